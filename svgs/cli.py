@@ -1,0 +1,154 @@
+"""The ``svgs`` command line.
+
+``svgs solve`` lives here. Other sub-commands come from optional command modules
+(``render.cli``, ``calibration.cli``, ``tof.cli``): each exposes ``register(subparsers)``
+and is imported only to add its parsers - none of them imports Mitsuba before its command
+runs, so ``svgs solve`` works on a machine without a renderer.
+
+Exit codes: 0 solved / done, 1 no solution (the reason is printed), 2 bad input or usage.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+
+import numpy as np
+
+from .errors import InputError
+
+#: Optional command modules, in help order.
+COMMAND_MODULES = ("render.cli", "calibration.cli", "tof.cli", "studies.cli")
+
+EXIT_OK, EXIT_NO_SOLUTION, EXIT_BAD_INPUT = 0, 1, 2
+
+
+def _add_solve(sub) -> None:
+    p = sub.add_parser(
+        "solve",
+        help="solve the 6-DOF pose from one image of the target",
+        description="Detect the retroreflector spots in IMAGE, identify the targets and solve the "
+        "relative state with the collinearity equations (paper eqs. 12-13). Exit 0 when solved, "
+        "1 when no solution (with the reason), 2 for bad input.",
+    )
+    p.add_argument("image", help="image file (PNG/JPEG/TIFF, 8 or 16 bit, grey or colour, or .npy)")
+    p.add_argument("--camera", required=True, help="camera profile name (e.g. galaxy-nexus) or path to a .toml")
+    p.add_argument("--pattern", default="svgs-3u", help="target pattern name or .toml path (default: svgs-3u)")
+    p.add_argument("--threshold", default=None,
+                   help="binarisation threshold in image counts, or 'auto' / 'otsu' (default: auto)")
+    p.add_argument("--sigma-px", type=float, default=0.1,
+                   help="centroid noise in px for the reported Cramer-Rao bound (default: 0.1)")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.set_defaults(func=cmd_solve)
+
+
+def _parse_threshold(text):
+    if text is None or text in ("auto", "otsu"):
+        return text
+    try:
+        v = float(text)
+    except ValueError:
+        raise InputError(f"--threshold: expected a number, 'auto' or 'otsu', got {text!r}") from None
+    if not np.isfinite(v) or v < 0:
+        raise InputError(f"--threshold: expected a non-negative finite level, got {text!r}")
+    return v
+
+
+def solution_json(result) -> dict:
+    """The JSON object of ``svgs solve --json`` for a Solution or a Failure."""
+    if result:
+        return result.to_json()
+    d = {
+        "ok": False,
+        "reason": result.reason,
+        "message": result.message,
+        "state": None,
+        "R_cam_target": None,
+        "t_cam_target_m": None,
+        "targets_px": {},
+        "n_blobs": result.details.get("n_blobs"),
+        "residual_rms_px": result.details.get("residual_rms_px"),
+    }
+    d["details"] = {k: v for k, v in result.details.items() if k not in ("n_blobs", "residual_rms_px")}
+    return d
+
+
+def print_solution(result, out=sys.stdout) -> None:
+    """A readable summary of a Solution or Failure."""
+    if not result:
+        print(f"NO SOLUTION ({result.reason}): {result.message}", file=out)
+        if result.details.get("n_blobs") is not None:
+            print(f"  blobs found: {result.details['n_blobs']}", file=out)
+        return
+    s = result.state_dict
+    sd = result.std
+    print("SOLVED", file=out)
+    print(f"  position of the camera in the target frame (m): x {s['x_m']:+.4f}  y {s['y_m']:+.4f}  z {s['z_m']:+.4f}", file=out)
+    print(f"  attitude (deg, paper x-y-z sequence): roll {s['roll_deg']:+.3f}  pitch {s['pitch_deg']:+.3f}  yaw {s['yaw_deg']:+.3f}", file=out)
+    print(f"  range along the boresight to the target origin: {result.t_cam_target_m[2]:.4f} m", file=out)
+    print(f"  reprojection residual: {result.residual_rms_px:.3f} px RMS; blobs found: {result.n_blobs}", file=out)
+    print(
+        f"  Cramer-Rao 1-sigma for {result.sigma_px:g} px centroid noise: "
+        f"pos {sd[0]:.3g} {sd[1]:.3g} {sd[2]:.3g} m, att {np.degrees(sd[3]):.3g} {np.degrees(sd[4]):.3g} {np.degrees(sd[5]):.3g} deg",
+        file=out,
+    )
+    for tid, uv in result.targets_px.items():
+        print(f"  target {tid}: u {uv[0]:.3f}  v {uv[1]:.3f} px", file=out)
+
+
+def cmd_solve(args) -> int:
+    from .pipeline import solve_image
+    from .profiles import Camera, Pattern
+
+    camera = Camera.load(args.camera)
+    pattern = Pattern.load(args.pattern)
+    if not (np.isfinite(args.sigma_px) and args.sigma_px > 0):
+        raise InputError(f"--sigma-px: expected a positive number of pixels, got {args.sigma_px}")
+    result = solve_image(args.image, camera, pattern, threshold=_parse_threshold(args.threshold), sigma_px=args.sigma_px)
+    if args.json:
+        print(json.dumps(solution_json(result)))
+    else:
+        print_solution(result)
+    return EXIT_OK if result else EXIT_NO_SOLUTION
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="svgs",
+        description="Smartphone Video Guidance Sensor simulator: render, expose, detect, solve.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    _add_solve(sub)
+    for name in COMMAND_MODULES:
+        try:
+            mod = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name and (exc.name == name or name.startswith(exc.name + ".")):
+                continue  # that command module is not part of this installation
+            raise
+        mod.register(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    """Run the CLI; returns the exit code (also used by tests in-process)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse: usage errors exit 2, --help exits 0
+        return int(exc.code or 0)
+    try:
+        return int(args.func(args))
+    except InputError as exc:
+        print(f"svgs {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print(f"svgs {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,124 @@
+"""Image -> Solution: the SVGS processing chain (paper Figure 3).
+
+threshold -> blob extraction -> target identification -> collinearity solve.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .profiles import Camera, Pattern
+from .result import Failure
+
+
+def load_image(path) -> np.ndarray:
+    """Read an image file as stored (8- or 16-bit, grey or colour).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    image : ndarray, shape (H, W) or (H, W, 3)
+
+    Raises
+    ------
+    InputError
+        The file is missing, empty, or not an image OpenCV can decode.
+    """
+    import cv2
+
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"image {str(p)!r} does not exist")
+    if p.is_dir():
+        raise InputError(f"image {str(p)!r} is a directory, not an image file")
+    if p.stat().st_size == 0:
+        raise InputError(f"image {str(p)!r} is empty (0 bytes)")
+    if p.suffix.lower() == ".npy":
+        try:
+            img = np.load(p, allow_pickle=False)
+        except Exception as exc:  # noqa: BLE001 - any decode failure is bad input
+            raise InputError(f"image {str(p)!r} is not a readable .npy array: {exc}") from None
+    else:
+        data = np.fromfile(p, dtype=np.uint8)
+        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        if img is None:
+            raise InputError(f"image {str(p)!r} is corrupt or not an image format OpenCV can read")
+    if img.ndim == 3 and img.shape[2] == 4:
+        img = img[..., :3]
+    if img.ndim == 3 and img.shape[2] == 3 and p.suffix.lower() != ".npy":
+        img = img[..., ::-1]  # OpenCV decodes BGR; the rest of the code expects RGB
+    if img.size == 0 or img.ndim not in (2, 3):
+        raise InputError(f"image {str(p)!r}: expected a 2-D grey or 3-channel colour image, got shape {img.shape}")
+    return img
+
+
+def check_image_matches_camera(image: np.ndarray, camera: Camera, name: str = "image") -> None:
+    """Raise :class:`InputError` unless the image has the camera profile's size."""
+    h, w = image.shape[:2]
+    if (w, h) != (camera.width, camera.height):
+        raise InputError(
+            f"{name}: size {w} x {h} px does not match camera {camera.name!r} ({camera.width} x {camera.height} px); "
+            "use the profile of the resolution the image was taken at"
+        )
+
+
+def solve_image(
+    image,
+    camera,
+    pattern="svgs-3u",
+    *,
+    threshold=None,
+    sigma_px: float = 0.1,
+    detect_options: dict | None = None,
+    identify_options: dict | None = None,
+):
+    """Detect, identify and solve the pose from one image.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W) or (H, W, 3), or str/Path
+        8- or 16-bit (or float) image, or the path to one. Must match the camera's size.
+    camera : Camera or str
+    pattern : Pattern or str
+    threshold : None, number or str
+        Binarisation threshold (see :func:`svgs.detect.detect_blobs`); ``None`` is automatic.
+    sigma_px : float
+        Centroid noise (px) for which the Cramer-Rao covariance is reported.
+    detect_options, identify_options : dict, optional
+        Passed to :func:`svgs.detect.detect_blobs` and :func:`svgs.identify.identify`.
+
+    Returns
+    -------
+    Solution or Failure
+        The failure's ``details`` hold ``n_blobs``; a solution's ``n_blobs`` likewise.
+    """
+    from .detect import detect_blobs
+    from .identify import identify
+    from .solver import solve_centroids
+
+    camera = Camera.load(camera)
+    pattern = Pattern.load(pattern)
+    if isinstance(image, (str, Path)):
+        image = load_image(image)
+    image = np.asarray(image)
+    check_image_matches_camera(image, camera)
+    blobs = detect_blobs(image, threshold=threshold, **(detect_options or {}))
+    ident = identify(blobs, camera, pattern, **(identify_options or {}))
+    if not ident:
+        ident.details.setdefault("n_blobs", len(blobs))
+        return ident
+    sol = solve_centroids(ident.points_px, camera, pattern, sigma_px=sigma_px)
+    if not sol:
+        sol.details["n_blobs"] = len(blobs)
+        return sol
+    sol.n_blobs = len(blobs)
+    return sol
+
+
+__all__ = ["load_image", "solve_image", "check_image_matches_camera", "Failure"]

@@ -1,0 +1,403 @@
+"""Camera profiles and target patterns: TOML files loaded by name or by path.
+
+Named profiles live in ``assets/cameras/<name>.toml`` and ``assets/patterns/<name>.toml``.
+A camera profile needs only an ``[intrinsics]`` table to solve; ``[distortion]`` is
+optional (zero when absent); any other table (``[sensor]``, ``[optics]``, ``[flash]``,
+``[isp]``, ``[sources]``...) is kept verbatim in :attr:`Camera.tables` for the renderer and
+camera model, and is not needed for solving real photos.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError, ProfileError, check_finite, check_finite_positive
+
+ASSETS_DIR = Path(__file__).resolve().parent.parent / "assets"
+CAMERAS_DIR = ASSETS_DIR / "cameras"
+PATTERNS_DIR = ASSETS_DIR / "patterns"
+
+DISTORTION_KEYS = ("k1", "k2", "p1", "p2", "k3")
+
+
+def _available(folder: Path) -> list[str]:
+    return sorted(p.stem for p in folder.glob("*.toml"))
+
+
+def _resolve(name_or_path, folder: Path, kind: str) -> Path:
+    """Find a profile file: an existing path, or a name in ``folder``."""
+    if isinstance(name_or_path, Path) or (isinstance(name_or_path, str) and (
+        name_or_path.endswith(".toml") or "/" in name_or_path or "\\" in name_or_path
+    )):
+        p = Path(name_or_path)
+        if not p.is_file():
+            raise ProfileError(f"{kind} file {str(p)!r} does not exist")
+        return p
+    if not isinstance(name_or_path, str) or not name_or_path:
+        raise ProfileError(f"{kind}: expected a name or a path to a .toml file, got {name_or_path!r}")
+    p = folder / f"{name_or_path}.toml"
+    if not p.is_file():
+        raise ProfileError(
+            f"unknown {kind} {name_or_path!r}; known: {', '.join(_available(folder)) or 'none'} "
+            f"(or give a path to a .toml file)"
+        )
+    return p
+
+
+def _read_toml(path: Path, kind: str) -> dict:
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise ProfileError(f"{kind} file {str(path)!r} is not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise ProfileError(f"{kind} file {str(path)!r} cannot be read: {exc}") from None
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A camera's geometry (pinhole + Brown-Conrady distortion, OpenCV conventions).
+
+    Pixel centres sit at integer coordinates (OpenCV): the top-left pixel's centre is
+    (0, 0), its area spans [-0.5, 0.5]. ``u`` grows to the right, ``v`` downwards.
+
+    Attributes
+    ----------
+    name : str
+    width, height : int
+        Image size, pixels.
+    fx, fy, cx, cy : float
+        Focal lengths and principal point, pixels.
+    dist : ndarray, shape (5,)
+        OpenCV distortion coefficients ``(k1, k2, p1, p2, k3)``.
+    tables : dict
+        Every other table of the profile (sensor, optics, flash, isp, sources...).
+    source : str
+        Where the profile was loaded from.
+    """
+
+    name: str
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    dist: np.ndarray = field(default_factory=lambda: np.zeros(5))
+    tables: dict = field(default_factory=dict)
+    source: str = ""
+
+    def __post_init__(self):
+        for k in ("width", "height"):
+            v = getattr(self, k)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v <= 0:
+                if isinstance(v, float) and v.is_integer() and v > 0:
+                    object.__setattr__(self, k, int(v))
+                else:
+                    raise ProfileError(f"camera {self.name!r}: intrinsics.{k} must be a positive integer, got {v!r}")
+        for k in ("fx", "fy"):
+            object.__setattr__(self, k, _wrap(check_finite_positive, getattr(self, k), f"camera {self.name!r}: intrinsics.{k}"))
+        for k, lim in (("cx", self.width), ("cy", self.height)):
+            v = _wrap(check_finite, getattr(self, k), f"camera {self.name!r}: intrinsics.{k}")
+            if not (-0.5 <= v <= lim - 0.5):
+                raise ProfileError(f"camera {self.name!r}: intrinsics.{k} = {v} lies outside the image (0..{lim - 1} px)")
+            object.__setattr__(self, k, v)
+        d = np.asarray(self.dist, float).reshape(-1)
+        if d.shape != (5,) or not np.all(np.isfinite(d)):
+            raise ProfileError(f"camera {self.name!r}: distortion must be 5 finite numbers (k1, k2, p1, p2, k3), got {self.dist!r}")
+        object.__setattr__(self, "dist", d)
+
+    # ------------------------------------------------------------------ loading
+    @classmethod
+    def load(cls, name_or_path) -> "Camera":
+        """Load a camera profile by name (``assets/cameras/<name>.toml``) or path."""
+        if isinstance(name_or_path, Camera):
+            return name_or_path
+        path = _resolve(name_or_path, CAMERAS_DIR, "camera profile")
+        return cls.from_dict(_read_toml(path, "camera profile"), source=str(path), default_name=path.stem)
+
+    @classmethod
+    def from_dict(cls, data: dict, source: str = "", default_name: str = "camera") -> "Camera":
+        """Build a camera from the TOML structure (see :meth:`to_dict`)."""
+        name = str(data.get("name", default_name))
+        intr = data.get("intrinsics")
+        if not isinstance(intr, dict):
+            raise ProfileError(f"camera {name!r} ({source or 'dict'}): missing [intrinsics] table")
+        missing = [k for k in ("width", "height", "fx", "fy", "cx", "cy") if k not in intr]
+        if missing:
+            raise ProfileError(f"camera {name!r}: [intrinsics] lacks {', '.join(missing)}")
+        dist_t = data.get("distortion", {}) or {}
+        if not isinstance(dist_t, dict):
+            raise ProfileError(f"camera {name!r}: [distortion] must be a table")
+        unknown = set(dist_t) - set(DISTORTION_KEYS)
+        if unknown:
+            raise ProfileError(f"camera {name!r}: unknown [distortion] keys {sorted(unknown)}; expected {DISTORTION_KEYS}")
+        dist = [_wrap(check_finite, dist_t.get(k, 0.0), f"camera {name!r}: distortion.{k}") for k in DISTORTION_KEYS]
+        tables = {k: v for k, v in data.items() if k not in ("name", "intrinsics", "distortion")}
+        return cls(
+            name=name,
+            width=intr["width"],
+            height=intr["height"],
+            fx=intr["fx"],
+            fy=intr["fy"],
+            cx=intr["cx"],
+            cy=intr["cy"],
+            dist=np.array(dist),
+            tables=tables,
+            source=source,
+        )
+
+    def to_dict(self) -> dict:
+        """The TOML structure of this profile."""
+        out = {"name": self.name}
+        for k, v in self.tables.items():
+            if not isinstance(v, dict):
+                out[k] = v
+        out["intrinsics"] = {
+            "width": int(self.width), "height": int(self.height),
+            "fx": float(self.fx), "fy": float(self.fy), "cx": float(self.cx), "cy": float(self.cy),
+        }
+        out["distortion"] = {k: float(v) for k, v in zip(DISTORTION_KEYS, self.dist)}
+        for k, v in self.tables.items():
+            if isinstance(v, dict):
+                out[k] = v
+        return out
+
+    def save(self, path) -> Path:
+        """Write this profile as TOML; :meth:`load` reads it back unchanged."""
+        import tomli_w
+
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "wb") as fh:
+            tomli_w.dump(self.to_dict(), fh)
+        return path
+
+    def replace(self, **changes) -> "Camera":
+        """A copy with some fields changed (e.g. ``fx=...``)."""
+        d = {k: getattr(self, k) for k in ("name", "width", "height", "fx", "fy", "cx", "cy", "dist", "tables", "source")}
+        d.update(changes)
+        return Camera(**d)
+
+    # --------------------------------------------------------------- geometry
+    @property
+    def K(self) -> np.ndarray:
+        """Camera matrix, shape (3, 3)."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def has_distortion(self) -> bool:
+        return bool(np.any(self.dist != 0))
+
+    def table(self, name: str) -> dict:
+        """An optional table of the profile; :class:`ProfileError` naming it if absent."""
+        t = self.tables.get(name)
+        if not isinstance(t, dict):
+            raise ProfileError(f"camera {self.name!r} ({self.source or 'dict'}) has no [{name}] table, which this operation needs")
+        return t
+
+    def distort_normalized(self, xy: np.ndarray) -> np.ndarray:
+        """Apply the distortion model to normalised (undistorted) coordinates.
+
+        Parameters
+        ----------
+        xy : ndarray, shape (..., 2)
+            ``(X/Z, Y/Z)`` in the OpenCV camera frame.
+
+        Returns
+        -------
+        ndarray, shape (..., 2)
+        """
+        xy = np.asarray(xy, float)
+        if not self.has_distortion:
+            return xy.copy()
+        k1, k2, p1, p2, k3 = self.dist
+        x, y = xy[..., 0], xy[..., 1]
+        r2 = x * x + y * y
+        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        return np.stack([xd, yd], -1)
+
+    def normalized_to_pixels(self, xy: np.ndarray) -> np.ndarray:
+        """Normalised coordinates -> pixels, distortion included. Shapes (..., 2)."""
+        d = self.distort_normalized(xy)
+        return np.stack([self.fx * d[..., 0] + self.cx, self.fy * d[..., 1] + self.cy], -1)
+
+    def project(self, p_cam_m: np.ndarray) -> np.ndarray:
+        """Project points given in the OpenCV camera frame to pixels (distortion included).
+
+        Parameters
+        ----------
+        p_cam_m : ndarray, shape (..., 3)
+            Points with positive z (in front of the camera), metres.
+
+        Returns
+        -------
+        uv_px : ndarray, shape (..., 2)
+        """
+        p = np.asarray(p_cam_m, float)
+        return self.normalized_to_pixels(p[..., :2] / p[..., 2:3])
+
+    def project_target(self, points_target_m, R_cam_target, t_cam_target_m) -> np.ndarray:
+        """Project target-frame points through a pose. Shapes: (..., N, 3) -> (..., N, 2)."""
+        R = np.asarray(R_cam_target, float)
+        t = np.asarray(t_cam_target_m, float)
+        p = np.einsum("...ij,...nj->...ni", R, np.asarray(points_target_m, float)) + t[..., None, :]
+        return self.project(p)
+
+    def pixels_to_normalized(self, uv_px: np.ndarray) -> np.ndarray:
+        """Undistort pixel coordinates to normalised coordinates ``(X/Z, Y/Z)``.
+
+        Newton iteration on the Brown-Conrady model (:meth:`undistort_normalized`),
+        converged to ~1e-15, where OpenCV's fixed-point ``undistortPoints`` stops at ~1e-6.
+
+        Parameters
+        ----------
+        uv_px : ndarray, shape (..., 2)
+
+        Returns
+        -------
+        ndarray, shape (..., 2)
+        """
+        uv = np.asarray(uv_px, float)
+        if not self.has_distortion:
+            return np.stack([(uv[..., 0] - self.cx) / self.fx, (uv[..., 1] - self.cy) / self.fy], -1)
+        target = np.stack([(uv[..., 0] - self.cx) / self.fx, (uv[..., 1] - self.cy) / self.fy], -1)
+        return self.undistort_normalized(target)
+
+    def undistort_normalized(self, xy_d: np.ndarray, n_iter: int = 20) -> np.ndarray:
+        """Invert :meth:`distort_normalized` by Newton's method (converges to ~1e-15).
+
+        Parameters
+        ----------
+        xy_d : ndarray, shape (..., 2)
+            Distorted normalised coordinates.
+
+        Returns
+        -------
+        ndarray, shape (..., 2)
+        """
+        xy_d = np.asarray(xy_d, float)
+        if not self.has_distortion:
+            return xy_d.copy()
+        k1, k2, p1, p2, k3 = self.dist
+        xy = xy_d.copy()
+        for _ in range(n_iter):
+            x, y = xy[..., 0], xy[..., 1]
+            r2 = x * x + y * y
+            rad = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            drad = 2 * (k1 + r2 * (2 * k2 + 3 * k3 * r2))  # d rad / d(r2) * 2
+            f = self.distort_normalized(xy) - xy_d
+            a = rad + x * x * drad + 2 * p1 * y + 6 * p2 * x
+            b = x * y * drad + 2 * p1 * x + 2 * p2 * y
+            c = x * y * drad + 2 * p1 * x + 2 * p2 * y
+            d = rad + y * y * drad + 6 * p1 * y + 2 * p2 * x
+            det = a * d - b * c
+            dx = (d * f[..., 0] - b * f[..., 1]) / det
+            dy = (-c * f[..., 0] + a * f[..., 1]) / det
+            xy = np.stack([x - dx, y - dy], -1)
+            if np.nanmax(np.abs(f)) < 1e-15:
+                break
+        return xy
+
+    def in_image(self, uv_px: np.ndarray, margin_px: float = 0.0) -> np.ndarray:
+        """True where pixel coordinates lie inside the image (by ``margin_px``). Shape (...)."""
+        uv = np.asarray(uv_px, float)
+        return (
+            (uv[..., 0] >= -0.5 + margin_px) & (uv[..., 0] <= self.width - 0.5 - margin_px)
+            & (uv[..., 1] >= -0.5 + margin_px) & (uv[..., 1] <= self.height - 0.5 - margin_px)
+        )
+
+
+def _wrap(fn, value, name):
+    try:
+        return fn(value, name)
+    except InputError as exc:
+        raise ProfileError(str(exc)) from None
+
+
+@dataclass(frozen=True)
+class Pattern:
+    """A target pattern: retroreflector positions in the target frame.
+
+    Attributes
+    ----------
+    name : str
+    ids : ndarray of int, shape (N,)
+        Target ids, in the order of ``points_m``.
+    points_m : ndarray, shape (N, 3)
+        Target positions in the target frame, metres.
+    tables : dict
+        Any other table of the file (reflector model, body, description...).
+    """
+
+    name: str
+    ids: np.ndarray
+    points_m: np.ndarray
+    tables: dict = field(default_factory=dict)
+    source: str = ""
+
+    def __post_init__(self):
+        ids = np.asarray(self.ids)
+        pts = np.asarray(self.points_m, float)
+        if pts.ndim != 2 or pts.shape[1] != 3 or pts.shape[0] != ids.shape[0]:
+            raise ProfileError(f"pattern {self.name!r}: expected N ids and N x 3 points, got {ids.shape} and {pts.shape}")
+        if pts.shape[0] < 4:
+            raise ProfileError(f"pattern {self.name!r}: needs at least 4 targets, got {pts.shape[0]}")
+        if not np.all(np.isfinite(pts)):
+            raise ProfileError(f"pattern {self.name!r}: target coordinates must be finite")
+        if len(set(ids.tolist())) != len(ids):
+            raise ProfileError(f"pattern {self.name!r}: target ids must be unique, got {ids.tolist()}")
+        c = pts - pts.mean(0)
+        sv = np.linalg.svd(c, compute_uv=False)
+        if sv[1] < 1e-6 * max(sv[0], 1e-12):
+            raise ProfileError(f"pattern {self.name!r}: targets are collinear; a pose cannot be solved from them")
+        object.__setattr__(self, "ids", ids.astype(int))
+        object.__setattr__(self, "points_m", pts)
+
+    @classmethod
+    def load(cls, name_or_path) -> "Pattern":
+        """Load a pattern by name (``assets/patterns/<name>.toml``) or path."""
+        if isinstance(name_or_path, Pattern):
+            return name_or_path
+        path = _resolve(name_or_path, PATTERNS_DIR, "target pattern")
+        data = _read_toml(path, "target pattern")
+        name = str(data.get("name", path.stem))
+        targets = data.get("target")
+        if not isinstance(targets, list) or not targets:
+            raise ProfileError(f"pattern {name!r} ({path}): expected [[target]] tables with id, x_m, y_m, z_m")
+        ids, pts = [], []
+        for i, t in enumerate(targets):
+            missing = [k for k in ("id", "x_m", "y_m", "z_m") if k not in t]
+            if missing:
+                raise ProfileError(f"pattern {name!r}: target #{i + 1} lacks {', '.join(missing)}")
+            ids.append(int(t["id"]))
+            pts.append([_wrap(check_finite, t[k], f"pattern {name!r}: target {t['id']}.{k}") for k in ("x_m", "y_m", "z_m")])
+        order = np.argsort(ids)
+        tables = {k: v for k, v in data.items() if k not in ("name", "target")}
+        return cls(name=name, ids=np.asarray(ids)[order], points_m=np.asarray(pts)[order], tables=tables, source=str(path))
+
+    @property
+    def n(self) -> int:
+        return int(self.points_m.shape[0])
+
+    def point(self, target_id: int) -> np.ndarray:
+        """The position of one target, shape (3,)."""
+        idx = np.flatnonzero(self.ids == target_id)
+        if idx.size == 0:
+            raise InputError(f"pattern {self.name!r} has no target {target_id}")
+        return self.points_m[idx[0]]
+
+
+def known_cameras() -> list[str]:
+    return _available(CAMERAS_DIR)
+
+
+def known_patterns() -> list[str]:
+    return _available(PATTERNS_DIR)
+

@@ -1,0 +1,51 @@
+"""Result objects. Failure is a value: a falsy :class:`Failure` carries a reason code."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: Machine-readable failure reasons and what they mean.
+REASONS = {
+    "no_blobs": "no bright blob passed the threshold and the size/shape gates",
+    "too_few_blobs": "fewer blobs than targets were found",
+    "merged_spots": "the target spots merged into fewer, larger blobs",
+    "no_consistent_set": "no subset of the blobs matches the target pattern geometrically",
+    "diverged": "the least-squares iteration diverged or did not converge",
+    "behind_camera": "the solution puts the target behind the camera",
+    "behind_target": "the only pose that fits views the target from behind, where its reflectors return no light",
+    "degenerate": "the measurements do not constrain the pose",
+}
+
+
+@dataclass
+class Failure:
+    """A failed estimation: falsy, with a machine-readable ``reason`` and a ``message``.
+
+    Attributes
+    ----------
+    reason : str
+        One of :data:`REASONS`.
+    message : str
+        A sentence for people.
+    details : dict
+        Anything that helps diagnose (blob counts, residuals...), JSON-serialisable.
+    """
+
+    reason: str
+    message: str
+    details: dict = field(default_factory=dict)
+
+    ok = False
+
+    def __bool__(self) -> bool:
+        return False
+
+    def to_json(self) -> dict:
+        return {"ok": False, "reason": self.reason, "message": self.message, **self.details}
+
+
+def as_list(a) -> list:
+    """ndarray -> nested list of floats for JSON."""
+    return np.asarray(a, float).tolist()

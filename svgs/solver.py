@@ -1,0 +1,602 @@
+"""The SVGS collinearity solver in azimuth/elevation form (paper eqs. 1-13).
+
+Measurements
+    Each target's centroid is undistorted to normalised coordinates ``(xn, yn)`` (OpenCV
+    camera frame) and turned into the paper's azimuth and elevation (eqs. 12-13), with the
+    paper's image frame (x right, y up, looking along -z)::
+
+        Az = atan(xn)                       El = asin(-yn / sqrt(xn^2 + yn^2 + 1))
+
+Model
+    ``v = M(phi, theta, psi) @ (P - L)`` in the paper camera frame, ``Az = atan2(v_x, -v_z)``,
+    ``El = asin(v_y / |v|)``, with the state ``V = [X_L, Y_L, Z_L, phi, theta, psi]``
+    (see :mod:`svgs.frames`).
+
+Estimator
+    Levenberg-Marquardt on the az/el residuals with the analytic Jacobian
+    ``d(Az, El)/dV``, weighted by the inverse covariance of az/el that isotropic centroid
+    noise induces (``Sigma_i = G_i G_i^T sigma^2``, ``G_i = d(Az, El)/d(u, v)``). With that
+    weight the estimator is the maximum-likelihood estimator for Gaussian centroid noise, and
+    its covariance reaches the Cramer-Rao bound ``(J^T Sigma^-1 J)^-1``, which the solver
+    reports. The initial guess comes from POSIT (DeMenthon & Davis 1995, non-coplanar form),
+    vectorised over frames; frames that do not converge from it are retried from other
+    starts before they are declared failed.
+
+Everything is vectorised over frames: ``points_px`` of shape ``(N, n, 2)`` is solved in one
+call (the Monte Carlo path); shape ``(n, 2)`` returns a single :class:`Solution`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import InputError
+from .frames import D_CAM_PHOTO, rotation_from_angles, state_dict, state_to_pose
+from .profiles import Camera, Pattern
+from .result import Failure
+
+#: Default convergence tolerance on the state step: metres for position, radians for angles.
+STEP_TOL = 1e-11
+#: Default iteration cap.
+MAX_ITER = 200
+#: Reprojection residual (px RMS) above which a converged solution is not accepted as "ok"
+#: unless the caller raises it. Noise-free data converge to ~1e-9 px.
+DEFAULT_MAX_RESIDUAL_PX = 5.0
+
+
+# --------------------------------------------------------------------------- derivatives
+def _drot(a):
+    """Rotation matrices R1, R2, R3 and their derivatives, shapes (N, 3, 3)."""
+    c, s = np.cos(a), np.sin(a)
+    o, z = np.ones_like(a), np.zeros_like(a)
+
+    def m(rows):
+        return np.stack([np.stack(r, -1) for r in rows], -2)
+
+    return c, s, o, z, m
+
+
+def _rotations_and_derivatives(angles):
+    """M and dM/dphi, dM/dtheta, dM/dpsi for angles (N, 3). Returns (M, dM (N, 3, 3, 3))."""
+    phi, th, psi = angles[:, 0], angles[:, 1], angles[:, 2]
+    c1, s1, o, z, m = _drot(phi)
+    R1 = m([[o, z, z], [z, c1, s1], [z, -s1, c1]])
+    dR1 = m([[z, z, z], [z, -s1, c1], [z, -c1, -s1]])
+    c2, s2 = np.cos(th), np.sin(th)
+    R2 = m([[c2, z, -s2], [z, o, z], [s2, z, c2]])
+    dR2 = m([[-s2, z, -c2], [z, z, z], [c2, z, -s2]])
+    c3, s3 = np.cos(psi), np.sin(psi)
+    R3 = m([[c3, s3, z], [-s3, c3, z], [z, z, o]])
+    dR3 = m([[-s3, c3, z], [-c3, -s3, z], [z, z, z]])
+    R21 = R2 @ R1
+    M = R3 @ R21
+    dM = np.stack([R3 @ R2 @ dR1, R3 @ dR2 @ R1, dR3 @ R21], 1)
+    return M, dM
+
+
+def azel_from_normalized(xy: np.ndarray) -> np.ndarray:
+    """Paper eqs. 12-13 from normalised (undistorted) coordinates.
+
+    Parameters
+    ----------
+    xy : ndarray, shape (..., 2)
+        ``(X/Z, Y/Z)`` in the OpenCV camera frame.
+
+    Returns
+    -------
+    azel_rad : ndarray, shape (..., 2)
+    """
+    x, y = xy[..., 0], xy[..., 1]
+    return np.stack([np.arctan(x), np.arcsin(-y / np.sqrt(x * x + y * y + 1.0))], -1)
+
+
+def model_azel(state: np.ndarray, points_m: np.ndarray, with_jacobian: bool = True):
+    """Predicted azimuth/elevation and their Jacobian with respect to the state.
+
+    Parameters
+    ----------
+    state : ndarray, shape (N, 6)
+    points_m : ndarray, shape (n, 3)
+        Target points in the target frame.
+
+    Returns
+    -------
+    azel : ndarray, shape (N, n, 2)
+    J : ndarray, shape (N, n, 2, 6) (only when ``with_jacobian``)
+    vz : ndarray, shape (N, n)
+        Depth coordinate in the paper camera frame (negative in front of the camera).
+    """
+    L = state[:, :3]
+    M, dM = _rotations_and_derivatives(state[:, 3:])
+    d = points_m[None, :, :] - L[:, None, :]  # (N, n, 3)
+    v = np.einsum("kij,knj->kni", M, d)
+    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    rho2 = vx * vx + vz * vz
+    r2 = rho2 + vy * vy
+    az = np.arctan2(vx, -vz)
+    el = np.arcsin(np.clip(vy / np.sqrt(r2), -1.0, 1.0))
+    azel = np.stack([az, el], -1)
+    if not with_jacobian:
+        return azel, None, vz
+    rho = np.sqrt(rho2)
+    daz_dv = np.stack([-vz / rho2, np.zeros_like(vx), vx / rho2], -1)  # (N, n, 3)
+    el_vec = -vy[..., None] * v / r2[..., None]
+    el_vec[..., 1] += 1.0
+    del_dv = el_vec / rho[..., None]
+    dazel_dv = np.stack([daz_dv, del_dv], -2)  # (N, n, 2, 3)
+    dv_dL = -M  # (N, 3, 3)
+    dv_dang = np.einsum("kaij,knj->knia", dM, d)  # (N, n, 3, 3): column a = dv/dangle_a
+    dv_dV = np.concatenate([np.broadcast_to(dv_dL[:, None], dv_dang.shape), dv_dang], -1)  # (N, n, 3, 6)
+    J = np.einsum("knij,knjp->knip", dazel_dv, dv_dV)
+    return azel, J, vz
+
+
+def azel_pixel_jacobian(uv_px: np.ndarray, camera: Camera, h_px: float = 1e-3) -> np.ndarray:
+    """``G = d(Az, El) / d(u, v)`` by central differences through the undistortion.
+
+    Parameters
+    ----------
+    uv_px : ndarray, shape (..., 2)
+
+    Returns
+    -------
+    G : ndarray, shape (..., 2, 2), rad/px
+    """
+    uv = np.asarray(uv_px, float)
+    cols = []
+    for k in range(2):
+        e = np.zeros(2)
+        e[k] = h_px
+        ap = azel_from_normalized(camera.pixels_to_normalized(uv + e))
+        am = azel_from_normalized(camera.pixels_to_normalized(uv - e))
+        cols.append((ap - am) / (2 * h_px))
+    return np.stack(cols, -1)
+
+
+# --------------------------------------------------------------------------- initial guess
+def posit(xy: np.ndarray, points_m: np.ndarray, n_iter: int = 30):
+    """POSIT (DeMenthon & Davis 1995) for non-coplanar points, vectorised over frames.
+
+    Parameters
+    ----------
+    xy : ndarray, shape (N, n, 2)
+        Normalised image coordinates (OpenCV camera frame).
+    points_m : ndarray, shape (n, 3)
+
+    Returns
+    -------
+    R_cam_target : ndarray, shape (N, 3, 3)
+    t_cam_target_m : ndarray, shape (N, 3)
+    """
+    P0 = points_m[0]
+    A = points_m[1:] - P0  # (n-1, 3)
+    B = np.linalg.pinv(A)  # (3, n-1)
+    N = xy.shape[0]
+    eps = np.zeros((N, points_m.shape[0] - 1))
+    x0, y0 = xy[:, 0, 0], xy[:, 0, 1]
+    for _ in range(n_iter):
+        xp = xy[:, 1:, 0] * (1 + eps) - x0[:, None]
+        yp = xy[:, 1:, 1] * (1 + eps) - y0[:, None]
+        I = xp @ B.T
+        Jv = yp @ B.T
+        nI = np.linalg.norm(I, axis=1)
+        nJ = np.linalg.norm(Jv, axis=1)
+        s = np.sqrt(nI * nJ)
+        s = np.where(s > 0, s, 1.0)
+        i = I / np.maximum(nI, 1e-300)[:, None]
+        j = Jv / np.maximum(nJ, 1e-300)[:, None]
+        k = np.cross(i, j)
+        k /= np.maximum(np.linalg.norm(k, axis=1), 1e-300)[:, None]
+        Z0 = 1.0 / s
+        eps = (A @ k.T).T / Z0[:, None]
+    j = np.cross(k, i)
+    R = np.stack([i, j, k], 1)
+    u, _, vt = np.linalg.svd(R)
+    R = u @ vt
+    det = np.linalg.det(R)
+    R[det < 0] *= -1
+    T = np.stack([x0 * Z0, y0 * Z0, Z0], -1)
+    t = T - R @ P0
+    return R, t
+
+
+def _state_from_pose(R, t):
+    from .frames import pose_to_state
+
+    return pose_to_state(R, t)
+
+
+# --------------------------------------------------------------------------- results
+@dataclass
+class Solution:
+    """A solved pose: truthy.
+
+    Attributes
+    ----------
+    state : ndarray, shape (6,)
+        Paper state ``[X_L_m, Y_L_m, Z_L_m, phi_rad, theta_rad, psi_rad]``.
+    R_cam_target : ndarray, shape (3, 3)
+    t_cam_target_m : ndarray, shape (3,)
+    residual_rms_px : float
+        RMS of the whitened residuals (the reprojection error in px to first order).
+    covariance : ndarray, shape (6, 6)
+        Cramer-Rao bound of the state for centroid noise ``sigma_px`` per axis
+        (units m^2, m rad, rad^2). Scales as ``sigma_px^2``.
+    sigma_px : float
+        The centroid noise the covariance is given for.
+    iterations : int
+    targets_px : dict
+        Target id -> measured ``[u, v]``, when known.
+    """
+
+    state: np.ndarray
+    R_cam_target: np.ndarray
+    t_cam_target_m: np.ndarray
+    residual_rms_px: float
+    covariance: np.ndarray
+    sigma_px: float = 1.0
+    iterations: int = 0
+    targets_px: dict = field(default_factory=dict)
+    n_blobs: int | None = None
+
+    ok = True
+    reason = None
+
+    def __bool__(self) -> bool:
+        return True
+
+    @property
+    def state_dict(self) -> dict:
+        return state_dict(self.state)
+
+    @property
+    def std(self) -> np.ndarray:
+        """1-sigma bound per state component (m, m, m, rad, rad, rad), shape (6,)."""
+        return np.sqrt(np.diag(self.covariance))
+
+    def to_json(self) -> dict:
+        return {
+            "ok": True,
+            "reason": None,
+            "state": self.state_dict,
+            "R_cam_target": self.R_cam_target.tolist(),
+            "t_cam_target_m": self.t_cam_target_m.tolist(),
+            "targets_px": {str(k): [float(x) for x in v] for k, v in self.targets_px.items()},
+            "n_blobs": self.n_blobs,
+            "residual_rms_px": float(self.residual_rms_px),
+            "iterations": int(self.iterations),
+            "crlb_std": dict(zip(
+                ["x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg"],
+                [float(v) for v in np.concatenate([self.std[:3], np.degrees(self.std[3:])])],
+            )),
+            "crlb_sigma_px": float(self.sigma_px),
+        }
+
+
+@dataclass
+class BatchSolution:
+    """Solutions of N frames. Arrays have a leading axis N; failed rows hold NaN.
+
+    Attributes
+    ----------
+    ok : ndarray of bool, shape (N,)
+    reason : ndarray of object, shape (N,)
+        ``None`` where solved, else a reason code of :data:`svgs.result.REASONS`.
+    state : ndarray, shape (N, 6)
+    R_cam_target : ndarray, shape (N, 3, 3)
+    t_cam_target_m : ndarray, shape (N, 3)
+    residual_rms_px : ndarray, shape (N,)
+    covariance : ndarray, shape (N, 6, 6)
+    iterations : ndarray of int, shape (N,)
+    sigma_px : float
+    """
+
+    ok: np.ndarray
+    reason: np.ndarray
+    state: np.ndarray
+    R_cam_target: np.ndarray
+    t_cam_target_m: np.ndarray
+    residual_rms_px: np.ndarray
+    covariance: np.ndarray
+    iterations: np.ndarray
+    sigma_px: float = 1.0
+
+    def __len__(self) -> int:
+        return int(self.ok.shape[0])
+
+    def __getitem__(self, i: int):
+        """Frame ``i`` as a :class:`Solution` or :class:`Failure`."""
+        if not self.ok[i]:
+            return Failure(str(self.reason[i]), _REASON_TEXT.get(str(self.reason[i]), str(self.reason[i])),
+                           {"residual_rms_px": _f(self.residual_rms_px[i])})
+        return Solution(self.state[i], self.R_cam_target[i], self.t_cam_target_m[i], float(self.residual_rms_px[i]),
+                        self.covariance[i], self.sigma_px, int(self.iterations[i]))
+
+
+def _f(x):
+    x = float(x)
+    return None if x != x else x
+
+
+_REASON_TEXT = {
+    "diverged": "the least-squares iteration did not converge to a consistent pose",
+    "behind_camera": "the only consistent solution puts the target behind the camera",
+}
+
+
+# --------------------------------------------------------------------------- input checks
+def _check_points(points_px, pattern: Pattern) -> tuple[np.ndarray, bool]:
+    try:
+        pts = np.asarray(points_px, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"points_px: expected numbers, got {type(points_px).__name__}") from None
+    single = pts.ndim == 2
+    if single:
+        pts = pts[None]
+    n = pattern.n
+    if pts.ndim != 3 or pts.shape[1:] != (n, 2):
+        raise InputError(
+            f"points_px: expected shape ({n}, 2) or (N, {n}, 2) for pattern {pattern.name!r} with {n} targets, got {np.shape(points_px)}"
+        )
+    if pts.shape[0] == 0:
+        raise InputError("points_px: no frames (N = 0)")
+    bad = ~np.all(np.isfinite(pts), axis=(1, 2))
+    if np.any(bad):
+        raise InputError(f"points_px: non-finite centroid in frame(s) {np.flatnonzero(bad)[:10].tolist()}")
+    # degenerate sets: coincident points or all points on one line
+    diff = pts[:, :, None, :] - pts[:, None, :, :]
+    dist = np.linalg.norm(diff, axis=-1) + np.eye(n)[None] * 1e9
+    coincident = np.min(dist, axis=(1, 2)) < 1e-6
+    c = pts - pts.mean(1, keepdims=True)
+    sv = np.linalg.svd(c, compute_uv=False)
+    collinear = sv[:, 1] < 1e-9 * np.maximum(sv[:, 0], 1e-300)
+    deg = coincident | collinear
+    if np.any(deg):
+        which = np.flatnonzero(deg)[:10].tolist()
+        raise InputError(
+            f"points_px: degenerate point set in frame(s) {which} (coincident or collinear centroids); a pose cannot be solved"
+        )
+    return pts, single
+
+
+# --------------------------------------------------------------------------- solver
+def _lm(state0, meas_azel, Winv_sqrt, points_m, max_iter, step_tol):
+    """Vectorised Levenberg-Marquardt. Returns (state, converged, iterations, whitened residual)."""
+    N = state0.shape[0]
+    x = state0.copy()
+    lam = np.full(N, 1e-3)
+    active = np.ones(N, bool)
+    conv = np.zeros(N, bool)
+    iters = np.zeros(N, int)
+
+    def whitened(xs, idx, jac=True):
+        azel, J, vz = model_azel(xs, points_m, with_jacobian=jac)
+        r = meas_azel[idx] - azel
+        r[..., 0] = (r[..., 0] + np.pi) % (2 * np.pi) - np.pi
+        rw = np.einsum("knij,knj->kni", Winv_sqrt[idx], r).reshape(len(idx), -1)
+        Jw = None
+        if jac:
+            Jw = np.einsum("knij,knjp->knip", Winv_sqrt[idx], J).reshape(len(idx), -1, 6)
+        return rw, Jw, vz
+
+    idx_all = np.arange(N)
+    rw, Jw, _ = whitened(x, idx_all)
+    cost = np.sum(rw * rw, 1)
+    for _ in range(max_iter):
+        idx = np.flatnonzero(active)
+        if idx.size == 0:
+            break
+        iters[idx] += 1
+        Ja = Jw[idx]
+        ra = rw[idx]
+        JTJ = np.einsum("kmp,kmq->kpq", Ja, Ja)
+        g = np.einsum("kmp,km->kp", Ja, ra)
+        diag = np.einsum("kpp->kp", JTJ)
+        A = JTJ + lam[idx, None, None] * np.einsum("kp,pq->kpq", np.maximum(diag, 1e-12), np.eye(6))
+        try:
+            dx = np.linalg.solve(A, g[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            dx = np.stack([np.linalg.lstsq(a, b, rcond=None)[0] for a, b in zip(A, g)])
+        cost_before = cost[idx].copy()
+        xn = x[idx] + dx
+        rn, Jn, vzn = whitened(xn, idx)
+        cn = np.sum(rn * rn, 1)
+        finite = np.isfinite(cn) & np.all(np.isfinite(xn), 1)
+        better = finite & (cn <= cost[idx] * (1 + 1e-12))
+        bi = idx[better]
+        x[bi] = xn[better]
+        rw[bi] = rn[better]
+        Jw[bi] = Jn[better]
+        cost[bi] = cn[better]
+        lam[bi] = np.maximum(lam[bi] * 0.2, 1e-12)
+        wi = idx[~better]
+        lam[wi] = lam[wi] * 10.0
+        # convergence: the accepted step is tiny relative to the range / in radians
+        rng = np.maximum(np.linalg.norm(x[idx, :3], axis=1), 1e-3)
+        small = (np.max(np.abs(dx[:, :3]), 1) <= step_tol * rng) & (np.max(np.abs(dx[:, 3:]), 1) <= step_tol)
+        # cost no longer decreasing beyond rounding: at the minimum
+        flat = better & (cost_before - cn <= 1e-13 * cost_before + 1e-300)
+        stalled = (~better) & (lam[idx] > 1e6)
+        done = small | flat | stalled
+        conv[idx[done]] = True  # judged afterwards by the residual
+        active[idx[done]] = False
+        # give up on frames that ran away
+        gone = ~finite | (lam[idx] > 1e12)
+        active[idx[gone]] = False
+    return x, conv, iters, rw
+
+
+def solve_centroids(
+    points_px,
+    camera,
+    pattern="svgs-3u",
+    *,
+    sigma_px: float = 1.0,
+    max_iter: int = MAX_ITER,
+    step_tol: float = STEP_TOL,
+    max_residual_px: float = DEFAULT_MAX_RESIDUAL_PX,
+    initial_state=None,
+    front_side_only: bool = True,
+):
+    """Solve the 6-DOF state from labelled target centroids.
+
+    Parameters
+    ----------
+    points_px : array_like, shape (n, 2) or (N, n, 2)
+        Centroids in pixels (OpenCV convention, distorted as imaged), ordered by target id
+        (``pattern.ids`` ascending).
+    camera : Camera or str
+        Camera profile (name, path or :class:`Camera`).
+    pattern : Pattern or str
+        Target pattern (default ``svgs-3u``).
+    sigma_px : float
+        Centroid noise (px, per axis) for which the Cramer-Rao covariance is reported.
+    max_iter : int
+        Iteration cap of the Levenberg-Marquardt loop.
+    step_tol : float
+        Convergence tolerance on the step (relative to range for position, radians for angles).
+    max_residual_px : float
+        A converged solution whose RMS reprojection residual exceeds this is a failure
+        (``diverged``): the points are not an image of the pattern.
+    initial_state : array_like, shape (6,) or (N, 6), optional
+        A starting state; by default POSIT provides one.
+    front_side_only : bool
+        Reject solutions with the camera behind the target plane (``Z_L <= 0``), from
+        where the retroreflectors (facing +z) return no light: reason ``behind_target``.
+
+    Returns
+    -------
+    Solution or Failure
+        For a single frame.
+    BatchSolution
+        For ``N`` frames.
+    """
+    camera = Camera.load(camera)
+    pattern = Pattern.load(pattern)
+    if not (np.isfinite(sigma_px) and sigma_px > 0):
+        raise InputError(f"sigma_px: expected a positive centroid noise in px, got {sigma_px!r}")
+    pts, single = _check_points(points_px, pattern)
+    N, n = pts.shape[:2]
+    xy = camera.pixels_to_normalized(pts)
+    meas = azel_from_normalized(xy)
+    G = azel_pixel_jacobian(pts, camera)  # (N, n, 2, 2) rad/px
+    Winv_sqrt = np.linalg.inv(G)  # whitening: az/el residual -> px residual
+    P = pattern.points_m
+
+    if initial_state is None:
+        R0, t0 = posit(xy, P)
+        x0 = _state_from_pose(R0, t0)
+    else:
+        x0 = np.broadcast_to(np.asarray(initial_state, float), (N, 6)).copy()
+    x, conv, iters, rw = _lm(x0, meas, Winv_sqrt, P, max_iter, step_tol)
+    res = np.sqrt(np.sum(rw * rw, 1) / n)
+
+    # retry frames that did not converge or fit badly from other starts
+    bad = ~conv | ~(res <= max_residual_px) | ~np.all(np.isfinite(x), 1)
+    if np.any(bad):
+        bi = np.flatnonzero(bad)
+        n_starts = len(_alternative_starts(xy[:1], P))
+        for k in range(n_starts):
+            start = _alternative_starts(xy[bi], P)[k]
+            xs, cs, its, rws = _lm(start, meas[bi], Winv_sqrt[bi], P, max_iter, step_tol)
+            rs = np.sqrt(np.sum(rws * rws, 1) / n)
+            take = cs & (rs < np.where(np.isfinite(res[bi]) & conv[bi], res[bi], np.inf))
+            x[bi[take]] = xs[take]
+            conv[bi[take]] = True
+            res[bi[take]] = rs[take]
+            iters[bi[take]] += its[take]
+            bad = ~conv | ~(res <= max_residual_px)
+            bi = np.flatnonzero(bad)
+            if bi.size == 0:
+                break
+
+    R, t = state_to_pose(x)
+    depth_ok = np.all(np.einsum("kij,nj->kni", R, P)[..., 2] + t[:, None, 2] > 0, axis=1)
+    ok = conv & (res <= max_residual_px) & np.all(np.isfinite(x), 1) & depth_ok
+    reason = np.full(N, None, dtype=object)
+    reason[~ok] = "diverged"
+    reason[conv & ~depth_ok] = "behind_camera"
+    if front_side_only:
+        # the reflectors face the target's +z: a camera at Z_L <= 0 cannot see their return
+        back = conv & depth_ok & (x[:, 2] <= 0)
+        ok &= ~back
+        reason[back] = "behind_target"
+
+    # Cramer-Rao bound: (J^T Sigma^-1 J)^-1 with Sigma = G G^T sigma^2 per point
+    _, J, _ = model_azel(np.where(np.isfinite(x), x, 0.0), P)
+    Jw = np.einsum("knij,knjp->knip", Winv_sqrt, J).reshape(N, -1, 6)
+    F = np.einsum("kmp,kmq->kpq", Jw, Jw) / sigma_px**2
+    cov = np.full((N, 6, 6), np.nan)
+    good_F = np.isfinite(F).all((1, 2))
+    if np.any(good_F):
+        cond = np.linalg.cond(F[good_F])
+        inv_ok = cond < 1e14
+        gi = np.flatnonzero(good_F)[inv_ok]
+        cov[gi] = np.linalg.inv(F[gi])
+        degenerate = np.flatnonzero(good_F)[~inv_ok]
+        ok[degenerate] = False
+        reason[degenerate] = "degenerate"
+
+    x[~ok] = np.nan
+    R[~ok] = np.nan
+    t[~ok] = np.nan
+    batch = BatchSolution(ok, reason, x, R, t, res, cov, iters, float(sigma_px))
+    if not single:
+        return batch
+    if not ok[0]:
+        msg = {
+            "diverged": f"no pose reproduces the centroids (RMS residual {res[0]:.3g} px after {iters[0]} iterations)",
+            "behind_camera": "the only pose that fits puts the target behind the camera",
+            "degenerate": "the centroids do not constrain all six pose parameters",
+            "behind_target": "the only pose that fits views the target from behind (a mirror image of the pattern?)",
+        }[reason[0]]
+        return Failure(reason[0], msg, {"residual_rms_px": _f(res[0]), "iterations": int(iters[0])})
+    sol = batch[0]
+    sol.targets_px = {int(i): pts[0, k].tolist() for k, i in enumerate(pattern.ids)}
+    return sol
+
+
+def _alternative_starts(xy, P):
+    """Fallback starting states (N, 6): the target facing the camera at the POSIT-free range
+    estimate, with the in-image rotation taken from the two most distant targets."""
+    N = xy.shape[0]
+    # range from the largest image baseline versus the largest pattern baseline
+    dP = np.linalg.norm(P[:, None] - P[None], axis=-1)
+    a, b = np.unravel_index(np.argmax(dP), dP.shape)
+    d_img = np.linalg.norm(xy[:, a] - xy[:, b], axis=-1)
+    rng = dP[a, b] / np.maximum(d_img, 1e-12)
+    c = xy.mean(1)
+    # in-image rotation: angle of (b -> a) in the image versus the pattern (photo frame: v up)
+    ang_img = np.arctan2(-(xy[:, a, 1] - xy[:, b, 1]), xy[:, a, 0] - xy[:, b, 0])
+    ang_pat = np.arctan2(P[a, 1] - P[b, 1], P[a, 0] - P[b, 0])
+    starts = []
+    for tilt in (0.0, 0.35, -0.35):
+        for axis in (3, 4):
+            psi = -(ang_img - ang_pat)
+            s = np.zeros((N, 6))
+            s[:, axis] = tilt
+            s[:, 5] = psi
+            # perspective centre such that the pattern centroid lies along the measured ray
+            M = rotation_from_angles(s[:, 3], s[:, 4], s[:, 5])
+            ray_photo = np.stack([c[:, 0], -c[:, 1], -np.ones(N)], -1)
+            p_photo = ray_photo * rng[:, None]
+            Pc = P.mean(0)
+            s[:, :3] = Pc[None] - np.einsum("kji,kj->ki", M, p_photo)
+            starts.append(s)
+            if tilt == 0.0:
+                break
+    return starts
+
+
+__all__ = [
+    "Solution",
+    "BatchSolution",
+    "solve_centroids",
+    "model_azel",
+    "azel_from_normalized",
+    "azel_pixel_jacobian",
+    "posit",
+    "D_CAM_PHOTO",
+]

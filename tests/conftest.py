@@ -1,0 +1,41 @@
+"""Shared fixtures. Paths are relative to this file, never to the working directory."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared"
+
+
+@pytest.fixture(scope="session")
+def nexus():
+    from svgs import Camera
+
+    return Camera.load("galaxy-nexus")
+
+
+@pytest.fixture(scope="session")
+def pattern():
+    from svgs import Pattern
+
+    return Pattern.load("svgs-3u")
+
+
+def random_envelope_poses(n, seed, range_m=(1.0, 40.0)):
+    """Poses drawn over the paper's test envelope: range log-uniform, roll/pitch +/-25 deg,
+    yaw +/-45 deg, lateral offsets up to +/-15 % of range. Returns (R (n,3,3), t (n,3))."""
+    from svgs.frames import pose_from_scenario
+
+    rng = np.random.default_rng(seed)
+    Rs, ts = [], []
+    for _ in range(n):
+        r = float(np.exp(rng.uniform(np.log(range_m[0]), np.log(range_m[1]))))
+        R, t = pose_from_scenario(
+            r, rng.uniform(-0.15, 0.15) * r, rng.uniform(-0.15, 0.15) * r,
+            rng.uniform(-25, 25), rng.uniform(-25, 25), rng.uniform(-45, 45),
+        )
+        Rs.append(R)
+        ts.append(t)
+    return np.array(Rs), np.array(ts)

@@ -1,0 +1,121 @@
+"""Collinearity solver: exactness on noise-free data, efficiency (Cramer-Rao), OpenCV agreement."""
+
+import cv2
+import numpy as np
+import pytest
+
+from conftest import random_envelope_poses
+from svgs import InputError, solve_centroids
+from svgs.frames import pose_from_scenario, pose_to_state, rotation_angle_deg
+
+
+def test_noise_free_envelope_10000_poses(nexus, pattern):
+    """Every pose of 10,000 over the envelope is recovered to < 1e-6 deg and < 1e-6 m."""
+    R, t = random_envelope_poses(10_000, seed=11)
+    uv = nexus.project_target(pattern.points_m, R, t)
+    assert nexus.in_image(uv).all()
+    b = solve_centroids(uv, nexus, pattern)
+    assert b.ok.all(), f"failed frames: {np.flatnonzero(~b.ok)[:10]}"
+    rot_err = rotation_angle_deg(b.R_cam_target, R)
+    pos_err = np.linalg.norm(b.t_cam_target_m - t, axis=1)
+    assert rot_err.max() < 1e-6, rot_err.max()
+    assert pos_err.max() < 1e-6, pos_err.max()
+    assert b.residual_rms_px.max() < 1e-6
+
+
+def test_noise_free_with_distortion(nexus, pattern):
+    cam = nexus.replace(dist=np.array([0.09, -0.2, 4e-4, -2e-4, 0.1]))
+    R, t = random_envelope_poses(2000, seed=12)
+    uv = cam.project_target(pattern.points_m, R, t)
+    b = solve_centroids(uv, cam, pattern)
+    assert b.ok.all()
+    assert rotation_angle_deg(b.R_cam_target, R).max() < 1e-6
+    assert np.abs(b.t_cam_target_m - t).max() < 1e-6
+
+
+def test_agrees_with_opencv_ap3p_refinelm(nexus, pattern):
+    """Noise-free: same pose as OpenCV's AP3P + solvePnPRefineLM; noisy: the two minimise
+    almost the same cost (pixel versus whitened az/el residuals), so they agree to a small
+    fraction of the Cramer-Rao sigma."""
+    R, t = random_envelope_poses(200, seed=13)
+    uv = nexus.project_target(pattern.points_m, R, t)
+    rng = np.random.default_rng(14)
+    noisy = uv + rng.normal(0, 0.3, uv.shape)
+    for pts, tol_frac in ((uv, None), (noisy, 0.05)):
+        b = solve_centroids(pts, nexus, pattern, sigma_px=0.3)
+        assert b.ok.all()
+        for k in range(len(pts)):
+            ok, rv, tv = cv2.solvePnP(pattern.points_m, pts[k], nexus.K, nexus.dist, flags=cv2.SOLVEPNP_AP3P)
+            assert ok
+            rv, tv = cv2.solvePnPRefineLM(pattern.points_m, pts[k], nexus.K, nexus.dist, rv, tv)
+            R_cv = cv2.Rodrigues(rv)[0]
+            if tol_frac is None:
+                assert rotation_angle_deg(R_cv, b.R_cam_target[k]) < 1e-6
+                assert np.abs(tv[:, 0] - b.t_cam_target_m[k]).max() < 1e-6
+            else:
+                d_state = pose_to_state(R_cv, tv[:, 0]) - b.state[k]
+                sd = np.sqrt(np.diag(b.covariance[k]))
+                assert np.all(np.abs(d_state) < tol_frac * sd), np.abs(d_state) / sd
+
+
+@pytest.mark.parametrize("range_m, sigma_px", [(3.0, 0.05), (10.0, 0.2), (20.0, 0.5), (30.0, 0.3)])
+def test_monte_carlo_covariance_matches_crlb(nexus, pattern, range_m, sigma_px):
+    """The solver is efficient: the Monte Carlo covariance of 6000 noisy solves matches its
+    predicted covariance (the Cramer-Rao bound) within 10 % per component (variance)."""
+    R, t = pose_from_scenario(range_m, 0.06 * range_m, -0.04 * range_m, 12, -18, 30)
+    truth = pose_to_state(R, t)
+    uv = nexus.project_target(pattern.points_m, R, t)
+    rng = np.random.default_rng(int(range_m * 100))
+    n = 6000
+    b = solve_centroids(uv[None] + rng.normal(0, sigma_px, (n, 4, 2)), nexus, pattern, sigma_px=sigma_px)
+    assert b.ok.all()
+    err = b.state - truth
+    var_mc = err.var(0)
+    var_crlb = np.diag(solve_centroids(uv, nexus, pattern, sigma_px=sigma_px).covariance)
+    ratio = var_mc / var_crlb
+    print(f"range {range_m} m sigma {sigma_px} px: var ratio MC/CRLB = {np.round(ratio, 3)}")
+    assert np.all(np.abs(ratio - 1) < 0.10), ratio
+    # the full matrix too: correlation structure agrees
+    c_mc = np.cov(err.T)
+    c_cr = solve_centroids(uv, nexus, pattern, sigma_px=sigma_px).covariance
+    corr = lambda c: c / np.sqrt(np.outer(np.diag(c), np.diag(c)))  # noqa: E731
+    assert np.abs(corr(c_mc) - corr(c_cr)).max() < 0.05
+
+
+def test_single_frame_result_and_batch_agree(nexus, pattern):
+    R, t = pose_from_scenario(7.0, 0.3, 0.2, 5, -5, 10)
+    uv = nexus.project_target(pattern.points_m, R, t)
+    s = solve_centroids(uv, nexus, pattern)
+    assert s and s.ok
+    b = solve_centroids(uv[None], nexus, pattern)
+    np.testing.assert_allclose(s.state, b.state[0])
+    assert set(s.targets_px) == {1, 2, 3, 4}
+    d = s.to_json()
+    assert d["state"]["z_m"] == pytest.approx(7.0, abs=0.2)
+    assert d["ok"] is True
+
+
+def test_points_that_are_not_the_pattern_fail_with_reason(nexus, pattern):
+    rng = np.random.default_rng(5)
+    R, t = pose_from_scenario(7.0)
+    uv = nexus.project_target(pattern.points_m, R, t)
+    uv = uv[[1, 0, 2, 3]]  # targets 1 and 2 swapped: a mirror image of the pattern
+    res = solve_centroids(uv + rng.normal(0, 0.01, uv.shape), nexus, pattern)
+    assert not res
+    assert res.reason in ("diverged", "behind_camera", "behind_target")
+    assert res.message
+
+
+@pytest.mark.parametrize(
+    "pts, match",
+    [
+        (np.zeros((3, 2)), "expected shape"),
+        (np.full((4, 2), np.nan), "non-finite"),
+        (np.array([[1.0, 1], [1, 1], [5, 5], [9, 1]]), "degenerate"),
+        (np.array([[0.0, 0], [1, 1], [2, 2], [3, 3]]), "degenerate"),
+        ("abc", "expected"),
+    ],
+)
+def test_bad_points(nexus, pattern, pts, match):
+    with pytest.raises(InputError, match=match):
+        solve_centroids(pts, nexus, pattern)
