@@ -33,12 +33,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InputError
-from .frames import D_CAM_PHOTO, rotation_from_angles, state_dict, state_to_pose
+from .frames import D_CAM_PHOTO, pose_to_state, rotation_from_angles, state_dict, state_to_pose
 from .profiles import Camera, Pattern
 from .result import Failure
 
 #: Default convergence tolerance on the state step: metres for position, radians for angles.
-STEP_TOL = 1e-11
+STEP_TOL = 1e-9
+#: Batches at least this large run the compiled kernel on all cores.
+PARALLEL_MIN_FRAMES = 256
 #: Default iteration cap.
 MAX_ITER = 200
 #: Reprojection residual (px RMS) above which a converged solution is not accepted as "ok"
@@ -47,33 +49,46 @@ DEFAULT_MAX_RESIDUAL_PX = 5.0
 
 
 # --------------------------------------------------------------------------- derivatives
-def _drot(a):
-    """Rotation matrices R1, R2, R3 and their derivatives, shapes (N, 3, 3)."""
-    c, s = np.cos(a), np.sin(a)
-    o, z = np.ones_like(a), np.zeros_like(a)
-
-    def m(rows):
-        return np.stack([np.stack(r, -1) for r in rows], -2)
-
-    return c, s, o, z, m
-
-
 def _rotations_and_derivatives(angles):
-    """M and dM/dphi, dM/dtheta, dM/dpsi for angles (N, 3). Returns (M, dM (N, 3, 3, 3))."""
-    phi, th, psi = angles[:, 0], angles[:, 1], angles[:, 2]
-    c1, s1, o, z, m = _drot(phi)
-    R1 = m([[o, z, z], [z, c1, s1], [z, -s1, c1]])
-    dR1 = m([[z, z, z], [z, -s1, c1], [z, -c1, -s1]])
-    c2, s2 = np.cos(th), np.sin(th)
-    R2 = m([[c2, z, -s2], [z, o, z], [s2, z, c2]])
-    dR2 = m([[-s2, z, -c2], [z, z, z], [c2, z, -s2]])
-    c3, s3 = np.cos(psi), np.sin(psi)
-    R3 = m([[c3, s3, z], [-s3, c3, z], [z, z, o]])
-    dR3 = m([[-s3, c3, z], [-c3, -s3, z], [z, z, z]])
-    R21 = R2 @ R1
-    M = R3 @ R21
-    dM = np.stack([R3 @ R2 @ dR1, R3 @ dR2 @ R1, dR3 @ R21], 1)
-    return M, dM
+    """M = R3(psi) R2(theta) R1(phi) and its derivatives, element by element.
+
+    Parameters
+    ----------
+    angles : ndarray, shape (N, 3)
+
+    Returns
+    -------
+    M : list of 3 lists of 3 ndarrays, each shape (N, 1)
+        ``M[i][j]``, kept as separate arrays (explicit products beat batched 3x3 matmul).
+    dM : list of 3 such matrices
+        ``dM[a]`` is dM / d angle_a (a = phi, theta, psi).
+    """
+    c1, s1 = np.cos(angles[:, 0:1]), np.sin(angles[:, 0:1])
+    c2, s2 = np.cos(angles[:, 1:2]), np.sin(angles[:, 1:2])
+    c3, s3 = np.cos(angles[:, 2:3]), np.sin(angles[:, 2:3])
+    s2c3, s2s3, c2c3, c2s3 = s2 * c3, s2 * s3, c2 * c3, c2 * s3
+    z = np.zeros_like(c1)
+    M = [
+        [c2c3, c1 * s3 + s1 * s2c3, s1 * s3 - c1 * s2c3],
+        [-c2s3, c1 * c3 - s1 * s2s3, s1 * c3 + c1 * s2s3],
+        [s2, -s1 * c2, c1 * c2],
+    ]
+    d_phi = [
+        [z, -s1 * s3 + c1 * s2c3, c1 * s3 + s1 * s2c3],
+        [z, -s1 * c3 - c1 * s2s3, c1 * c3 - s1 * s2s3],
+        [z, -c1 * c2, -s1 * c2],
+    ]
+    d_theta = [
+        [-s2c3, s1 * c2c3, -c1 * c2c3],
+        [s2s3, -s1 * c2s3, c1 * c2s3],
+        [c2, s1 * s2, -c1 * s2],
+    ]
+    d_psi = [
+        [-c2s3, M[1][1], M[1][2]],
+        [-c2c3, -M[0][1], -M[0][2]],
+        [z, z, z],
+    ]
+    return M, [d_phi, d_theta, d_psi]
 
 
 def azel_from_normalized(xy: np.ndarray) -> np.ndarray:
@@ -111,30 +126,38 @@ def model_azel(state: np.ndarray, points_m: np.ndarray, with_jacobian: bool = Tr
     L = state[:, :3]
     M, dM = _rotations_and_derivatives(state[:, 3:])
     d = points_m[None, :, :] - L[:, None, :]  # (N, n, 3)
-    v = np.einsum("kij,knj->kni", M, d)
-    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    dx_, dy_, dz_ = d[..., 0], d[..., 1], d[..., 2]
+
+    def rot(R):  # R as nested element lists applied to d -> three (N, n) arrays
+        return [R[i][0] * dx_ + R[i][1] * dy_ + R[i][2] * dz_ for i in range(3)]
+
+    vx, vy, vz = rot(M)
     rho2 = vx * vx + vz * vz
     r2 = rho2 + vy * vy
-    az = np.arctan2(vx, -vz)
-    el = np.arcsin(np.clip(vy / np.sqrt(r2), -1.0, 1.0))
-    azel = np.stack([az, el], -1)
+    azel = np.empty(d.shape[:2] + (2,))
+    azel[..., 0] = np.arctan2(vx, -vz)
+    azel[..., 1] = np.arcsin(np.clip(vy / np.sqrt(r2), -1.0, 1.0))
     if not with_jacobian:
         return azel, None, vz
     rho = np.sqrt(rho2)
-    daz_dv = np.stack([-vz / rho2, np.zeros_like(vx), vx / rho2], -1)  # (N, n, 3)
-    el_vec = -vy[..., None] * v / r2[..., None]
-    el_vec[..., 1] += 1.0
-    del_dv = el_vec / rho[..., None]
-    dazel_dv = np.stack([daz_dv, del_dv], -2)  # (N, n, 2, 3)
-    dv_dL = -M  # (N, 3, 3)
-    dv_dang = np.einsum("kaij,knj->knia", dM, d)  # (N, n, 3, 3): column a = dv/dangle_a
-    dv_dV = np.concatenate([np.broadcast_to(dv_dL[:, None], dv_dang.shape), dv_dang], -1)  # (N, n, 3, 6)
-    J = np.einsum("knij,knjp->knip", dazel_dv, dv_dV)
+    a_x, a_z = -vz / rho2, vx / rho2  # dAz/dv (dAz/dvy = 0)
+    k = -vy / (r2 * rho)
+    e_x, e_y, e_z = vx * k, vy * k + 1.0 / rho, vz * k  # dEl/dv
+    J = np.empty(d.shape[:2] + (2, 6))
+    for j in range(3):  # dv/dL_j = -M[:, :, j]
+        mx, my, mz = -M[0][j], -M[1][j], -M[2][j]
+        J[..., 0, j] = a_x * mx + a_z * mz
+        J[..., 1, j] = e_x * mx + e_y * my + e_z * mz
+    for a in range(3):  # dv/dangle_a = dM_a @ d
+        wx, wy, wz = rot(dM[a])
+        J[..., 0, 3 + a] = a_x * wx + a_z * wz
+        J[..., 1, 3 + a] = e_x * wx + e_y * wy + e_z * wz
     return azel, J, vz
 
 
 def azel_pixel_jacobian(uv_px: np.ndarray, camera: Camera, h_px: float = 1e-3) -> np.ndarray:
-    """``G = d(Az, El) / d(u, v)`` by central differences through the undistortion.
+    """``G = d(Az, El) / d(u, v)``: analytic without distortion, else central differences
+    through the undistortion.
 
     Parameters
     ----------
@@ -145,6 +168,16 @@ def azel_pixel_jacobian(uv_px: np.ndarray, camera: Camera, h_px: float = 1e-3) -
     G : ndarray, shape (..., 2, 2), rad/px
     """
     uv = np.asarray(uv_px, float)
+    if not camera.has_distortion:
+        xn, yn = (uv[..., 0] - camera.cx) / camera.fx, (uv[..., 1] - camera.cy) / camera.fy
+        q2 = 1.0 + xn * xn
+        s2 = q2 + yn * yn
+        q = np.sqrt(q2)
+        G = np.zeros(uv.shape[:-1] + (2, 2))
+        G[..., 0, 0] = 1.0 / (q2 * camera.fx)
+        G[..., 1, 0] = xn * yn / (s2 * q * camera.fx)
+        G[..., 1, 1] = -q / (s2 * camera.fy)
+        return G
     cols = []
     for k in range(2):
         e = np.zeros(2)
@@ -156,49 +189,30 @@ def azel_pixel_jacobian(uv_px: np.ndarray, camera: Camera, h_px: float = 1e-3) -
 
 
 # --------------------------------------------------------------------------- initial guess
-def posit(xy: np.ndarray, points_m: np.ndarray, n_iter: int = 30):
-    """POSIT (DeMenthon & Davis 1995) for non-coplanar points, vectorised over frames.
+def posit(xy: np.ndarray, points_m: np.ndarray, n_iter: int = 10):
+    """POSIT (DeMenthon & Davis 1995) for non-coplanar points, over N frames (compiled).
 
     Parameters
     ----------
     xy : ndarray, shape (N, n, 2)
         Normalised image coordinates (OpenCV camera frame).
     points_m : ndarray, shape (n, 3)
+    n_iter : int
+        POSIT iterations; the Levenberg-Marquardt refinement does the rest.
 
     Returns
     -------
     R_cam_target : ndarray, shape (N, 3, 3)
     t_cam_target_m : ndarray, shape (N, 3)
     """
-    P0 = points_m[0]
-    A = points_m[1:] - P0  # (n-1, 3)
-    B = np.linalg.pinv(A)  # (3, n-1)
+    from ._lm_kernel import posit_batch
+
+    P = np.ascontiguousarray(points_m, dtype=np.float64)
+    B = np.linalg.pinv(P[1:] - P[0])
     N = xy.shape[0]
-    eps = np.zeros((N, points_m.shape[0] - 1))
-    x0, y0 = xy[:, 0, 0], xy[:, 0, 1]
-    for _ in range(n_iter):
-        xp = xy[:, 1:, 0] * (1 + eps) - x0[:, None]
-        yp = xy[:, 1:, 1] * (1 + eps) - y0[:, None]
-        I = xp @ B.T
-        Jv = yp @ B.T
-        nI = np.linalg.norm(I, axis=1)
-        nJ = np.linalg.norm(Jv, axis=1)
-        s = np.sqrt(nI * nJ)
-        s = np.where(s > 0, s, 1.0)
-        i = I / np.maximum(nI, 1e-300)[:, None]
-        j = Jv / np.maximum(nJ, 1e-300)[:, None]
-        k = np.cross(i, j)
-        k /= np.maximum(np.linalg.norm(k, axis=1), 1e-300)[:, None]
-        Z0 = 1.0 / s
-        eps = (A @ k.T).T / Z0[:, None]
-    j = np.cross(k, i)
-    R = np.stack([i, j, k], 1)
-    u, _, vt = np.linalg.svd(R)
-    R = u @ vt
-    det = np.linalg.det(R)
-    R[det < 0] *= -1
-    T = np.stack([x0 * Z0, y0 * Z0, Z0], -1)
-    t = T - R @ P0
+    R = np.empty((N, 3, 3))
+    t = np.empty((N, 3))
+    posit_batch(np.ascontiguousarray(xy, dtype=np.float64), P, B, int(n_iter), R, t)
     return R, t
 
 
@@ -350,8 +364,11 @@ def _check_points(points_px, pattern: Pattern) -> tuple[np.ndarray, bool]:
     dist = np.linalg.norm(diff, axis=-1) + np.eye(n)[None] * 1e9
     coincident = np.min(dist, axis=(1, 2)) < 1e-6
     c = pts - pts.mean(1, keepdims=True)
-    sv = np.linalg.svd(c, compute_uv=False)
-    collinear = sv[:, 1] < 1e-9 * np.maximum(sv[:, 0], 1e-300)
+    sxx, syy, sxy = np.sum(c[..., 0] ** 2, 1), np.sum(c[..., 1] ** 2, 1), np.sum(c[..., 0] * c[..., 1], 1)
+    # smallest over largest eigenvalue of the 2x2 scatter matrix, in closed form
+    half_tr, det = 0.5 * (sxx + syy), sxx * syy - sxy**2
+    disc = np.sqrt(np.maximum(half_tr**2 - det, 0.0))
+    collinear = (half_tr - disc) < 1e-18 * np.maximum(half_tr + disc, 1e-300)
     deg = coincident | collinear
     if np.any(deg):
         which = np.flatnonzero(deg)[:10].tolist()
@@ -362,70 +379,25 @@ def _check_points(points_px, pattern: Pattern) -> tuple[np.ndarray, bool]:
 
 
 # --------------------------------------------------------------------------- solver
-def _lm(state0, meas_azel, Winv_sqrt, points_m, max_iter, step_tol):
-    """Vectorised Levenberg-Marquardt. Returns (state, converged, iterations, whitened residual)."""
-    N = state0.shape[0]
-    x = state0.copy()
-    lam = np.full(N, 1e-3)
-    active = np.ones(N, bool)
-    conv = np.zeros(N, bool)
-    iters = np.zeros(N, int)
+def _lm(R0, t0, meas_azel, Winv_sqrt, points_m, max_iter, step_tol):
+    """Run the compiled Levenberg-Marquardt kernel (:mod:`svgs._lm_kernel`) on N frames.
 
-    def whitened(xs, idx, jac=True):
-        azel, J, vz = model_azel(xs, points_m, with_jacobian=jac)
-        r = meas_azel[idx] - azel
-        r[..., 0] = (r[..., 0] + np.pi) % (2 * np.pi) - np.pi
-        rw = np.einsum("knij,knj->kni", Winv_sqrt[idx], r).reshape(len(idx), -1)
-        Jw = None
-        if jac:
-            Jw = np.einsum("knij,knjp->knip", Winv_sqrt[idx], J).reshape(len(idx), -1, 6)
-        return rw, Jw, vz
+    Returns
+    -------
+    R (N, 3, 3), t (N, 3), converged (N,), iterations (N,), whitened residual (N, 2n),
+    unit-noise paper-state covariance (N, 6, 6), smallest information pivot (N,).
+    """
+    from ._lm_kernel import lm_batch, lm_batch_serial
 
-    idx_all = np.arange(N)
-    rw, Jw, _ = whitened(x, idx_all)
-    cost = np.sum(rw * rw, 1)
-    for _ in range(max_iter):
-        idx = np.flatnonzero(active)
-        if idx.size == 0:
-            break
-        iters[idx] += 1
-        Ja = Jw[idx]
-        ra = rw[idx]
-        JTJ = np.einsum("kmp,kmq->kpq", Ja, Ja)
-        g = np.einsum("kmp,km->kp", Ja, ra)
-        diag = np.einsum("kpp->kp", JTJ)
-        A = JTJ + lam[idx, None, None] * np.einsum("kp,pq->kpq", np.maximum(diag, 1e-12), np.eye(6))
-        try:
-            dx = np.linalg.solve(A, g[..., None])[..., 0]
-        except np.linalg.LinAlgError:
-            dx = np.stack([np.linalg.lstsq(a, b, rcond=None)[0] for a, b in zip(A, g)])
-        cost_before = cost[idx].copy()
-        xn = x[idx] + dx
-        rn, Jn, vzn = whitened(xn, idx)
-        cn = np.sum(rn * rn, 1)
-        finite = np.isfinite(cn) & np.all(np.isfinite(xn), 1)
-        better = finite & (cn <= cost[idx] * (1 + 1e-12))
-        bi = idx[better]
-        x[bi] = xn[better]
-        rw[bi] = rn[better]
-        Jw[bi] = Jn[better]
-        cost[bi] = cn[better]
-        lam[bi] = np.maximum(lam[bi] * 0.2, 1e-12)
-        wi = idx[~better]
-        lam[wi] = lam[wi] * 10.0
-        # convergence: the accepted step is tiny relative to the range / in radians
-        rng = np.maximum(np.linalg.norm(x[idx, :3], axis=1), 1e-3)
-        small = (np.max(np.abs(dx[:, :3]), 1) <= step_tol * rng) & (np.max(np.abs(dx[:, 3:]), 1) <= step_tol)
-        # cost no longer decreasing beyond rounding: at the minimum
-        flat = better & (cost_before - cn <= 1e-13 * cost_before + 1e-300)
-        stalled = (~better) & (lam[idx] > 1e6)
-        done = small | flat | stalled
-        conv[idx[done]] = True  # judged afterwards by the residual
-        active[idx[done]] = False
-        # give up on frames that ran away
-        gone = ~finite | (lam[idx] > 1e12)
-        active[idx[gone]] = False
-    return x, conv, iters, rw
+    R = np.ascontiguousarray(R0, dtype=np.float64).copy()
+    t = np.ascontiguousarray(t0, dtype=np.float64).copy()
+    kernel = lm_batch if R.shape[0] >= PARALLEL_MIN_FRAMES else lm_batch_serial
+    conv, iters, rw, cov, piv = kernel(
+        R, t, np.ascontiguousarray(points_m, dtype=np.float64),
+        np.ascontiguousarray(meas_azel, dtype=np.float64), np.ascontiguousarray(Winv_sqrt, dtype=np.float64),
+        int(max_iter), float(step_tol), np.ones(R.shape[0], np.bool_),
+    )
+    return R, t, conv, iters, rw, cov, piv
 
 
 def solve_centroids(
@@ -482,28 +454,31 @@ def solve_centroids(
     xy = camera.pixels_to_normalized(pts)
     meas = azel_from_normalized(xy)
     G = azel_pixel_jacobian(pts, camera)  # (N, n, 2, 2) rad/px
-    Winv_sqrt = np.linalg.inv(G)  # whitening: az/el residual -> px residual
+    detG = G[..., 0, 0] * G[..., 1, 1] - G[..., 0, 1] * G[..., 1, 0]
+    Winv_sqrt = np.stack([np.stack([G[..., 1, 1], -G[..., 0, 1]], -1),
+                          np.stack([-G[..., 1, 0], G[..., 0, 0]], -1)], -2) / detG[..., None, None]
+    # Winv_sqrt = G^-1 whitens: az/el residual -> px residual
     P = pattern.points_m
 
     if initial_state is None:
         R0, t0 = posit(xy, P)
-        x0 = _state_from_pose(R0, t0)
     else:
-        x0 = np.broadcast_to(np.asarray(initial_state, float), (N, 6)).copy()
-    x, conv, iters, rw = _lm(x0, meas, Winv_sqrt, P, max_iter, step_tol)
+        R0, t0 = state_to_pose(np.broadcast_to(np.asarray(initial_state, float), (N, 6)))
+    R, t, conv, iters, rw, cov1, piv = _lm(R0, t0, meas, Winv_sqrt, P, max_iter, step_tol)
     res = np.sqrt(np.sum(rw * rw, 1) / n)
 
     # retry frames that did not converge or fit badly from other starts
-    bad = ~conv | ~(res <= max_residual_px) | ~np.all(np.isfinite(x), 1)
+    bad = ~conv | ~(res <= max_residual_px) | ~np.all(np.isfinite(t), 1)
     if np.any(bad):
         bi = np.flatnonzero(bad)
         n_starts = len(_alternative_starts(xy[:1], P))
         for k in range(n_starts):
-            start = _alternative_starts(xy[bi], P)[k]
-            xs, cs, its, rws = _lm(start, meas[bi], Winv_sqrt[bi], P, max_iter, step_tol)
+            Rs, ts = state_to_pose(_alternative_starts(xy[bi], P)[k])
+            Rk, tk, cs, its, rws, covk, pivk = _lm(Rs, ts, meas[bi], Winv_sqrt[bi], P, max_iter, step_tol)
             rs = np.sqrt(np.sum(rws * rws, 1) / n)
             take = cs & (rs < np.where(np.isfinite(res[bi]) & conv[bi], res[bi], np.inf))
-            x[bi[take]] = xs[take]
+            R[bi[take]], t[bi[take]] = Rk[take], tk[take]
+            cov1[bi[take]], piv[bi[take]] = covk[take], pivk[take]
             conv[bi[take]] = True
             res[bi[take]] = rs[take]
             iters[bi[take]] += its[take]
@@ -512,7 +487,7 @@ def solve_centroids(
             if bi.size == 0:
                 break
 
-    R, t = state_to_pose(x)
+    x = pose_to_state(R, t)
     depth_ok = np.all(np.einsum("kij,nj->kni", R, P)[..., 2] + t[:, None, 2] > 0, axis=1)
     ok = conv & (res <= max_residual_px) & np.all(np.isfinite(x), 1) & depth_ok
     reason = np.full(N, None, dtype=object)
@@ -524,20 +499,11 @@ def solve_centroids(
         ok &= ~back
         reason[back] = "behind_target"
 
-    # Cramer-Rao bound: (J^T Sigma^-1 J)^-1 with Sigma = G G^T sigma^2 per point
-    _, J, _ = model_azel(np.where(np.isfinite(x), x, 0.0), P)
-    Jw = np.einsum("knij,knjp->knip", Winv_sqrt, J).reshape(N, -1, 6)
-    F = np.einsum("kmp,kmq->kpq", Jw, Jw) / sigma_px**2
-    cov = np.full((N, 6, 6), np.nan)
-    good_F = np.isfinite(F).all((1, 2))
-    if np.any(good_F):
-        cond = np.linalg.cond(F[good_F])
-        inv_ok = cond < 1e14
-        gi = np.flatnonzero(good_F)[inv_ok]
-        cov[gi] = np.linalg.inv(F[gi])
-        degenerate = np.flatnonzero(good_F)[~inv_ok]
-        ok[degenerate] = False
-        reason[degenerate] = "degenerate"
+    # Cramer-Rao bound: (J^T Sigma^-1 J)^-1 with Sigma = G G^T sigma^2 per point, from the kernel
+    cov = cov1 * sigma_px**2
+    degenerate = ok & ~(piv > 1e-14)
+    ok[degenerate] = False
+    reason[degenerate] = "degenerate"
 
     x[~ok] = np.nan
     R[~ok] = np.nan

@@ -119,3 +119,32 @@ def test_points_that_are_not_the_pattern_fail_with_reason(nexus, pattern):
 def test_bad_points(nexus, pattern, pts, match):
     with pytest.raises(InputError, match=match):
         solve_centroids(pts, nexus, pattern)
+
+
+def test_kernel_covariance_equals_analytic_paper_state_crlb(nexus, pattern):
+    """The covariance the compiled kernel reports (iteration parameters mapped to the paper's
+    state) equals (J^T Sigma^-1 J)^-1 built from the analytic paper-state Jacobian."""
+    from svgs.solver import azel_pixel_jacobian, model_azel
+
+    for range_m in (2.0, 15.0, 35.0):
+        R, t = pose_from_scenario(range_m, 0.1 * range_m, 0.05 * range_m, -20, 15, 40)
+        uv = nexus.project_target(pattern.points_m, R, t)
+        sol = solve_centroids(uv, nexus, pattern, sigma_px=0.25)
+        _, J, _ = model_azel(sol.state[None], pattern.points_m)
+        Winv = np.linalg.inv(azel_pixel_jacobian(uv, nexus))
+        Jw = (Winv @ J[0]).reshape(-1, 6)
+        cov = np.linalg.inv(Jw.T @ Jw) * 0.25**2
+        np.testing.assert_allclose(sol.covariance, cov, rtol=1e-5, atol=1e-12 * np.abs(cov).max())
+
+
+def test_model_jacobian_matches_finite_differences(pattern):
+    from svgs.solver import model_azel
+
+    x = np.array([[0.3, -0.2, 5.0, 0.2, -0.3, 0.5]])
+    _, J, _ = model_azel(x, pattern.points_m)
+    Jn = np.zeros_like(J)
+    for p in range(6):
+        e = np.zeros(6)
+        e[p] = 1e-6
+        Jn[..., p] = (model_azel(x + e, pattern.points_m, False)[0] - model_azel(x - e, pattern.points_m, False)[0]) / 2e-6
+    np.testing.assert_allclose(J, Jn, atol=1e-8)

@@ -1,0 +1,491 @@
+"""Numpy-returning entry points of the renderer.
+
+>>> from render import Renderer, render_flux
+>>> from svgs.frames import pose_from_scenario
+>>> R, t = pose_from_scenario(10.0)
+>>> res = render_flux("galaxy-nexus", "svgs-3u", R, t, seed=1)   # doctest: +SKIP
+>>> res.flux.shape, res.truth["targets_px"]                       # doctest: +SKIP
+
+:class:`Renderer` keeps the scene and its compiled kernels; :meth:`Renderer.render`
+updates the pose in place. ``render_flux`` is a one-call form that reuses a cached
+renderer for the same camera/pattern/reflector/options.
+
+Sampling plan: the full frame at ``spp`` samples per pixel (the dark diffuse
+background; 0 skips it), plus one fixed-size window (``roi_size_px`` square) around the
+predicted spot of every target in the image at ``roi_spp`` - all windows in one
+Mitsuba pass (a mosaic film), composed into the full frame. ``full_frame=True`` renders
+the whole frame at ``spp`` instead (the reference the ROI scheme is tested against).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from svgs.errors import InputError, check_finite
+from svgs.frames import pose_to_state, state_dict
+from svgs.profiles import Camera, Pattern
+
+from .constants import DEFAULT_ROI_SIZE_PX, DEFAULT_ROI_SPP, DEFAULT_SPOT_SAMPLES, DEFAULT_SPP
+from .geometry import Reflector, SceneOptions
+from .optics import Flash, Optics, pixel_normalized_grid, radiance_to_photon_rate
+from .predict import retro_factor, retro_irradiance_w_m2, spot_direction_cam
+from .variant import select_variant
+
+#: Upper bound of samples in one Mitsuba pass (memory: ~100 bytes per lane).
+MAX_SAMPLES_PER_PASS = 1 << 24
+
+
+@dataclass
+class RenderResult:
+    """One rendered frame.
+
+    Attributes
+    ----------
+    flux : ndarray of float32, shape (H, W)
+        Photons per second reaching each pixel, in the camera band (noise-free
+        expectation, up to Monte Carlo error).
+    truth : dict
+        Pose, projections, every physical parameter used (JSON-serialisable).
+    radiance : ndarray of float32, shape (H, W)
+        Mean radiance over each pixel and the aperture, W m^-2 sr^-1 in band.
+    timings_s : dict
+    """
+
+    flux: np.ndarray
+    truth: dict
+    radiance: np.ndarray
+    timings_s: dict = field(default_factory=dict)
+
+    def save(self, out_dir) -> dict:
+        """Write ``flux.npy``, ``truth.json`` and ``preview.png`` into ``out_dir``."""
+        from pathlib import Path
+
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        np.save(out / "flux.npy", self.flux.astype(np.float32))
+        with open(out / "truth.json", "w") as fh:
+            json.dump(self.truth, fh, indent=2)
+        write_preview(out / "preview.png", self.flux)
+        return {"flux": str(out / "flux.npy"), "truth": str(out / "truth.json"), "preview": str(out / "preview.png")}
+
+
+def write_preview(path, flux: np.ndarray) -> None:
+    """Tone-mapped 8-bit preview for people: log scale between the 1st percentile of
+    the lit pixels and the maximum (the spots are ~1e7 x the background)."""
+    import cv2
+
+    f = np.asarray(flux, np.float64)
+    pos = f[f > 0]
+    if pos.size == 0:
+        img = np.zeros(f.shape, np.uint8)
+    else:
+        lo = max(np.percentile(pos, 1.0), pos.max() * 1e-9)
+        hi = pos.max()
+        x = np.log(np.clip(f, lo, hi) / lo) / max(np.log(hi / lo), 1e-12)
+        img = np.round(255 * x).astype(np.uint8)
+    cv2.imwrite(str(path), img)
+
+
+def _check_pose(R, t):
+    R = np.asarray(R, float)
+    t = np.asarray(t, float)
+    if R.shape != (3, 3) or not np.all(np.isfinite(R)):
+        raise InputError(f"R_cam_target: expected a finite 3x3 rotation matrix, got shape {R.shape}")
+    if np.max(np.abs(R @ R.T - np.eye(3))) > 1e-6 or np.linalg.det(R) < 0:
+        raise InputError("R_cam_target: not a proper rotation (R R^T != I or det < 0)")
+    if t.shape != (3,) or not np.all(np.isfinite(t)):
+        raise InputError(f"t_cam_target_m: expected 3 finite numbers (m), got {t!r}")
+    return R, t
+
+
+def _pow2(n: int) -> int:
+    n = int(n)
+    return 1 << max(0, (n - 1).bit_length())
+
+
+class Renderer:
+    """A loaded scene for one camera, pattern, reflector and scene options.
+
+    Parameters
+    ----------
+    camera : str, path or svgs.Camera
+        Needs ``[optics]`` and ``[flash]`` tables (see :mod:`render.optics`).
+    pattern : str, path or svgs.Pattern
+    reflector : None, str, dict or Reflector
+        See :meth:`render.geometry.Reflector.resolve` (default: the pattern's model).
+    scene_options : None, dict or SceneOptions
+    roi_size_px : int
+        Side of the square windows rendered around each spot (constant for the
+        renderer's life: changing it would recompile).
+    spp, roi_spp : int
+        Default samples per pixel of the full frame and of the windows (rounded up to
+        powers of two, as the low-discrepancy sampler needs).
+    variant : str, optional
+        Passed to :func:`render.select_variant`.
+
+    Raises
+    ------
+    InputError
+        Unknown profile, missing ``[optics]``/``[flash]`` table, bad options.
+    """
+
+    def __init__(self, camera, pattern="svgs-3u", *, reflector=None, scene_options=None,
+                 roi_size_px: int = DEFAULT_ROI_SIZE_PX, spp: int = DEFAULT_SPP, roi_spp: int = DEFAULT_ROI_SPP,
+                 spot_samples: int = DEFAULT_SPOT_SAMPLES, method: str = "guided", variant: str | None = None,
+                 extra_meshes=()):
+        self.camera = Camera.load(camera)
+        self.pattern = Pattern.load(pattern)
+        self.optics = Optics.from_camera(self.camera)
+        self.flash = Flash.from_camera(self.camera, self.optics.band_nm)
+        self.reflector = Reflector.resolve(reflector, self.pattern)
+        self.options = SceneOptions.resolve(scene_options)
+        if self.options.focus_distance_m is not None:
+            from dataclasses import replace
+
+            self.optics = replace(self.optics, focus_distance_m=float(self.options.focus_distance_m))
+        roi = int(roi_size_px)
+        if roi < 4:
+            raise InputError(f"roi_size_px: expected >= 4, got {roi_size_px!r}")
+        self.roi_size_px = min(roi, self.camera.width, self.camera.height)
+        self.spp = self._check_spp(spp, "spp", allow_zero=True)
+        self.roi_spp = self._check_spp(roi_spp, "roi_spp")
+        self.n_windows = int(self.pattern.n)
+        if method not in ("guided", "path"):
+            raise InputError(f"method: expected 'guided' or 'path', got {method!r}")
+        self.method = method
+        self.spot_samples = self._check_spp(spot_samples, "spot_samples")
+        self.variant = select_variant(variant)
+        import drjit as dr
+        import mitsuba as mi
+
+        from .scene import build_scene
+        from .sensor import CameraModel
+        from .spots import SpotEstimator
+
+        self._mi, self._dr = mi, dr
+        t0 = time.perf_counter()
+        self.scene, h = build_scene(self.camera, self.pattern, self.optics, self.flash, self.reflector, self.options,
+                                    self.roi_size_px, self.n_windows, extra_meshes=extra_meshes, method=method)
+        self._sensor_full, self._sensor_roi = h["sensor_full"], h["sensor_roi"]
+        self.target = h["target"]
+        self._flash_keys = h["flash_keys"]
+        self._params = h["params"]
+        self.model = CameraModel(self.camera, self.optics.aperture_radius_m, self.optics.focus_distance_m)
+        for s in (self._sensor_full, self._sensor_roi):
+            s.set_model(self.model)
+        self._sensor_full.set_windows(np.zeros((1, 2)), self.camera.height)
+        self._glints = [d for d in self.options.distractors if d["type"] == "glint"]
+        n_leds = self.flash.led_offsets_m.shape[0]
+        self._n_strategies = self.pattern.n * n_leds * 3 + len(self._glints) * n_leds
+        self.spots = None
+        if method == "guided":
+            self.spots = SpotEstimator(self.scene, self.model, self._n_strategies, n_leds,
+                                       0.5 * self.flash.emitter_diameter_m, self.flash.radiance_w_m2_sr,
+                                       self.flash.cos_exponent, self.options.max_depth, self.camera.width,
+                                       self.camera.height)
+        self.load_time_s = time.perf_counter() - t0
+        self._factor_full = None
+
+    @staticmethod
+    def _check_spp(v, name, allow_zero=False):
+        try:
+            iv = int(v)
+        except (TypeError, ValueError):
+            raise InputError(f"{name}: expected a positive integer, got {v!r}") from None
+        if iv != v or iv < (0 if allow_zero else 1):
+            raise InputError(f"{name}: expected a {'non-negative' if allow_zero else 'positive'} integer, got {v!r}")
+        return 0 if iv == 0 else _pow2(iv)
+
+    # ------------------------------------------------------------------ geometry
+    def predicted_spots_px(self, R_cam_target, t_cam_target_m) -> np.ndarray:
+        """Geometric-optics spot centre of every target, averaged over the LEDs.
+
+        Returns
+        -------
+        ndarray, shape (N, 2)
+            Pixels (OpenCV convention), distortion included.
+        """
+        R, t = np.asarray(R_cam_target, float), np.asarray(t_cam_target_m, float)
+        V = self.target.cube_vertex_m @ R.T + t
+        A = self.target.cube_axis @ R.T
+        out = np.zeros((V.shape[0], 2))
+        for i in range(V.shape[0]):
+            uv = []
+            for S in self.flash.led_offsets_m:
+                d = spot_direction_cam(S, V[i], A[i], self.reflector, self.optics.band_nm)
+                uv.append(self.camera.project(d if d[2] > 0 else np.array([d[0], d[1], 1e-12])))
+            out[i] = np.mean(uv, axis=0)
+        return out
+
+    def _windows(self, spots_px, visible):
+        """Top-left corners (integers) of the windows, clamped into the frame."""
+        w = self.roi_size_px
+        c = np.where(np.isfinite(spots_px), spots_px, 0.0)
+        x0 = np.clip(np.round(c[:, 0] + 0.5 - w / 2.0), 0, self.camera.width - w).astype(int)
+        y0 = np.clip(np.round(c[:, 1] + 0.5 - w / 2.0), 0, self.camera.height - w).astype(int)
+        return np.stack([x0, y0], 1)
+
+    def _set_pose(self, R, t):
+        mi = self._mi
+        R_wc = R.T
+        p_wc = -R.T @ t
+        self.model.set_pose(R_wc, p_wc)
+        r = 0.5 * self.flash.emitter_diameter_m
+        centre_cam = self.pattern.points_m.mean(0) @ R.T + t
+        for keys, off in zip(self._flash_keys, self.flash.led_offsets_m):
+            if "to_world" in keys:
+                M = np.eye(4)
+                M[:3, :3] = R_wc * np.array([r, r, 1.0])  # disk radius r, normal = camera +z
+                M[:3, 3] = R_wc @ off + p_wc
+                self._params[keys["to_world"]] = mi.Transform4f(M.tolist())
+            else:
+                d = centre_cam - off
+                self._params[keys["position"]] = mi.Point3f(*(R_wc @ off + p_wc).tolist())
+                # the profile I0 cos^m evaluated towards the target centre (see docs/renderer.md)
+                self._params[keys["intensity"]] = float(self.flash.intensity_w_sr(d[2] / np.linalg.norm(d)))
+        self._params.update()
+
+    def _spot_image(self, R, t, seed):
+        """Radiance of the flash seen through specular chains (guided estimator)."""
+        from .predict import virtual_sources
+
+        V = self.target.cube_vertex_m @ R.T + t
+        A = self.target.cube_axis @ R.T
+        glints = [(np.asarray(g["position_m"]) @ R.T + t, g["radius_m"]) for g in self._glints]
+        src, rad, act, labels = virtual_sources(self.camera, self.flash, self.reflector, self.optics.band_nm, V, A, glints)
+        counts = np.where(act, self.spot_samples, 0)
+        R_wc, p_wc = R.T, -R.T @ t
+        leds_w = self.flash.led_offsets_m @ R_wc.T + p_wc
+        img = self.spots.render(src, rad, counts, leds_w, R_wc @ np.array([0.0, 0.0, 1.0]), seed)
+        info = [{"label": lab, "source_cam_m": s_.tolist(), "radius_px": float(r_), "samples": int(c)}
+                for lab, s_, r_, c in zip(labels, src, rad, counts) if c > 0]
+        return img, info
+
+    def _radiance(self, sensor, spp, seed):
+        """Mean radiance image of one sensor, float64, shape (h, w)."""
+        mi = self._mi
+        fs = sensor.film().size()
+        npx = int(fs[0]) * int(fs[1])
+        cap = 1 << max(0, (MAX_SAMPLES_PER_PASS // max(npx, 1)).bit_length() - 1)  # power of two
+        per_pass = max(1, min(spp, cap))
+        n_pass = max(1, spp // per_pass)
+        acc = None
+        seeds = np.random.SeedSequence(int(seed)).generate_state(n_pass, dtype=np.uint32)
+        for k in range(n_pass):
+            img = mi.render(self.scene, sensor=sensor, spp=per_pass, seed=int(seeds[k]))
+            a = np.asarray(img, dtype=np.float64)
+            a = a.mean(axis=2) if a.ndim == 3 else a
+            acc = a if acc is None else acc + a
+        return acc / n_pass
+
+    def flux_factor(self, u0=0, v0=0, width=None, height=None) -> np.ndarray:
+        """Photons/s per pixel per unit radiance (W m^-2 sr^-1) of a window of the frame."""
+        ph = self.flash.photometry["mean_photon_energy_j"]
+        if u0 == 0 and v0 == 0 and width in (None, self.camera.width) and height in (None, self.camera.height):
+            if self._factor_full is None:
+                xy = pixel_normalized_grid(self.camera)
+                self._factor_full = radiance_to_photon_rate(self.camera, self.optics, ph, xy)
+            return self._factor_full
+        xy = pixel_normalized_grid(self.camera, u0, v0, width, height)
+        return radiance_to_photon_rate(self.camera, self.optics, ph, xy)
+
+    # ------------------------------------------------------------------ rendering
+    def render(self, R_cam_target, t_cam_target_m, *, seed: int = 0, spp: int | None = None,
+               roi_spp: int | None = None, full_frame: bool = False) -> RenderResult:
+        """Render one frame at a pose.
+
+        Parameters
+        ----------
+        R_cam_target : array_like, shape (3, 3)
+        t_cam_target_m : array_like, shape (3,)
+            ``p_cam = R_cam_target @ p_target + t_cam_target_m`` (OpenCV camera frame).
+        seed : int
+            Seed of the low-discrepancy sampler (each pass gets its own, derived with
+            ``numpy.random.SeedSequence``).
+        spp, roi_spp : int, optional
+            Override the renderer's defaults for this frame.
+        full_frame : bool
+            Render the whole frame at ``spp`` and no windows.
+
+        Returns
+        -------
+        RenderResult
+
+        Raises
+        ------
+        InputError
+            Not a rotation, a target point behind (or in the plane of) the lens, or no
+            target inside the image.
+        """
+        R, t = _check_pose(R_cam_target, t_cam_target_m)
+        seed = int(check_finite(seed, "seed"))
+        spp = self.spp if spp is None else self._check_spp(spp, "spp", allow_zero=not full_frame)
+        roi_spp = self.roi_spp if roi_spp is None else self._check_spp(roi_spp, "roi_spp")
+        cam, pat = self.camera, self.pattern
+        p_cam = pat.points_m @ R.T + t
+        if np.any(p_cam[:, 2] <= 0.0):
+            bad = [int(i) for i, z in zip(pat.ids, p_cam[:, 2]) if z <= 0]
+            raise InputError(
+                f"pose: target(s) {bad} lie behind the camera (z_cam <= 0; t_cam_target_m = {t.tolist()}); "
+                "the range must be positive and the target in front of the lens"
+            )
+        targets_px = cam.project(p_cam)
+        visible = cam.in_image(targets_px)
+        if not np.any(visible):
+            raise InputError(
+                f"pose: no target projects inside the {cam.width}x{cam.height} image "
+                f"(targets_px = {np.round(targets_px, 1).tolist()}); the target is outside the field of view"
+            )
+        timings = {}
+        t0 = time.perf_counter()
+        self._set_pose(R, t)
+        spots = self.predicted_spots_px(R, t)
+        timings["setup_s"] = time.perf_counter() - t0
+        H, W = cam.height, cam.width
+        rois = []
+        if full_frame:
+            t0 = time.perf_counter()
+            rad = self._radiance(self._sensor_full, spp, seed)
+            timings["full_frame_s"] = time.perf_counter() - t0
+        else:
+            if spp > 0:
+                t0 = time.perf_counter()
+                rad = self._radiance(self._sensor_full, spp, seed)
+                timings["full_frame_s"] = time.perf_counter() - t0
+            else:
+                rad = np.zeros((H, W))
+            t0 = time.perf_counter()
+            win = self._windows(spots, visible)
+            w = self.roi_size_px
+            self._sensor_roi.set_windows(win, w)
+            mosaic = self._radiance(self._sensor_roi, roi_spp, seed + 0x9E3779B1)
+            acc = np.zeros((H, W))
+            cnt = np.zeros((H, W))
+            for k, (x0, y0) in enumerate(win):
+                acc[y0:y0 + w, x0:x0 + w] += mosaic[k * w:(k + 1) * w, :]
+                cnt[y0:y0 + w, x0:x0 + w] += 1
+                rois.append({"target": int(pat.ids[k]), "x0": int(x0), "y0": int(y0), "width": w, "height": w})
+            m = cnt > 0
+            rad[m] = acc[m] / cnt[m]
+            timings["roi_s"] = time.perf_counter() - t0
+        strategies = []
+        if self.spots is not None:
+            t0 = time.perf_counter()
+            spot_img, strategies = self._spot_image(R, t, seed + 0x5BD1E995)
+            rad = rad + spot_img
+            timings["spots_s"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        flux = (rad * self.flux_factor()).astype(np.float32)
+        timings["convert_s"] = time.perf_counter() - t0
+        truth = self.truth(R, t, targets_px, visible, spots, seed=seed, spp=spp, roi_spp=roi_spp,
+                           full_frame=full_frame, rois=rois, timings=timings, strategies=strategies)
+        return RenderResult(flux=flux, truth=truth, radiance=rad.astype(np.float32), timings_s=timings)
+
+    # ------------------------------------------------------------------ truth
+    def truth(self, R, t, targets_px, visible, spots, **render_info) -> dict:
+        """The ground-truth record of a frame (JSON-serialisable)."""
+        import drjit as dr
+        import mitsuba as mi
+
+        cam, pat, fl, op = self.camera, self.pattern, self.flash, self.optics
+        V_ref = pat.points_m @ R.T + t
+        intens, irr = {}, {}
+        for i, tid in enumerate(pat.ids):
+            I_tot, E_tot = 0.0, 0.0
+            for S in fl.led_offsets_m:
+                d = V_ref[i] - S
+                I = float(fl.intensity_w_sr(d[2] / np.linalg.norm(d)))
+                I_tot += I
+                E_tot += retro_irradiance_w_m2(I, S, V_ref[i], self.reflector, op.band_nm)
+            intens[str(tid)] = I_tot
+            irr[str(tid)] = E_tot
+        ph = fl.photometry["mean_photon_energy_j"]
+        return {
+            "camera": cam.name,
+            "camera_source": _rel(cam.source),
+            "pattern": pat.name,
+            "R_cam_target": np.asarray(R).tolist(),
+            "t_cam_target_m": np.asarray(t).tolist(),
+            "state": state_dict(pose_to_state(R, t)),
+            "range_m": float(t[2]),
+            "targets_px": {str(i): [float(u), float(v)] for i, (u, v) in zip(pat.ids, targets_px)},
+            "targets_in_image": {str(i): bool(b) for i, b in zip(pat.ids, visible)},
+            "spots_px_predicted": {str(i): [float(u), float(v)] for i, (u, v) in zip(pat.ids, spots)},
+            "intrinsics": {"width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy},
+            "distortion": {k: float(v) for k, v in zip(("k1", "k2", "p1", "p2", "k3"), cam.dist)},
+            "optics": op.to_json(),
+            "flash": fl.to_json(),
+            "reflector": self.reflector.to_json(op.band_nm),
+            "scene": self.options.to_json(),
+            "geometry": self.target.info,
+            "radiometry": {
+                "flux_unit": "photons per second per pixel, in optics.band_nm",
+                "radiance_unit": "W m^-2 sr^-1 in band (rendered)",
+                "chain": "flux = L * aperture_area_m2 * cos(theta)^4 / (fx * fy * |det J_distortion|) / mean_photon_energy_j",
+                "aperture_area_m2": op.aperture_area_m2,
+                "mean_photon_energy_j": ph,
+                "led_radiance_w_m2_sr": fl.radiance_w_m2_sr,
+                "flash_intensity_towards_target_w_sr": intens,
+                "retro_factor": retro_factor(self.reflector, op.band_nm),
+                "retro_irradiance_at_lens_predicted_w_m2": irr,
+                "retro_photons_per_s_predicted": {k: v * op.aperture_area_m2 / ph for k, v in irr.items()},
+            },
+            "render": {
+                "variant": self.variant.name,
+                "variant_notice": self.variant.notice,
+                "method": self.method,
+                "integrator": "path" + (" (diffuse, LED as point light) + guided spot estimator" if self.method == "guided" else " (LED as disk area emitter)"),
+                "spot_samples_per_strategy": self.spot_samples if self.method == "guided" else None,
+                "spot_strategies": render_info.get("strategies", []),
+                "max_depth": int(self.options.max_depth),
+                "sampler": "ldsampler",
+                "seed": render_info["seed"],
+                "spp": render_info["spp"],
+                "roi_spp": None if render_info["full_frame"] else render_info["roi_spp"],
+                "roi_size_px": None if render_info["full_frame"] else self.roi_size_px,
+                "full_frame": render_info["full_frame"],
+                "rois": render_info["rois"],
+                "timings_s": render_info["timings"],
+                "versions": {"mitsuba": mi.__version__, "drjit": dr.__version__, "numpy": np.__version__},
+            },
+        }
+
+
+def _rel(path: str) -> str:
+    """Profile path relative to the repository (no machine-specific absolute paths)."""
+    from pathlib import Path
+
+    try:
+        root = Path(__file__).resolve().parent.parent
+        return str(Path(path).resolve().relative_to(root))
+    except (ValueError, OSError):
+        return Path(path).name if path else ""
+
+
+_CACHE: dict = {}
+
+
+def render_flux(camera, pattern, R_cam_target, t_cam_target_m, *, spp: int = DEFAULT_SPP,
+                roi_spp: int = DEFAULT_ROI_SPP, roi_size_px: int = DEFAULT_ROI_SIZE_PX, seed: int = 0,
+                full_frame: bool = False, reflector=None, scene_options=None) -> RenderResult:
+    """Render the photon flux of one frame (see :class:`Renderer` for the parameters).
+
+    A renderer per (camera, pattern, reflector, options, window size) is cached, so a
+    loop of calls reuses the loaded scene and compiled kernels.
+    """
+    cam = Camera.load(camera)
+    pat = Pattern.load(pattern)
+    refl = Reflector.resolve(reflector, pat)
+    opts = SceneOptions.resolve(scene_options)
+    key = json.dumps([cam.to_dict(), pat.name, pat.points_m.tolist(), refl.to_json(), opts.to_json(), int(roi_size_px)],
+                     sort_keys=True, default=str)
+    r = _CACHE.get(key)
+    if r is None:
+        r = Renderer(cam, pat, reflector=refl, scene_options=opts, roi_size_px=roi_size_px, spp=spp, roi_spp=roi_spp)
+        _CACHE.clear()  # one scene at a time: they hold a lot of memory
+        _CACHE[key] = r
+    return r.render(R_cam_target, t_cam_target_m, seed=seed, spp=spp, roi_spp=roi_spp, full_frame=full_frame)

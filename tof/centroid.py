@@ -1,0 +1,271 @@
+"""Candidate reflector centroids, depths and penalty scores (paper section 3.4).
+
+For each blob:
+
+- weighted centroid ``sum(w x) / sum(w)`` with ``w = gray - background`` (paper eq. 18);
+- depth: mean of the member pixels' (temporally filtered) depths (paper eq. 19), weighted by
+  ``w`` and after rejecting samples more than 3 robust sigmas from the blob median - mixed
+  ("flying") pixels on the rim, which AMCW phasor mixing puts between the marker and the
+  plate, weigh little and the far-off ones are dropped (deviation from the paper's plain mean);
+- an image conic: a sub-pixel ellipse fit (:func:`tof.ellipse.fit_ellipse_subpixel`) for
+  blobs of at least ``ellipse_min_pixels``, else the uniform-ellipse conic of the blob's
+  second moments; with a good fit the centre is the mean of the weighted centroid and the
+  ellipse centre (paper: "the mean values of ... and detected ellipse centroids");
+- a penalty score from size, shape and intensity; candidates with a score above
+  ``max_penalty`` or a box larger than ``max_box_px`` are dropped (paper: ``P < P_max``,
+  ``w < W_max``, ``h < H_max``).
+
+The projected-circle-centre correction needs the plate normal and is applied after a first
+pose (see :mod:`tof.pipeline`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from svgs.profiles import Camera
+
+from .blobs import Blobs
+from .ellipse import EllipseFit, conic_center, conic_from_moments, conic_to_ellipse, detect_ellipse_arcs, fit_ellipse_subpixel
+
+#: ASSUMPTION: blobs of at least this many pixels get a sub-pixel ellipse fit (~9 px across).
+DEFAULT_ELLIPSE_MIN_PIXELS = 60
+#: ASSUMPTION: an ellipse fit is good when its RMS Sampson distance is at most this.
+DEFAULT_MAX_FIT_RMS_PX = 0.35
+#: ASSUMPTION: the paper's P_max, W_max, H_max.
+DEFAULT_MAX_PENALTY = 1.5
+DEFAULT_MAX_BOX_PX = 160
+
+
+@dataclass
+class Candidates:
+    """Candidate reflectors measured in one frame.
+
+    Attributes
+    ----------
+    uv_px : ndarray, shape (n, 2)
+        Centre estimate (before the projected-circle-centre correction).
+    conic : ndarray, shape (n, 3, 3)
+        Image conic of each marker (fit or moments).
+    depth_m : ndarray, shape (n,)
+        Blob depth (NaN when the blob has no valid depth pixel).
+    depth_std_m : ndarray, shape (n,)
+        Standard error of the blob depth (robust spread / sqrt(count)).
+    n_depth : ndarray of int, shape (n,)
+    n_pixels : ndarray of int, shape (n,)
+    eccentricity : ndarray, shape (n,)
+    semi_major_px : ndarray, shape (n,)
+    penalty : ndarray, shape (n,)
+    fit_rms_px : ndarray, shape (n,)
+        RMS of the ellipse fit (NaN without a fit).
+    source : ndarray of str, shape (n,)
+        ``"blob"`` or ``"ellipse"`` (supplemented by ellipse detection).
+    """
+
+    uv_px: np.ndarray
+    conic: np.ndarray
+    depth_m: np.ndarray
+    depth_std_m: np.ndarray
+    n_depth: np.ndarray
+    n_pixels: np.ndarray
+    eccentricity: np.ndarray
+    semi_major_px: np.ndarray
+    penalty: np.ndarray
+    fit_rms_px: np.ndarray
+    source: np.ndarray
+    notes: dict = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return int(self.uv_px.shape[0])
+
+    def subset(self, keep) -> "Candidates":
+        return Candidates(self.uv_px[keep], self.conic[keep], self.depth_m[keep], self.depth_std_m[keep],
+                          self.n_depth[keep], self.n_pixels[keep], self.eccentricity[keep], self.semi_major_px[keep],
+                          self.penalty[keep], self.fit_rms_px[keep], self.source[keep], dict(self.notes))
+
+    def diameter_m(self, camera: Camera) -> np.ndarray:
+        """Marker diameter implied by the image size and depth: ``2 a rho / f`` (approx.)."""
+        return 2 * self.semi_major_px * self.depth_m / np.sqrt(camera.fx * camera.fy)
+
+
+def blob_depth(d, w, k_sigma: float = 3.0, floor_m: float = 1e-3) -> tuple[float, float, int]:
+    """Robust weighted mean depth of one blob's samples.
+
+    Parameters
+    ----------
+    d : ndarray, shape (m,)
+        Depth samples (NaN = invalid).
+    w : ndarray, shape (m,)
+        Non-negative weights.
+
+    Returns
+    -------
+    depth_m, std_err_m : float
+        NaN when no valid sample.
+    n : int
+        Samples used.
+    """
+    ok = np.isfinite(d)
+    if not ok.any():
+        return np.nan, np.nan, 0
+    d, w = d[ok], w[ok]
+    med = float(np.median(d))
+    sig = 1.4826 * float(np.median(np.abs(d - med)))
+    sel = np.abs(d - med) <= max(k_sigma * sig, floor_m)
+    d, w = d[sel], w[sel]
+    if w.sum() <= 0:
+        w = np.ones_like(d)
+    mean = float(np.sum(w * d) / np.sum(w))
+    n = int(d.size)
+    spread = float(np.sqrt(np.sum(w * (d - mean) ** 2) / np.sum(w))) if n > 1 else sig
+    return mean, max(spread, 1e-4) / np.sqrt(n), n
+
+
+def _penalty(ecc, n_pixels, cov, peak, peak_max):
+    lam = np.linalg.eigvalsh(cov)
+    area = np.pi * 4 * np.sqrt(np.clip(lam[..., 0], 1e-12, None) * lam[..., 1])
+    fill = n_pixels / area
+    return ecc**2 + np.abs(1 - fill) + (1 - peak / max(peak_max, 1e-12))
+
+
+def measure_candidates(
+    blobs: Blobs,
+    gray,
+    depth_m,
+    background: float = 0.0,
+    *,
+    expected: int | None = None,
+    ellipse_min_pixels: int = DEFAULT_ELLIPSE_MIN_PIXELS,
+    max_fit_rms_px: float = DEFAULT_MAX_FIT_RMS_PX,
+    max_penalty: float = DEFAULT_MAX_PENALTY,
+    max_box_px: int = DEFAULT_MAX_BOX_PX,
+    supplement: bool = True,
+) -> Candidates:
+    """Centroids, depths, conics and penalties of the candidate blobs.
+
+    Parameters
+    ----------
+    blobs : Blobs
+    gray : ndarray, shape (H, W)
+        Intensity image the centroids are weighted with (raw or persistence mean).
+    depth_m : ndarray, shape (H, W)
+        Depth image (temporally filtered), NaN where invalid.
+    background : float
+        Background gray level subtracted from the weights.
+    expected : int, optional
+        Number of markers on the target. When the count differs, ellipse detection confirms
+        (drops blobs whose contour is not an ellipse, if too many) or supplements (searches
+        the components rejected by the gates for elliptical arcs, if too few).
+    ellipse_min_pixels, max_fit_rms_px, max_penalty, max_box_px : see module constants
+    supplement : bool
+        Allow the ellipse supplement.
+
+    Returns
+    -------
+    Candidates
+    """
+    gray = np.asarray(gray, np.float32)
+    depth = np.asarray(depth_m, np.float32)
+    n = blobs.n
+    w_all = np.clip(blobs.gray - background, 0, None).astype(float)
+    sw = np.bincount(blobs.blob_of_pixel, w_all, n)
+    su = np.bincount(blobs.blob_of_pixel, w_all * blobs.cols, n)
+    sv = np.bincount(blobs.blob_of_pixel, w_all * blobs.rows, n)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        uvw = np.stack([su / sw, sv / sw], -1)
+    bad_w = ~(sw > 0)
+    uvw[bad_w] = blobs.centroid_px[bad_w]
+    d_all = depth[blobs.rows, blobs.cols]
+    starts = np.searchsorted(blobs.blob_of_pixel, np.arange(n + 1))
+    uv = uvw.copy()
+    conics = np.empty((n, 3, 3))
+    dep = np.full(n, np.nan)
+    dstd = np.full(n, np.nan)
+    nd = np.zeros(n, int)
+    rms = np.full(n, np.nan)
+    semi = np.empty(n)
+    confirmed = np.ones(n, bool)
+    for i in range(n):
+        s, e = starts[i], starts[i + 1]
+        dep[i], dstd[i], nd[i] = blob_depth(d_all[s:e], w_all[s:e])
+        conics[i] = conic_from_moments(uvw[i], blobs.cov_px2[i])
+        if blobs.n_pixels[i] >= ellipse_min_pixels:
+            g = blobs.gray[s:e]
+            level = background + 0.5 * (float(np.percentile(g, 90)) - background)
+            fit = fit_ellipse_subpixel(gray, tuple(blobs.bbox[i]), level)
+            if fit is not None:
+                rms[i] = fit.rms_px
+            if fit is not None and fit.rms_px <= max_fit_rms_px and fit.coverage >= 0.9:
+                uv[i] = 0.5 * (uvw[i] + fit.center_px)
+                conics[i] = fit.conic
+            else:
+                confirmed[i] = False
+        semi[i] = _semi_major(conics[i])
+    peak_max = float(blobs.peak_gray.max()) if n else 1.0
+    pen = _penalty(blobs.eccentricity, blobs.n_pixels, blobs.cov_px2, blobs.peak_gray, peak_max) if n else np.zeros(0)
+    box = (blobs.bbox[:, 2:] - blobs.bbox[:, :2] + 1) if n else np.zeros((0, 2), int)
+    ok = (pen <= max_penalty) & np.all(box <= max_box_px, axis=1)
+    notes = {"dropped_penalty": int(np.sum(~ok))}
+    if expected is not None and int(np.sum(ok)) > expected and not confirmed.all():
+        # confirm: drop blobs whose contour failed the ellipse test
+        notes["dropped_unconfirmed"] = int(np.sum(ok & ~confirmed))
+        ok &= confirmed
+    cands = Candidates(uv[ok], conics[ok], dep[ok], dstd[ok], nd[ok], blobs.n_pixels[ok], blobs.eccentricity[ok],
+                       semi[ok], pen[ok], rms[ok], np.array(["blob"] * int(ok.sum()), dtype=object), notes)
+    if supplement and expected is not None and cands.n < expected and len(blobs.rejected_rows):
+        extra = _supplement(blobs, gray, depth, background, cands.uv_px, max_fit_rms_px)
+        if extra is not None and extra.n:
+            cands = _concat(cands, extra)
+            cands.notes["supplemented"] = int(extra.n)
+    return cands
+
+
+def _semi_major(C) -> float:
+    try:
+        return float(conic_to_ellipse(C)[1][0])
+    except Exception:  # noqa: BLE001 - a degenerate conic has no size
+        return np.nan
+
+
+def _supplement(blobs: Blobs, gray, depth, background, existing_uv, max_fit_rms_px) -> Candidates | None:
+    """Elliptical arcs in the components rejected by the gates (merged or clipped markers)."""
+    rows_out = []
+    for bbox, rr, cc in zip(blobs.rejected_bbox, blobs.rejected_rows, blobs.rejected_cols):
+        g = gray[rr, cc]
+        level = background + 0.5 * (float(np.percentile(g, 90)) - background)
+        fits: list[EllipseFit] = detect_ellipse_arcs(gray, tuple(bbox), level, max_rms_px=max_fit_rms_px)
+        for f in fits:
+            c = f.center_px
+            if existing_uv.shape[0] and np.min(np.linalg.norm(existing_uv - c, axis=1)) < 2.0:
+                continue
+            if any(np.linalg.norm(r[0] - c) < 2.0 for r in rows_out):
+                continue
+            x = np.stack([cc, rr, np.ones_like(cc)], 1).astype(float)
+            inside = np.einsum("ij,jk,ik->i", x, f.conic, x) < 0
+            if inside.sum() < 3:
+                continue
+            w = np.clip(g[inside] - background, 0, None).astype(float)
+            dm, ds, nd = blob_depth(depth[rr[inside], cc[inside]].astype(float), w)
+            rows_out.append((c, f.conic, dm, ds, nd, int(inside.sum()), float(np.sqrt(1 - (f.axes_px[1] / f.axes_px[0]) ** 2)),
+                             float(f.axes_px[0]), f.rms_px))
+    if not rows_out:
+        return None
+    r = list(zip(*rows_out))
+    k = len(rows_out)
+    return Candidates(np.array(r[0]), np.array(r[1]), np.array(r[2]), np.array(r[3]), np.array(r[4], int),
+                      np.array(r[5], int), np.array(r[6]), np.array(r[7]), np.zeros(k), np.array(r[8]),
+                      np.array(["ellipse"] * k, dtype=object))
+
+
+def _concat(a: Candidates, b: Candidates) -> Candidates:
+    return Candidates(*(np.concatenate([getattr(a, f), getattr(b, f)]) for f in (
+        "uv_px", "conic", "depth_m", "depth_std_m", "n_depth", "n_pixels", "eccentricity", "semi_major_px",
+        "penalty", "fit_rms_px", "source")), notes=dict(a.notes))
+
+
+def centre_from_conic(C) -> np.ndarray:
+    """Alias of :func:`tof.ellipse.conic_center` for readability in the pipeline."""
+    return conic_center(C)
