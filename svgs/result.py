@@ -16,6 +16,8 @@ REASONS = {
     "behind_camera": "the solution puts the target behind the camera",
     "behind_target": "the only pose that fits views the target from behind, where its reflectors return no light",
     "degenerate": "the measurements do not constrain the pose",
+    "no_board": "no calibration board was found in the image",
+    "too_few_corners": "too few board corners or circles were found in the image",
 }
 
 

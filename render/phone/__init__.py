@@ -1,0 +1,199 @@
+"""The phone camera model: photon flux -> the image a phone would deliver.
+
+Flux (photons/s/px, from :mod:`render`) -> optics PSF (core + glare + ghosts) -> exposure
+(auto or manual) -> sensor in electrons (shot, dark, DSNU/PRNU, blooming) -> readout (read
+noise, gain, black level, ADC) = **raw** (DN) -> ISP (tone curve, 8 bits, downscale, JPEG) =
+**image** (uint8). No Mitsuba here: it runs on any flux image.
+
+Render once, expose many: :class:`Exposer` holds one noise-free flux, applies the optics and
+meters the scene once, and then makes as many exposures (noise draws, exposure or gain
+changes) as asked, each from its own seed.
+
+Stages (``stages=``): ``glare`` (optics PSF; off: a perfect lens), ``shot``, ``dark``,
+``fpn`` (DSNU and PRNU), ``read``, ``bloom`` (off: plain full-well clipping), ``adc``
+(quantise and clip; off: float DN), ``tone`` (off: linear 8-bit), ``downscale``, ``jpeg``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from svgs.errors import InputError
+
+from .isp import ExposureSolver, auto_exposure, downscale, jpeg_roundtrip, metering_weights, to_8bit, tone_lut
+from .optics import apply_psf, core_sigma_px
+from .params import ALL_STAGES, PhoneParams, check_stages
+from .sensor import bloom, electrons, fixed_patterns, readout
+
+__all__ = ["PhoneCamera", "Exposer", "Exposure", "PhoneParams", "ALL_STAGES"]
+
+
+@dataclass
+class Exposure:
+    """One exposure of the phone camera.
+
+    Attributes
+    ----------
+    raw_dn : ndarray, float32, shape (H, W)
+        ADC output before the ISP (integers when the ``adc`` stage is on), full resolution.
+    image : ndarray, uint8, shape (h, w)
+        What the phone delivered (after tone curve, downscale, JPEG).
+    exposure_s, iso : float
+    gain_dn_per_e : float
+        System gain K.
+    info : dict
+        Auto-exposure result, blooming statistics, stages, seed.
+    electrons : ndarray, float32, shape (H, W), optional
+        Charge after blooming, before read noise (kept with ``keep_electrons=True``).
+    """
+
+    raw_dn: np.ndarray
+    image: np.ndarray
+    exposure_s: float
+    iso: float
+    gain_dn_per_e: float
+    info: dict = field(default_factory=dict)
+    electrons: np.ndarray | None = None
+
+
+class PhoneCamera:
+    """A camera profile's sensor, optics and ISP.
+
+    Parameters
+    ----------
+    camera : svgs.Camera or str
+    params : PhoneParams, optional
+        Defaults to the profile's ``[sensor]``, ``[glare]``, ``[exposure]``, ``[isp]`` tables.
+    """
+
+    def __init__(self, camera, params: PhoneParams | None = None):
+        from svgs import Camera
+
+        self.camera = Camera.load(camera)
+        self.params = params if params is not None else PhoneParams.from_camera(self.camera)
+        self._fpn = None
+
+    @property
+    def shape(self):
+        return (self.camera.height, self.camera.width)
+
+    def fixed_patterns(self):
+        if self._fpn is None:
+            self._fpn = fixed_patterns(self.params.sensor, self.shape)
+        return self._fpn
+
+    def optics(self, flux_ph_s: np.ndarray) -> np.ndarray:
+        """Apply the lens PSF to a flux image (photons/s/px). Returns float32 (H, W)."""
+        p = self.params
+        s = core_sigma_px(p.f_number, p.band_nm, p.sensor.pixel_pitch_m, p.glare.aberration_sigma_px)
+        return apply_psf(flux_ph_s, p.glare, s, (self.camera.cx, self.camera.cy))
+
+    def check_flux(self, flux_ph_s) -> np.ndarray:
+        f = np.asarray(flux_ph_s)
+        if f.shape != self.shape:
+            raise InputError(f"flux: shape {f.shape} does not match camera {self.camera.name!r} {self.shape}")
+        if not np.issubdtype(f.dtype, np.number) or not np.all(np.isfinite(f)) or f.min() < 0:
+            raise InputError("flux: expected finite, non-negative photons per second per pixel")
+        return f.astype(np.float32, copy=False)
+
+    def exposer(self, flux_ph_s, *, stages=ALL_STAGES) -> "Exposer":
+        return Exposer(self, flux_ph_s, stages=stages)
+
+    def expose(self, flux_ph_s, *, seed: int = 0, exposure_s=None, iso=None, stages=ALL_STAGES, keep_electrons=False):
+        """One exposure of a flux image (convenience for ``exposer(flux).expose(...)``)."""
+        return self.exposer(flux_ph_s, stages=stages).expose(seed=seed, exposure_s=exposure_s, iso=iso,
+                                                              keep_electrons=keep_electrons)
+
+
+class Exposer:
+    """Render once, expose many: optics and metering done once for a flux image.
+
+    Parameters
+    ----------
+    phone : PhoneCamera
+    flux_ph_s : ndarray, shape (H, W)
+        Noise-free photon flux, photons per second per pixel (before the lens PSF).
+    stages : sequence of str
+        Pipeline stages that are on (see the module docstring).
+    """
+
+    def __init__(self, phone: PhoneCamera, flux_ph_s, *, stages=ALL_STAGES):
+        self.phone = phone
+        self.stages = check_stages(stages)
+        f = phone.check_flux(flux_ph_s)
+        self.flux_optics = phone.optics(f) if "glare" in self.stages else f.copy()
+        self._solver = None
+        p = phone.params
+        self._lut = tone_lut(p.sensor, p.isp.gamma, "tone" in self.stages)
+
+    def auto_exposure(self):
+        """(exposure_s, iso, info) chosen by the phone's auto-exposure for this scene."""
+        p = self.phone.params
+        if self._solver is None:
+            rate = (p.sensor.qe * self.flux_optics.astype(np.float64) + p.sensor.dark_current_e_s) / p.sensor.full_well_e
+            self._solver = ExposureSolver(rate, metering_weights(self.flux_optics.shape, p.exposure.metering))
+        return auto_exposure(self.flux_optics, p.sensor, p.exposure, self._solver)
+
+    def settings(self, exposure_s=None, iso=None):
+        """Resolve the exposure: explicit values, the profile's manual values, or auto-exposure."""
+        p = self.phone.params
+        info = {}
+        if exposure_s is None and iso is None and p.exposure.mode == "auto":
+            exposure_s, iso, info = self.auto_exposure()
+            info["mode"] = "auto"
+        else:
+            exposure_s = p.exposure.exposure_s if exposure_s is None else exposure_s
+            iso = p.exposure.iso if iso is None else iso
+            info["mode"] = "manual"
+        for name, v in (("exposure_s", exposure_s), ("iso", iso)):
+            try:
+                fv = float(v)
+            except (TypeError, ValueError):
+                raise InputError(f"{name}: expected a number, got {v!r}") from None
+            if not np.isfinite(fv) or fv <= 0:
+                raise InputError(f"{name}: impossible exposure setting {v!r} (must be a positive finite number)")
+        if float(exposure_s) > 60.0:
+            raise InputError(f"exposure_s: impossible exposure of {exposure_s} s for a phone camera (> 60 s)")
+        return float(exposure_s), float(iso), info
+
+    def expose(self, *, seed: int = 0, exposure_s=None, iso=None, keep_electrons=False) -> Exposure:
+        """One exposure with its own noise draw.
+
+        Parameters
+        ----------
+        seed : int
+            Seeds shot, dark and read noise (fixed patterns come from the camera's serial).
+        exposure_s, iso : float, optional
+            Override the profile's exposure (manual or auto).
+        keep_electrons : bool
+            Keep the charge image (after blooming) in the result.
+
+        Returns
+        -------
+        Exposure
+        """
+        p = self.phone.params
+        sp = p.sensor
+        st = self.stages
+        t, iso, info = self.settings(exposure_s, iso)
+        prnu, dsnu = self.phone.fixed_patterns()
+        mu = self.flux_optics * np.float32(sp.qe * t)
+        if "fpn" in st:
+            mu = mu * prnu
+        e = electrons(mu, sp, t, dsnu, seed, shot="shot" in st, dark="dark" in st, fpn="fpn" in st)
+        if "bloom" in st:
+            info["bloom"] = bloom(e, sp.full_well_e, sp.anti_blooming_drain, sp.bloom_direction)
+        else:
+            np.minimum(e, sp.full_well_e, out=e)
+        raw = readout(e, sp, iso, seed, read="read" in st, adc="adc" in st)
+        img = to_8bit(raw, self._lut) if "adc" in st else np.round(
+            np.clip((raw - sp.black_level_dn) / (sp.white_dn - sp.black_level_dn), 0, 1)
+            ** (1.0 / p.isp.gamma if ("tone" in st and p.isp.gamma > 0) else 1.0) * 255).astype(np.uint8)
+        if "downscale" in st and p.isp.output_width > 0:
+            img = downscale(img, p.isp.output_width, p.isp.output_height)
+        if "jpeg" in st and p.isp.jpeg_quality > 0:
+            img = jpeg_roundtrip(img, p.isp.jpeg_quality)
+        info.update({"seed": int(seed), "stages": list(st)})
+        return Exposure(raw, img, t, iso, sp.gain_dn_per_e(iso), info, e if keep_electrons else None)
