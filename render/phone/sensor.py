@@ -12,8 +12,10 @@ Order of operations (ISETCam's ``sensorCompute``, plus a charge spill it lacks):
    base_ISO`` (DN/e-), black level, ADC clipping to ``[0, 2^bits - 1]`` and rounding.
 
 The fixed patterns (PRNU, DSNU) depend on the camera's ``serial`` only, never on the frame.
-Per-frame noise is drawn row by row from generators seeded by ``(seed, row)``: the same seed
-gives the same frame whatever the number of threads.
+Per-frame noise comes from a counter-based generator (SplitMix64 of the seed, the noise
+source and the pixel index): the same seed gives the same frame whatever the number of
+threads. Shot noise is exact Poisson (inversion) below 25 e- and the normal approximation
+N(mu, mu) above, as in ISETCam's ``noiseShot``; mean and variance are exact either way.
 """
 
 from __future__ import annotations
@@ -40,33 +42,72 @@ def fixed_patterns(params: SensorParams, shape) -> tuple[np.ndarray, np.ndarray]
     return prnu, dsnu
 
 
+@njit(cache=True, inline="always")
+def _uniform(key, counter):
+    """Counter-based uniform in (0, 1): SplitMix64 of (key, counter). Same (key, counter),
+    same number - whatever thread draws it."""
+    z = key + (counter + np.uint64(1)) * np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    z = z ^ (z >> np.uint64(31))
+    return (float(z >> np.uint64(11)) + 0.5) * (1.0 / 9007199254740992.0)
+
+
+@njit(cache=True, inline="always")
+def _normal(key, counter):
+    """Standard normal from two counter-based uniforms (Box-Muller)."""
+    u1 = _uniform(key, np.uint64(2) * counter)
+    u2 = _uniform(key, np.uint64(2) * counter + np.uint64(1))
+    return np.sqrt(-2.0 * np.log(u1)) * np.cos(6.283185307179586 * u2)
+
+
+@njit(cache=True, inline="always")
+def _poisson(lam, key, counter):
+    """Poisson(lam): exact inversion below POISSON_GAUSS_LAMBDA, else the normal
+    approximation N(lam, lam) rounded (as ISETCam's noiseShot does above 25 e-)."""
+    if lam <= 0.0:
+        return 0.0
+    if lam < 25.0:
+        u = _uniform(key, np.uint64(2) * counter)
+        p = np.exp(-lam)
+        F = p
+        k = 0
+        while u > F and k < 200:
+            k += 1
+            p *= lam / k
+            F += p
+        return float(k)
+    x = np.floor(lam + np.sqrt(lam) * _normal(key, counter) + 0.5)
+    return x if x > 0.0 else 0.0
+
+
+def _key(seed: int, stream: int) -> np.uint64:
+    return np.uint64((np.uint64(int(seed) & 0xFFFFFFFF) << np.uint64(20)) ^ np.uint64(stream * 0x5851F42D))
+
+
 @njit(parallel=True, cache=True)
-def _charge_kernel(mu_e, dark_e, dsnu, seed, shot, dark, out):
-    """Poisson shot + dark noise and DSNU, row-seeded (thread-count independent)."""
+def _charge_kernel(mu_e, dark_e, dsnu, key_shot, key_dark, shot, dark, out):
+    """Poisson shot + dark noise and DSNU; every pixel draws from its own counter."""
     H, W = mu_e.shape
     for r in prange(H):
-        np.random.seed((seed * 1000003 + r * 7919 + 17) % 4294967291)
         for c in range(W):
+            idx = np.uint64(r * W + c)
             m = mu_e[r, c]
-            if shot:
-                e = float(np.random.poisson(m)) if m > 0 else 0.0
-            else:
-                e = m
+            e = _poisson(m, key_shot, idx) if shot else m
             if dark:
-                e += float(np.random.poisson(dark_e)) if dark_e > 0 else 0.0
+                e += _poisson(dark_e, key_dark, idx)
             out[r, c] = e + dsnu[r, c]
 
 
 @njit(parallel=True, cache=True)
-def _readout_kernel(e, read_sigma, gain, black, white, seed, read, quantise, out):
+def _readout_kernel(e, read_sigma, gain, black, white, key, read, quantise, out):
     """Read noise, gain, black level, ADC clip and rounding (DN, float32)."""
     H, W = e.shape
     for r in prange(H):
-        np.random.seed((seed * 1000003 + r * 7919 + 29) % 4294967291)
         for c in range(W):
             x = e[r, c]
             if read:
-                x += read_sigma * np.random.standard_normal()
+                x += read_sigma * _normal(key, np.uint64(r * W + c))
             y = gain * x + black
             if quantise:
                 y = np.floor(y + 0.5)
@@ -169,7 +210,7 @@ def electrons(mu_e, params: SensorParams, exposure_s: float, dsnu, seed: int, *,
     out = np.empty(mu_e.shape, np.float32)
     dsnu_use = dsnu if fpn else np.zeros_like(mu_e)
     _charge_kernel(np.ascontiguousarray(mu_e, np.float32), float(params.dark_current_e_s * exposure_s),
-                   dsnu_use, int(seed) % (2**31), bool(shot), bool(dark), out)
+                   dsnu_use, _key(seed, 1), _key(seed, 2), bool(shot), bool(dark), out)
     return out
 
 
@@ -177,6 +218,6 @@ def readout(e, params: SensorParams, iso: float, seed: int, *, read=True, adc=Tr
     """Stage 4: read noise, gain, black level and ADC. Returns DN as float32 (integers if ``adc``)."""
     out = np.empty(e.shape, np.float32)
     _readout_kernel(np.ascontiguousarray(e, np.float32), float(params.read_noise_e), float(params.gain_dn_per_e(iso)),
-                    float(params.black_level_dn), float(params.white_dn), (int(seed) + 7777) % (2**31),
+                    float(params.black_level_dn), float(params.white_dn), _key(seed, 3),
                     bool(read), bool(adc), out)
     return out
