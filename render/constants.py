@@ -33,8 +33,9 @@ def nbk7_index(wavelength_nm) -> np.ndarray:
 
 # ------------------------------------------------------------------ render defaults
 DEFAULT_SPP = 4  # full-frame samples per pixel (the background: dark, diffuse)
-DEFAULT_ROI_SPP = 4096  # samples per pixel inside the windows around the targets
+DEFAULT_ROI_SPP = 128  # samples per pixel inside the windows around the targets (guided method)
+DEFAULT_ROI_SPP_PATH = 4096  # the same for the brute-force method (the spots are path traced)
 DEFAULT_ROI_SIZE_PX = 32
-DEFAULT_SPOT_SAMPLES = 1 << 17  # guided samples per virtual source (render.spots)  # side of the square window rendered around each spot
+DEFAULT_SPOT_SAMPLES = 1 << 16  # guided samples per virtual source (render.spots)  # side of the square window rendered around each spot
 DEFAULT_MAX_DEPTH = 12  # camera -> front face -> 3 TIR -> front face -> LED needs >= 7 (use more)
 DEFAULT_MESH_SEGMENTS = 48  # rim segments per cube face (aperture area error ~1e-4)

@@ -24,8 +24,8 @@ def _mesh(spec, bsdf):
     m = mi.Mesh(spec.name, v.shape[0], f.shape[0], has_vertex_normals=False)
     params = mi.traverse(m)
     # float64 -> float32 happens once, here (the world-frame values are < 1 m)
-    params["vertex_positions"] = mi.Float(v.reshape(-1).astype(np.float32))
-    params["faces"] = mi.UInt32(f.reshape(-1))
+    params["vertex_positions"] = type(params["vertex_positions"])(v.reshape(-1).astype(np.float32))
+    params["faces"] = type(params["faces"])(f.reshape(-1))
     params.update()
     m.set_bsdf(bsdf)
     return m

@@ -75,8 +75,9 @@ def solution_json(result) -> dict:
     return d
 
 
-def print_solution(result, out=sys.stdout) -> None:
+def print_solution(result, out=None) -> None:
     """A readable summary of a Solution or Failure."""
+    out = sys.stdout if out is None else out
     if not result:
         print(f"NO SOLUTION ({result.reason}): {result.message}", file=out)
         if result.details.get("n_blobs") is not None:
@@ -148,6 +149,9 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"svgs {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # output piped into a program that stopped reading (e.g. head)
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -6,9 +6,9 @@ The steps
     2. Threshold: a fixed level, Otsu, or automatic (``"auto"``, the default): the
        background level (median) plus ``k`` robust sigmas (1.4826 x MAD for float images,
        the histogram-interpolated inter-quartile range / 1.349 for 8/16-bit ones, whose
-       MAD is quantised to whole DN), both estimated on a regular subsample of the frame, with two floors - half a quantisation step per sigma
-       for integer images and ``peak_fraction`` of the frame's brightest value above the
-       background (so that noise-free dark frames and saturated spots are handled).
+       MAD is quantised to whole DN), both estimated on a regular subsample of the frame,
+       with two floors - a sigma of at least half a DN for integer images, and
+       ``peak_fraction`` of the frame's brightest value above the background (so that noise-free dark frames and saturated spots are handled).
        Otsu splits the histogram into two populations of comparable size and is a poor
        choice for a dark frame with a few small spots (it lands inside the noise); it is
        offered for completeness.

@@ -19,10 +19,15 @@ envelope, not hard-coded for ``svgs-3u``:
    centroid tolerance (``tolerance_px`` relative to the baseline length). Every combination
    of distinct blobs in the regions is a candidate, scored by its summed normalised
    Mahalanobis distance.
-3. **Verification.** The best-scored candidates (at most ``max_verify``) are solved in one
-   batch with :func:`svgs.solver.solve_centroids`; a candidate is consistent when its RMS
-   reprojection residual is at most ``max_residual_px`` and the pose lies in the envelope
-   (with ``pose_margin``). The consistent candidate with the lowest residual wins.
+3. **Verification.** Candidates are ranked by the reprojection residual of a POSIT pose
+   (vectorised over all candidates, cheap); those within a loose gate, at most
+   ``max_verify`` of them, are solved in one batch with
+   :func:`svgs.solver.solve_centroids`. A candidate is consistent when its RMS reprojection
+   residual is at most ``max_residual_px`` and its pose lies in the envelope (with
+   margins). The consistent candidate with the lowest residual wins; candidates that fit
+   about as well are told apart by how alike their blobs are (flux, area), because the
+   boom target's position is nearly free in the pose fit (it mostly sets roll and pitch)
+   and a distractor where it could be fits as well as the target itself.
 
 Failures (falsy :class:`svgs.result.Failure`): ``no_blobs``; ``too_few_blobs``;
 ``merged_spots`` when there are fewer blobs than targets and one blob is much larger or
@@ -247,7 +252,9 @@ def _as_points(blobs_or_points):
     try:
         pts = np.asarray(blobs_or_points, dtype=float)
     except (TypeError, ValueError):
-        raise InputError(f"blobs_or_points: expected Blobs or an (N, 2) array of pixels, got {type(blobs_or_points).__name__}") from None
+        raise InputError(
+            f"blobs_or_points: expected Blobs or an (N, 2) array of pixels, got {type(blobs_or_points).__name__}"
+        ) from None
     if pts.size == 0:
         return np.zeros((0, 2)), None
     if pts.ndim != 2 or pts.shape[1] != 2:
@@ -277,9 +284,11 @@ def _merged_failure(blobs, n_targets: int, single_spot_area_px):
     if ref is not None and area[big] >= MERGE_AREA_RATIO * ref:
         why = f"blob {big} covers {int(area[big])} px, {area[big] / ref:.1f} times a single spot (~{ref:.0f} px)"
     elif ref is not None and others.size and share >= MERGE_FLUX_FRACTION and area[big] >= 1.5 * ref:
-        why = f"blob {big} holds {100 * share:.0f} % of the light and is {area[big] / ref:.1f} times a single spot's area"
+        why = (f"blob {big} holds {100 * share:.0f} % of the light and is {area[big] / ref:.1f} times "
+               "a single spot's area")
     elif ref is None and area[big] >= MERGE_MIN_AREA_PX:
-        why = f"the only blob covers {int(area[big])} px (a single spot is expected to be smaller than {MERGE_MIN_AREA_PX} px)"
+        why = (f"the only blob covers {int(area[big])} px (a single spot is expected to be smaller than "
+               f"{MERGE_MIN_AREA_PX} px)")
     if why is None:
         return None
     sat = float(blobs.saturated_fraction[big])
@@ -292,6 +301,20 @@ def _merged_failure(blobs, n_targets: int, single_spot_area_px):
         {"n_blobs": len(blobs), "merged_blob": big, "merged_area_px": int(area[big]),
          "single_spot_area_px": ref, "flux_fraction": share, "saturated_fraction": sat},
     )
+
+
+def _merge_hint(blobs, idx_all) -> tuple[str, dict]:
+    """Message suffix and details naming a blob that looks like merged spots, if any."""
+    if blobs is None or len(idx_all) < 2:
+        return "", {}
+    area = np.asarray(blobs.area_px, float)[idx_all]
+    big = int(np.argmax(area))
+    ref = float(np.median(np.delete(area, big)))
+    if ref > 0 and area[big] >= MERGE_AREA_RATIO * ref:
+        k = int(idx_all[big])
+        return (f"; blob {k} covers {area[big]:.0f} px, {area[big] / ref:.1f} times the median blob - "
+                "target spots may have merged"), {"possibly_merged_blob": k}
+    return "", {}
 
 
 def _pose_in_envelope(R, t, env: Envelope, margin_deg, margin_lateral, margin_range):
@@ -331,8 +354,8 @@ def identify(
     camera : Camera or str
     pattern : Pattern or str
     verify : bool
-        Solve the best candidates and keep the one with the smallest residual (default).
-        Without it the best geometric score wins.
+        Solve the best candidates and keep the consistent one with the smallest residual
+        (default). Without it the best geometric score wins (no solve).
     envelope : Envelope
         Operating envelope the gates are built for (default the paper's).
     tolerance_px : float
@@ -373,7 +396,8 @@ def identify(
     n_all = pts.shape[0]
     base = {"n_blobs": n_all}
     if n_all == 0:
-        return Failure("no_blobs", "no bright blob was found (nothing above the threshold passed the size and shape gates)", base)
+        return Failure("no_blobs", "no bright blob was found (nothing above the threshold passed the size and "
+                       "shape gates)", base)
     if n_all < n_t:
         merged = _merged_failure(blobs, n_t, single_spot_area_px)
         if merged is not None:
@@ -430,11 +454,12 @@ def identify(
             scores = part_d2 / K
     n_cand = int(sets.shape[0])
     diag = {"n_blobs": n_all, "n_pairs": n_pairs, "n_candidates": n_cand}
+    hint, hint_d = _merge_hint(blobs, idx_all)
     if n_cand == 0:
         return Failure(
             "no_consistent_set",
-            f"no {n_t} of the {N} blobs match the {pattern.name!r} pattern's geometry over the envelope",
-            {**diag, "n_verified": 0},
+            f"no {n_t} of the {N} blobs match the {pattern.name!r} pattern's geometry over the envelope" + hint,
+            {**diag, "n_verified": 0, **hint_d},
         )
     order = np.argsort(scores, kind="stable")[:MAX_CANDIDATES]
     sets, scores = sets[order], scores[order]
@@ -451,8 +476,9 @@ def identify(
         return Failure(
             "no_consistent_set",
             f"{n_cand} candidate set(s) of the {N} blobs fit the pattern's layout, but no pose reproduces any of them "
-            f"(best approximate residual {float(np.nanmin(pres)) if np.any(np.isfinite(pres)) else float('nan'):.3g} px)",
-            {**diag, "n_verified": 0},
+            f"(best approximate residual {float(np.min(pres)):.3g} px)"
+            + hint,
+            {**diag, "n_verified": 0, **hint_d},
         )
     vsets = sets[rank]
     # solve without the solver's retries first (cheap); retry the best few only if none fits
@@ -472,8 +498,8 @@ def identify(
             "no_consistent_set",
             f"{n_cand} candidate set(s) of the {N} blobs fit the pattern's layout, but none of the {n_ver} solved "
             f"reproduces it within {max_residual_px:g} px inside the envelope"
-            + (f" (best RMS residual {best:.3g} px)" if best is not None else ""),
-            {**diag, "n_verified": n_ver, "best_residual_px": best},
+            + (f" (best RMS residual {best:.3g} px)" if best is not None else "") + hint,
+            {**diag, "n_verified": n_ver, "best_residual_px": best, **hint_d},
         )
     best = _pick(vsets, res, good, blobs, idx_all)
     sel = vsets[best]
@@ -483,9 +509,9 @@ def identify(
     ok_res = np.sort(res[good])
     return Identification(
         pts[sel], idx_all[sel], pattern.ids.copy(), residual_rms_px=float(res[best]), solution=sol, n_blobs=n_all,
-        n_pairs=n_pairs, n_candidates=n_cand, n_verified=n_ver, score=float(scores[rank[best]]) if best < rank.size else float("nan"),
+        n_pairs=n_pairs, n_candidates=n_cand, n_verified=n_ver, score=float(scores[rank[best]]),
         details={"n_consistent": int(good.sum()), "second_residual_px": float(ok_res[1]) if ok_res.size > 1 else None,
-                 "posit_residual_px": float(pres[rank[best]]) if best < rank.size else None},
+                 "posit_residual_px": float(pres[rank[best]])},
     )
 
 

@@ -109,11 +109,13 @@ def solve_image(
     image = np.asarray(image)
     check_image_matches_camera(image, camera)
     blobs = detect_blobs(image, threshold=threshold, **(detect_options or {}))
-    ident = identify(blobs, camera, pattern, **(identify_options or {}))
+    ident = identify(blobs, camera, pattern, **{"sigma_px": sigma_px, **(identify_options or {})})
     if not ident:
         ident.details.setdefault("n_blobs", len(blobs))
         return ident
-    sol = solve_centroids(ident.points_px, camera, pattern, sigma_px=sigma_px)
+    sol = ident.solution  # identification verified the set with the solver already
+    if sol is None or not sol or getattr(sol, "sigma_px", None) != sigma_px:
+        sol = solve_centroids(ident.points_px, camera, pattern, sigma_px=sigma_px)
     if not sol:
         sol.details["n_blobs"] = len(blobs)
         return sol

@@ -102,7 +102,8 @@ def draw_elliptical_spots(image: np.ndarray, centers_px, sigma_major_px, sigma_m
     """
     c = np.asarray(centers_px, float).reshape(-1, 2)
     n = c.shape[0]
-    sa, sb, ang, pk = (np.broadcast_to(np.asarray(x, float), (n,)) for x in (sigma_major_px, sigma_minor_px, angle_rad, peak))
+    sa, sb, ang, pk = (np.broadcast_to(np.asarray(x, float), (n,))
+                       for x in (sigma_major_px, sigma_minor_px, angle_rad, peak))
     H, W = image.shape
     for (u, v), a, b, t, p in zip(c, sa, sb, ang, pk):
         r = int(np.ceil(5.0 * a)) + 1

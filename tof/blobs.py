@@ -173,10 +173,11 @@ def find_blobs(
     mask[active.rows, active.cols] = True
     labels, nlab = ndimage.label(mask, structure=_EIGHT)
     lab = labels[active.rows, active.cols] - 1
-    pg = np.full(nlab, -np.inf)
-    np.maximum.at(pg, lab, active.gray)
-    pf = np.full(nlab, -np.inf)
-    np.maximum.at(pf, lab, f)
+    # per-label reductions on the pixels sorted by label (every label has >= 1 pixel)
+    srt = np.argsort(lab, kind="stable")
+    starts = np.searchsorted(lab[srt], np.arange(nlab))
+    pg = np.maximum.reduceat(active.gray[srt], starts)
+    pf = np.maximum.reduceat(f[srt], starts)
     cnt, cen, cov = _moments(lab, active.rows, active.cols, nlab)
     ecc = eccentricity_from_cov(cov)
     rejected = {}
@@ -189,14 +190,9 @@ def find_blobs(
     keep = hyst & size_ok & shape_ok
     gate_rej = hyst & ~(size_ok & shape_ok) & (cnt >= min_pixels)
     # bounding boxes per label
-    u0 = np.full(nlab, W, int)
-    v0 = np.full(nlab, H, int)
-    u1 = np.full(nlab, -1, int)
-    v1 = np.full(nlab, -1, int)
-    np.minimum.at(u0, lab, active.cols)
-    np.minimum.at(v0, lab, active.rows)
-    np.maximum.at(u1, lab, active.cols)
-    np.maximum.at(v1, lab, active.rows)
+    cs, rs = active.cols[srt], active.rows[srt]
+    u0, u1 = np.minimum.reduceat(cs, starts), np.maximum.reduceat(cs, starts)
+    v0, v1 = np.minimum.reduceat(rs, starts), np.maximum.reduceat(rs, starts)
     bbox = np.stack([u0, v0, u1, v1], -1)
     kept = np.flatnonzero(keep)
     kept = kept[np.argsort(-pf[kept], kind="stable")]
@@ -206,11 +202,9 @@ def find_blobs(
     order = np.argsort(new_id[lab][member], kind="stable")
     sel = np.flatnonzero(member)[order]
     rej = np.flatnonzero(gate_rej)
-    rej_rows, rej_cols = [], []
-    for k in rej:
-        m = lab == k
-        rej_rows.append(active.rows[m])
-        rej_cols.append(active.cols[m])
+    ends = np.append(starts[1:], lab.size)
+    rej_rows = [rs[starts[k]:ends[k]] for k in rej]
+    rej_cols = [cs[starts[k]:ends[k]] for k in rej]
     return Blobs(
         n_pixels=cnt[kept].astype(int),
         centroid_px=cen[kept],

@@ -22,8 +22,8 @@ Circle from its image (paper eqs. 22-24)
     (:func:`circle_poses_from_conic`, the eigen-decomposition of the paper's section 3.4).
 
 Ellipse detection
-    :func:`fit_ellipse_subpixel` fits ``cv2.fitEllipseDirect`` to a sub-pixel iso-contour
-    (marching squares) of the gray image around a blob; :func:`detect_ellipse_arcs` is the
+    :func:`fit_ellipse_subpixel` fits ``cv2.fitEllipseDirect`` to the sub-pixel crossings of
+    an iso-level (:func:`level_crossings`) around a blob; :func:`detect_ellipse_arcs` is the
     edge-following detector used to supplement blobs when the count is wrong: it splits a
     contour into elliptical arcs by the paper's angle and curvature conditions and fits each
     arc (ellipse fits replace the paper's ElliFit).
@@ -127,12 +127,15 @@ def sampson_distance(C, pts_px) -> np.ndarray:
 
 
 # ------------------------------------------------------------- circles and projection
+def _cross(a, b):
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
 def _plane_basis(n):
-    n = np.asarray(n, float) / np.linalg.norm(n)
-    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    u = np.cross(n, a)
-    u /= np.linalg.norm(u)
-    return u, np.cross(n, u), n
+    n = np.asarray(n, float) / np.sqrt(n[0] ** 2 + n[1] ** 2 + n[2] ** 2)
+    u = _cross(n, (1.0, 0.0, 0.0) if abs(n[0]) < 0.9 else (0.0, 1.0, 0.0))
+    u /= np.sqrt(u @ u)
+    return u, _cross(n, u), n
 
 
 def project_circle_conic(K, center_cam_m, normal_cam, radius_m) -> np.ndarray:
@@ -305,8 +308,9 @@ def fit_ellipse(points_px, method: str = "direct") -> EllipseFit | None:
     rms = float(np.sqrt(np.mean(sampson_distance(C, p) ** 2)))
     d = p - center
     ang_pts = np.arctan2(d[:, 1], d[:, 0])
-    hist = np.histogram(ang_pts, bins=36, range=(-np.pi, np.pi))[0]
-    return EllipseFit(C, center, axes, angle, rms, int(p.shape[0]), float(np.mean(hist > 0)))
+    bins = np.minimum(((ang_pts + np.pi) * (36 / (2 * np.pi))).astype(int), 35)
+    coverage = np.count_nonzero(np.bincount(bins, minlength=36)) / 36.0
+    return EllipseFit(C, center, axes, angle, rms, int(p.shape[0]), float(coverage))
 
 
 def subpixel_contours(gray_roi, level: float) -> list[np.ndarray]:
@@ -316,8 +320,60 @@ def subpixel_contours(gray_roi, level: float) -> list[np.ndarray]:
     return [c[:, ::-1] for c in find_contours(np.asarray(gray_roi, float), level)]
 
 
-def fit_ellipse_subpixel(gray, bbox, level: float, margin: int = 2, min_points: int = 8) -> EllipseFit | None:
-    """Fit an ellipse to the sub-pixel iso-contour of a blob.
+def level_crossings(gray, level: float, member_mask=None, bbox=None, margin: int = 2) -> np.ndarray:
+    """Sub-pixel edge points: where the image crosses ``level`` between 4-neighbours.
+
+    Between each horizontally or vertically adjacent pixel pair that straddles ``level``,
+    the crossing is placed by linear interpolation (the marching-squares vertices, without
+    assembling contours - an ellipse fit needs no order).
+
+    Parameters
+    ----------
+    gray : ndarray, shape (H, W)
+    level : float
+    member_mask : ndarray of bool, shape (H, W), optional
+        Keep only crossings with one pixel of the pair in the mask (the blob), so that the
+        edges of neighbouring markers in the box are ignored.
+    bbox : tuple of int, optional
+        ``(u0, v0, u1, v1)`` inclusive; searched with ``margin`` pixels around it.
+
+    Returns
+    -------
+    pts_px : ndarray, shape (n, 2)
+        ``(u, v)`` of the crossings.
+    """
+    H, W = gray.shape
+    if bbox is None:
+        u0, v0, u1, v1 = 0, 0, W - 1, H - 1
+    else:
+        u0, v0, u1, v1 = bbox
+        u0, v0 = max(u0 - margin, 0), max(v0 - margin, 0)
+        u1, v1 = min(u1 + margin, W - 1), min(v1 + margin, H - 1)
+    g = np.asarray(gray[v0:v1 + 1, u0:u1 + 1], float) - level
+    m = None if member_mask is None else member_mask[v0:v1 + 1, u0:u1 + 1]
+    out = []
+    # horizontal pairs (v, u) - (v, u + 1)
+    a, b = g[:, :-1], g[:, 1:]
+    sel = (a > 0) != (b > 0)
+    if m is not None:
+        sel &= m[:, :-1] | m[:, 1:]
+    vv, uu = np.nonzero(sel)
+    fa, fb = a[vv, uu], b[vv, uu]
+    out.append(np.stack([uu + fa / (fa - fb) + u0, vv + float(v0)], 1))
+    # vertical pairs (v, u) - (v + 1, u)
+    a, b = g[:-1, :], g[1:, :]
+    sel = (a > 0) != (b > 0)
+    if m is not None:
+        sel &= m[:-1, :] | m[1:, :]
+    vv, uu = np.nonzero(sel)
+    fa, fb = a[vv, uu], b[vv, uu]
+    out.append(np.stack([uu + float(u0), vv + fa / (fa - fb) + v0], 1))
+    return np.vstack(out)
+
+
+def fit_ellipse_subpixel(gray, bbox, level: float, member_mask=None, margin: int = 2,
+                         min_points: int = 8) -> EllipseFit | None:
+    """Fit an ellipse to the sub-pixel ``level`` crossings around a blob.
 
     Parameters
     ----------
@@ -326,6 +382,8 @@ def fit_ellipse_subpixel(gray, bbox, level: float, margin: int = 2, min_points: 
         ``(u0, v0, u1, v1)`` inclusive pixel bounds of the blob.
     level : float
         Iso-level (e.g. half-way between background and marker plateau).
+    member_mask : ndarray of bool, shape (H, W), optional
+        The blob's pixels (crossings must touch them); strongly advised when markers are close.
     margin : int
         Pixels added around the box.
     min_points : int
@@ -333,30 +391,25 @@ def fit_ellipse_subpixel(gray, bbox, level: float, margin: int = 2, min_points: 
     Returns
     -------
     EllipseFit or None
-        The fit to the longest closed contour, in full-image pixel coordinates.
+        In full-image pixel coordinates.
     """
-    H, W = gray.shape
-    u0, v0, u1, v1 = bbox
-    u0, v0 = max(u0 - margin, 0), max(v0 - margin, 0)
-    u1, v1 = min(u1 + margin, W - 1), min(v1 + margin, H - 1)
-    roi = gray[v0:v1 + 1, u0:u1 + 1]
-    cs = [c for c in subpixel_contours(roi, level) if c.shape[0] > min_points]
-    if not cs:
+    pts = level_crossings(gray, level, member_mask, bbox, margin)
+    if pts.shape[0] < min_points:
         return None
-    closed = [c for c in cs if np.allclose(c[0], c[-1])]
-    c = max(closed or cs, key=len)
-    fit = fit_ellipse(c[:-1] + [u0, v0] if np.allclose(c[0], c[-1]) else c + [u0, v0])
-    return fit
+    return fit_ellipse(pts)
 
 
 # ------------------------------------------------------------- edge-following arcs
-def split_arcs(contour_px, max_turn_deg: float = 40.0, step: int = 2, min_points: int = 6) -> list[np.ndarray]:
+def split_arcs(contour_px, max_turn_deg: float = 40.0, step: int = 2, min_points: int = 6,
+               reverse_tol_deg: float = 10.0) -> list[np.ndarray]:
     """Split an edge contour into candidate elliptical arcs (paper section 3.3).
 
+    Directions are taken between points ``step`` apart on the (3-point smoothed) contour.
     The contour is cut where the direction turns by more than ``max_turn_deg`` between
-    successive chords of ``step`` points (angle condition) and where the turning changes
-    sign (curvature condition); pieces with fewer than ``min_points`` points are dropped
-    (point condition).
+    successive chords (angle condition) and where it turns against the contour's dominant
+    sense by more than ``reverse_tol_deg`` (curvature condition: an elliptical arc turns one
+    way; the tolerance absorbs the pixel-level jitter of iso-contours); pieces with fewer
+    than ``min_points`` points are dropped (point condition).
 
     Parameters
     ----------
@@ -370,23 +423,25 @@ def split_arcs(contour_px, max_turn_deg: float = 40.0, step: int = 2, min_points
     p = np.asarray(contour_px, float)
     if p.shape[0] < min_points:
         return []
-    closed = np.allclose(p[0], p[-1])
+    closed = p.shape[0] > 2 and np.allclose(p[0], p[-1])
     if closed:
         p = p[:-1]
-    q = p[::step]
+    if closed:
+        sm = (np.roll(p, 1, 0) + p + np.roll(p, -1, 0)) / 3
+    else:
+        sm = p.copy()
+        sm[1:-1] = (p[:-2] + p[1:-1] + p[2:]) / 3
+    q = sm[::step]
     if q.shape[0] < 4:
         return [p] if p.shape[0] >= min_points else []
     d = np.diff(np.vstack([q, q[:1]]) if closed else q, axis=0)
     ang = np.arctan2(d[:, 1], d[:, 0])
     turn = np.angle(np.exp(1j * (np.roll(ang, -1) - ang)))[: (len(ang) if closed else len(ang) - 1)]
-    sign = np.sign(np.where(np.abs(turn) < 1e-3, 0.0, turn))
-    # a cut after chord k: sharp corner, or a sign change against the dominant sense
     dominant = np.sign(np.sum(turn)) or 1.0
-    cut = (np.abs(turn) > np.radians(max_turn_deg)) | (sign == -dominant)
+    cut = (np.abs(turn) > np.radians(max_turn_deg)) | (dominant * turn < -np.radians(reverse_tol_deg))
     if not cut.any():
         return [np.vstack([p, p[:1]])] if closed else [p]
-    cuts = np.flatnonzero(cut) + 1  # chord index after the turn
-    pts_idx = np.minimum(cuts * step, p.shape[0])
+    pts_idx = np.minimum((np.flatnonzero(cut) + 1) * step, p.shape[0])
     if closed:
         start = pts_idx[0]
         p = np.roll(p, -start, axis=0)

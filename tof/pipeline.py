@@ -63,6 +63,7 @@ class PipelineParams:
     max_penalty: float = _centroid.DEFAULT_MAX_PENALTY
     max_box_px: int = _centroid.DEFAULT_MAX_BOX_PX
     ellipse_supplement: bool = True
+    centroid_weighting: str = "coverage"
     temporal_median: bool = True
     persistence_window: int = 1
     persistence_min_count: int = 1
@@ -277,7 +278,7 @@ class TofPipeline:
         cands = _centroid.measure_candidates(
             bl, g_c, d_c, act.background, expected=self.target.n, ellipse_min_pixels=P.ellipse_min_pixels,
             max_fit_rms_px=P.max_fit_rms_px, max_penalty=P.max_penalty, max_box_px=P.max_box_px,
-            supplement=P.ellipse_supplement,
+            supplement=P.ellipse_supplement, weighting=P.centroid_weighting,
         )
         n_found = cands.n
         cands = cands.subset(np.isfinite(cands.depth_m) & (cands.depth_m > 0))

@@ -110,8 +110,18 @@ class Refinement:
     converged: bool
 
 
+def _rotvec_to_matrix(w):
+    th = np.linalg.norm(w)
+    if th < 1e-300:
+        return np.eye(3)
+    k = w / th
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(th) * K + (1 - np.cos(th)) * (K @ K)
+
+
 def refine_line_of_sight(points_target_m, los_cam, R0, t0, *, weights=None, range_m=None, depth_weight=0.0,
-                         tol: float = REFINE_TOL, max_iter: int = REFINE_MAX_ITER) -> Refinement:
+                         method: str = "gauss-newton", tol: float = REFINE_TOL,
+                         max_iter: int | None = None) -> Refinement:
     """Iterative line-of-sight reprojection refinement (paper section 5.2).
 
     Parameters
@@ -126,10 +136,17 @@ def refine_line_of_sight(points_target_m, los_cam, R0, t0, *, weights=None, rang
         Measured ranges ``rho_i`` along the lines of sight (needed when ``depth_weight > 0``).
     depth_weight : float or array_like, shape (N,)
         ``lambda_i`` in [0, 1]; 0 is the paper's scheme.
+    method : {"gauss-newton", "fixed-point"}
+        ``"fixed-point"`` iterates the paper's reprojection + SVD literally (linear
+        convergence, slow at long range where the depth direction is weakly constrained);
+        ``"gauss-newton"`` minimises the same objective (module notes) with Gauss-Newton
+        steps on the rotation vector and translation, reaching the same fixed point in a few
+        iterations.
     tol : float
         Stop when the translation changes by less than ``tol`` metres and the rotation by
         less than ``tol`` radians.
-    max_iter : int
+    max_iter : int, optional
+        Default 50 (Gauss-Newton) or 500 (fixed point).
 
     Returns
     -------
@@ -138,7 +155,8 @@ def refine_line_of_sight(points_target_m, los_cam, R0, t0, *, weights=None, rang
     p = _check_points(points_target_m, "points_target_m")
     e = _check_points(los_cam, "los_cam", p.shape[0])
     e = e / np.linalg.norm(e, axis=1, keepdims=True)
-    lam = np.broadcast_to(np.asarray(depth_weight, float), (p.shape[0],))
+    n = p.shape[0]
+    lam = np.broadcast_to(np.asarray(depth_weight, float), (n,))
     if np.any(lam < 0) or np.any(lam > 1):
         raise InputError("depth_weight: expected values in [0, 1]")
     if np.any(lam > 0):
@@ -146,19 +164,52 @@ def refine_line_of_sight(points_target_m, los_cam, R0, t0, *, weights=None, rang
             raise InputError("range_m: needed when depth_weight > 0")
         rho = np.asarray(range_m, float)
     else:
-        rho = np.zeros(p.shape[0])
+        rho = np.zeros(n)
+    w = np.ones(n) if weights is None else np.asarray(weights, float)
+    if method not in ("gauss-newton", "fixed-point"):
+        raise InputError(f"method: expected 'gauss-newton' or 'fixed-point', got {method!r}")
     R, t = np.asarray(R0, float), np.asarray(t0, float)
     converged = False
     it = 0
-    for it in range(1, max_iter + 1):
-        x = p @ R.T + t
-        s = np.einsum("ij,ij->i", e, x)
-        q = e * ((1 - lam) * s + lam * rho)[:, None]
-        R1, t1 = weighted_svd_pose(p, q, weights)
-        dR = np.linalg.norm(R1 - R)
-        dt = np.linalg.norm(t1 - t)
-        R, t = R1, t1
-        if dR < tol and dt < tol:
+    if method == "fixed-point":
+        for it in range(1, (max_iter or REFINE_MAX_ITER) + 1):
+            x = p @ R.T + t
+            s = np.einsum("ij,ij->i", e, x)
+            q = e * ((1 - lam) * s + lam * rho)[:, None]
+            R1, t1 = weighted_svd_pose(p, q, w)
+            dR = np.linalg.norm(R1 - R)
+            dt = np.linalg.norm(t1 - t)
+            R, t = R1, t1
+            if dR < tol and dt < tol:
+                converged = True
+                break
+        return Refinement(R, t, it, converged)
+    # Gauss-Newton on r_i = sqrt(w_i) (A_i x_i - sqrt(l_i) rho_i e_i), A_i = I - (1 - sqrt(l_i)) e_i e_i^T
+    sl = np.sqrt(lam)
+    A = np.eye(3)[None] - (1 - sl)[:, None, None] * np.einsum("ni,nj->nij", e, e)
+    sw = np.sqrt(w)[:, None, None]
+    b = (sl * rho)[:, None] * e
+    for it in range(1, (max_iter or 50) + 1):
+        y = p @ R.T  # rotated points
+        x = y + t
+        r = np.einsum("nij,nj->ni", A, x) - b
+        # d x / d(omega) = -[y]_x, d x / d t = I
+        J = np.zeros((n, 3, 6))
+        J[:, 0, 1], J[:, 0, 2] = y[:, 2], -y[:, 1]
+        J[:, 1, 0], J[:, 1, 2] = -y[:, 2], y[:, 0]
+        J[:, 2, 0], J[:, 2, 1] = y[:, 1], -y[:, 0]
+        J[:, :, 3:] = np.eye(3)
+        AJ = sw * np.einsum("nij,njk->nik", A, J)
+        rw = sw[:, :, 0] * r
+        Hm = np.einsum("nik,nil->kl", AJ, AJ)
+        g = np.einsum("nik,ni->k", AJ, rw)
+        try:
+            delta = -np.linalg.solve(Hm, g)
+        except np.linalg.LinAlgError:
+            break
+        R = _rotvec_to_matrix(delta[:3]) @ R
+        t = t + delta[3:]
+        if np.linalg.norm(delta[:3]) < tol and np.linalg.norm(delta[3:]) < tol:
             converged = True
             break
     return Refinement(R, t, it, converged)

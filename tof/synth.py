@@ -29,6 +29,54 @@ from .ellipse import project_circle_conic
 C_LIGHT = 299_792_458.0  # m/s
 
 
+def _plane_basis_local(n):
+    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(n, a)
+    u /= np.linalg.norm(u)
+    return u, np.cross(n, u)
+
+
+def _cast(camera, target, R, t, centres, normal, pw, ph, a_m, a_p, f_mod, gray_scale_dn, roi, s):
+    """Supersampled ray casting of the box ``roi = (r0, r1, c0, c1)``: pixel amplitude and
+    amplitude-weighted AMCW phasor."""
+    r0, r1, c0, c1 = roi
+    h, w = r1 - r0, c1 - c0
+    off = (np.arange(s) + 0.5) / s - 0.5
+    uu = (np.arange(c0, c1)[:, None] + off[None, :]).ravel()
+    vv = (np.arange(r0, r1)[:, None] + off[None, :]).ravel()
+    U, V = np.meshgrid(uu, vv)
+    xy = camera.pixels_to_normalized(np.stack([U, V], -1))
+    d = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], -1)
+    dn = np.linalg.norm(d, axis=-1)
+    best = np.full(U.shape, np.inf)
+    alb = np.zeros(U.shape)
+    ndd = d @ normal  # n . d, one plane normal for all faces
+    with np.errstate(divide="ignore", invalid="ignore"):
+        front = ndd < 0
+        sp = (normal @ t) / ndd
+        X = d * sp[..., None] - t
+        lx, ly = X @ R[:, 0], X @ R[:, 1]
+        hit = front & (sp > 0) & (np.abs(lx) <= pw / 2) & (np.abs(ly) <= ph / 2)
+        best = np.where(hit, sp, best)
+        alb = np.where(hit, a_p, alb)
+        for c, r in zip(centres, target.radius_m):
+            sm = (normal @ c) / ndd
+            X = d * sm[..., None] - c
+            hit = front & (sm > 0) & (np.einsum("...k,...k->...", X, X) <= r * r) & (sm < best)
+            best = np.where(hit, sm, best)
+            alb = np.where(hit, a_m, alb)
+        valid = np.isfinite(best)
+        rng_m = np.where(valid, best * dn, 1.0)
+        amp = np.where(valid, gray_scale_dn * alb * (np.abs(ndd) / dn) / rng_m**2, 0.0)
+    k = 4 * np.pi * f_mod / C_LIGHT
+    ph = amp * np.exp(1j * k * rng_m)
+
+    def pix(a):
+        return a.reshape(h, s, w, s).mean(axis=(1, 3))
+
+    return pix(amp), pix(ph)
+
+
 def random_pose(rng=None, range_m=(0.7, 6.0), max_tilt_deg: float = 25.0, max_roll_deg: float = 180.0,
                 lateral_frac: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
     """A random pose of the target in front of the camera.
@@ -171,47 +219,31 @@ def synth_frame(camera: Camera, target: MarkerTarget, R_cam_target, t_cam_target
     f_mod = modulation_frequency_hz or float(camera.tables.get("tof", {}).get("modulation_frequency_hz", 10e6))
     a_m = float(target.marker.get("albedo", 0.85)) if marker_albedo is None else float(marker_albedo)
     a_p = float(target.plate.get("albedo", 0.04)) if plate_albedo is None else float(plate_albedo)
-    off = (np.arange(s) + 0.5) / s - 0.5
-    uu = (np.arange(W)[:, None] + off[None, :]).ravel()
-    vv = (np.arange(H)[:, None] + off[None, :]).ravel()
-    U, V = np.meshgrid(uu, vv)
-    xy = camera.pixels_to_normalized(np.stack([U, V], -1))
-    d = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], -1)
-    dn = np.linalg.norm(d, axis=-1)
     normal = R[:, 2]
-    best = np.full(U.shape, np.inf)
-    alb = np.zeros(U.shape)
-    ndd = d @ normal  # n . d, same plane normal for all faces
-    with np.errstate(divide="ignore", invalid="ignore"):
-        front = ndd < 0
-        # plate
-        sp = (normal @ t) / ndd
-        X = d * sp[..., None] - t
-        lx, ly = X @ R[:, 0], X @ R[:, 1]
-        pw, ph = float(target.plate.get("width_m", 0.0)), float(target.plate.get("height_m", 0.0))
-        hit = front & (sp > 0) & (np.abs(lx) <= pw / 2) & (np.abs(ly) <= ph / 2)
-        best = np.where(hit, sp, best)
-        alb = np.where(hit, a_p, alb)
-        centres = target.points_m @ R.T + t
-        for c, r in zip(centres, target.radius_m):
-            sm = (normal @ c) / ndd
-            X = d * sm[..., None] - c
-            hit = front & (sm > 0) & (np.einsum("...k,...k->...", X, X) <= r * r) & (sm < best)
-            best = np.where(hit, sm, best)
-            alb = np.where(hit, a_m, alb)
-    valid = np.isfinite(best)
-    rng_m = np.where(valid, best * dn, np.nan)
-    cosi = np.abs(ndd) / dn
-    amp = np.where(valid, gray_scale_dn * alb * cosi / np.where(valid, rng_m, 1.0) ** 2, 0.0)
-    # pixel averages: amplitude and the AMCW phasor mean
+    centres = target.points_m @ R.T + t
+    pw, ph = float(target.plate.get("width_m", 0.0)), float(target.plate.get("height_m", 0.0))
+    # ray-cast only the box that can hold the target (plate corners, marker rims)
+    corners = np.array([[x, y, 0.0] for x in (-pw / 2, pw / 2) for y in (-ph / 2, ph / 2)]) @ R.T + t
+    u_, v_ = _plane_basis_local(normal)
+    ang = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    ring = np.cos(ang)[:, None] * u_ + np.sin(ang)[:, None] * v_  # (16, 3)
+    rim = (centres[:, None, :] + target.radius_m[:, None, None] * ring[None]).reshape(-1, 3)
+    pts = np.vstack([corners, rim])
+    pts = pts[pts[:, 2] > 1e-6]
+    A = np.zeros((H, W))
+    P = np.zeros((H, W), complex)
+    if pts.shape[0]:
+        uv = camera.project(pts)
+        c0 = int(np.clip(np.floor(uv[:, 0].min()) - 2, 0, W))
+        c1 = int(np.clip(np.ceil(uv[:, 0].max()) + 3, 0, W))
+        r0 = int(np.clip(np.floor(uv[:, 1].min()) - 2, 0, H))
+        r1 = int(np.clip(np.ceil(uv[:, 1].max()) + 3, 0, H))
+        if c1 > c0 and r1 > r0:
+            a_roi, p_roi = _cast(camera, target, R, t, centres, normal, pw, ph, a_m, a_p, f_mod, gray_scale_dn,
+                                 (r0, r1, c0, c1), s)
+            A[r0:r1, c0:c1] = a_roi
+            P[r0:r1, c0:c1] = p_roi
     k = 4 * np.pi * f_mod / C_LIGHT
-    ph = np.where(valid, amp * np.exp(1j * k * np.nan_to_num(rng_m)), 0)
-
-    def pix(a):
-        return a.reshape(H, s, W, s).mean(axis=(1, 3))
-
-    A = pix(amp)
-    P = pix(ph)
     unamb = C_LIGHT / (2 * f_mod)
     depth = np.mod(np.angle(P), 2 * np.pi) / k
     depth = np.where(depth > unamb, depth - unamb, depth)
@@ -222,6 +254,7 @@ def synth_frame(camera: Camera, target: MarkerTarget, R_cam_target, t_cam_target
     depth = np.where(ok, depth + rng.normal(0.0, 1.0, A.shape) * sig, np.nan)
     # truth
     K = camera.K
+    normal = R[:, 2]
     conics = np.array([project_circle_conic(K, c, normal, r) for c, r in zip(centres, target.radius_m)])
     centres_px = camera.project(centres)
     ell = -np.linalg.solve(conics[:, :2, :2], conics[:, :2, 2:3])[:, :, 0]

@@ -1,0 +1,182 @@
+"""``svgs campaign`` and ``svgs sensitivity``: studies from the command line.
+
+Discovered by :mod:`svgs.cli` (``register(subparsers)``). Nothing heavy is imported until a
+handler runs. Exit codes: 0 done, 2 bad input (an :class:`~svgs.errors.InputError`, raised
+before any trial runs).
+"""
+
+from __future__ import annotations
+
+import shlex
+import sys
+
+from svgs.errors import InputError
+
+
+def _add_executor_options(p) -> None:
+    g = p.add_argument_group("where the trials run (choose one; default: a local process pool, one process per core)")
+    x = g.add_mutually_exclusive_group()
+    x.add_argument("--processes", type=int, default=None, metavar="N",
+                   help="local process pool of N processes (0: run in this process)")
+    x.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="start a Dask LocalCluster of N worker processes (needs the 'dask' extra)")
+    x.add_argument("--scheduler", default=None, metavar="ADDR",
+                   help="run on an existing Dask cluster, e.g. tcp://10.0.0.5:8786 (needs the 'dask' extra)")
+    g.add_argument("--chunk-size", type=int, default=None, metavar="N",
+                   help="trials per task (default 16); trials sharing a render stay together")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+
+
+def _executor_argv(args) -> list[str]:
+    out = []
+    for flag, v in (("--processes", args.processes), ("--workers", args.workers), ("--scheduler", args.scheduler),
+                    ("--chunk-size", args.chunk_size)):
+        if v is not None:
+            out += [flag, str(v)]
+    return out
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "campaign",
+        help="simulate the paper's MSFC test campaign and compare with its Tables 2-5",
+        description="Simulate the 2014 MSFC Flight Robotics Lab campaign for one phone: gimbal roll/pitch +/-25 deg, "
+        "yaw +/-45 deg, translation stage +/-15 cm, at the paper's ranges. Writes DIR/results.csv (one row per trial, "
+        "resumable: rerun the same command to finish an interrupted run), DIR/summary.csv and a self-contained "
+        "DIR/report.html with the tables beside the paper's, histograms and the Cramer-Rao bound.",
+    )
+    p.add_argument("--camera", required=True, help="camera profile (htc-amaze-4g, galaxy-nexus, or a .toml path)")
+    p.add_argument("--trials", type=int, default=200, metavar="N", help="trials per range (default 200)")
+    p.add_argument("--ranges", default=None, metavar="R1,R2,...",
+                   help="test ranges in m (default: the paper's for the phone)")
+    p.add_argument("--out", default=None, metavar="DIR", help="study directory (default runs/campaign-CAMERA)")
+    p.add_argument("--seed", type=int, default=0, help="study seed (default 0)")
+    p.add_argument("--trial-kind", default="geometric", help="trial kind (default geometric)")
+    p.add_argument("--sigma-px", type=float, default=0.1, help="centroid noise, px per axis (default 0.1)")
+    p.add_argument("--pattern", default="svgs-3u", help="target pattern (default svgs-3u)")
+    p.add_argument("--calibration", choices=("exact", "paper"), default="exact",
+                   help="calibration the solver uses: exact, or the paper's practice (one rough calibration drawn "
+                   "per campaign; see docs/studies.md)")
+    p.add_argument("--focal-error-frac", type=float, default=0.0, help="solver's focal-length error, fraction")
+    p.add_argument("--pp-error-px", default="0,0", metavar="DU,DV", help="solver's principal-point error, px")
+    p.add_argument("--k1-error", type=float, default=0.0, help="solver's radial distortion k1 error")
+    p.add_argument("--merge-px", type=float, default=0.0,
+                   help="spots closer than this many px merge (geometric trial; 0: never)")
+    _add_executor_options(p)
+    p.set_defaults(func=cmd_campaign)
+
+    s = sub.add_parser(
+        "sensitivity",
+        help="global sensitivity (Sobol or Morris) of pose error and success to scenario parameters",
+        description="Vary parameters uniformly in LOW:HIGH and compute first-order and total Sobol' indices (or Morris "
+        "mu*) with confidence intervals for the position error, attitude error and success. Writes DIR/results.csv "
+        "(resumable), DIR/indices.csv and DIR/report.html.",
+    )
+    s.add_argument("--camera", required=True, help="camera profile")
+    s.add_argument("--vary", action="append", default=[], metavar="PARAM=LOW:HIGH",
+                   help="a varied parameter (repeat); see docs/studies.md for the names")
+    s.add_argument("--fixed", action="append", default=[], metavar="PARAM=VALUE", help="hold a parameter at VALUE")
+    s.add_argument("--method", choices=("sobol", "morris"), default="sobol")
+    s.add_argument("--n", type=int, default=256,
+                   help="base samples (Sobol: a power of two, n (d + 2) trials) or trajectories (Morris: n (d + 1))")
+    s.add_argument("--out", default=None, metavar="DIR", help="study directory (default runs/sensitivity-CAMERA)")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--trial-kind", default="geometric")
+    s.add_argument("--pattern", default="svgs-3u")
+    _add_executor_options(s)
+    s.set_defaults(func=cmd_sensitivity)
+
+
+def _ranges(text):
+    if text is None:
+        return None
+    try:
+        vals = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise InputError(f"--ranges: expected comma-separated numbers in m, got {text!r}") from None
+    if not vals:
+        raise InputError(f"--ranges: no ranges in {text!r}")
+    return vals
+
+
+def _pp(text):
+    try:
+        du, dv = (float(x) for x in text.split(","))
+    except ValueError:
+        raise InputError(f"--pp-error-px: expected DU,DV in px, got {text!r}") from None
+    return du, dv
+
+
+def _safe(name: str) -> str:
+    import re
+    from pathlib import Path
+
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(name).stem)
+
+
+def cmd_campaign(args) -> int:
+    from .campaign import make_config, print_summary, run_campaign
+    from .execution import executor_spec
+
+    spec = executor_spec(args.processes, args.workers, args.scheduler)
+    du, dv = _pp(args.pp_error_px)
+    err = {"focal_error_frac": args.focal_error_frac, "pp_error_u_px": du, "pp_error_v_px": dv, "k1_error": args.k1_error}
+    if args.calibration == "exact":
+        err = {k: v for k, v in err.items() if v != 0}
+    config = make_config(args.camera, ranges_m=_ranges(args.ranges), trials_per_range=args.trials, seed=args.seed,
+                         sigma_px=args.sigma_px, trial_kind=args.trial_kind, pattern=args.pattern,
+                         calibration=args.calibration, calibration_error=err, merge_px=args.merge_px)
+    if args.chunk_size is not None and args.chunk_size < 1:
+        raise InputError(f"--chunk-size: expected a positive integer, got {args.chunk_size}")
+    out = args.out or f"runs/campaign-{_safe(args.camera)}"
+    argv = ["svgs", "campaign", "--camera", args.camera, "--trials", str(args.trials),
+            "--ranges", ",".join(f"{r:g}" for r in config.ranges_m), "--out", out, "--seed", str(args.seed),
+            "--trial-kind", args.trial_kind, "--sigma-px", repr(args.sigma_px), "--pattern", args.pattern,
+            "--calibration", args.calibration]
+    if args.calibration == "exact":
+        argv += ["--focal-error-frac", repr(args.focal_error_frac), "--pp-error-px", f"{du!r},{dv!r}",
+                 "--k1-error", repr(args.k1_error)]
+    if args.merge_px:
+        argv += ["--merge-px", repr(args.merge_px)]
+    argv += _executor_argv(args)
+    summary, stats, path = run_campaign(config, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress,
+                                        command=shlex.join(argv))
+    print_summary(summary, config)
+    if stats is not None:
+        print(f"ran {stats.n_run} trial(s) in {stats.elapsed_s:.1f} s ({stats.trials_per_s:.0f} trials/s, "
+              f"{stats.executor}); {stats.n_already_done} were already done")
+    else:
+        print("all trials were already done; report rebuilt from the stored results")
+    print(f"results: {out}/results.csv  summary: {out}/summary.csv  report: {path}")
+    return 0
+
+
+def cmd_sensitivity(args) -> int:
+    from .execution import executor_spec
+    from .sensitivity import OUTPUTS, make_config, ranking, run_sensitivity
+
+    spec = executor_spec(args.processes, args.workers, args.scheduler)
+    config = make_config(args.camera, args.vary, fixed=args.fixed, method=args.method, n=args.n, seed=args.seed,
+                         trial_kind=args.trial_kind, pattern=args.pattern)
+    if args.chunk_size is not None and args.chunk_size < 1:
+        raise InputError(f"--chunk-size: expected a positive integer, got {args.chunk_size}")
+    out = args.out or f"runs/sensitivity-{_safe(args.camera)}"
+    argv = ["svgs", "sensitivity", "--camera", args.camera]
+    for v in args.vary:
+        argv += ["--vary", v]
+    for v in args.fixed:
+        argv += ["--fixed", v]
+    argv += ["--method", args.method, "--n", str(args.n), "--out", out, "--seed", str(args.seed),
+             "--trial-kind", args.trial_kind, "--pattern", args.pattern] + _executor_argv(args)
+    print(f"{args.method}: {config.n_trials} trials over {len(config.varied)} parameters", file=sys.stderr)
+    result, stats, path, n_groups = run_sensitivity(config, out, spec, chunk_size=args.chunk_size,
+                                                    progress=not args.no_progress, command=shlex.join(argv))
+    label = "ST" if args.method == "sobol" else "mu*"
+    for k in OUTPUTS:
+        rk = ranking(result, config, k)
+        print(f"{k:12s} ranked by {label}: " + ", ".join(f"{n} {s:.3f}" for n, s in rk))
+    print(f"failed trials: {100 * result['failure_fraction']:.1f} %; renders needed: {n_groups} of {config.n_trials} trials")
+    if stats is not None:
+        print(f"ran {stats.n_run} trial(s) in {stats.elapsed_s:.1f} s ({stats.executor})")
+    print(f"results: {out}/results.csv  indices: {out}/indices.csv  report: {path}")
+    return 0

@@ -1,0 +1,334 @@
+"""Where trials run: a ``concurrent.futures.Executor`` chosen by the user, and the loop that
+feeds it and stores rows as they finish.
+
+Executors (:func:`executor_spec`)
+    - default: a local process pool with one process per CPU core;
+    - ``--processes N``: a local process pool of N processes (``0``: run in this process,
+      no pool - for debugging);
+    - ``--workers N``: a Dask ``LocalCluster`` of N single-threaded worker processes,
+      through ``distributed.Client(cluster).get_executor()``;
+    - ``--scheduler tcp://HOST:PORT``: an existing Dask cluster.
+
+Dask is an optional extra (``pip install 'svgs-sim[dask]'``). Missing Dask and an
+unreachable scheduler are :class:`~svgs.errors.InputError`\\ s raised by
+:func:`check_executor`, before any work starts.
+
+Results do not depend on the executor: each trial carries its own seed
+(:mod:`studies.seeding`) and trials never share random state. Trials are packed into tasks
+(chunks of ``chunk_size`` trials, trials sharing a render key kept together) to amortise the
+per-task overhead; the packing does not change any trial's numbers either.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import multiprocessing
+import os
+import re
+import socket
+import sys
+import time
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+
+from svgs.errors import InputError
+
+from .trials import TrialKind, run_task, warm_up_worker
+
+#: Seconds to wait for a Dask scheduler to answer before giving up.
+SCHEDULER_TIMEOUT_S = 5.0
+#: Default number of trials per task.
+DEFAULT_CHUNK_SIZE = 16
+#: Tasks in flight per worker (keeps workers busy while the main process writes rows).
+TASKS_PER_WORKER = 4
+
+
+@dataclass(frozen=True)
+class ExecutorSpec:
+    """How to run a study's tasks.
+
+    Attributes
+    ----------
+    mode : str
+        ``"inline"``, ``"process"``, ``"dask-local"`` or ``"dask-scheduler"``.
+    n_workers : int
+        Workers (processes) for the local modes; 0 for a remote scheduler (unknown).
+    scheduler : str or None
+        ``tcp://HOST:PORT`` for ``dask-scheduler``.
+    """
+
+    mode: str
+    n_workers: int = 1
+    scheduler: str | None = None
+
+    def describe(self) -> str:
+        if self.mode == "inline":
+            return "in this process (no pool)"
+        if self.mode == "process":
+            return f"local process pool, {self.n_workers} process(es)"
+        if self.mode == "dask-local":
+            return f"Dask LocalCluster, {self.n_workers} single-threaded worker process(es)"
+        return f"Dask cluster at {self.scheduler}"
+
+
+def _count(value, name: str, minimum: int) -> int:
+    if isinstance(value, bool):
+        raise InputError(f"{name}: expected an integer >= {minimum}, got {value!r}")
+    try:
+        v = int(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: expected an integer >= {minimum}, got {value!r}") from None
+    if v != value and not (isinstance(value, str) and str(v) == value.strip()):
+        raise InputError(f"{name}: expected an integer >= {minimum}, got {value!r}")
+    if v < minimum:
+        raise InputError(f"{name}: expected an integer >= {minimum}, got {value!r}")
+    return v
+
+
+_ADDRESS = re.compile(r"^(tcp|tls)://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.\-]+):(\d{1,5})$")
+
+
+def parse_scheduler_address(address: str) -> tuple[str, str, int]:
+    """Split ``tcp://HOST:PORT`` (or ``tls://``) into (scheme, host, port); InputError if malformed."""
+    m = _ADDRESS.match(str(address).strip())
+    if not m:
+        raise InputError(f"--scheduler: expected an address like tcp://HOST:PORT, got {address!r}")
+    port = int(m.group(3))
+    if not 1 <= port <= 65535:
+        raise InputError(f"--scheduler: port {port} is out of range 1..65535 in {address!r}")
+    return m.group(1), m.group(2).strip("[]"), port
+
+
+def executor_spec(processes=None, workers=None, scheduler=None) -> ExecutorSpec:
+    """Validate the executor options (at most one of them) into an :class:`ExecutorSpec`.
+
+    Parameters
+    ----------
+    processes : int, optional
+        Local process pool size (0: in this process).
+    workers : int, optional
+        Dask LocalCluster worker count.
+    scheduler : str, optional
+        Address of a running Dask scheduler.
+    """
+    given = [n for n, v in (("--processes", processes), ("--workers", workers), ("--scheduler", scheduler)) if v is not None]
+    if len(given) > 1:
+        raise InputError(f"{' and '.join(given)}: choose one way to run the trials")
+    if workers is not None:
+        return ExecutorSpec("dask-local", _count(workers, "--workers", 1))
+    if scheduler is not None:
+        parse_scheduler_address(scheduler)
+        return ExecutorSpec("dask-scheduler", 0, str(scheduler).strip())
+    if processes is not None:
+        n = _count(processes, "--processes", 0)
+        return ExecutorSpec("inline", 1) if n == 0 else ExecutorSpec("process", n)
+    return ExecutorSpec("process", max(1, os.cpu_count() or 1))
+
+
+def _require_dask(flag: str):
+    try:
+        import distributed  # noqa: F401
+    except ModuleNotFoundError:
+        raise InputError(
+            f"{flag} runs trials on Dask, which is not installed; install the optional extra with "
+            "pip install 'svgs-sim[dask]' (or pip install 'dask[distributed]'), or use --processes N for a local pool"
+        ) from None
+
+
+def check_executor(spec: ExecutorSpec) -> None:
+    """Fail fast, before any work: Dask importable, scheduler reachable (a TCP connect)."""
+    if spec.mode == "dask-local":
+        _require_dask("--workers")
+    elif spec.mode == "dask-scheduler":
+        _require_dask("--scheduler")
+        _, host, port = parse_scheduler_address(spec.scheduler)
+        try:
+            with socket.create_connection((host, port), timeout=SCHEDULER_TIMEOUT_S):
+                pass
+        except OSError as exc:
+            raise InputError(
+                f"--scheduler: cannot reach a Dask scheduler at {spec.scheduler} ({exc.strerror or exc}); "
+                "is it running and reachable from here?"
+            ) from None
+
+
+class InlineExecutor(Executor):
+    """Runs each task at submission, in this process (no parallelism; for debugging)."""
+
+    def submit(self, fn, /, *args, **kwargs):
+        fut = Future()
+        try:
+            fut.set_result(fn(*args, **kwargs))
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller through the future
+            fut.set_exception(exc)
+        return fut
+
+
+@contextlib.contextmanager
+def open_executor(spec: ExecutorSpec, kind: TrialKind | None = None):
+    """Start the executor of ``spec``; yields a ``concurrent.futures.Executor``.
+
+    Local process pools use the ``spawn`` start method (no forked locks or threads) and warm
+    the trial kind up in every worker (e.g. load the compiled solver).
+    """
+    check_executor(spec)
+    if spec.mode == "inline":
+        if kind is not None:
+            warm_up_worker(kind.ref)
+        yield InlineExecutor()
+        return
+    if spec.mode == "process":
+        init = (warm_up_worker, (kind.ref,)) if kind is not None else (None, ())
+        with ProcessPoolExecutor(max_workers=spec.n_workers, mp_context=multiprocessing.get_context("spawn"),
+                                 initializer=init[0], initargs=init[1]) as ex:
+            yield ex
+        return
+    from distributed import Client, LocalCluster
+
+    if spec.mode == "dask-local":
+        cluster = LocalCluster(n_workers=spec.n_workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None, silence_logs=logging.ERROR)
+        try:
+            with Client(cluster) as client:
+                if kind is not None:
+                    client.run(warm_up_worker, kind.ref)
+                yield client.get_executor(pure=False)
+        finally:
+            cluster.close()
+        return
+    try:
+        client = Client(spec.scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
+    except (OSError, TimeoutError) as exc:
+        raise InputError(f"--scheduler: cannot connect to the Dask scheduler at {spec.scheduler}: {exc}") from None
+    try:
+        yield client.get_executor(pure=False)
+    finally:
+        client.close()
+
+
+# --------------------------------------------------------------------------- the study loop
+@dataclass(frozen=True)
+class Trial:
+    """One trial of a study: its id (unique in the study), scenario and seed."""
+
+    trial_id: int
+    scenario: dict
+    seed: int
+
+
+def make_tasks(kind: TrialKind, trials: list[Trial], chunk_size: int) -> list[list]:
+    """Pack trials into tasks of at most ``chunk_size`` trials (larger only to keep a render
+    group whole, up to ``4 * chunk_size``); trials with equal render keys go to the same task,
+    consecutively.
+
+    Returns
+    -------
+    list of list of (trial_id, scenario, seed)
+    """
+    groups: dict = {}
+    for tr in trials:
+        key = kind.render_key(tr.scenario) if kind.render_key is not None else ("__trial__", tr.trial_id)
+        groups.setdefault(key, []).append((tr.trial_id, tr.scenario, tr.seed))
+    tasks, cur = [], []
+    for grp in groups.values():
+        while len(grp) > 4 * chunk_size:  # a huge group: split it (each part renders once)
+            if cur:
+                tasks.append(cur)
+                cur = []
+            tasks.append(grp[: 4 * chunk_size])
+            grp = grp[4 * chunk_size:]
+        if cur and len(cur) + len(grp) > chunk_size:
+            tasks.append(cur)
+            cur = []
+        cur = cur + grp
+    if cur:
+        tasks.append(cur)
+    return tasks
+
+
+@dataclass
+class RunStats:
+    """What a call of :func:`run_study` did."""
+
+    n_trials: int
+    n_already_done: int
+    n_run: int
+    n_tasks: int
+    n_render_groups: int
+    elapsed_s: float
+    executor: str
+
+    @property
+    def trials_per_s(self) -> float:
+        return self.n_run / self.elapsed_s if self.elapsed_s > 0 else float("nan")
+
+
+def run_study(kind: TrialKind, trials: list[Trial], store, executor: Executor, *, chunk_size: int = DEFAULT_CHUNK_SIZE,
+              n_workers: int = 1, progress: bool = True, description: str = "trials", spec: ExecutorSpec | None = None
+              ) -> RunStats:
+    """Run the trials of ``trials`` not yet in ``store`` on ``executor``; store rows as they finish.
+
+    Parameters
+    ----------
+    kind : TrialKind
+    trials : list of Trial
+        The whole study (finished ones are skipped).
+    store : ResultStore
+        Open store (:meth:`ResultStore.open`).
+    executor : concurrent.futures.Executor
+    chunk_size : int
+        Trials per task.
+    n_workers : int
+        Used to size the window of tasks in flight.
+    progress : bool
+        Show a progress bar with ETA on stderr.
+
+    Returns
+    -------
+    RunStats
+    """
+    from .progress import progress_bar
+
+    ids = [t.trial_id for t in trials]
+    if len(set(ids)) != len(ids):
+        raise ValueError("run_study: duplicate trial ids")
+    done = store.done_ids
+    pending = [t for t in trials if t.trial_id not in done]
+    tasks = make_tasks(kind, pending, _count(chunk_size, "--chunk-size", 1))
+    n_groups = len({kind.render_key(t.scenario) for t in pending}) if kind.render_key else len(pending)
+    t0 = time.perf_counter()
+    window = max(2, TASKS_PER_WORKER * max(1, n_workers))
+    with progress_bar(len(pending), description, enabled=progress) as bar:
+        todo = list(reversed(tasks))
+        in_flight = set()
+        try:
+            while todo or in_flight:
+                while todo and len(in_flight) < window:
+                    in_flight.add(executor.submit(run_task, kind.ref, todo.pop()))
+                finished, in_flight = wait(in_flight, return_when=FIRST_COMPLETED)
+                for fut in finished:
+                    rows = fut.result()  # a bug in a trial surfaces here; finished rows are kept
+                    store.append(rows)
+                    bar.update(len(rows))
+        except BaseException:
+            for fut in in_flight:
+                fut.cancel()
+            raise
+    return RunStats(len(trials), len(trials) - len(pending), len(pending), len(tasks), n_groups,
+                    time.perf_counter() - t0, spec.describe() if spec else type(executor).__name__)
+
+
+def library_versions() -> dict:
+    """Versions of the libraries a study's numbers depend on (for reports)."""
+    import importlib.metadata as md
+    import platform
+
+    out = {"python": sys.version.split()[0], "platform": platform.platform()}
+    for name in ("svgs-sim", "numpy", "scipy", "numba", "opencv-python-headless", "matplotlib", "dask", "distributed",
+                 "mitsuba", "drjit"):
+        try:
+            out[name] = md.version(name)
+        except md.PackageNotFoundError:
+            pass
+    return out

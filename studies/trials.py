@@ -1,0 +1,455 @@
+"""Trial kinds: what one trial of a study computes, registered by name.
+
+A trial kind is a top-level (picklable) function ``run_trial(scenario: dict, seed: int) ->
+dict`` plus a description of its inputs and outputs. Studies (campaign, sensitivity, range
+sweeps) only build scenarios and hand them, with per-trial seeds (:mod:`studies.seeding`),
+to an executor (:mod:`studies.execution`); they never call a renderer or solver themselves.
+So the render-and-solve trial plugs in with :func:`register_trial_kind` and every study runs
+on it unchanged.
+
+Render once, expose many
+    A kind may declare ``render_key(scenario) -> hashable``: trials with equal keys need the
+    same expensive render (same geometry, camera, pattern, flash...), differing only in what
+    happens after it (noise draw, exposure, centroiding, calibration used by the solver).
+    The runner packs such trials into one task and calls ``run_group(scenarios, seeds)``,
+    which renders once and exposes/solves each trial. ``run_group`` must return exactly the
+    rows ``run_trial`` would (a trial's numbers never depend on its companions).
+
+The built-in kind ``geometric`` projects the pattern through the camera at the scenario's
+pose, adds seeded Gaussian centroid noise, optionally gives the solver a wrong calibration
+(focal length, principal point, radial distortion), solves with
+:func:`svgs.solve_centroids` and records truth, estimate, errors and the Cramer-Rao bound.
+Its "render" (the projection) is grouped the same way, so the mechanism is exercised today.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Hashable, Mapping
+
+import numpy as np
+
+from svgs.errors import InputError
+
+#: Modules that may register more trial kinds; imported when an unknown name is asked for
+#: (a module that is not installed is skipped). The render-and-solve trial registers itself
+#: from ``render.trials``.
+KIND_MODULES = ("render.trials",)
+
+#: Columns every study row has besides the scenario and the kind's outputs.
+ID_COLUMNS = ("trial_id", "seed")
+TIMING_COLUMNS = ("wall_s",)
+
+STATE_KEYS = ("x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg")
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A scenario parameter a study may set or vary.
+
+    Attributes
+    ----------
+    name : str
+        Scenario key (units in the name).
+    unit : str
+    meaning : str
+        One sentence for reports and ``--help``.
+    default : float
+    needs_render : bool
+        True if changing it changes the rendered flux (geometry, optics, flash); False if
+        it acts after the render (noise, exposure, detector, calibration used by the solver),
+        so trials differing only in it can share one render.
+    lower, upper : float or None
+        Physical domain (inclusive unless ``*_open``).
+    """
+
+    name: str
+    unit: str
+    meaning: str
+    default: float
+    needs_render: bool
+    lower: float | None = None
+    upper: float | None = None
+    lower_open: bool = False
+
+    def check(self, value, what: str = "") -> float:
+        """``float(value)`` if it lies in the domain, else :class:`InputError`."""
+        label = what or self.name
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise InputError(f"{label}: expected a number ({self.unit}), got {value!r}") from None
+        if not np.isfinite(v):
+            raise InputError(f"{label}: expected a finite number ({self.unit}), got {value!r}")
+        if self.lower is not None and (v < self.lower or (self.lower_open and v == self.lower)):
+            op = ">" if self.lower_open else ">="
+            raise InputError(f"{label}: {self.name} must be {op} {self.lower:g} {self.unit} ({self.meaning}), got {v:g}")
+        if self.upper is not None and v > self.upper:
+            raise InputError(f"{label}: {self.name} must be <= {self.upper:g} {self.unit} ({self.meaning}), got {v:g}")
+        return v
+
+
+@dataclass(frozen=True)
+class TrialKind:
+    """A registered kind of trial.
+
+    Attributes
+    ----------
+    name : str
+    run_trial : callable
+        ``run_trial(scenario: dict, seed: int) -> dict`` (top-level, picklable). The dict
+        holds the kind's ``outputs``.
+    outputs : tuple of str
+        Output columns, in order.
+    parameters : mapping of str -> Parameter
+        Numeric scenario parameters (for validation and sensitivity studies).
+    text_keys : tuple of str
+        Non-numeric scenario keys (camera, pattern...).
+    run_group : callable, optional
+        ``run_group(scenarios, seeds) -> list[dict]`` for trials sharing one render key.
+    render_key : callable, optional
+        ``render_key(scenario) -> hashable``.
+    warm_up : callable, optional
+        Called once per worker process (JIT compilation, caches).
+    description : str
+    module : str
+        Module that registers the kind; workers import it to find the kind.
+    """
+
+    name: str
+    run_trial: Callable[[dict, int], dict]
+    outputs: tuple
+    parameters: Mapping[str, Parameter]
+    text_keys: tuple = ("camera", "pattern")
+    run_group: Callable | None = None
+    render_key: Callable[[dict], Hashable] | None = None
+    warm_up: Callable | None = None
+    description: str = ""
+    module: str = field(default="")
+
+    @property
+    def ref(self) -> tuple[str, str]:
+        return (self.module or self.run_trial.__module__, self.name)
+
+    def columns(self, scenario_keys) -> list[str]:
+        """All columns of a study of this kind whose scenarios have ``scenario_keys``."""
+        clash = set(scenario_keys) & (set(self.outputs) | set(ID_COLUMNS) | set(TIMING_COLUMNS))
+        if clash:
+            raise ValueError(f"scenario keys {sorted(clash)} clash with output columns")
+        return [*ID_COLUMNS, *scenario_keys, *self.outputs, *TIMING_COLUMNS]
+
+
+_REGISTRY: dict[str, TrialKind] = {}
+
+
+def register_trial_kind(kind: TrialKind) -> TrialKind:
+    """Register (or replace) a trial kind under ``kind.name``."""
+    if not kind.module:
+        kind = TrialKind(**{**kind.__dict__, "module": kind.run_trial.__module__})
+    _REGISTRY[kind.name] = kind
+    return kind
+
+
+def known_trial_kinds() -> list[str]:
+    _import_kind_modules()
+    return sorted(_REGISTRY)
+
+
+def _import_kind_modules() -> None:
+    for m in KIND_MODULES:
+        try:
+            importlib.import_module(m)
+        except ModuleNotFoundError as exc:
+            if exc.name and (exc.name == m or m.startswith(exc.name + ".")):
+                continue
+            raise
+
+
+def get_trial_kind(name: str) -> TrialKind:
+    """The trial kind called ``name`` (:class:`InputError` listing the known ones)."""
+    if name not in _REGISTRY:
+        _import_kind_modules()
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise InputError(f"--trial-kind: unknown trial kind {name!r}; known: {', '.join(sorted(_REGISTRY))}") from None
+
+
+# --------------------------------------------------------------------------- task runner
+def run_task(kind_ref: tuple[str, str], items: list) -> list[dict]:
+    """Run one task of a study (in a worker process): trials sharing a render key or a chunk.
+
+    Parameters
+    ----------
+    kind_ref : (module, name)
+        Where the trial kind is registered.
+    items : list of (trial_id, scenario, seed)
+
+    Returns
+    -------
+    list of dict
+        One row per trial: ``trial_id``, ``seed``, the scenario, the outputs, ``wall_s``.
+    """
+    module, name = kind_ref
+    importlib.import_module(module)
+    kind = _REGISTRY[name]
+    _warm(kind)
+    rows = []
+    # consecutive items with the same render key form one group
+    groups: list[list] = []
+    for it in items:
+        key = kind.render_key(it[1]) if (kind.render_key and kind.run_group) else None
+        if groups and key is not None and groups[-1][0] == key:
+            groups[-1][1].append(it)
+        else:
+            groups.append([key, [it]])
+    for key, grp in groups:
+        t0 = time.perf_counter()
+        if key is not None and len(grp) > 1:
+            outs = kind.run_group([g[1] for g in grp], [g[2] for g in grp])
+        else:
+            outs = [kind.run_trial(g[1], g[2]) for g in grp]
+        dt = (time.perf_counter() - t0) / len(grp)
+        for (tid, scen, seed), out in zip(grp, outs):
+            rows.append({"trial_id": int(tid), "seed": int(seed), **scen, **out, "wall_s": dt})
+    return rows
+
+
+_WARMED: set = set()
+
+
+def _warm(kind: TrialKind) -> None:
+    if kind.warm_up is not None and kind.name not in _WARMED:
+        kind.warm_up()
+        _WARMED.add(kind.name)
+
+
+def warm_up_worker(kind_ref: tuple[str, str]) -> None:
+    """Process-pool initializer: import the kind's module and warm it up."""
+    module, name = kind_ref
+    importlib.import_module(module)
+    _warm(_REGISTRY[name])
+
+
+# --------------------------------------------------------------------------- geometric trial
+GEOMETRIC_PARAMETERS = {
+    p.name: p
+    for p in (
+        Parameter("range_m", "m", "distance from the camera to the target origin along the boresight", 10.0, True,
+                  lower=0.0, lower_open=True),
+        Parameter("x_m", "m", "lateral offset of the target origin, camera right", 0.0, True),
+        Parameter("y_m", "m", "lateral offset of the target origin, camera up", 0.0, True),
+        Parameter("roll_deg", "deg", "relative attitude, rotation about the target x axis (paper phi)", 0.0, True,
+                  lower=-90.0, upper=90.0),
+        Parameter("pitch_deg", "deg", "relative attitude, rotation about the target y axis (paper theta)", 0.0, True,
+                  lower=-90.0, upper=90.0),
+        Parameter("yaw_deg", "deg", "relative attitude, rotation about the target z axis (paper psi)", 0.0, True,
+                  lower=-180.0, upper=180.0),
+        Parameter("sigma_px", "px", "1-sigma Gaussian centroid noise per image axis", 0.1, False, lower=0.0),
+        Parameter("focal_error_frac", "1", "relative error of the focal length the solver uses (fx and fy scaled by 1 + e)",
+                  0.0, False, lower=-0.5, upper=0.5),
+        Parameter("pp_error_u_px", "px", "error of the principal point cx the solver uses", 0.0, False),
+        Parameter("pp_error_v_px", "px", "error of the principal point cy the solver uses", 0.0, False),
+        Parameter("k1_error", "1", "error of the radial distortion k1 the solver uses (the lens has the profile's k1)",
+                  0.0, False, lower=-1.0, upper=1.0),
+        Parameter("merge_px", "px", "spots closer than this in the image merge into one (0: never)", 0.0, True,
+                  lower=0.0),
+    )
+}
+
+GEOMETRIC_OUTPUTS = (
+    "ok", "reason",
+    *(f"true_{k}" for k in STATE_KEYS),
+    *(f"est_{k}" for k in STATE_KEYS),
+    *(f"err_{k}" for k in STATE_KEYS),
+    "pos_err_m", "att_err_deg", "residual_rms_px", "min_separation_px",
+    *(f"crlb_{k}" for k in STATE_KEYS),
+)
+
+
+@functools.lru_cache(maxsize=16)
+def _camera(name: str):
+    from svgs.profiles import Camera
+
+    return Camera.load(name)
+
+
+@functools.lru_cache(maxsize=16)
+def _pattern(name: str):
+    from svgs.profiles import Pattern
+
+    return Pattern.load(name)
+
+
+def build_scenario(kind: TrialKind, values: dict, labels: dict | None = None) -> dict:
+    """A complete, validated scenario of ``kind``: defaults filled in, domains checked.
+
+    Parameters
+    ----------
+    kind : TrialKind
+    values : dict
+        Text keys (``camera`` required, ``pattern`` default ``svgs-3u``) and numeric
+        parameters of ``kind``; an unknown key is an :class:`InputError`.
+    labels : dict, optional
+        Extra keys carried into the rows unchanged (e.g. ``nominal_range_m``).
+    """
+    values = dict(values)
+    if "camera" not in values:
+        raise InputError(f"{kind.name} scenario: 'camera' is required")
+    out = {"camera": str(values.pop("camera")), "pattern": str(values.pop("pattern", "svgs-3u"))}
+    _camera(out["camera"])  # InputError for an unknown profile, now rather than in a worker
+    _pattern(out["pattern"])
+    unknown = sorted(set(values) - set(kind.parameters))
+    if unknown:
+        raise InputError(f"trial kind {kind.name!r} has no parameter {', '.join(map(repr, unknown))}; "
+                         f"known: {', '.join(kind.parameters)}")
+    for name, p in kind.parameters.items():
+        out[name] = p.check(values.get(name, p.default))
+    for k, v in (labels or {}).items():
+        if k in out:
+            raise InputError(f"scenario label {k!r} clashes with a parameter")
+        out[k] = v
+    return out
+
+
+def geometric_scenario(labels: dict | None = None, **values) -> dict:
+    """A complete, validated geometric scenario (see :func:`build_scenario`)."""
+    return build_scenario(GEOMETRIC, values, labels)
+
+
+def _geometric_render(scenario: dict):
+    """The geometric "render": the pattern's true image points through the true camera.
+
+    Returns
+    -------
+    uv_px : ndarray, shape (n, 2)
+    depth_ok : bool
+        All points in front of the camera.
+    state_true : ndarray, shape (6,)
+    """
+    from svgs.frames import pose_from_scenario, pose_to_state
+
+    cam, pat = _camera(scenario["camera"]), _pattern(scenario["pattern"])
+    R, t = pose_from_scenario(scenario["range_m"], scenario["x_m"], scenario["y_m"],
+                              scenario["roll_deg"], scenario["pitch_deg"], scenario["yaw_deg"])
+    p_cam = pat.points_m @ R.T + t
+    depth_ok = bool(np.all(p_cam[:, 2] > 0))
+    uv = cam.project(p_cam)
+    return uv, depth_ok, pose_to_state(R, t)
+
+
+def _geometric_expose_solve(scenario: dict, seed: int, rendered) -> dict:
+    from svgs.solver import solve_centroids
+
+    uv_true, depth_ok, state_true = rendered
+    cam, pat = _camera(scenario["camera"]), _pattern(scenario["pattern"])
+    rng = np.random.default_rng(seed)
+    uv = uv_true + scenario["sigma_px"] * rng.standard_normal(uv_true.shape)
+    out = {k: None for k in GEOMETRIC_OUTPUTS}
+    true_deg = np.concatenate([state_true[:3], np.degrees(state_true[3:])])
+    out.update({f"true_{k}": float(v) for k, v in zip(STATE_KEYS, true_deg)})
+    d = np.linalg.norm(uv_true[:, None] - uv_true[None], axis=-1) + np.eye(len(uv_true)) * 1e12
+    out["min_separation_px"] = float(d.min())
+    reason = None
+    if not depth_ok or not np.all(cam.in_image(uv_true)):
+        reason = "too_few_blobs"  # a target outside the image: the detector sees fewer than four spots
+    elif scenario["merge_px"] > 0 and d.min() < scenario["merge_px"]:
+        reason = "merged_spots"
+    if reason is None:
+        solver_cam = cam.replace(
+            fx=cam.fx * (1.0 + scenario["focal_error_frac"]),
+            fy=cam.fy * (1.0 + scenario["focal_error_frac"]),
+            cx=cam.cx + scenario["pp_error_u_px"],
+            cy=cam.cy + scenario["pp_error_v_px"],
+            dist=cam.dist + np.array([scenario["k1_error"], 0.0, 0.0, 0.0, 0.0]),
+        )
+        try:
+            sol = solve_centroids(uv, solver_cam, pat, sigma_px=1.0)
+        except InputError:  # a degenerate image (e.g. all points on one line)
+            sol = None
+            reason = "degenerate"
+        if sol is not None and not sol:
+            reason = sol.reason
+    out["ok"] = reason is None
+    out["reason"] = reason
+    if reason is None:
+        est = np.concatenate([sol.state[:3], np.degrees(sol.state[3:])])
+        err = est - true_deg
+        err[3:] = (err[3:] + 180.0) % 360.0 - 180.0
+        from svgs.frames import rotation_angle_deg
+
+        crlb = np.sqrt(np.diag(sol.covariance)) * scenario["sigma_px"]
+        crlb = np.concatenate([crlb[:3], np.degrees(crlb[3:])])
+        out.update({f"est_{k}": float(v) for k, v in zip(STATE_KEYS, est)})
+        out.update({f"err_{k}": float(v) for k, v in zip(STATE_KEYS, err)})
+        out.update({f"crlb_{k}": float(v) for k, v in zip(STATE_KEYS, crlb)})
+        from svgs.frames import state_to_pose
+
+        R_true, _ = state_to_pose(state_true)
+        out["pos_err_m"] = float(np.linalg.norm(err[:3]))
+        out["att_err_deg"] = float(rotation_angle_deg(sol.R_cam_target, R_true))
+        out["residual_rms_px"] = float(sol.residual_rms_px)
+    return out
+
+
+def geometric_trial(scenario: dict, seed: int) -> dict:
+    """One geometric trial: project, add centroid noise, solve with the solver's calibration.
+
+    Parameters
+    ----------
+    scenario : dict
+        See :func:`geometric_scenario` (camera, pattern, pose, ``sigma_px``, calibration
+        errors, ``merge_px``).
+    seed : int
+        Seeds the centroid noise.
+
+    Returns
+    -------
+    dict
+        :data:`GEOMETRIC_OUTPUTS`: ``ok``, ``reason`` (a :data:`svgs.result.REASONS` code or
+        None), ``true_*``/``est_*``/``err_*`` for x, y, z (m; the camera's perspective centre in
+        the target frame) and roll, pitch, yaw (deg; paper angles, errors wrapped to
+        [-180, 180)), ``pos_err_m`` (norm), ``att_err_deg`` (rotation angle between solved
+        and true attitude), ``residual_rms_px``, ``min_separation_px`` (closest pair of true
+        image points) and ``crlb_*`` (Cramer-Rao 1-sigma for ``sigma_px``, at the estimate).
+    """
+    return _geometric_expose_solve(scenario, seed, _geometric_render(scenario))
+
+
+def geometric_group(scenarios: list, seeds: list) -> list[dict]:
+    """Trials sharing one projection (same :func:`geometric_render_key`): project once."""
+    rendered = _geometric_render(scenarios[0])
+    return [_geometric_expose_solve(s, seed, rendered) for s, seed in zip(scenarios, seeds)]
+
+
+def geometric_render_key(scenario: dict):
+    """What decides the geometric "render": camera, pattern, pose."""
+    return (scenario["camera"], scenario["pattern"], scenario["range_m"], scenario["x_m"], scenario["y_m"],
+            scenario["roll_deg"], scenario["pitch_deg"], scenario["yaw_deg"])
+
+
+def geometric_warm_up() -> None:
+    """Load the compiled solver (numba, cached on disk after the first compilation)."""
+    from svgs.frames import pose_from_scenario
+    from svgs.profiles import Camera, Pattern
+    from svgs.solver import solve_centroids
+
+    cam = Camera(name="warm-up", width=1000, height=1000, fx=1000.0, fy=1000.0, cx=499.5, cy=499.5)
+    pat = Pattern.load("svgs-3u")
+    R, t = pose_from_scenario(5.0, 0.0, 0.0, 5.0, -5.0, 10.0)
+    solve_centroids(cam.project_target(pat.points_m, R, t), cam, pat)
+
+
+GEOMETRIC = register_trial_kind(TrialKind(
+    name="geometric",
+    run_trial=geometric_trial,
+    outputs=GEOMETRIC_OUTPUTS,
+    parameters=GEOMETRIC_PARAMETERS,
+    run_group=geometric_group,
+    render_key=geometric_render_key,
+    warm_up=geometric_warm_up,
+    description="pattern projected through the camera, Gaussian centroid noise, solver with a (possibly wrong) calibration",
+))
