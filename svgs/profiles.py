@@ -183,6 +183,17 @@ class Camera:
         d.update(changes)
         return Camera(**d)
 
+    def scaled(self, width: int, height: int) -> "Camera":
+        """The same camera delivering images resized to ``width x height`` (a preview
+        stream): focal lengths scale, and the principal point keeps its place in the
+        field (pixel centres at integers: ``c' = (c + 0.5) * s - 0.5``). Distortion, in
+        normalised coordinates, is unchanged."""
+        sx, sy = width / self.width, height / self.height
+        return self.replace(
+            width=int(width), height=int(height), fx=self.fx * sx, fy=self.fy * sy,
+            cx=(self.cx + 0.5) * sx - 0.5, cy=(self.cy + 0.5) * sy - 0.5,
+        )
+
     # --------------------------------------------------------------- geometry
     @property
     def K(self) -> np.ndarray:

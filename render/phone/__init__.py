@@ -22,7 +22,7 @@ import numpy as np
 
 from svgs.errors import InputError
 
-from .isp import ExposureSolver, auto_exposure, downscale, jpeg_roundtrip, metering_weights, to_8bit, tone_lut
+from .isp import ExposureSolver, auto_exposure, downscale, jpeg_roundtrip, metering_weights, tone_lut
 from .optics import apply_psf, core_sigma_px
 from .params import ALL_STAGES, PhoneParams, check_stages
 from .sensor import bloom, electrons, fixed_patterns, readout
@@ -187,8 +187,9 @@ class Exposer:
             info["bloom"] = bloom(e, sp.full_well_e, sp.anti_blooming_drain, sp.bloom_direction)
         else:
             np.minimum(e, sp.full_well_e, out=e)
-        raw = readout(e, sp, iso, seed, read="read" in st, adc="adc" in st)
-        img = to_8bit(raw, self._lut) if "adc" in st else np.round(
+        raw, img = readout(e, sp, iso, seed, read="read" in st, adc="adc" in st, lut=self._lut)
+        if img is None:
+            img = np.round(
             np.clip((raw - sp.black_level_dn) / (sp.white_dn - sp.black_level_dn), 0, 1)
             ** (1.0 / p.isp.gamma if ("tone" in st and p.isp.gamma > 0) else 1.0) * 255).astype(np.uint8)
         if "downscale" in st and p.isp.output_width > 0:

@@ -93,29 +93,49 @@ def _charge_kernel(mu_e, dark_e, dsnu, key_shot, key_dark, shot, dark, out):
         for c in range(W):
             idx = np.uint64(r * W + c)
             m = mu_e[r, c]
-            e = _poisson(m, key_shot, idx) if shot else m
-            if dark:
-                e += _poisson(dark_e, key_dark, idx)
+            if shot and dark:  # a sum of Poisson variables is Poisson: one draw
+                e = _poisson(m + dark_e, key_shot, idx)
+            elif shot:
+                e = _poisson(m, key_shot, idx)
+            elif dark:
+                e = m + _poisson(dark_e, key_dark, idx)
+            else:
+                e = m
             out[r, c] = e + dsnu[r, c]
 
 
 @njit(parallel=True, cache=True)
-def _readout_kernel(e, read_sigma, gain, black, white, key, read, quantise, out):
-    """Read noise, gain, black level, ADC clip and rounding (DN, float32)."""
+def _readout_kernel(e, read_sigma, gain, black, white, key, read, quantise, lut, out, out8):
+    """Read noise, gain, black level, ADC clip and rounding (DN, float32), and the 8-bit
+    image through the tone LUT when quantising. Normals come in Box-Muller pairs."""
     H, W = e.shape
+    nl = lut.shape[0]
     for r in prange(H):
-        for c in range(W):
-            x = e[r, c]
+        for c0 in range(0, W, 2):
+            z0 = 0.0
+            z1 = 0.0
             if read:
-                x += read_sigma * _normal(key, np.uint64(r * W + c))
-            y = gain * x + black
-            if quantise:
-                y = np.floor(y + 0.5)
-                if y < 0.0:
-                    y = 0.0
-                elif y > white:
-                    y = white
-            out[r, c] = y
+                idx = np.uint64(r * W + c0)
+                u1 = _uniform(key, np.uint64(2) * idx)
+                u2 = _uniform(key, np.uint64(2) * idx + np.uint64(1))
+                rad = np.sqrt(-2.0 * np.log(u1))
+                z0 = rad * np.cos(6.283185307179586 * u2)
+                z1 = rad * np.sin(6.283185307179586 * u2)
+            for j in range(2):
+                c = c0 + j
+                if c >= W:
+                    break
+                x = e[r, c] + read_sigma * (z0 if j == 0 else z1)
+                y = gain * x + black
+                if quantise:
+                    y = np.floor(y + 0.5)
+                    if y < 0.0:
+                        y = 0.0
+                    elif y > white:
+                        y = white
+                    k = int(y)
+                    out8[r, c] = lut[k if k < nl else nl - 1]
+                out[r, c] = y
 
 
 def bloom(e: np.ndarray, full_well_e: float, drain: float, direction: str = "isotropic"):
@@ -142,17 +162,29 @@ def bloom(e: np.ndarray, full_well_e: float, drain: float, direction: str = "iso
         ``drained_e`` (removed by the drain), ``lost_e`` (spilled off the frame),
         ``regions`` (number of saturated regions), ``bloomed_px`` (pixels filled by spill).
     """
-    over = e > full_well_e
     stats = {"drained_e": 0.0, "lost_e": 0.0, "regions": 0, "bloomed_px": 0}
-    if not over.any():
-        return stats
     H, W = e.shape
-    n, labels, box, _ = cv2.connectedComponentsWithStats(over.view(np.uint8), connectivity=8)
+    # rows and columns holding saturated pixels (cheap reductions), then work in that box
+    rows = np.flatnonzero(e.max(axis=1) > full_well_e)
+    if rows.size == 0:
+        return stats
+    cols = np.flatnonzero(e[rows[0] : rows[-1] + 1].max(axis=0) > full_well_e)
+    ry0, ry1, rx0, rx1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+    over = np.zeros((H, W), np.uint8)
+    over[ry0:ry1, rx0:rx1] = e[ry0:ry1, rx0:rx1] > full_well_e
+    sub_over = over[ry0:ry1, rx0:rx1]
+    n, sub_labels, box, _ = cv2.connectedComponentsWithStats(sub_over, connectivity=8)
+    labels = np.zeros((H, W), np.int32)
+    labels[ry0:ry1, rx0:rx1] = sub_labels
+    box = box.copy()
+    box[:, 0] += rx0
+    box[:, 1] += ry0
     stats["regions"] = n - 1
     kernel = np.ones((3, 3), np.uint8) if direction == "isotropic" else np.ones((3, 1), np.uint8)
     # excess per region, then clip everything at full well
-    excess = np.bincount(labels.ravel(), weights=np.maximum(e - full_well_e, 0).ravel(), minlength=n)
-    np.minimum(e, full_well_e, out=e)
+    sub_e = e[ry0:ry1, rx0:rx1]
+    excess = np.bincount(sub_labels.ravel(), weights=np.maximum(sub_e - full_well_e, 0).ravel(), minlength=n)
+    np.minimum(sub_e, full_well_e, out=sub_e)
     order = np.argsort(-excess[1:]) + 1
     for lab in order:
         q = float(excess[lab])
@@ -214,10 +246,21 @@ def electrons(mu_e, params: SensorParams, exposure_s: float, dsnu, seed: int, *,
     return out
 
 
-def readout(e, params: SensorParams, iso: float, seed: int, *, read=True, adc=True):
-    """Stage 4: read noise, gain, black level and ADC. Returns DN as float32 (integers if ``adc``)."""
+def readout(e, params: SensorParams, iso: float, seed: int, *, read=True, adc=True, lut=None):
+    """Stage 4: read noise, gain, black level and ADC.
+
+    Returns
+    -------
+    raw_dn : ndarray, float32, shape (H, W)
+        DN (integers when ``adc``).
+    image : ndarray, uint8, shape (H, W) or None
+        ``lut[raw_dn]`` when ``adc`` and a tone LUT is given (one pass over the frame).
+    """
     out = np.empty(e.shape, np.float32)
+    want8 = bool(adc) and lut is not None
+    out8 = np.empty(e.shape if want8 else (1, 1), np.uint8)
+    lut_arr = np.ascontiguousarray(lut if lut is not None else np.zeros(1, np.uint8), np.uint8)
     _readout_kernel(np.ascontiguousarray(e, np.float32), float(params.read_noise_e), float(params.gain_dn_per_e(iso)),
                     float(params.black_level_dn), float(params.white_dn), _key(seed, 3),
-                    bool(read), bool(adc), out)
-    return out
+                    bool(read), bool(adc), lut_arr, out, out8)
+    return out, (out8 if want8 else None)

@@ -1,0 +1,283 @@
+"""Closing the loop: scenario -> rendered flux -> phone image -> SVGS solution -> errors.
+
+The data path of ``docs/design`` in one place::
+
+    Scenario --render--> Flux --expose--> Raw --isp--> Image --detect/identify/solve--> Solution
+
+- :class:`Scenario`: camera, pattern, pose (range along the boresight, lateral offsets,
+  the paper's attitude), the lab around the target, render quality.
+- :func:`render_scenario`: Mitsuba renders the target under the flash (retro returns,
+  target body); the lab - a flash-lit backdrop behind the target and the room's ambient
+  light, both uniform and smooth - is added analytically (nothing to ray trace in a
+  Lambertian wall).
+- :class:`Frame` holds one rendered flux and its truth; :meth:`Frame.exposer` gives the
+  phone's :class:`render.phone.Exposer` (render once, expose many).
+- :func:`expose_and_solve` makes one exposure and runs the SVGS chain on the delivered
+  image, returning a row of results (truth, solution, errors, timings, reasons).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from svgs.errors import InputError
+from svgs.frames import pose_from_scenario, pose_to_state, rotation_angle_deg, state_dict
+from svgs.profiles import Camera, Pattern
+
+#: Default lab: a matt grey backdrop 3 m behind the target, room lights off (the paper's
+#: flash-only tests). ASSUMPTION: the paper does not describe the lab background.
+DEFAULT_BACKDROP_DISTANCE_M = 3.0
+DEFAULT_BACKDROP_REFLECTANCE = 0.2
+DEFAULT_AMBIENT_RADIANCE_W_M2_SR = 0.0
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One simulated situation (what a test stand would set up).
+
+    Attributes
+    ----------
+    camera : str
+        Camera profile name or path.
+    pattern : str
+        Target pattern name or path.
+    range_m : float
+        Along the boresight to the target origin, m.
+    x_m, y_m : float
+        Lateral offsets of the target origin (right, up in the paper's camera frame), m.
+    roll_deg, pitch_deg, yaw_deg : float
+        The paper's attitude (x-y-z sequence), degrees.
+    backdrop_distance_m : float or None
+        Distance of a Lambertian backdrop behind the target origin (None: no backdrop).
+    backdrop_reflectance : float
+    ambient_radiance_w_m2_sr : float
+        Uniform scene radiance from room lighting, in the camera band.
+    spp, roi_spp : int
+        Samples per pixel of the full frame and of the spot windows.
+    """
+
+    camera: str = "galaxy-nexus"
+    pattern: str = "svgs-3u"
+    range_m: float = 10.0
+    x_m: float = 0.0
+    y_m: float = 0.0
+    roll_deg: float = 0.0
+    pitch_deg: float = 0.0
+    yaw_deg: float = 0.0
+    backdrop_distance_m: float | None = DEFAULT_BACKDROP_DISTANCE_M
+    backdrop_reflectance: float = DEFAULT_BACKDROP_REFLECTANCE
+    ambient_radiance_w_m2_sr: float = DEFAULT_AMBIENT_RADIANCE_W_M2_SR
+    spp: int = 1
+    roi_spp: int = 1024
+
+    def __post_init__(self):
+        for k in ("range_m", "x_m", "y_m", "roll_deg", "pitch_deg", "yaw_deg", "backdrop_reflectance",
+                  "ambient_radiance_w_m2_sr"):
+            v = getattr(self, k)
+            try:
+                fv = float(v)
+            except (TypeError, ValueError):
+                raise InputError(f"{k}: expected a number, got {v!r}") from None
+            if not np.isfinite(fv):
+                raise InputError(f"{k}: expected a finite number, got {v!r}")
+        if self.range_m <= 0:
+            raise InputError(f"range_m: expected a positive range in metres, got {self.range_m!r}")
+        if not 0 <= self.backdrop_reflectance <= 1:
+            raise InputError(f"backdrop_reflectance: expected 0..1, got {self.backdrop_reflectance!r}")
+        if self.ambient_radiance_w_m2_sr < 0:
+            raise InputError(f"ambient_radiance_w_m2_sr: expected >= 0, got {self.ambient_radiance_w_m2_sr!r}")
+        if self.backdrop_distance_m is not None and not (np.isfinite(self.backdrop_distance_m) and self.backdrop_distance_m > 0):
+            raise InputError(f"backdrop_distance_m: expected a positive distance or None, got {self.backdrop_distance_m!r}")
+        if int(self.spp) < 0 or int(self.roi_spp) < 1:
+            raise InputError(f"spp/roi_spp: expected spp >= 0 and roi_spp >= 1, got {self.spp}, {self.roi_spp}")
+
+    def pose(self):
+        """(R_cam_target, t_cam_target_m) of this scenario."""
+        return pose_from_scenario(self.range_m, self.x_m, self.y_m, self.roll_deg, self.pitch_deg, self.yaw_deg)
+
+    def replace(self, **kw) -> "Scenario":
+        d = asdict(self)
+        d.update(kw)
+        return Scenario(**d)
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class Frame:
+    """One rendered frame: noise-free flux and its truth.
+
+    Attributes
+    ----------
+    scenario : Scenario
+    flux : ndarray, float32, shape (H, W)
+        Photons per second per pixel (target render + backdrop + ambient).
+    truth : dict
+        The renderer's truth record plus the lab's parameters.
+    render_s : float
+        Wall time of the render.
+    """
+
+    scenario: Scenario
+    flux: np.ndarray
+    truth: dict
+    render_s: float = 0.0
+    _phone: object = field(default=None, repr=False)
+
+    @property
+    def camera(self) -> Camera:
+        return Camera.load(self.scenario.camera)
+
+    def phone(self):
+        from .phone import PhoneCamera
+
+        if self._phone is None:
+            self._phone = PhoneCamera(self.camera)
+        return self._phone
+
+    def exposer(self, stages=None):
+        """The phone's exposer for this flux (optics and metering done once)."""
+        from .phone import ALL_STAGES, Exposer
+
+        return Exposer(self.phone(), self.flux, stages=ALL_STAGES if stages is None else stages)
+
+
+def lab_flux(camera: Camera, scenario: Scenario) -> tuple[np.ndarray, dict]:
+    """Photon flux of the lab around the target: a flash-lit Lambertian backdrop and
+    uniform ambient light, photons/s/px, with the parameters used.
+
+    Backdrop radiance ``rho * I_flash / (pi * D^2)`` (D from the camera to the backdrop,
+    the flash's on-axis intensity, its cos^m fall-off towards the field edge ignored),
+    plus the ambient radiance; photons per pixel through the aperture from
+    :func:`render.optics.radiance_to_photon_rate`.
+    """
+    from .optics import Flash, Optics, pixel_normalized_grid, radiance_to_photon_rate
+
+    optics = Optics.from_camera(camera)
+    flash = Flash.from_camera(camera, optics.band_nm)
+    L = float(scenario.ambient_radiance_w_m2_sr)
+    info = {"ambient_radiance_w_m2_sr": L}
+    if scenario.backdrop_distance_m is not None:
+        D = scenario.range_m + scenario.backdrop_distance_m
+        n_led = len(flash.led_offsets_m)
+        Lb = scenario.backdrop_reflectance * n_led * flash.radiant_intensity_w_sr / (np.pi * D * D)
+        L += Lb
+        info.update({"backdrop_distance_from_camera_m": D, "backdrop_reflectance": scenario.backdrop_reflectance,
+                     "backdrop_radiance_w_m2_sr": Lb})
+    if L == 0:
+        return np.zeros((camera.height, camera.width), np.float32), info
+    # the per-pixel factor varies smoothly: evaluate on a coarse grid and interpolate
+    import cv2
+
+    step = 16
+    xy = pixel_normalized_grid(camera, 0, 0, camera.width, camera.height)[::step, ::step]
+    k = radiance_to_photon_rate(camera, optics, flash.photometry["mean_photon_energy_j"], xy).astype(np.float32)
+    full = cv2.resize(k, (k.shape[1] * step, k.shape[0] * step), interpolation=cv2.INTER_LINEAR)
+    return (L * full[: camera.height, : camera.width]).astype(np.float32), info
+
+
+def render_scenario(scenario: Scenario, *, seed: int = 0) -> Frame:
+    """Render a scenario: Mitsuba for the target, analytic lab light around it."""
+    from . import render_flux
+
+    camera = Camera.load(scenario.camera)
+    pattern = Pattern.load(scenario.pattern)
+    R, t = scenario.pose()
+    t0 = time.perf_counter()
+    res = render_flux(camera, pattern, R, t, spp=int(scenario.spp), roi_spp=int(scenario.roi_spp), seed=int(seed))
+    lab, info = lab_flux(camera, scenario)
+    dt = time.perf_counter() - t0
+    truth = dict(res.truth)
+    truth["lab"] = info
+    truth["scenario"] = scenario.to_json()
+    return Frame(scenario, res.flux + lab, truth, dt)
+
+
+def pose_errors(state, truth_state) -> dict:
+    """Errors of a paper-convention state against the truth.
+
+    Returns
+    -------
+    dict
+        ``pos_err_m`` [dX_L, dY_L, dZ_L], ``att_err_deg`` [droll, dpitch, dyaw] (wrapped to
+        +/-180), ``rot_err_deg`` (angle of the relative rotation).
+    """
+    s, tr = np.asarray(state, float), np.asarray(truth_state, float)
+    d = s - tr
+    d[3:] = (d[3:] + np.pi) % (2 * np.pi) - np.pi
+    from svgs.frames import state_to_pose
+
+    Ra, _ = state_to_pose(s)
+    Rb, _ = state_to_pose(tr)
+    return {
+        "pos_err_m": d[:3].tolist(),
+        "att_err_deg": np.degrees(d[3:]).tolist(),
+        "rot_err_deg": float(rotation_angle_deg(Ra, Rb)),
+    }
+
+
+def solver_camera(camera: Camera, image_shape) -> Camera:
+    """The camera geometry of a delivered image (scaled when the ISP downscaled it)."""
+    h, w = image_shape[:2]
+    return camera if (w, h) == (camera.width, camera.height) else camera.scaled(w, h)
+
+
+def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposure_s=None, iso=None,
+                     solver_camera_profile: Camera | None = None) -> dict:
+    """One exposure of a rendered frame through the SVGS chain.
+
+    Parameters
+    ----------
+    frame : Frame
+    exposer : render.phone.Exposer
+        From :meth:`Frame.exposer` (reused across calls).
+    seed : int
+        Noise seed of this exposure.
+    threshold : None, float or str
+        Detector threshold (see :func:`svgs.detect.detect_blobs`).
+    exposure_s, iso : float, optional
+        Override the phone's exposure.
+    solver_camera_profile : Camera, optional
+        The geometry the solver believes (a calibration with errors); default: the truth.
+
+    Returns
+    -------
+    dict
+        ``ok``, ``reason``, ``message``, ``n_blobs``, ``state`` (solved, paper keys) or None,
+        ``truth_state``, ``pos_err_m``, ``att_err_deg``, ``rot_err_deg``, ``residual_rms_px``,
+        ``exposure_s``, ``iso``, ``expose_s``, ``solve_s``; and ``_exposure`` / ``_solution``
+        (objects, for callers that write images).
+    """
+    from svgs.pipeline import solve_image
+
+    t0 = time.perf_counter()
+    ex = exposer.expose(seed=seed, exposure_s=exposure_s, iso=iso)
+    t1 = time.perf_counter()
+    cam = solver_camera(solver_camera_profile or frame.camera, ex.image.shape)
+    sol = solve_image(ex.image, cam, frame.scenario.pattern, threshold=threshold)
+    t2 = time.perf_counter()
+    R, t = frame.scenario.pose()
+    truth_state = pose_to_state(R, t)
+    row = {
+        "ok": bool(sol),
+        "reason": None if sol else sol.reason,
+        "message": None if sol else sol.message,
+        "n_blobs": sol.n_blobs if sol else sol.details.get("n_blobs"),
+        "truth_state": state_dict(truth_state),
+        "exposure_s": ex.exposure_s,
+        "iso": ex.iso,
+        "expose_s": t1 - t0,
+        "solve_s": t2 - t1,
+        "_exposure": ex,
+        "_solution": sol,
+    }
+    if sol:
+        row.update({"state": sol.state_dict, "residual_rms_px": sol.residual_rms_px, **pose_errors(sol.state, truth_state)})
+    else:
+        row.update({"state": None, "residual_rms_px": sol.details.get("residual_rms_px"),
+                    "pos_err_m": None, "att_err_deg": None, "rot_err_deg": None})
+    return row
