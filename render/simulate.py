@@ -55,8 +55,9 @@ class Scenario:
     backdrop_reflectance : float
     ambient_radiance_w_m2_sr : float
         Uniform scene radiance from room lighting, in the camera band.
-    spp, roi_spp : int
-        Samples per pixel of the full frame and of the spot windows.
+    spp, roi_spp : int or None
+        Samples per pixel of the full frame and of the spot windows (None: the renderer's
+        defaults).
     """
 
     camera: str = "galaxy-nexus"
@@ -70,8 +71,8 @@ class Scenario:
     backdrop_distance_m: float | None = DEFAULT_BACKDROP_DISTANCE_M
     backdrop_reflectance: float = DEFAULT_BACKDROP_REFLECTANCE
     ambient_radiance_w_m2_sr: float = DEFAULT_AMBIENT_RADIANCE_W_M2_SR
-    spp: int = 1
-    roi_spp: int = 1024
+    spp: int | None = None
+    roi_spp: int | None = None
 
     def __post_init__(self):
         for k in ("range_m", "x_m", "y_m", "roll_deg", "pitch_deg", "yaw_deg", "backdrop_reflectance",
@@ -91,7 +92,7 @@ class Scenario:
             raise InputError(f"ambient_radiance_w_m2_sr: expected >= 0, got {self.ambient_radiance_w_m2_sr!r}")
         if self.backdrop_distance_m is not None and not (np.isfinite(self.backdrop_distance_m) and self.backdrop_distance_m > 0):
             raise InputError(f"backdrop_distance_m: expected a positive distance or None, got {self.backdrop_distance_m!r}")
-        if int(self.spp) < 0 or int(self.roi_spp) < 1:
+        if (self.spp is not None and int(self.spp) < 0) or (self.roi_spp is not None and int(self.roi_spp) < 1):
             raise InputError(f"spp/roi_spp: expected spp >= 0 and roi_spp >= 1, got {self.spp}, {self.roi_spp}")
 
     def pose(self):
@@ -188,7 +189,8 @@ def render_scenario(scenario: Scenario, *, seed: int = 0) -> Frame:
     pattern = Pattern.load(scenario.pattern)
     R, t = scenario.pose()
     t0 = time.perf_counter()
-    res = render_flux(camera, pattern, R, t, spp=int(scenario.spp), roi_spp=int(scenario.roi_spp), seed=int(seed))
+    kw = {k: int(getattr(scenario, k)) for k in ("spp", "roi_spp") if getattr(scenario, k) is not None}
+    res = render_flux(camera, pattern, R, t, seed=int(seed), **kw)
     lab, info = lab_flux(camera, scenario)
     dt = time.perf_counter() - t0
     truth = dict(res.truth)
