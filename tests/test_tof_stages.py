@@ -169,3 +169,25 @@ def test_persistence_counter_keeps_pixels_seen_often_and_averages_them():
     assert cnt[1, 1] == 3 and g[1, 1] == pytest.approx(30.0)  # window slides
     with pytest.raises(InputError):
         PersistenceCounter(window=2, min_count=3)
+
+
+def test_vectorised_coverage_centroids_match_the_per_blob_version():
+    from tof.centroid import coverage_centroids
+
+    rng = np.random.default_rng(4)
+    centres = [(20.3, 20.6), (24.9, 20.2), (29.6, 21.1), (60.2, 40.7)]  # three 2-px markers 2 px apart
+    img = _disk_image((64, 90), centres, [1.1, 1.1, 1.1, 9.0], [900, 800, 850, 1000], bg=30.0)
+    img += rng.normal(0, 2, img.shape)
+    a = active_pixel_set(img, threshold_rel=0.1)
+    b = find_blobs(a, np.ones(a.n), min_pixels=1, max_eccentricity=1.0)
+    assert b.n == 4
+    vec = coverage_centroids(img, b, a.background)
+    anyblob = b.mask(img.shape)
+    for i in range(b.n):
+        k = b.pixels(i)
+        one, _ = coverage_centroid(img, b.rows[k], b.cols[k], a.background, anyblob)
+        np.testing.assert_allclose(vec[i], one, atol=0.01)
+    # and both find the marker centres
+    truth = np.array(centres)
+    d = np.linalg.norm(vec[:, None] - truth[None], axis=-1).min(1)
+    assert d.max() < 0.15

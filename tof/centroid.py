@@ -3,10 +3,11 @@
 For each blob:
 
 - weighted centroid ``sum(w x) / sum(w)`` (paper eq. 18) with the paper's ``w = gray - background``
-  or (default) coverage weights (:func:`coverage_weights`), which remove the bias that the
-  illumination gradient across a large marker gives the intensity weighting;
+  or (default) coverage weights over the blob and its one-pixel rim (:func:`coverage_centroids`),
+  which remove the bias that the illumination gradient across a large marker gives the
+  intensity weighting;
 - depth: mean of the member pixels' (temporally filtered) depths (paper eq. 19), weighted by
-  ``w`` and after rejecting samples more than 3 robust sigmas from the blob median - mixed
+  ``gray - background`` and after rejecting samples more than 3 robust sigmas from the blob median - mixed
   ("flying") pixels on the rim, which AMCW phasor mixing puts between the marker and the
   plate, weigh little and the far-off ones are dropped (deviation from the paper's plain mean);
 - an image conic: a sub-pixel ellipse fit (:func:`tof.ellipse.fit_ellipse_subpixel`) for
@@ -31,10 +32,13 @@ from svgs.errors import InputError
 from svgs.profiles import Camera
 
 from .blobs import Blobs
-from .ellipse import EllipseFit, conic_center, conic_from_moments, detect_ellipse_arcs, fit_ellipse_subpixel
+from .ellipse import EllipseFit, detect_ellipse_arcs, fit_ellipse_subpixel
 
 #: ASSUMPTION: blobs of at least this many pixels get a sub-pixel ellipse fit (~9 px across).
 DEFAULT_ELLIPSE_MIN_PIXELS = 60
+#: ASSUMPTION: a blob whose pixel count differs from its moment ellipse's area by more than
+#: this fraction is not a clean filled ellipse (its contour gets checked).
+DEFAULT_FILL_TOL = 0.06
 #: ASSUMPTION: an ellipse fit is good when its RMS Sampson distance is at most this.
 DEFAULT_MAX_FIT_RMS_PX = 0.35
 #: ASSUMPTION: the paper's P_max, W_max, H_max.
@@ -94,6 +98,14 @@ class Candidates:
         return 2 * self.semi_major_px * self.depth_m / np.sqrt(camera.fx * camera.fy)
 
 
+def _median(x) -> float:
+    """Median by partition (faster than np.median on small arrays)."""
+    n = x.size
+    k = n // 2
+    part = np.partition(x, (k - 1, k) if n % 2 == 0 and n > 1 else k)
+    return float(part[k] if n % 2 else 0.5 * (part[k - 1] + part[k]))
+
+
 def blob_depth(d, w, k_sigma: float = 3.0, floor_m: float = 1e-3) -> tuple[float, float, int]:
     """Robust weighted mean depth of one blob's samples.
 
@@ -115,8 +127,8 @@ def blob_depth(d, w, k_sigma: float = 3.0, floor_m: float = 1e-3) -> tuple[float
     if not ok.any():
         return np.nan, np.nan, 0
     d, w = d[ok], w[ok]
-    med = float(np.median(d))
-    sig = 1.4826 * float(np.median(np.abs(d - med)))
+    med = _median(d)
+    sig = 1.4826 * _median(np.abs(d - med))
     sel = np.abs(d - med) <= max(k_sigma * sig, floor_m)
     d, w = d[sel], w[sel]
     if w.sum() <= 0:
@@ -153,8 +165,15 @@ def local_intensity(signal, u, v, min_plane_pixels: int = 20, interior_frac: flo
     if sig.size >= min_plane_pixels:
         inner = sig >= interior_frac * p90
         if inner.sum() >= 6:
-            A = np.stack([np.ones(int(inner.sum())), u[inner], v[inner]], 1).astype(float)
-            c = np.linalg.lstsq(A, sig[inner], rcond=None)[0]
+            ui, vi, si = u[inner].astype(float), v[inner].astype(float), sig[inner]
+            uc, vc = ui.mean(), vi.mean()
+            du, dv = ui - uc, vi - vc
+            M = np.array([[du @ du, du @ dv], [du @ dv, dv @ dv]])
+            try:
+                bu, bv = np.linalg.solve(M, [du @ si, dv @ si])
+            except np.linalg.LinAlgError:
+                bu = bv = 0.0
+            c = (si.mean() - bu * uc - bv * vc, bu, bv)
 
             def plane(uu, vv):
                 pl = c[0] + c[1] * np.asarray(uu, float) + c[2] * np.asarray(vv, float)
@@ -259,6 +278,169 @@ def _penalty(ecc, n_pixels, cov, peak, peak_max):
     return ecc**2 + np.abs(1 - fill) + (1 - peak / max(peak_max, 1e-12))
 
 
+def _group_slices(groups, n_groups: int):
+    """Order that sorts ``groups`` (stable) and the slice bounds of each group."""
+    groups = np.asarray(groups)
+    if groups.size > 1 and np.any(groups[1:] < groups[:-1]):
+        order = np.argsort(groups, kind="stable")
+    else:
+        order = None
+    g = groups if order is None else groups[order]
+    bounds = np.searchsorted(g, np.arange(n_groups + 1))
+    return order, bounds
+
+
+def _grouped_quantile(values, groups, n_groups: int, q: float) -> np.ndarray:
+    """Per-group quantile (lower, by rank) of ``values`` grouped by ``groups`` (0..n-1); NaN
+    for empty groups."""
+    order, bounds = _group_slices(groups, n_groups)
+    v = np.asarray(values, float) if order is None else np.asarray(values, float)[order]
+    out = np.full(n_groups, np.nan)
+    for i in range(n_groups):
+        x = v[bounds[i]:bounds[i + 1]]
+        if x.size:
+            k = int(q * (x.size - 1))
+            out[i] = np.partition(x, k)[k]
+    return out
+
+
+def _grouped_median(values, groups, n_groups: int) -> np.ndarray:
+    """Per-group median; NaN when empty."""
+    order, bounds = _group_slices(groups, n_groups)
+    v = np.asarray(values, float) if order is None else np.asarray(values, float)[order]
+    out = np.full(n_groups, np.nan)
+    for i in range(n_groups):
+        x = v[bounds[i]:bounds[i + 1]]
+        if x.size:
+            out[i] = _median(x)
+    return out
+
+
+def _neighbour_labels(labels, size: int):
+    """Largest and smallest non-zero label within a ``size x size`` window (0 / big if none)."""
+    import cv2
+
+    k = np.ones((size, size), np.uint8)
+    big = np.uint16(65535)
+    hi = cv2.dilate(labels, k)
+    lo = cv2.erode(np.where(labels == 0, big, labels).astype(np.uint16), k)
+    return hi, lo
+
+
+def _pixels_of_both(mask, hi, lo):
+    """Pixels of ``mask`` with the blob index ``hi - 1``, repeated with ``lo - 1`` where a
+    second blob is near (``lo != hi``)."""
+    rr, cc = np.nonzero(mask)
+    h = hi[rr, cc].astype(np.intp)
+    lw = lo[rr, cc].astype(np.intp)
+    two = (lw != h) & (lw < 65535)
+    return (np.concatenate([rr, rr[two]]), np.concatenate([cc, cc[two]]),
+            np.concatenate([h, lw[two]]) - 1)
+
+
+def coverage_centroids(gray, blobs: Blobs, background: float, local_background: bool = True,
+                       min_plane_pixels: int = 20, interior_frac: float = 0.7) -> np.ndarray:
+    """Coverage-weighted centroids of all blobs at once (vectorised :func:`coverage_centroid`).
+
+    Each blob's pixels plus its one-pixel rim (pixels next to this blob only) are weighted by
+    ``clip((gray - b_i) / I_i(u, v), 0, 1)``: ``b_i`` the local background (median of the ring
+    2-3 px around the blob, next to no other blob), ``I_i`` the marker intensity model of
+    :func:`local_intensity` (plane fitted to the interior, or the 90th percentile).
+
+    Returns
+    -------
+    uv_px : ndarray, shape (n, 2)
+    """
+    n = blobs.n
+    if n == 0:
+        return np.zeros((0, 2))
+    if n > 65000:
+        raise InputError("too many blobs for the label image")
+    H, W = gray.shape
+    # work in the box holding all blobs and their 3-px surroundings
+    r0, c0 = max(int(blobs.rows.min()) - 4, 0), max(int(blobs.cols.min()) - 4, 0)
+    r1, c1 = min(int(blobs.rows.max()) + 5, H), min(int(blobs.cols.max()) + 5, W)
+    g = np.asarray(gray, np.float32)[r0:r1, c0:c1]
+    labels = np.zeros((r1 - r0, c1 - c0), np.uint16)
+    labels[blobs.rows - r0, blobs.cols - c0] = (blobs.blob_of_pixel + 1).astype(np.uint16)
+    hi1, lo1 = _neighbour_labels(labels, 3)
+    bg = np.full(n, float(background))
+    if local_background:
+        hi3, lo3 = _neighbour_labels(labels, 7)
+        rr, cc, lab = _pixels_of_both((hi1 == 0) & (hi3 > 0), hi3, lo3)
+        cnt = np.bincount(lab, minlength=n)
+        med = _grouped_median(g[rr, cc].astype(float), lab, n)
+        use = (cnt >= 8) & (med > bg)
+        bg[use] = med[use]
+    # marker intensity model from the members
+    mb = blobs.blob_of_pixel
+    sig_m = blobs.gray.astype(float) - bg[mb]
+    p90 = _grouped_quantile(sig_m, mb, n, 0.9)
+    inner = sig_m >= interior_frac * p90[mb]
+    u = blobs.cols.astype(float)
+    v = blobs.rows.astype(float)
+    ii = mb[inner]
+    S = [np.bincount(ii, x, n) for x in (np.ones(int(inner.sum())), u[inner], v[inner], u[inner] ** 2,
+                                         u[inner] * v[inner], v[inner] ** 2, sig_m[inner], u[inner] * sig_m[inner],
+                                         v[inner] * sig_m[inner])]
+    s0, su, sv, suu, suv, svv, ss, sus, svs = S
+    A = np.stack([np.stack([s0, su, sv], -1), np.stack([su, suu, suv], -1), np.stack([sv, suv, svv], -1)], -2)
+    b = np.stack([ss, sus, svs], -1)
+    plane_ok = (blobs.n_pixels >= min_plane_pixels) & (s0 >= 6) & (np.abs(np.linalg.det(A)) > 1e-9)
+    coef = np.zeros((n, 3))
+    coef[:, 0] = p90
+    if plane_ok.any():
+        coef[plane_ok] = np.linalg.solve(A[plane_ok], b[plane_ok][..., None])[..., 0]
+    # weights on members + rim (a rim pixel between two blobs counts for both)
+    rr, cc, lab_r = _pixels_of_both((labels == 0) & (hi1 > 0), hi1, lo1)
+    all_lab = np.concatenate([mb, lab_r])
+    all_u = np.concatenate([u, cc.astype(float) + c0])
+    all_v = np.concatenate([v, rr.astype(float) + r0])
+    all_g = np.concatenate([blobs.gray.astype(float), g[rr, cc].astype(float)])
+    model = coef[all_lab, 0] + coef[all_lab, 1] * all_u + coef[all_lab, 2] * all_v
+    model = np.where(model > 0.5 * p90[all_lab], model, p90[all_lab])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w = np.clip((all_g - bg[all_lab]) / model, 0.0, 1.0)
+    w = np.nan_to_num(w)
+    sw = np.bincount(all_lab, w, n)
+    out = np.stack([np.bincount(all_lab, w * all_u, n), np.bincount(all_lab, w * all_v, n)], -1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = out / sw[:, None]
+    bad = ~(sw > 0)
+    out[bad] = blobs.centroid_px[bad]
+    return out
+
+
+def blob_depths(depth_samples, weights, groups, n_groups: int, k_sigma: float = 3.0, floor_m: float = 1e-3):
+    """Vectorised :func:`blob_depth` over all blobs.
+
+    Returns
+    -------
+    depth_m, std_err_m : ndarray, shape (n,)
+    n_used : ndarray of int, shape (n,)
+    """
+    d = np.asarray(depth_samples, float)
+    ok = np.isfinite(d)
+    d, w, gr = d[ok], np.asarray(weights, float)[ok], groups[ok]
+    med = _grouped_median(d, gr, n_groups)
+    mad = _grouped_median(np.abs(d - med[gr]), gr, n_groups)
+    tol = np.maximum(k_sigma * 1.4826 * np.nan_to_num(mad), floor_m)
+    sel = np.abs(d - med[gr]) <= tol[gr]
+    d, w, gr = d[sel], w[sel], gr[sel]
+    n_used = np.bincount(gr, minlength=n_groups)
+    sw = np.bincount(gr, w, n_groups)
+    w = np.where(sw[gr] > 0, w, 1.0)
+    sw = np.bincount(gr, w, n_groups)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.bincount(gr, w * d, n_groups) / sw
+        var = np.bincount(gr, w * (d - mean[gr]) ** 2, n_groups) / sw
+    spread = np.where(n_used > 1, np.sqrt(np.maximum(var, 0)), 1.4826 * np.nan_to_num(mad))
+    err = np.maximum(spread, 1e-4) / np.sqrt(np.maximum(n_used, 1))
+    mean[n_used == 0] = np.nan
+    err[n_used == 0] = np.nan
+    return mean, err, n_used
+
+
 def measure_candidates(
     blobs: Blobs,
     gray,
@@ -272,6 +454,8 @@ def measure_candidates(
     max_box_px: int = DEFAULT_MAX_BOX_PX,
     supplement: bool = True,
     weighting: str = "coverage",
+    ellipse_fit: str = "auto",
+    fill_tol: float = DEFAULT_FILL_TOL,
 ) -> Candidates:
     """Centroids, depths, conics and penalties of the candidate blobs.
 
@@ -293,6 +477,14 @@ def measure_candidates(
         Allow the edge-following ellipse detection: it supplements missing markers (count too
         low) and repairs blobs whose contour is not an ellipse (a glint or a neighbour glued to
         a marker) by taking the marker's centre from its elliptical arcs.
+    ellipse_fit : {"auto", "always", "never"}
+        When blobs of at least ``ellipse_min_pixels`` get the sub-pixel ellipse fit:
+        ``"always"``; ``"auto"`` (default) when the blob count differs from ``expected`` (the
+        paper's rule, section 3.3), or for blobs whose pixel count differs from the area of
+        their moment ellipse by more than ``fill_tol`` or that touch the image border;
+        ``"never"``. A fitted blob's centre is the mean of its centroid and the ellipse centre.
+    fill_tol : float
+        See ``ellipse_fit``.
     weighting : {"coverage", "intensity"}
         Centroid weights: ``"intensity"`` is the paper's ``w = gray - background``;
         ``"coverage"`` (default) weighs each pixel of the blob and of its one-pixel rim by
@@ -312,12 +504,7 @@ def measure_candidates(
     starts = np.searchsorted(blobs.blob_of_pixel, np.arange(n + 1))
     w_all = np.clip(blobs.gray - background, 0, None).astype(float)
     if weighting == "coverage":
-        anyblob = blobs.mask(gray.shape)
-        uvw = np.empty((n, 2))
-        for i in range(n):
-            s, e = starts[i], starts[i + 1]
-            uvw[i] = coverage_centroid(gray, blobs.rows[s:e], blobs.cols[s:e], background, anyblob)[0]
-            w_all[s:e] = coverage_weights(w_all[s:e], blobs.cols[s:e], blobs.rows[s:e])
+        uvw = coverage_centroids(gray, blobs, background)
     elif weighting == "intensity":
         sw = np.bincount(blobs.blob_of_pixel, w_all, n)
         su = np.bincount(blobs.blob_of_pixel, w_all * blobs.cols, n)
@@ -337,47 +524,76 @@ def measure_candidates(
     rms = np.full(n, np.nan)
     semi = np.empty(n)
     confirmed = np.ones(n, bool)
+    fitted = np.zeros(n, bool)
     source = np.array(["blob"] * n, dtype=object)
     member = None
-    for i in range(n):
+    if n:
+        dep, dstd, nd = blob_depths(d_all, w_all, blobs.blob_of_pixel, n)
+        A = np.linalg.inv(4.0 * blobs.cov_px2)
+        conics[:, :2, :2] = A
+        conics[:, :2, 2] = conics[:, 2, :2] = -np.einsum("nij,nj->ni", A, uvw)
+        conics[:, 2, 2] = np.einsum("ni,nij,nj->n", uvw, A, uvw) - 1.0
+        semi = 2 * np.sqrt(np.maximum(np.linalg.eigvalsh(blobs.cov_px2)[:, 1], 0.0))
+    if ellipse_fit not in ("auto", "always", "never"):
+        raise InputError(f"ellipse_fit: expected 'auto', 'always' or 'never', got {ellipse_fit!r}")
+    fit_me = blobs.n_pixels >= ellipse_min_pixels
+    if ellipse_fit == "never":
+        fit_me[:] = False
+    elif ellipse_fit == "auto" and n and (expected is None or n == expected):
+        # the paper runs ellipse detection when the count is wrong; we also run it on blobs
+        # that do not look like a filled ellipse (fill ratio of the moment ellipse off by more
+        # than fill_tol: a glint or neighbour glued to a marker) or that touch the border
+        lam = np.linalg.eigvalsh(blobs.cov_px2)
+        fill = blobs.n_pixels / (4 * np.pi * np.sqrt(np.clip(lam[:, 0], 1e-12, None) * lam[:, 1]))
+        H, W = gray.shape
+        bb = blobs.bbox
+        at_border = (bb[:, 0] <= 0) | (bb[:, 1] <= 0) | (bb[:, 2] >= W - 1) | (bb[:, 3] >= H - 1)
+        fit_me &= (np.abs(1 - fill) > fill_tol) | at_border
+    for i in np.flatnonzero(fit_me):
         s, e = starts[i], starts[i + 1]
-        dep[i], dstd[i], nd[i] = blob_depth(d_all[s:e], w_all[s:e])
-        conics[i] = conic_from_moments(uvw[i], blobs.cov_px2[i])
-        lam = np.linalg.eigvalsh(blobs.cov_px2[i])
-        semi[i] = 2 * np.sqrt(max(lam[1], 0.0))
-        if blobs.n_pixels[i] >= ellipse_min_pixels:
-            if member is None:
-                member = np.zeros(gray.shape, bool)
-            member[blobs.rows[s:e], blobs.cols[s:e]] = True
-            g = blobs.gray[s:e]
-            k = int(0.9 * (g.size - 1))
-            level = background + 0.5 * (float(np.partition(g, k)[k]) - background)
-            fit = fit_ellipse_subpixel(gray, tuple(blobs.bbox[i]), level, member)
-            if fit is not None:
-                rms[i] = fit.rms_px
-            if fit is not None and fit.rms_px <= max_fit_rms_px and fit.coverage >= 0.9:
-                uv[i] = 0.5 * (uvw[i] + fit.center_px)
-                conics[i] = fit.conic
-                semi[i] = fit.axes_px[0]
+        if member is None:
+            member = np.zeros(gray.shape, bool)
+        member[blobs.rows[s:e], blobs.cols[s:e]] = True
+        g = blobs.gray[s:e]
+        k = int(0.9 * (g.size - 1))
+        level = background + 0.5 * (float(np.partition(g, k)[k]) - background)
+        fit = fit_ellipse_subpixel(gray, tuple(blobs.bbox[i]), level, member)
+        if fit is not None:
+            rms[i] = fit.rms_px
+        if fit is not None and fit.rms_px <= max_fit_rms_px and fit.coverage >= 0.9:
+            fitted[i] = True
+            uv[i] = 0.5 * (uvw[i] + fit.center_px)
+            conics[i] = fit.conic
+            semi[i] = fit.axes_px[0]
+        else:
+            # not an ellipse (a glint or a neighbour glued to it, a clipped marker):
+            # look for the marker's elliptical arcs and, if found, take its centre from them
+            repaired = _repair(gray, blobs.bbox[i], level, member, max_fit_rms_px) if supplement else None
+            if repaired is not None:
+                uv[i], conics[i], semi[i], rms[i] = repaired.center_px, repaired.conic, repaired.axes_px[0], repaired.rms_px
+                x = np.stack([blobs.cols[s:e], blobs.rows[s:e], np.ones(e - s)], 1)
+                inside = np.einsum("ij,jk,ik->i", x, repaired.conic, x) < 0
+                if inside.sum() >= 3:
+                    dep[i], dstd[i], nd[i] = blob_depth(d_all[s:e][inside], w_all[s:e][inside])
+                source[i] = "ellipse"
             else:
-                # not an ellipse (a glint or a neighbour glued to it, a clipped marker):
-                # look for the marker's elliptical arcs and, if found, take its centre from them
-                repaired = _repair(gray, blobs.bbox[i], level, member, max_fit_rms_px) if supplement else None
-                if repaired is not None:
-                    uv[i], conics[i], semi[i], rms[i] = repaired.center_px, repaired.conic, repaired.axes_px[0], repaired.rms_px
-                    x = np.stack([blobs.cols[s:e], blobs.rows[s:e], np.ones(e - s)], 1)
-                    inside = np.einsum("ij,jk,ik->i", x, repaired.conic, x) < 0
-                    if inside.sum() >= 3:
-                        dep[i], dstd[i], nd[i] = blob_depth(d_all[s:e][inside], w_all[s:e][inside])
-                    source[i] = "ellipse"
-                else:
-                    confirmed[i] = False
-            member[blobs.rows[s:e], blobs.cols[s:e]] = False
+                confirmed[i] = False
+        member[blobs.rows[s:e], blobs.cols[s:e]] = False
     peak_max = float(blobs.peak_gray.max()) if n else 1.0
     pen = _penalty(blobs.eccentricity, blobs.n_pixels, blobs.cov_px2, blobs.peak_gray, peak_max) if n else np.zeros(0)
     box = (blobs.bbox[:, 2:] - blobs.bbox[:, :2] + 1) if n else np.zeros((0, 2), int)
     ok = (pen <= max_penalty) & np.all(box <= max_box_px, axis=1)
     notes = {"dropped_penalty": int(np.sum(~ok))}
+    if n:
+        # a marker cut by the image border has a biased centroid: keep a blob touching the
+        # border only if its contour closed into a good ellipse or its arcs were found
+        H, W = gray.shape
+        bb = blobs.bbox
+        border = (bb[:, 0] <= 0) | (bb[:, 1] <= 0) | (bb[:, 2] >= W - 1) | (bb[:, 3] >= H - 1)
+        cut = border & ~fitted & (source != "ellipse")
+        if cut.any():
+            notes["dropped_at_border"] = int(np.sum(ok & cut))
+            ok &= ~cut
     if expected is not None and int(np.sum(ok)) > expected and not confirmed.all():
         # confirm: drop blobs whose contour failed the ellipse test
         notes["dropped_unconfirmed"] = int(np.sum(ok & ~confirmed))
@@ -392,11 +608,26 @@ def measure_candidates(
     return cands
 
 
+def _inside_image(f: EllipseFit, shape, margin: float = 0.5) -> bool:
+    """True if the whole ellipse lies inside the image (a marker cut by the border gives arcs
+    whose fit is unreliable)."""
+    H, W = shape
+    a, b = f.axes_px
+    c, s_ = np.cos(f.angle_rad), np.sin(f.angle_rad)
+    hu = np.sqrt((a * c) ** 2 + (b * s_) ** 2)
+    hv = np.sqrt((a * s_) ** 2 + (b * c) ** 2)
+    u, v = f.center_px
+    return bool(u - hu >= margin - 0.5 and v - hv >= margin - 0.5 and u + hu <= W - 0.5 - margin
+                and v + hv <= H - 0.5 - margin)
+
+
 def _repair(gray, bbox, level, member, max_fit_rms_px) -> EllipseFit | None:
     """The best elliptical-arc fit centred inside a blob that is not an ellipse, or None."""
     fits = detect_ellipse_arcs(gray, tuple(bbox), level, max_rms_px=max_fit_rms_px, min_coverage=0.5)
     best = None
     for f in fits:
+        if not _inside_image(f, gray.shape):
+            continue
         c = np.round(f.center_px).astype(int)
         if not (0 <= c[1] < member.shape[0] and 0 <= c[0] < member.shape[1] and member[c[1], c[0]]):
             continue
@@ -414,6 +645,8 @@ def _supplement(blobs: Blobs, gray, depth, background, existing_uv, max_fit_rms_
         fits: list[EllipseFit] = detect_ellipse_arcs(gray, tuple(bbox), level, max_rms_px=max_fit_rms_px)
         for f in fits:
             c = f.center_px
+            if not _inside_image(f, gray.shape):
+                continue
             if existing_uv.shape[0] and np.min(np.linalg.norm(existing_uv - c, axis=1)) < 2.0:
                 continue
             if any(np.linalg.norm(r[0] - c) < 2.0 for r in rows_out):
@@ -439,8 +672,3 @@ def _concat(a: Candidates, b: Candidates) -> Candidates:
     return Candidates(*(np.concatenate([getattr(a, f), getattr(b, f)]) for f in (
         "uv_px", "conic", "depth_m", "depth_std_m", "n_depth", "n_pixels", "eccentricity", "semi_major_px",
         "penalty", "fit_rms_px", "source")), notes=dict(a.notes))
-
-
-def centre_from_conic(C) -> np.ndarray:
-    """Alias of :func:`tof.ellipse.conic_center` for readability in the pipeline."""
-    return conic_center(C)

@@ -163,6 +163,35 @@ def project_circle_conic(K, center_cam_m, normal_cam, radius_m) -> np.ndarray:
     return C if np.linalg.det(C[:2, :2]) > 0 and C[0, 0] > 0 else -C
 
 
+def project_circle_conics(K, centers_cam_m, normal_cam, radii_m) -> np.ndarray:
+    """Batched :func:`project_circle_conic` for circles sharing one plane normal.
+
+    Parameters
+    ----------
+    K : array_like, shape (3, 3)
+    centers_cam_m : array_like, shape (n, 3)
+    normal_cam : array_like, shape (3,)
+    radii_m : array_like, shape (n,)
+
+    Returns
+    -------
+    C : ndarray, shape (n, 3, 3)
+        Unnormalised conics (``H^-T diag(1, 1, -r^2) H^-1``).
+    """
+    u, v, _ = _plane_basis(np.asarray(normal_cam, float))
+    c = np.asarray(centers_cam_m, float)
+    n = c.shape[0]
+    B = np.empty((n, 3, 3))
+    B[:, :, 0] = u
+    B[:, :, 1] = v
+    B[:, :, 2] = c
+    Hi = np.linalg.inv(np.asarray(K, float) @ B)
+    D = np.zeros((n, 3, 3))
+    D[:, 0, 0] = D[:, 1, 1] = 1.0
+    D[:, 2, 2] = -np.asarray(radii_m, float) ** 2
+    return np.swapaxes(Hi, 1, 2) @ D @ Hi
+
+
 def projected_circle_centre(C, K, normal_cam) -> np.ndarray:
     """Image of a circle's centre: the pole of the plane's vanishing line ``K^-T n``.
 
@@ -303,18 +332,27 @@ def fit_ellipse(points_px, method: str = "direct") -> EllipseFit | None:
         return None
     if not (np.isfinite([cu, cv_, w, h, ang]).all() and w > 0 and h > 0):
         return None
-    C = ellipse_to_conic((cu + mean[0], cv_ + mean[1]), (w / 2, h / 2), np.radians(ang))
-    center, axes, angle = conic_to_ellipse(C)
-    rms = float(np.sqrt(np.mean(sampson_distance(C, p) ** 2)))
+    a, b, th = w / 2.0, h / 2.0, np.radians(ang)
+    if b > a:
+        a, b, th = b, a, th + np.pi / 2
+    th = float(np.arctan2(np.sin(th), np.cos(th)))
+    center = np.array([cu + mean[0], cv_ + mean[1]])
+    C = ellipse_to_conic(center, (a, b), th)
+    # RMS Sampson distance and angular coverage, in the ellipse's centred frame
     d = p - center
+    A2 = C[:2, :2]
+    Ad = d @ A2  # gradient / 2 of (x - c)^T A (x - c) - 1
+    qv = np.sum(Ad * d, axis=1) - 1.0
+    gn = 2 * np.sqrt(np.sum(Ad * Ad, axis=1))
+    rms = float(np.sqrt(np.mean((qv / np.maximum(gn, 1e-300)) ** 2)))
     ang_pts = np.arctan2(d[:, 1], d[:, 0])
     bins = np.minimum(((ang_pts + np.pi) * (36 / (2 * np.pi))).astype(int), 35)
     coverage = np.count_nonzero(np.bincount(bins, minlength=36)) / 36.0
-    return EllipseFit(C, center, axes, angle, rms, int(p.shape[0]), float(coverage))
+    return EllipseFit(C, center, np.array([a, b]), th, rms, int(p.shape[0]), float(coverage))
 
 
 def subpixel_contours(gray_roi, level: float) -> list[np.ndarray]:
-    """Iso-contours of an image patch at ``level`` (marching squares), as ``(u, v)`` arrays."""
+    """Ordered iso-contours of an image patch at ``level`` (marching squares), as ``(u, v)`` arrays."""
     from skimage.measure import find_contours
 
     return [c[:, ::-1] for c in find_contours(np.asarray(gray_roi, float), level)]

@@ -25,6 +25,9 @@ from .active import ActiveSet
 
 #: ASSUMPTION: nLoG scale in pixels.
 DEFAULT_SIGMA_PX = 1.0
+#: Above this (active pixels x kernel size) / (frame pixels x kernel width), the filter is
+#: evaluated on the whole frame with OpenCV and read at the active pixels (same values).
+FULL_FRAME_FRACTION = 0.5
 #: ASSUMPTION: filtered-intensity threshold as a fraction of the largest response.
 DEFAULT_FILTERED_THRESHOLD_REL = -0.1
 
@@ -75,6 +78,10 @@ def nlog_at(gray, rows, cols, sigma_px: float = DEFAULT_SIGMA_PX) -> np.ndarray:
     cols = np.asarray(cols, np.intp)
     if rows.size == 0:
         return np.zeros(0, np.float32)
+    if rows.size * kern.size > FULL_FRAME_FRACTION * g.size * kern.shape[0]:
+        # many active pixels: OpenCV's whole-frame (separable-speed) filter is cheaper in numpy
+        # than gathering every window; the values at the active pixels are the same
+        return nlog_image(g, sigma_px)[rows, cols]
     pad = np.pad(g, r, mode="reflect")
     win = sliding_window_view(pad, kern.shape)
     return win[rows, cols].reshape(rows.size, -1) @ kern.ravel()
@@ -107,7 +114,7 @@ def filtered_threshold(filtered, threshold_rel: float = DEFAULT_FILTERED_THRESHO
         return np.zeros(0, np.intp), 0.0
     thr = float(threshold_rel) * float(max(f.max(), 0.0))
     keep = np.flatnonzero(f > thr)
-    return keep[np.argsort(-f[keep], kind="stable")], thr
+    return keep[np.argsort(-f[keep])], thr
 
 
 def filter_active_set(gray, active: ActiveSet, sigma_px: float = DEFAULT_SIGMA_PX,

@@ -33,8 +33,8 @@ from . import blobs as _blobs
 from . import centroid as _centroid
 from . import log_filter as _log
 from . import match as _match
-from .camera import DEFAULT_CAMERA, DEFAULT_PATTERN, MarkerTarget, depth_kind, line_of_sight, load_camera, load_target
-from .ellipse import centre_correction_px, project_circle_conic
+from .camera import DEFAULT_CAMERA, DEFAULT_PATTERN, depth_kind, line_of_sight, load_camera, load_target
+from .ellipse import centre_correction_px, project_circle_conics
 from .pose import is_degenerate, refine_line_of_sight, weighted_svd_pose
 from .temporal import PersistenceCounter, RecursiveMedianDepth
 
@@ -63,6 +63,7 @@ class PipelineParams:
     max_penalty: float = _centroid.DEFAULT_MAX_PENALTY
     max_box_px: int = _centroid.DEFAULT_MAX_BOX_PX
     ellipse_supplement: bool = True
+    ellipse_fit: str = "auto"
     centroid_weighting: str = "coverage"
     temporal_median: bool = True
     persistence_window: int = 1
@@ -278,7 +279,7 @@ class TofPipeline:
         cands = _centroid.measure_candidates(
             bl, g_c, d_c, act.background, expected=self.target.n, ellipse_min_pixels=P.ellipse_min_pixels,
             max_fit_rms_px=P.max_fit_rms_px, max_penalty=P.max_penalty, max_box_px=P.max_box_px,
-            supplement=P.ellipse_supplement, weighting=P.centroid_weighting,
+            supplement=P.ellipse_supplement, weighting=P.centroid_weighting, ellipse_fit=P.ellipse_fit,
         )
         n_found = cands.n
         cands = cands.subset(np.isfinite(cands.depth_m) & (cands.depth_m > 0))
@@ -315,16 +316,17 @@ class TofPipeline:
         R, t = weighted_svd_pose(pts, q[a], 1 / obs_sigma[a] ** 2)
         lam = (sig_perp[a] ** 2 / sig_rho[a] ** 2).clip(0, 1) if P.depth_weight is None else float(P.depth_weight)
         iters = 0
-        for _ in range(2 if P.centre_correction else 1):
-            if P.centre_correction:
-                uv = cands.uv_px[a] + self._centre_shift(R, t, i)
-            e_a = line_of_sight(cam, uv)
-            rho_a = self._to_range(cands.depth_m[a], e_a)
-            if P.refine:
-                r = refine_line_of_sight(pts, e_a, R, t, weights=1 / sig_perp[a] ** 2, range_m=rho_a, depth_weight=lam)
-                R, t, iters = r.R_cam_target, r.t_cam_target_m, iters + r.iterations
-            else:
-                R, t = weighted_svd_pose(pts, e_a * rho_a[:, None], 1 / obs_sigma[a] ** 2)
+        if P.centre_correction:
+            # the shift depends on the pose only weakly (it is itself ~0.1 px): one pass from
+            # the SVD pose is enough
+            uv = cands.uv_px[a] + self._centre_shift(R, t, i)
+        e_a = line_of_sight(cam, uv)
+        rho_a = self._to_range(cands.depth_m[a], e_a)
+        if P.refine:
+            r = refine_line_of_sight(pts, e_a, R, t, weights=1 / sig_perp[a] ** 2, range_m=rho_a, depth_weight=lam)
+            R, t, iters = r.R_cam_target, r.t_cam_target_m, r.iterations
+        else:
+            R, t = weighted_svd_pose(pts, e_a * rho_a[:, None], 1 / obs_sigma[a] ** 2)
         lap("pose")
         x = pts @ R.T + t
         if np.any(x[:, 2] <= 0) or t[2] <= 0:
@@ -355,7 +357,7 @@ class TofPipeline:
         K = self.camera.K
         n = R[:, 2]
         c = self.target.points_m[cat_index] @ R.T + t
-        C = np.array([project_circle_conic(K, ci, n, ri) for ci, ri in zip(c, self.target.radius_m[cat_index])])
+        C = project_circle_conics(K, c, n, self.target.radius_m[cat_index])
         return centre_correction_px(C, K, np.broadcast_to(n, c.shape))
 
 

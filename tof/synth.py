@@ -177,7 +177,8 @@ class SynthFrame:
 
 def synth_frame(camera: Camera, target: MarkerTarget, R_cam_target, t_cam_target_m, *, seed=None,
                 supersample: int = 4, gray_scale_dn: float = 800.0, gray_noise_dn: float = 2.0,
-                ambient_dn: float = 5.0, depth_noise_m: float = 0.003, depth_ref_dn: float = 1000.0,
+                gray_shot_dn: float = 1.0, ambient_dn: float = 5.0, depth_noise_m: float = 0.01,
+                depth_ref_dn: float = 1000.0,
                 min_amplitude_dn: float = 0.5, modulation_frequency_hz: float | None = None,
                 marker_albedo: float | None = None, plate_albedo: float | None = None,
                 full_scale_dn: float = 4095.0) -> SynthFrame:
@@ -196,9 +197,12 @@ def synth_frame(camera: Camera, target: MarkerTarget, R_cam_target, t_cam_target
     gray_scale_dn : float
         Gray of a unit-albedo face seen head-on at 1 m.
     gray_noise_dn, ambient_dn : float
-        Gaussian gray noise and constant ambient offset, DN.
+        Gaussian gray (read) noise and constant ambient offset, DN.
+    gray_shot_dn : float
+        Shot-noise variance per DN of signal (``sigma^2 = gray_noise_dn^2 + gray_shot_dn * A``).
     depth_noise_m : float
-        Depth noise at amplitude ``depth_ref_dn``; scales as ``sqrt(depth_ref_dn / A)``.
+        Per-pixel depth noise at amplitude ``depth_ref_dn``; scales as ``sqrt(depth_ref_dn / A)``
+        (ASSUMPTION: 1 cm at 1000 DN, the order of EPC660-class repeatability at 1 m).
     min_amplitude_dn : float
         Pixels returning less signal are invalid (NaN depth).
     modulation_frequency_hz : float, optional
@@ -247,7 +251,7 @@ def synth_frame(camera: Camera, target: MarkerTarget, R_cam_target, t_cam_target
     unamb = C_LIGHT / (2 * f_mod)
     depth = np.mod(np.angle(P), 2 * np.pi) / k
     depth = np.where(depth > unamb, depth - unamb, depth)
-    gray = A + ambient_dn + rng.normal(0.0, gray_noise_dn, A.shape)
+    gray = A + ambient_dn + rng.normal(0.0, 1.0, A.shape) * np.sqrt(gray_noise_dn**2 + gray_shot_dn * A)
     gray = np.clip(gray, 0, full_scale_dn)
     ok = A >= min_amplitude_dn
     sig = depth_noise_m * np.sqrt(depth_ref_dn / np.maximum(A, min_amplitude_dn))
