@@ -16,7 +16,7 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m svgs.demo
+	$(PY) -m render.demo
 
 test: $(STAMP)
 	$(PY) -m pytest -q
