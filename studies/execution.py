@@ -307,10 +307,16 @@ def run_study(kind: TrialKind, trials: list[Trial], store, executor: Executor, *
                 while todo and len(in_flight) < window:
                     in_flight.add(executor.submit(run_task, kind.ref, todo.pop()))
                 finished, in_flight = wait(in_flight, return_when=FIRST_COMPLETED)
+                error = None
                 for fut in finished:
-                    rows = fut.result()  # a bug in a trial surfaces here; finished rows are kept
+                    if fut.exception() is not None:  # a bug in a trial: keep every finished row, then raise
+                        error = error or fut.exception()
+                        continue
+                    rows = fut.result()
                     store.append(rows)
                     bar.update(len(rows))
+                if error is not None:
+                    raise error
         except BaseException:
             for fut in in_flight:
                 fut.cancel()

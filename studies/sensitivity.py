@@ -202,24 +202,23 @@ def morris_design(config: SensitivityConfig):
         Signed step of that factor (+-``p / (2 (p - 1))``).
     """
     p = MORRIS_LEVELS
-    step = p / (2.0 * (p - 1))
+    jump = p // 2  # grid steps per move: delta = (p / 2) / (p - 1)
     d = len(config.varied)
     rng = np.random.default_rng(np.random.SeedSequence(config.seed))
-    grid = np.arange(p) / (p - 1)
     X = np.empty((config.n, d + 1, d))
     order = np.empty((config.n, d), int)
     delta = np.empty((config.n, d))
     for t in range(config.n):
-        x = rng.choice(grid, size=d)
+        k = rng.integers(0, p, size=d)  # grid levels
         perm = rng.permutation(d)
-        X[t, 0] = x
+        X[t, 0] = k / (p - 1)
         for s, i in enumerate(perm):
-            dx = step if x[i] + step <= 1.0 + 1e-12 else -step
-            x = x.copy()
-            x[i] = min(max(x[i] + dx, 0.0), 1.0)
-            X[t, s + 1] = x
+            dk = jump if k[i] + jump <= p - 1 else -jump
+            k = k.copy()
+            k[i] += dk
+            X[t, s + 1] = k / (p - 1)
             order[t, s] = i
-            delta[t, s] = dx
+            delta[t, s] = dk / (p - 1)
     return X, order, delta
 
 
@@ -435,6 +434,23 @@ def write_sensitivity_report(out_dir, config: SensitivityConfig, table: dict, re
         rk = ranking(result, config, k)
         label = "total index ST" if config.method == "sobol" else "mu*"
         rep.paragraph(f"{k} by {label}: " + ", ".join(f"{nm} ({s:.3g})" for nm, s in rk))
+    if config.method == "sobol":
+        rep.paragraph(
+            "How to read this. S1 is the share of the output's variance explained by the parameter alone; ST adds "
+            "every interaction it takes part in. ST well above S1 means the parameter matters through others (e.g. an "
+            "attitude whose effect grows with range). A parameter whose ST interval stays near zero can be held at any "
+            "value in its range without changing the output's spread: it is not worth controlling in a design. "
+            "Indices are relative to the ranges given: widen a range and its parameter's share grows. Small negative "
+            "S1 values are estimator noise around zero.", "note")
+        for k in OUTPUTS:
+            if not result["outputs"][k]["variance"] > 0:
+                rep.paragraph(f"{k} did not vary over the design (e.g. every trial solved): its indices are zero.",
+                              "note")
+    else:
+        rep.paragraph(
+            "How to read this. mu* is the mean absolute change of the output when the parameter moves across "
+            "two-thirds of its range (the 4-level grid step), sigma the spread of that change: sigma comparable to mu* "
+            "means the effect depends on the other parameters (interactions or non-linearity).", "note")
     rep.heading("Indices")
     for k in OUTPUTS:
         sub = [r for r in rows if r["output"] == k]

@@ -96,6 +96,11 @@ def _diff(a: dict, b: dict, prefix: str = "") -> list[str]:
             out.append(f"{key}: {a[k]!r} -> (absent)")
         elif isinstance(a[k], dict) and isinstance(b[k], dict):
             out.extend(_diff(a[k], b[k], key + "."))
+        elif isinstance(a[k], list) and isinstance(b[k], list) and len(a[k]) + len(b[k]) > 12 and a[k] != b[k]:
+            add = [x for x in b[k] if x not in a[k]]
+            rem = [x for x in a[k] if x not in b[k]]
+            out.append(f"{key}: " + " ".join(x for x in (f"added {add}" if add else "", f"removed {rem}" if rem else "") if x)
+                       + ("" if add or rem else "same entries in another order"))
         elif a[k] != b[k]:
             out.append(f"{key}: {a[k]!r} -> {b[k]!r}")
     return out
@@ -206,19 +211,13 @@ class ResultStore:
         data = path.read_bytes()
         if not data.endswith(b"\n"):  # a torn final write: drop the partial line
             keep = data.rfind(b"\n") + 1
-            if keep == 0:
-                keep = 0
             with open(path, "r+b") as fh:
                 fh.truncate(keep)
+                if keep == 0:  # even the header was torn
+                    fh.write(header)
                 fh.flush()
                 os.fsync(fh.fileno())
-            data = data[:keep]
-            if keep == 0:
-                fd = os.open(path, os.O_WRONLY | os.O_TRUNC)
-                _write_all(fd, header)
-                os.fsync(fd)
-                os.close(fd)
-                data = header
+            data = data[:keep] if keep else header
         if not data.startswith(header):
             first = data.split(b"\n", 1)[0].decode(errors="replace")
             self.close()

@@ -41,7 +41,7 @@ KIND_MODULES = ("render.trials",)
 
 #: Columns every study row has besides the scenario and the kind's outputs.
 ID_COLUMNS = ("trial_id", "seed")
-TIMING_COLUMNS = ("wall_s",)
+TIMING_COLUMNS = ("wall_s", "cpu_s")
 
 STATE_KEYS = ("x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg")
 
@@ -191,7 +191,8 @@ def run_task(kind_ref: tuple[str, str], items: list) -> list[dict]:
     Returns
     -------
     list of dict
-        One row per trial: ``trial_id``, ``seed``, the scenario, the outputs, ``wall_s``.
+        One row per trial: ``trial_id``, ``seed``, the scenario, the outputs, ``wall_s`` and
+        ``cpu_s`` (wall-clock and worker CPU seconds, averaged over a render group).
     """
     module, name = kind_ref
     importlib.import_module(module)
@@ -207,14 +208,14 @@ def run_task(kind_ref: tuple[str, str], items: list) -> list[dict]:
         else:
             groups.append([key, [it]])
     for key, grp in groups:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         if key is not None and len(grp) > 1:
             outs = kind.run_group([g[1] for g in grp], [g[2] for g in grp])
         else:
             outs = [kind.run_trial(g[1], g[2]) for g in grp]
-        dt = (time.perf_counter() - t0) / len(grp)
+        dt, dc = (time.perf_counter() - t0) / len(grp), (time.process_time() - c0) / len(grp)
         for (tid, scen, seed), out in zip(grp, outs):
-            rows.append({"trial_id": int(tid), "seed": int(seed), **scen, **out, "wall_s": dt})
+            rows.append({"trial_id": int(tid), "seed": int(seed), **scen, **out, "wall_s": dt, "cpu_s": dc})
     return rows
 
 

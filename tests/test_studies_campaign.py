@@ -1,0 +1,167 @@
+"""The campaign: the paper's numbers from assets, statistics beside them, the CLI, and the HTML
+report opened in a real headless browser (Debian's Chromium)."""
+
+import base64
+import csv
+import os
+import shutil
+import subprocess
+from html.parser import HTMLParser
+
+import numpy as np
+import pytest
+
+from studies.campaign import PAPER_CSV, PAPER_RANGES_M, campaign_trials, load_paper_results, make_config, summarize
+from svgs.cli import main
+from svgs.errors import InputError
+
+CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+
+
+def test_paper_tables_come_from_assets():
+    assert PAPER_CSV.parent.name == "data" and PAPER_CSV.parent.parent.name == "assets"
+    paper = load_paper_results()
+    assert paper[("galaxy-nexus", "mean_error", 30.0)]["y_m"] == 1.53  # Table 4
+    assert paper[("htc-amaze-4g", "std", 6.5)]["roll_deg"] == 0.44  # Table 3
+    for phone, ranges in PAPER_RANGES_M.items():
+        assert all((phone, s, r) in paper for r in ranges for s in ("mean_error", "std"))
+
+
+def test_campaign_design_follows_the_sensor_mount_envelope():
+    cfg = make_config("htc-amaze-4g", trials_per_range=200, seed=1)
+    trials = campaign_trials(cfg)
+    assert len(trials) == 5 * 200 and [t.trial_id for t in trials] == list(range(1000))
+    s = {k: np.array([t.scenario[k] for t in trials]) for k in ("roll_deg", "pitch_deg", "yaw_deg", "range_m",
+                                                                 "nominal_range_m")}
+    assert np.abs(s["roll_deg"]).max() <= 25 and np.abs(s["roll_deg"]).max() > 24
+    assert np.abs(s["yaw_deg"]).max() <= 45 and np.abs(s["yaw_deg"]).max() > 44
+    stage = s["range_m"] - s["nominal_range_m"]
+    assert np.abs(stage).max() <= 0.15 and np.abs(stage).max() > 0.14
+    assert sorted(set(s["nominal_range_m"])) == [1.0, 2.0, 3.0, 4.0, 6.5]
+    # the design of trial i does not depend on how many trials there are
+    small = campaign_trials(make_config("htc-amaze-4g", trials_per_range=200, seed=1, ranges_m=(1.0,)))
+    assert [t.scenario for t in small] == [t.scenario for t in trials[:200]]
+
+
+def test_paper_calibration_is_drawn_once_per_campaign():
+    a = make_config("galaxy-nexus", calibration="paper", seed=4)
+    b = make_config("galaxy-nexus", calibration="paper", seed=4)
+    assert a.calibration_error == b.calibration_error and a.calibration_error["focal_error_frac"] != 0
+    trials = campaign_trials(make_config("galaxy-nexus", calibration="paper", seed=4, trials_per_range=3))
+    assert {t.scenario["focal_error_frac"] for t in trials} == {a.calibration_error["focal_error_frac"]}
+    with pytest.raises(InputError, match="draws the calibration error itself"):
+        make_config("galaxy-nexus", calibration="paper", calibration_error={"focal_error_frac": 0.01})
+
+
+def test_other_cameras_need_ranges(tmp_path):
+    from svgs import Camera
+
+    path = Camera.load("galaxy-nexus").replace(name="modern-phone").save(tmp_path / "modern-phone.toml")
+    with pytest.raises(InputError, match="give the test ranges"):
+        make_config(str(path))
+    assert make_config(str(path), ranges_m=(2.0, 8.0)).ranges_m == (2.0, 8.0)
+    with pytest.raises(InputError, match="--ranges"):
+        make_config(str(path), ranges_m=(2.0, -1.0))
+
+
+def test_summary_statistics_and_ratios():
+    cfg = make_config("galaxy-nexus", ranges_m=(5.0, 10.0), trials_per_range=4)
+    e = np.array([0.1, -0.3, 0.2, -0.2, 1.0, 1.0, 1.0, 1.0])
+    table = {"nominal_range_m": np.repeat([5.0, 10.0], 4), "ok": np.array([1, 1, 1, 1, 1, 1, 1, 0.0]),
+             "reason": np.array([None] * 7 + ["diverged"], dtype=object)}
+    for c in ("x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg"):
+        table[f"err_{c}"] = e
+        table[f"crlb_{c}"] = np.full(8, 0.5)
+    s = summarize(table, cfg)
+    assert s[0]["mean_abs_x_m"] == pytest.approx(0.2) and s[0]["bias_x_m"] == pytest.approx(-0.05)
+    assert s[0]["std_x_m"] == pytest.approx(np.std(e[:4], ddof=1))
+    assert s[0]["ratio_mean_x_m"] == pytest.approx(0.2 / 0.05)  # Table 4: 0.05 m at 5 m
+    assert s[1]["n_ok"] == 3 and s[1]["reasons"] == {"diverged": 1} and s[1]["std_x_m"] == 0.0
+    assert s[1]["ratio_std_yaw_deg"] == pytest.approx(0.0)
+
+
+@pytest.fixture(scope="module")
+def campaign_report(tmp_path_factory):
+    out = tmp_path_factory.mktemp("campaign") / "nexus"
+    import io
+    from contextlib import redirect_stdout
+
+    buf = io.StringIO()
+    with redirect_stdout(buf):
+        code = main(["campaign", "--camera", "galaxy-nexus", "--trials", "30", "--out", str(out), "--processes", "0",
+                     "--no-progress", "--calibration", "paper"])
+    assert code == 0
+    return out, buf.getvalue()
+
+
+def test_campaign_cli_writes_tables_beside_the_paper(campaign_report):
+    out, text = campaign_report
+    assert "X std  /paper" in text and "report.html" in text
+    with open(out / "summary.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    r = [x for x in rows if x["range_m"] == "30.0" and x["component"] == "y_m" and x["statistic"] == "mean_abs_error"][0]
+    assert float(r["paper"]) == 1.53 and float(r["ratio"]) == pytest.approx(float(r["simulated"]) / 1.53)
+    # errors grow with range (Cramer-Rao grows as range squared for X)
+    crlb = {float(x["range_m"]): float(x["simulated"]) for x in rows if x["component"] == "x_m"
+            and x["statistic"] == "crlb_std"}
+    assert crlb[30.0] / crlb[5.0] > 20
+    html = (out / "report.html").read_text()
+    assert "svgs campaign --camera galaxy-nexus --trials 30" in html and "numpy" in html
+
+
+def _chromium():
+    exe = shutil.which("chromium") or shutil.which("chromium-browser")
+    if exe:
+        return exe, None
+    if shutil.which("apt-get") is None or os.geteuid() != 0:
+        return None, "Chromium is not installed and apt-get cannot be run as root here"
+    try:
+        subprocess.run(["apt-get", "update", "-qq"], check=True, capture_output=True, timeout=300)
+        subprocess.run(["apt-get", "install", "-y", "-qq", "chromium"], check=True, capture_output=True, timeout=600,
+                       env={**os.environ, "DEBIAN_FRONTEND": "noninteractive"})
+    except (subprocess.SubprocessError, OSError) as exc:
+        return None, f"Chromium could not be installed with apt-get: {exc}"
+    exe = shutil.which("chromium")
+    return (exe, None) if exe else (None, "apt-get install chromium did not provide a chromium binary")
+
+
+class _Dom(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.images, self.tables, self.headers, self._in_th = [], 0, [], False
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        if tag == "img":
+            self.images.append(a.get("src", ""))
+        elif tag == "table":
+            self.tables += 1
+        self._in_th = tag == "th"
+
+    def handle_data(self, data):
+        if self._in_th:
+            self.headers.append(data)
+
+
+def test_report_opens_in_headless_chromium(campaign_report, tmp_path):
+    exe, why = _chromium()
+    if exe is None:
+        pytest.skip(why)
+    out, _ = campaign_report
+    proc = subprocess.run([exe, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'profile'}", "--dump-dom",
+                           (out / "report.html").resolve().as_uri()], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    dom = _Dom()
+    dom.feed(proc.stdout)
+    import cv2
+
+    pngs = [s for s in dom.images if s.startswith("data:image/png;base64,")]
+    assert len(pngs) >= 5  # errors versus range + 4 histogram figures (paper Figures 6-13)
+    for src in pngs:
+        raw = base64.b64decode(src.split(",", 1)[1])
+        assert raw[:8] == b"\x89PNG\r\n\x1a\n"
+        img = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_COLOR)
+        assert img is not None and img.shape[0] > 100 and img.shape[1] > 100
+    assert dom.tables >= 5
+    assert {"X sim", "X paper", "X ratio", "yaw ratio"} <= set(dom.headers)

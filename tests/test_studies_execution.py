@@ -1,0 +1,155 @@
+"""Executors: identical numbers in-process, on a local process pool and on a Dask LocalCluster;
+a campaign killed with SIGKILL resumes to the uninterrupted result; bad executor input."""
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import pytest
+
+from studies.campaign import campaign_trials, make_config
+from studies.execution import (ExecutorSpec, Trial, executor_spec, make_tasks, open_executor, run_study)
+from studies.store import ResultStore, read_rows
+from studies.trials import GEOMETRIC, TrialKind, register_trial_kind
+from svgs.cli import main
+from svgs.errors import InputError
+
+
+def _numbers(rows):
+    """Rows without the timing columns (the only ones allowed to differ between runs)."""
+    return [{k: v for k, v in r.items() if k not in ("wall_s", "cpu_s")} for r in rows]
+
+
+def _run(config, out_dir, spec, chunk_size=4):
+    trials = campaign_trials(config)
+    store = ResultStore(out_dir, config.manifest(), GEOMETRIC.columns(list(trials[0].scenario)))
+    with store, open_executor(spec, GEOMETRIC) as ex:
+        run_study(GEOMETRIC, trials, store, ex, chunk_size=chunk_size, n_workers=max(spec.n_workers, 1), progress=False)
+    return read_rows(out_dir / "results.csv")
+
+
+def test_identical_numbers_inline_process_pool_and_dask(tmp_path):
+    pytest.importorskip("distributed", reason="the 'dask' extra is not installed")
+    config = make_config("galaxy-nexus", ranges_m=(5.0, 20.0), trials_per_range=12, seed=11, sigma_px=0.2,
+                         calibration="paper")
+    ref = _run(config, tmp_path / "inline", ExecutorSpec("inline", 1), chunk_size=5)
+    assert len(ref) == 24 and all(r["ok"] == 1 for r in ref)
+    pool = _run(config, tmp_path / "pool", ExecutorSpec("process", 2), chunk_size=3)
+    dask = _run(config, tmp_path / "dask", ExecutorSpec("dask-local", 2), chunk_size=4)
+    assert _numbers(pool) == _numbers(ref)
+    assert _numbers(dask) == _numbers(ref)
+
+
+def test_sigkill_halfway_then_rerun_completes_without_duplicates(tmp_path):
+    out = tmp_path / "campaign"
+    args = ["campaign", "--camera", "galaxy-nexus", "--trials", "150", "--ranges", "5,15", "--out", str(out),
+            "--processes", "0", "--chunk-size", "1", "--no-progress", "--seed", "5"]
+    proc = subprocess.Popen([sys.executable, "-m", "svgs.cli", *args], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, start_new_session=True)
+    results = out / "results.csv"
+    n_at_kill = 0
+    deadline = time.monotonic() + 120
+    try:
+        while time.monotonic() < deadline and proc.poll() is None:
+            n_at_kill = results.read_bytes().count(b"\n") - 1 if results.exists() else 0
+            if n_at_kill >= 100:
+                os.killpg(proc.pid, signal.SIGKILL)
+                break
+            time.sleep(0.005)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    assert proc.returncode == -signal.SIGKILL, f"the run was not killed mid-way: {proc.stderr.read()[-2000:]!r}"
+    proc.stderr.close()
+    n_after_kill = len(read_rows(results))
+    assert 100 <= n_after_kill < 300, n_after_kill  # killed halfway: some trials done, some not
+    assert not (out / "report.html").exists()
+
+    assert main(args) == 0  # the same command again: finishes the missing trials only
+    rows = read_rows(results)
+    ids = [r["trial_id"] for r in rows]
+    assert len(ids) == len(set(ids)) == 300
+    raw_lines = results.read_text().splitlines()
+    assert len(raw_lines) == 301  # header + one line per trial, nothing twice in the file either
+
+    config = make_config("galaxy-nexus", ranges_m=(5.0, 15.0), trials_per_range=150, seed=5)
+    ref = _run(config, tmp_path / "reference", ExecutorSpec("inline", 1), chunk_size=16)
+    assert _numbers(rows) == _numbers(ref)
+    assert (out / "report.html").exists()
+
+
+def test_tasks_keep_render_groups_together():
+    scen = [{"camera": "c", "pattern": "p", "range_m": r, "x_m": 0.0, "y_m": 0.0, "roll_deg": 0.0, "pitch_deg": 0.0,
+             "yaw_deg": 0.0, "sigma_px": s} for r in (1.0, 2.0, 3.0) for s in (0.1, 0.2, 0.3)]
+    trials = [Trial(i, s, i) for i, s in enumerate(scen[::-1])]
+    tasks = make_tasks(GEOMETRIC, trials, chunk_size=2)
+    for task in tasks:
+        assert len({it[1]["range_m"] for it in task}) == 1  # a group of 3 is never split by chunk_size 2
+    assert sorted(it[0] for task in tasks for it in task) == list(range(9))
+
+
+def _boom(scenario, seed):
+    if scenario["range_m"] > 2:
+        raise RuntimeError("a bug in a trial")
+    return {"y": scenario["range_m"]}
+
+
+def test_a_failing_trial_raises_and_keeps_finished_rows(tmp_path):
+    kind = register_trial_kind(TrialKind("test-boom", _boom, ("y",), {}, text_keys=()))
+    trials = [Trial(i, {"range_m": float(i)}, 0) for i in range(5)]
+    with ResultStore(tmp_path, {}, kind.columns(["range_m"])) as st:
+        with pytest.raises(RuntimeError, match="a bug in a trial"):
+            run_study(kind, trials, st, _inline(), chunk_size=1, progress=False)
+        assert st.done_ids == {0, 1, 2}
+
+
+def _inline():
+    from studies.execution import InlineExecutor
+
+    return InlineExecutor()
+
+
+def test_executor_options_are_validated():
+    assert executor_spec(processes=0).mode == "inline"
+    assert executor_spec(processes=3) == ExecutorSpec("process", 3)
+    assert executor_spec(workers=2) == ExecutorSpec("dask-local", 2)
+    assert executor_spec().mode == "process"
+    with pytest.raises(InputError, match="choose one"):
+        executor_spec(processes=2, workers=2)
+    with pytest.raises(InputError, match="--workers: expected an integer >= 1"):
+        executor_spec(workers=0)
+    for bad in ("localhost:8786", "tcp://host", "http://h:1", "tcp://h:99999", "tcp://h:port"):
+        with pytest.raises(InputError, match="--scheduler"):
+            executor_spec(scheduler=bad)
+
+
+def _closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_unreachable_scheduler_is_exit_2_before_any_work(tmp_path, capsys):
+    pytest.importorskip("distributed", reason="the 'dask' extra is not installed")
+    out = tmp_path / "never"
+    t0 = time.monotonic()
+    code = main(["campaign", "--camera", "galaxy-nexus", "--trials", "5", "--out", str(out),
+                 "--scheduler", f"tcp://127.0.0.1:{_closed_port()}", "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2 and "cannot reach a Dask scheduler" in err and "Traceback" not in err
+    assert time.monotonic() - t0 < 10 and not out.exists()
+    code = main(["sensitivity", "--camera", "galaxy-nexus", "--vary", "range_m=5:10", "--vary", "sigma_px=0.1:0.2",
+                 "--n", "8", "--out", str(out), "--scheduler", f"tcp://localhost:{_closed_port()}"])
+    assert code == 2 and "--scheduler" in capsys.readouterr().err and not out.exists()
+
+
+def test_missing_dask_is_a_clear_error(tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "distributed", None)  # as if the extra were not installed
+    code = main(["campaign", "--camera", "galaxy-nexus", "--trials", "5", "--out", str(tmp_path / "x"),
+                 "--workers", "2"])
+    err = capsys.readouterr().err
+    assert code == 2 and "svgs-sim[dask]" in err and not (tmp_path / "x").exists()
