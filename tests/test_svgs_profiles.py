@@ -85,3 +85,16 @@ def test_distortion_inverse(nexus):
     xyz = np.column_stack([rng.uniform(-0.5, 0.5, (50, 2)), np.ones(50)])
     ref = cv2.projectPoints(xyz, np.zeros(3), np.zeros(3), cam.K, cam.dist)[0][:, 0]
     np.testing.assert_allclose(cam.project(xyz), ref, atol=1e-9)
+
+
+def test_scaled_camera_projects_consistently(nexus):
+    """A preview stream (area downscale) sees the same field: a point's pixel position
+    scales with the image, pixel centres at integers."""
+    small = nexus.scaled(640, 480)
+    sx = 640 / nexus.width
+    rng = np.random.default_rng(4)
+    p = np.column_stack([rng.uniform(-0.4, 0.4, (20, 2)), np.ones(20)])
+    uv_full = nexus.project(p)
+    uv_small = small.project(p)
+    np.testing.assert_allclose(uv_small, (uv_full + 0.5) * sx - 0.5, atol=1e-9)
+    assert small.fx == pytest.approx(nexus.fx * sx)

@@ -1,0 +1,43 @@
+"""Write docs/cli.md from the argparse help of every ``svgs`` command (keeps docs and code in step).
+
+Run: ``.venv/bin/python tools/make_cli_doc.py`` (a test checks the file is current).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from svgs.cli import build_parser  # noqa: E402
+
+DOC = Path(__file__).resolve().parents[1] / "docs" / "cli.md"
+
+
+def _walk(parser: argparse.ArgumentParser, prefix: str):
+    yield prefix, parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from _walk(sub, f"{prefix} {name}")
+
+
+def render() -> str:
+    import os
+
+    os.environ["COLUMNS"] = "100"
+    parser = build_parser()
+    parser.prog = "svgs"
+    out = ["# Command reference", "",
+           "Generated from the commands' own help by `tools/make_cli_doc.py`; do not edit by hand.", "",
+           "Exit codes everywhere: 0 done/solved, 1 no solution (the reason is printed), 2 bad input or usage.", ""]
+    for name, p in _walk(parser, "svgs"):
+        out += [f"## `{name}`", "", "```", p.format_help().rstrip(), "```", ""]
+    return "\n".join(out)
+
+
+if __name__ == "__main__":
+    DOC.write_text(render())
+    print(f"wrote {DOC}")
