@@ -29,7 +29,7 @@ from svgs.errors import InputError, check_finite
 from svgs.frames import pose_to_state, state_dict
 from svgs.profiles import Camera, Pattern
 
-from .constants import DEFAULT_ROI_SIZE_PX, DEFAULT_ROI_SPP, DEFAULT_SPOT_SAMPLES, DEFAULT_SPP
+from .constants import DEFAULT_ROI_SIZE_PX, DEFAULT_ROI_SPP, DEFAULT_ROI_SPP_PATH, DEFAULT_SPOT_SAMPLES, DEFAULT_SPP
 from .geometry import Reflector, SceneOptions
 from .optics import Flash, Optics, pixel_normalized_grid, radiance_to_photon_rate
 from .predict import retro_factor, retro_irradiance_w_m2, spot_direction_cam
@@ -102,9 +102,12 @@ def _check_pose(R, t):
     return R, t
 
 
-def _pow2(n: int) -> int:
-    n = int(n)
-    return 1 << max(0, (n - 1).bit_length())
+def _pow4(n: int) -> int:
+    """Smallest power of four >= n (at least 4): the sample counts ``ldsampler`` accepts."""
+    k = 4
+    while k < int(n):
+        k *= 4
+    return k
 
 
 class Renderer:
@@ -122,10 +125,21 @@ class Renderer:
         Side of the square windows rendered around each spot (constant for the
         renderer's life: changing it would recompile).
     spp, roi_spp : int
-        Default samples per pixel of the full frame and of the windows (rounded up to
-        powers of two, as the low-discrepancy sampler needs).
+        Default samples per pixel of the background (tiles covering the projected
+        scene, or the full frame) and of the windows around the spots, rounded up to
+        powers of four as Mitsuba's ``ldsampler`` needs; ``spp=0`` skips the background.
+        ``roi_spp`` defaults to 256 (guided) or 4096 (path).
+    spot_samples : int
+        Guided samples per virtual source (:mod:`render.spots`), method ``"guided"``.
+    method : {"guided", "path"}
+        ``"guided"`` (default): diffuse light by Mitsuba's ``path`` integrator with the
+        LEDs as point lights, the flash seen through glass and mirrors by the guided
+        spot estimator. ``"path"``: the LEDs as disk area emitters and everything path
+        traced (brute force, the reference; needs ~1e5+ spp per pixel beyond ~10 m).
     variant : str, optional
         Passed to :func:`render.select_variant`.
+    extra_meshes : sequence of render.geometry.MeshSpec
+        Extra geometry in the target frame (tests).
 
     Raises
     ------
@@ -134,7 +148,7 @@ class Renderer:
     """
 
     def __init__(self, camera, pattern="svgs-3u", *, reflector=None, scene_options=None,
-                 roi_size_px: int = DEFAULT_ROI_SIZE_PX, spp: int = DEFAULT_SPP, roi_spp: int = DEFAULT_ROI_SPP,
+                 roi_size_px: int = DEFAULT_ROI_SIZE_PX, spp: int = DEFAULT_SPP, roi_spp: int | None = None,
                  spot_samples: int = DEFAULT_SPOT_SAMPLES, method: str = "guided", variant: str | None = None,
                  extra_meshes=()):
         self.camera = Camera.load(camera)
@@ -152,6 +166,8 @@ class Renderer:
             raise InputError(f"roi_size_px: expected >= 4, got {roi_size_px!r}")
         self.roi_size_px = min(roi, self.camera.width, self.camera.height)
         self.spp = self._check_spp(spp, "spp", allow_zero=True)
+        if roi_spp is None:
+            roi_spp = DEFAULT_ROI_SPP if method == "guided" else DEFAULT_ROI_SPP_PATH
         self.roi_spp = self._check_spp(roi_spp, "roi_spp")
         self.n_windows = int(self.pattern.n)
         if method not in ("guided", "path"):
@@ -171,12 +187,16 @@ class Renderer:
         self.scene, h = build_scene(self.camera, self.pattern, self.optics, self.flash, self.reflector, self.options,
                                     self.roi_size_px, self.n_windows, extra_meshes=extra_meshes, method=method)
         self._sensor_full, self._sensor_roi = h["sensor_full"], h["sensor_roi"]
+        self._sensor_tiles = h["sensor_tiles"]
         self.target = h["target"]
         self._flash_keys = h["flash_keys"]
         self._params = h["params"]
         self.model = CameraModel(self.camera, self.optics.aperture_radius_m, self.optics.focus_distance_m)
-        for s in (self._sensor_full, self._sensor_roi):
+        for s in (self._sensor_full, self._sensor_roi, *self._sensor_tiles.values()):
             s.set_model(self.model)
+        bb = self.scene.bbox()
+        lo, hi = np.array(bb.min, float), np.array(bb.max, float)
+        self._scene_corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         self._sensor_full.set_windows(np.zeros((1, 2)), self.camera.height)
         self._glints = [d for d in self.options.distractors if d["type"] == "glint"]
         n_leds = self.flash.led_offsets_m.shape[0]
@@ -198,7 +218,7 @@ class Renderer:
             raise InputError(f"{name}: expected a positive integer, got {v!r}") from None
         if iv != v or iv < (0 if allow_zero else 1):
             raise InputError(f"{name}: expected a {'non-negative' if allow_zero else 'positive'} integer, got {v!r}")
-        return 0 if iv == 0 else _pow2(iv)
+        return 0 if iv == 0 else _pow4(iv)
 
     # ------------------------------------------------------------------ geometry
     def predicted_spots_px(self, R_cam_target, t_cam_target_m) -> np.ndarray:
@@ -221,6 +241,37 @@ class Renderer:
             out[i] = np.mean(uv, axis=0)
         return out
 
+    def predicted_centroids_px(self, R_cam_target, t_cam_target_m) -> np.ndarray:
+        """Geometric-optics pixel centroid of every retro spot, binned into pixels.
+
+        The flash image through each cube (virtual source at ``2V - S`` along the exact
+        chief-ray direction, see :func:`render.predict.spot_direction_cam`), defocused by
+        the thin lens and accumulated into pixels (:func:`render.predict.binned_spot`),
+        averaged over the LEDs. Valid when the lens lies inside every return footprint
+        and no glint overlaps the spot.
+
+        Returns
+        -------
+        ndarray, shape (N, 2)
+        """
+        from .predict import binned_spot, virtual_source_cam
+
+        R, t = np.asarray(R_cam_target, float), np.asarray(t_cam_target_m, float)
+        V = self.target.cube_vertex_m @ R.T + t
+        A = self.target.cube_axis @ R.T
+        Vref = self.target.reference_m @ R.T + t
+        out = np.zeros((V.shape[0], 2))
+        for i in range(V.shape[0]):
+            acc = []
+            for S in self.flash.led_offsets_m:
+                d = spot_direction_cam(S, V[i], A[i], self.reflector, self.optics.band_nm)
+                X = d * np.linalg.norm(virtual_source_cam(S, Vref[i]))
+                c, _ = binned_spot(self.camera, self.optics.aperture_radius_m, self.optics.focus_distance_m, X,
+                                   0.5 * self.flash.emitter_diameter_m)
+                acc.append(c)
+            out[i] = np.mean(acc, axis=0)
+        return out
+
     def _windows(self, spots_px, visible):
         """Top-left corners (integers) of the windows, clamped into the frame."""
         w = self.roi_size_px
@@ -229,24 +280,57 @@ class Renderer:
         y0 = np.clip(np.round(c[:, 1] + 0.5 - w / 2.0), 0, self.camera.height - w).astype(int)
         return np.stack([x0, y0], 1)
 
+    def _tiles(self, R, t):
+        """Origins of the tiles covering the projected scene, shape (n, 2); None: use the
+        whole frame (scene partly behind the lens, or more tiles than the largest mosaic)."""
+        from .scene import TILE_COUNTS, TILE_SIZE_PX as T
+
+        p = self._scene_corners @ R.T + t
+        if np.any(p[:, 2] <= 1e-3):
+            return None
+        uv = self.camera.project(p)
+        if self.camera.has_distortion:
+            return None  # a box's edges are not straight under distortion: be safe
+        W, H = self.camera.width, self.camera.height
+        u0, v0 = np.floor(uv.min(0) - 2.0)
+        u1, v1 = np.ceil(uv.max(0) + 2.0)
+        u0, v0 = max(0, int(u0)), max(0, int(v0))
+        u1, v1 = min(W, int(u1) + 1), min(H, int(v1) + 1)
+        if u1 <= u0 or v1 <= v0:
+            return np.zeros((0, 2), int)
+        xs = np.arange(u0, u1, T)
+        ys = np.arange(v0, v1, T)
+        if len(xs) * len(ys) > max(TILE_COUNTS) or (len(xs) * len(ys)) * T * T >= W * H:
+            return None
+        # keep tiles inside the frame (a last tile may overlap its neighbour)
+        xs = np.minimum(xs, max(0, W - T)) if W >= T else xs
+        ys = np.minimum(ys, max(0, H - T)) if H >= T else ys
+        return np.array([[x, y] for y in ys for x in xs], int)
+
     def _set_pose(self, R, t):
         mi = self._mi
         R_wc = R.T
         p_wc = -R.T @ t
         self.model.set_pose(R_wc, p_wc)
         r = 0.5 * self.flash.emitter_diameter_m
-        centre_cam = self.pattern.points_m.mean(0) @ R.T + t
+        centre_cam = np.asarray(t, float)  # the target origin, camera frame
         for keys, off in zip(self._flash_keys, self.flash.led_offsets_m):
             if "to_world" in keys:
                 M = np.eye(4)
                 M[:3, :3] = R_wc * np.array([r, r, 1.0])  # disk radius r, normal = camera +z
                 M[:3, 3] = R_wc @ off + p_wc
                 self._params[keys["to_world"]] = mi.Transform4f(M.tolist())
+                # a Lambertian disk: the cos^(m-1) radiance profile evaluated towards the target origin
+                d = centre_cam - off
+                c = d[2] / np.linalg.norm(d)
+                if keys["radiance"] in self._params:  # identical textures of several LEDs are shared
+                    self._params[keys["radiance"]] = float(self.flash.radiance_w_m2_sr * max(c, 0.0) ** (self.flash.cos_exponent - 1.0))
             else:
                 d = centre_cam - off
                 self._params[keys["position"]] = mi.Point3f(*(R_wc @ off + p_wc).tolist())
-                # the profile I0 cos^m evaluated towards the target centre (see docs/renderer.md)
-                self._params[keys["intensity"]] = float(self.flash.intensity_w_sr(d[2] / np.linalg.norm(d)))
+                # the profile I0 cos^m evaluated towards the target origin (see docs/renderer.md)
+                if keys["intensity"] in self._params:  # identical textures of several LEDs are shared
+                    self._params[keys["intensity"]] = float(self.flash.intensity_w_sr(d[2] / np.linalg.norm(d)))
         self._params.update()
 
     def _spot_image(self, R, t, seed):
@@ -270,8 +354,9 @@ class Renderer:
         mi = self._mi
         fs = sensor.film().size()
         npx = int(fs[0]) * int(fs[1])
-        cap = 1 << max(0, (MAX_SAMPLES_PER_PASS // max(npx, 1)).bit_length() - 1)  # power of two
-        per_pass = max(1, min(spp, cap))
+        per_pass = spp
+        while per_pass > 4 and per_pass * npx > MAX_SAMPLES_PER_PASS:
+            per_pass //= 4
         n_pass = max(1, spp // per_pass)
         acc = None
         seeds = np.random.SeedSequence(int(seed)).generate_state(n_pass, dtype=np.uint32)
@@ -295,7 +380,7 @@ class Renderer:
 
     # ------------------------------------------------------------------ rendering
     def render(self, R_cam_target, t_cam_target_m, *, seed: int = 0, spp: int | None = None,
-               roi_spp: int | None = None, full_frame: bool = False) -> RenderResult:
+               roi_spp: int | None = None, full_frame: bool = False, check_fov: bool = True) -> RenderResult:
         """Render one frame at a pose.
 
         Parameters
@@ -310,6 +395,9 @@ class Renderer:
             Override the renderer's defaults for this frame.
         full_frame : bool
             Render the whole frame at ``spp`` and no windows.
+        check_fov : bool
+            Refuse a pose with no target in the image (default). False lets scenes
+            without targets in view render (calibration plates in tests).
 
         Returns
         -------
@@ -335,7 +423,7 @@ class Renderer:
             )
         targets_px = cam.project(p_cam)
         visible = cam.in_image(targets_px)
-        if not np.any(visible):
+        if check_fov and not np.any(visible):
             raise InputError(
                 f"pose: no target projects inside the {cam.width}x{cam.height} image "
                 f"(targets_px = {np.round(targets_px, 1).tolist()}); the target is outside the field of view"
@@ -352,12 +440,25 @@ class Renderer:
             rad = self._radiance(self._sensor_full, spp, seed)
             timings["full_frame_s"] = time.perf_counter() - t0
         else:
+            rad = np.zeros((H, W))
             if spp > 0:
                 t0 = time.perf_counter()
-                rad = self._radiance(self._sensor_full, spp, seed)
-                timings["full_frame_s"] = time.perf_counter() - t0
-            else:
-                rad = np.zeros((H, W))
+                tiles = self._tiles(R, t)
+                if tiles is None:
+                    rad = self._radiance(self._sensor_full, spp, seed)
+                    timings["background_tiles"] = "full frame"
+                else:
+                    from .scene import TILE_SIZE_PX as T
+
+                    n = next(c for c in sorted(self._sensor_tiles) if c >= len(tiles))
+                    org = np.concatenate([tiles, np.repeat(tiles[-1:], n - len(tiles), axis=0)])
+                    sensor = self._sensor_tiles[n]
+                    sensor.set_windows(org, T)
+                    mosaic = self._radiance(sensor, spp, seed)
+                    for k, (x0, y0) in enumerate(tiles):
+                        rad[y0:y0 + T, x0:x0 + T] = mosaic[k * T:(k + 1) * T, :][: H - y0, : W - x0]
+                    timings["background_tiles"] = int(len(tiles))
+                timings["background_s"] = time.perf_counter() - t0
             t0 = time.perf_counter()
             win = self._windows(spots, visible)
             w = self.roi_size_px
@@ -470,8 +571,9 @@ _CACHE: dict = {}
 
 
 def render_flux(camera, pattern, R_cam_target, t_cam_target_m, *, spp: int = DEFAULT_SPP,
-                roi_spp: int = DEFAULT_ROI_SPP, roi_size_px: int = DEFAULT_ROI_SIZE_PX, seed: int = 0,
-                full_frame: bool = False, reflector=None, scene_options=None) -> RenderResult:
+                roi_spp: int | None = None, roi_size_px: int = DEFAULT_ROI_SIZE_PX, seed: int = 0,
+                full_frame: bool = False, reflector=None, scene_options=None, spot_samples: int = DEFAULT_SPOT_SAMPLES,
+                method: str = "guided") -> RenderResult:
     """Render the photon flux of one frame (see :class:`Renderer` for the parameters).
 
     A renderer per (camera, pattern, reflector, options, window size) is cached, so a
@@ -481,11 +583,13 @@ def render_flux(camera, pattern, R_cam_target, t_cam_target_m, *, spp: int = DEF
     pat = Pattern.load(pattern)
     refl = Reflector.resolve(reflector, pat)
     opts = SceneOptions.resolve(scene_options)
-    key = json.dumps([cam.to_dict(), pat.name, pat.points_m.tolist(), refl.to_json(), opts.to_json(), int(roi_size_px)],
-                     sort_keys=True, default=str)
+    key = json.dumps([cam.to_dict(), pat.name, pat.points_m.tolist(), refl.to_json(), opts.to_json(), int(roi_size_px),
+                      method, int(spot_samples)], sort_keys=True, default=str)
     r = _CACHE.get(key)
     if r is None:
-        r = Renderer(cam, pat, reflector=refl, scene_options=opts, roi_size_px=roi_size_px, spp=spp, roi_spp=roi_spp)
+        r = Renderer(cam, pat, reflector=refl, scene_options=opts, roi_size_px=roi_size_px, spp=spp, roi_spp=roi_spp,
+                     spot_samples=spot_samples, method=method)
         _CACHE.clear()  # one scene at a time: they hold a lot of memory
         _CACHE[key] = r
     return r.render(R_cam_target, t_cam_target_m, seed=seed, spp=spp, roi_spp=roi_spp, full_frame=full_frame)
+

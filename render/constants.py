@@ -33,7 +33,7 @@ def nbk7_index(wavelength_nm) -> np.ndarray:
 
 # ------------------------------------------------------------------ render defaults
 DEFAULT_SPP = 4  # full-frame samples per pixel (the background: dark, diffuse)
-DEFAULT_ROI_SPP = 128  # samples per pixel inside the windows around the targets (guided method)
+DEFAULT_ROI_SPP = 256  # samples per pixel inside the windows around the targets (guided method)
 DEFAULT_ROI_SPP_PATH = 4096  # the same for the brute-force method (the spots are path traced)
 DEFAULT_ROI_SIZE_PX = 32
 DEFAULT_SPOT_SAMPLES = 1 << 16  # guided samples per virtual source (render.spots)  # side of the square window rendered around each spot

@@ -37,7 +37,7 @@ import numpy as np
 
 from svgs.errors import InputError, check_finite, check_finite_positive
 
-from .constants import DEFAULT_MESH_SEGMENTS, nbk7_index
+from .constants import DEFAULT_MAX_DEPTH, DEFAULT_MESH_SEGMENTS, nbk7_index
 
 #: Named reflector models (``[reflector] model`` in a pattern file).
 REFLECTOR_MODELS = {
@@ -414,7 +414,7 @@ class SceneOptions:
     boom_radius_m: float = 0.004
     distractors: tuple = ()
     focus_distance_m: float | None = None
-    max_depth: int = 12
+    max_depth: int = DEFAULT_MAX_DEPTH
     anchor: str = "apparent-vertex"
 
     def __post_init__(self):

@@ -15,16 +15,37 @@ from .geometry import Reflector, SceneOptions, TargetGeometry, build_target
 from .optics import Flash, Optics
 from .sensor import PLUGIN_NAME, sensor_class
 
+#: The background pass renders only square tiles covering the projected scene (outside
+#: it the radiance is exactly 0): sensors with these tile counts exist, each a fixed
+#: film (so each kernel compiles once); unused tile slots repeat the last tile.
+TILE_SIZE_PX = 64
+TILE_COUNTS = (1, 4, 16, 64, 256)
+
 
 def _mesh(spec, bsdf):
+    """A Mitsuba mesh from a :class:`MeshSpec`.
+
+    Vertices are not shared between triangles, and each vertex carries its triangle's
+    normal computed in float64: the shading normal (what mirrors and glass reflect
+    about) is then exact to float32 rounding of a unit vector (~6e-8 rad), whereas the
+    geometric normal of a thin float32 triangle 0.14 m from the origin can be off by
+    ~1e-4 rad - enough to move a retro image by a pixel. Flat per-face normals, never
+    interpolated across faces (physics.md section 2, pitfall 1).
+    """
     import mitsuba as mi
 
     v = np.ascontiguousarray(spec.vertices_m, dtype=np.float64)
     f = np.ascontiguousarray(spec.faces, dtype=np.uint32)
-    m = mi.Mesh(spec.name, v.shape[0], f.shape[0], has_vertex_normals=False)
+    if len(np.unique(f)) != f.size:
+        raise ValueError(f"mesh {spec.name}: vertices must not be shared between triangles")
+    n_face = spec.face_normals()
+    n_vert = np.zeros_like(v)
+    n_vert[f.reshape(-1)] = np.repeat(n_face, 3, axis=0)
+    m = mi.Mesh(spec.name, v.shape[0], f.shape[0], has_vertex_normals=True)
     params = mi.traverse(m)
     # float64 -> float32 happens once, here (the world-frame values are < 1 m)
     params["vertex_positions"] = type(params["vertex_positions"])(v.reshape(-1).astype(np.float32))
+    params["vertex_normals"] = type(params["vertex_normals"])(n_vert.reshape(-1).astype(np.float32))
     params["faces"] = type(params["faces"])(f.reshape(-1))
     params.update()
     m.set_bsdf(bsdf)
@@ -99,6 +120,9 @@ def build_scene(camera, pattern, optics: Optics, flash: Flash, refl: Reflector, 
         "sensor_roi": {"type": PLUGIN_NAME, "svgs_role": "roi", "film": film_dict(roi_size_px, roi_size_px * n_windows),
                        "sampler": {"type": "ldsampler", "sample_count": 64}},
     }
+    for n in TILE_COUNTS:
+        d[f"sensor_tiles{n}"] = {"type": PLUGIN_NAME, "svgs_role": f"tiles{n}", "film": film_dict(TILE_SIZE_PX, TILE_SIZE_PX * n),
+                                 "sampler": {"type": "ldsampler", "sample_count": 4}}
     for spec in list(target.meshes) + list(extra_meshes):
         d[spec.name] = _mesh(spec, mats[spec.material])
     flash_keys = []
@@ -113,7 +137,7 @@ def build_scene(camera, pattern, optics: Optics, flash: Flash, refl: Reflector, 
                 "emitter": {"type": "area", "radiance": {"type": "uniform", "value": flash.radiance_w_m2_sr}},
                 "bsdf": {"type": "diffuse", "reflectance": {"type": "uniform", "value": 0.0}},
             }
-            flash_keys.append({"to_world": f"{key}.to_world"})
+            flash_keys.append({"to_world": f"{key}.to_world", "radiance": f"{key}.emitter.radiance.value"})
         else:
             # guided: diffuse lighting from a point light (NEE only, never hit by rays); the
             # LED seen through glass/mirrors is the job of render.spots
@@ -133,8 +157,9 @@ def build_scene(camera, pattern, optics: Optics, flash: Flash, refl: Reflector, 
     scene = mi.load_dict(d)
     roles = {getattr(s, "role", ""): s for s in scene.sensors()}
     s_full, s_roi = roles.get("full"), roles.get("roi")
+    tiles = {n: roles[f"tiles{n}"] for n in TILE_COUNTS}
     for s in (s_full, s_roi):
         if not isinstance(s, cls):
             raise RuntimeError("the custom sensor plugin was not instantiated as a Python object")
-    return scene, {"sensor_full": s_full, "sensor_roi": s_roi, "target": target, "flash_keys": flash_keys,
+    return scene, {"sensor_full": s_full, "sensor_roi": s_roi, "sensor_tiles": tiles, "target": target, "flash_keys": flash_keys,
                    "params": mi.traverse(scene)}

@@ -142,7 +142,7 @@ def sensor_class():
         def __init__(self, props):
             super().__init__(props)
             self.m_needs_sample_3 = True
-            self.role = props.get("svgs_role", "") if props.has_property("svgs_role") else ""
+            self.role = str(props.get("svgs_role", ""))
             self.model = None
             self.set_windows(np.zeros((1, 2)), self.film().size()[1])
 

@@ -186,13 +186,15 @@ def llvm_candidates(env: dict | None = None) -> list[tuple[str, int | None, str]
     return out
 
 
-def pick_llvm(candidates) -> tuple[str | None, str]:
+def pick_llvm(candidates, exists=os.path.isfile) -> tuple[str | None, str]:
     """Choose the LLVM library to point Dr.Jit at.
 
     Parameters
     ----------
     candidates : sequence of (path, major_or_None, origin)
         As returned by :func:`llvm_candidates`.
+    exists : callable
+        File test (tests pass a fake one).
 
     Returns
     -------
@@ -207,7 +209,7 @@ def pick_llvm(candidates) -> tuple[str | None, str]:
                 return path, ""  # the user's explicit choice; the loaded version is checked later
             notes.append(f"{ENV_LIBLLVM}={path} is LLVM {major}, which Dr.Jit 1.5 cannot use; ignoring it")
             continue
-        if major is not None and major >= MIN_LLVM_MAJOR and os.path.isfile(path):
+        if major is not None and major >= MIN_LLVM_MAJOR and exists(path):
             return path, "; ".join(notes)
     return None, "; ".join(notes)
 

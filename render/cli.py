@@ -1,0 +1,175 @@
+"""``svgs render`` and ``svgs doctor``.
+
+Registered by :mod:`svgs.cli` through :func:`register`. Nothing here imports mitsuba or
+drjit at import time: the handlers do, after :func:`render.variant.select_variant` has
+chosen the LLVM library.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from svgs.errors import InputError
+
+
+def register(sub) -> None:
+    """Add the ``render`` and ``doctor`` sub-commands to an argparse subparsers object."""
+    p = sub.add_parser(
+        "render",
+        help="ray-trace the target under the phone's flash: photon flux, preview and truth",
+        description="Render the noise-free photon flux (photons/s/pixel in the camera band) of the target "
+        "pattern lit by the phone's flash, seen by the phone's camera, with Mitsuba 3. Writes DIR/flux.npy "
+        "(float32, full frame), DIR/preview.png (tone-mapped) and DIR/truth.json (pose, state, targets_px, "
+        "every physical parameter used). Range is along the boresight to the target origin (m); attitude "
+        "(deg) and lateral offsets as in 'svgs solve'. Exit 0 done, 2 bad input.",
+    )
+    p.add_argument("--camera", required=True, help="camera profile name or .toml path (needs [optics] and [flash])")
+    p.add_argument("--pattern", default="svgs-3u", help="target pattern name or .toml path (default: svgs-3u)")
+    p.add_argument("--range", dest="range_m", type=float, required=True, help="range along the boresight, m")
+    p.add_argument("--x", dest="x_m", type=float, default=0.0, help="lateral offset of the target origin, m (right)")
+    p.add_argument("--y", dest="y_m", type=float, default=0.0, help="lateral offset of the target origin, m (up)")
+    p.add_argument("--roll", type=float, default=0.0, help="roll (phi), deg")
+    p.add_argument("--pitch", type=float, default=0.0, help="pitch (theta), deg")
+    p.add_argument("--yaw", type=float, default=0.0, help="yaw (psi), deg")
+    p.add_argument("--spp", type=int, default=None, help="samples per pixel of the background (default 4)")
+    p.add_argument("--roi-spp", type=int, default=None, help="samples per pixel in the windows around the spots")
+    p.add_argument("--spot-samples", type=int, default=None, help="guided samples per spot strategy (default 65536)")
+    p.add_argument("--reflector", default=None, help="'solid', 'hollow' or a model name (default: the pattern's)")
+    p.add_argument("--body", default=None, choices=("plate", "3u", "none"), help="target body (default plate)")
+    p.add_argument("--method", default="guided", choices=("guided", "path"),
+                   help="'guided' (default) or 'path' (brute force, the reference; slow beyond a few metres)")
+    p.add_argument("--full-frame", action="store_true", help="render the whole frame at --spp, no windows")
+    p.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--json", action="store_true", help="print a JSON summary")
+    p.set_defaults(func=cmd_render)
+
+    d = sub.add_parser(
+        "doctor",
+        help="print the Mitsuba variant, the LLVM library found and library versions",
+        description="Check the rendering set-up: which Mitsuba variant would be used, which LLVM library "
+        "Dr.Jit loads (LLVM 15 aborts Dr.Jit 1.5: it must not be used), library versions and whether each "
+        "is usable. Exit 0 when a renderer is usable (scalar counts, with a warning).",
+    )
+    d.add_argument("--variant", default=None, help="try this variant or backend (as SVGS_MI_VARIANT)")
+    d.add_argument("--json", action="store_true", help="print one JSON object")
+    d.set_defaults(func=cmd_doctor)
+
+
+def cmd_render(args) -> int:
+    from svgs.frames import pose_from_scenario
+    from svgs.profiles import Camera, Pattern
+
+    camera = Camera.load(args.camera)
+    for table in ("optics", "flash"):
+        camera.table(table)  # ProfileError naming the missing table, before any heavy import
+    pattern = Pattern.load(args.pattern)
+    if not (args.range_m == args.range_m) or args.range_m <= 0:
+        raise InputError(f"--range: expected a positive range in metres, got {args.range_m}")
+    R, t = pose_from_scenario(args.range_m, args.x_m, args.y_m, args.roll, args.pitch, args.yaw)
+
+    from .api import Renderer
+    from .constants import DEFAULT_ROI_SPP, DEFAULT_ROI_SPP_PATH, DEFAULT_SPOT_SAMPLES, DEFAULT_SPP
+
+    opts = {} if args.body is None else {"body": args.body}
+    spp = DEFAULT_SPP if args.spp is None else args.spp
+    roi_spp = args.roi_spp if args.roi_spp is not None else (DEFAULT_ROI_SPP if args.method == "guided" else DEFAULT_ROI_SPP_PATH)
+    r = Renderer(camera, pattern, reflector=args.reflector, scene_options=opts, spp=spp, roi_spp=roi_spp,
+                 spot_samples=args.spot_samples or DEFAULT_SPOT_SAMPLES, method=args.method)
+    if r.variant.notice:
+        print(f"svgs render: note: {r.variant.notice}", file=sys.stderr)
+    res = r.render(R, t, seed=args.seed, full_frame=args.full_frame)
+    res.truth["command"] = {k: v for k, v in vars(args).items() if k != "func"}
+    paths = res.save(args.out)
+    summary = {
+        "out": paths,
+        "variant": r.variant.name,
+        "total_flux_photons_per_s": float(res.flux.sum(dtype="float64")),
+        "targets_px": res.truth["targets_px"],
+        "timings_s": res.timings_s,
+    }
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(f"rendered {camera.name} at range {args.range_m:g} m with {r.variant.name} in "
+              f"{sum(v for v in res.timings_s.values() if isinstance(v, float)):.2f} s")
+        for k, v in paths.items():
+            print(f"  {k:8s} {v}")
+    return 0
+
+
+def doctor_report(variant=None) -> dict:
+    """What ``svgs doctor`` prints, as a dict."""
+    import importlib.metadata as md
+    import platform
+
+    from .variant import MIN_LLVM_MAJOR, llvm_candidates, pick_llvm, select_variant
+
+    rep = {"python": platform.python_version(), "platform": platform.platform()}
+    versions = {}
+    for pkg in ("mitsuba", "drjit", "karellen-llvm-core", "numpy", "scipy", "opencv-python-headless", "scikit-image"):
+        try:
+            versions[pkg] = md.version(pkg)
+        except md.PackageNotFoundError:
+            versions[pkg] = None
+    rep["versions"] = versions
+    cands = llvm_candidates()
+    chosen, note = pick_llvm(cands)
+    rep["llvm_candidates"] = [
+        {"path": p, "major": v, "origin": o, "usable": v is not None and v >= MIN_LLVM_MAJOR} for p, v, o in cands
+    ]
+    rep["llvm_chosen"] = chosen
+    rep["llvm_min_major"] = MIN_LLVM_MAJOR
+    ok = True
+    try:
+        info = select_variant(variant)
+        rep["variant"] = info.to_json()
+        import drjit as dr
+        import mitsuba as mi
+
+        rep["mitsuba_variants"] = list(mi.variants())
+        rep["backends"] = {
+            "cuda": bool(info.backend == "cuda" or _safe_has(dr, "CUDA")),
+            "llvm": info.llvm_version is not None,
+        }
+        rep["usable"] = True
+        rep["warning"] = info.notice or ("scalar variant: rendering works but is slow" if info.backend == "scalar" else "")
+    except InputError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - report, do not crash the doctor
+        ok = False
+        rep["usable"] = False
+        rep["error"] = f"{type(exc).__name__}: {exc}"
+    rep["ok"] = ok
+    return rep
+
+
+def _safe_has(dr, which):
+    try:
+        return bool(dr.has_backend(getattr(dr.JitBackend, which)))
+    except Exception:  # noqa: BLE001
+        return False
+
+
+def cmd_doctor(args) -> int:
+    rep = doctor_report(args.variant)
+    if args.json:
+        print(json.dumps(rep, default=str))
+        return 0 if rep["ok"] else 1
+    print(f"python      {rep['python']} on {rep['platform']}")
+    for k, v in rep["versions"].items():
+        print(f"{k:22s} {v or 'not installed'}")
+    print(f"LLVM libraries (Dr.Jit needs LLVM >= {rep['llvm_min_major']}; 15 aborts Dr.Jit 1.5):")
+    for c in rep["llvm_candidates"]:
+        print(f"  {'usable    ' if c['usable'] else 'NOT usable'} LLVM {c['major']}  {c['path']}  ({c['origin']})")
+    if not rep["llvm_candidates"]:
+        print("  none found")
+    if rep["ok"]:
+        v = rep["variant"]
+        ver = ".".join(map(str, v["llvm_version"])) if v["llvm_version"] else "not loaded"
+        print(f"variant     {v['name']} (backend {v['backend']}); LLVM loaded: {ver} from {v['llvm_path'] or '-'}")
+        print(f"usable      yes{' - ' + rep['warning'] if rep['warning'] else ''}")
+    else:
+        print(f"usable      NO - {rep['error']}")
+    return 0 if rep["ok"] else 1

@@ -1,0 +1,610 @@
+"""The ToF camera rendered with Mitsuba: per-sample path lengths -> per-pixel AMCW phasors.
+
+:class:`TofRenderer` loads the marker scene (:mod:`render.tof.scene`) once and renders a pose
+into a :class:`render.tof.taps.RenderedTof` (noise-free per-pixel means, numpy);
+:class:`render.tof.taps.TofSensor` then draws noisy tap frames from it (render once, many frames).
+
+Camera (``assets/cameras/tof-epc660.toml``)
+    EPC660 320 x 240, 6.5 mm lens: the OpenCV camera of the profile, exactly (rays from
+    :class:`render.sensor.CameraModel`, the same film -> ray map as the SVGS renderer), a thin
+    lens of the profile's f-number focused at ``[optics] focus_distance_m`` (``pinhole=True``
+    drops the defocus; the radiometry keeps the real aperture).
+
+Illumination
+    ``n_emitters`` small Lambertian-disk emitters (``emitter_diameter_m``) on a ring of
+    ``ring_radius_m`` around the lens, facing the boresight, each with radiant intensity
+    ``I(theta) = I0 cos^m theta``: ``m`` from the divergence (half intensity at half the full
+    angle; 90 deg -> m = 2), ``I0 = duty * flux * (m + 1) / (2 pi)``. Not in the Mitsuba
+    scene: sampled explicitly (next-event estimation with a shadow ray), so the light has its
+    real size and position and casts real (soft) shadows, and camera rays never see it.
+
+Integrator (custom, wavefront, Dr.Jit)
+    Per sample: a camera ray through a jittered point of the pixel (Cranley-Patterson rotated
+    R2 sequence per pixel) and of the aperture; at the first hit, one emitter point (shadow ray)
+    gives the return ``L = f cos / r^2 * n I(theta)``; its optical path length is
+    ``opl = |x - lens centre| + |x - emitter point|`` (Fermat: the path through the lens to the
+    pixel is the chief ray's). The sample adds ``L``, ``L cos(2 pi f opl / c)`` and
+    ``L sin(...)`` to its pixel, so a pixel straddling a depth edge returns the phasor sum of
+    both surfaces (flying pixel) and, with ``max_bounces > 1`` (BSDF-sampled bounces, each with
+    next-event estimation and its accumulated path length), multipath returns too. The same
+    BSDF-sampled ray gives the ambient term (uniform sky of unit radiance, occlusion included).
+    ``dr.block_sum`` reduces the samples of each pixel; passes are summed in float64.
+
+Only the box of pixels that can see the target (plate, markers, distractors) is traced; the
+rest of the frame returns nothing (no background, ``background_factor`` of ambient).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from svgs.errors import InputError, ProfileError, check_finite, check_finite_positive
+from svgs.frames import pose_to_state, state_dict
+from tof.camera import DEFAULT_CAMERA, DEFAULT_PATTERN, load_camera, load_target
+
+from .taps import C_LIGHT_M_S, RenderedTof, unambiguous_range_m
+
+PLANCK_J_S = 6.62607015e-34
+#: Most samples traced in one pass (memory: six float32 channels and the wavefront state per lane).
+MAX_LANES_PER_PASS = 1 << 22
+#: R2 low-discrepancy sequence (Roberts 2018): 1/g, 1/g^2 with g the plastic number, as 0.32 fixed point.
+_G = 1.32471795724474602596
+R2_STEP_U32 = (int(round(2**32 / _G)) & 0xFFFFFFFF, int(round(2**32 / _G**2)) & 0xFFFFFFFF)
+
+
+@dataclass(frozen=True)
+class Illumination:
+    """The ToF light source: ``n_emitters`` disks on a ring around the lens.
+
+    Attributes
+    ----------
+    n_emitters : int
+    radiant_flux_per_emitter_w : float
+        Optical flux of one emitter while on, W.
+    duty_cycle : float
+        Mean / peak optical power of the modulated drive (square wave: 0.5).
+    divergence_full_angle_deg : float
+        Full angle at half intensity.
+    ring_radius_m : float
+        Distance of the emitter centres from the lens axis (0: all at the lens centre).
+    emitter_diameter_m : float
+        Diameter of each emitting disk (the source size that softens shadows).
+    offset_from_lens_m : tuple of float
+        Centre of the ring in the camera frame (OpenCV axes), m.
+    """
+
+    n_emitters: int = 8
+    radiant_flux_per_emitter_w: float = 1.0
+    duty_cycle: float = 0.5
+    divergence_full_angle_deg: float = 90.0
+    ring_radius_m: float = 0.016
+    emitter_diameter_m: float = 0.002
+    offset_from_lens_m: tuple = (0.0, 0.0, 0.0)
+
+    def __post_init__(self):
+        if int(self.n_emitters) != self.n_emitters or self.n_emitters < 1:
+            raise InputError(f"illumination.n_emitters: expected a positive integer, got {self.n_emitters!r}")
+        check_finite_positive(self.radiant_flux_per_emitter_w, "illumination.radiant_flux_per_emitter_w")
+        d = check_finite_positive(self.duty_cycle, "illumination.duty_cycle")
+        if d > 1:
+            raise InputError(f"illumination.duty_cycle: expected a fraction in (0, 1], got {d!r}")
+        a = check_finite_positive(self.divergence_full_angle_deg, "illumination.divergence_full_angle_deg")
+        if a >= 180:
+            raise InputError(f"illumination.divergence_full_angle_deg: expected < 180, got {a!r}")
+        check_finite_positive(self.ring_radius_m, "illumination.ring_radius_m", allow_zero=True)
+        check_finite_positive(self.emitter_diameter_m, "illumination.emitter_diameter_m")
+        try:
+            off = tuple(float(x) for x in self.offset_from_lens_m)
+        except (TypeError, ValueError):
+            raise InputError(f"illumination.offset_from_lens_m: expected [x, y, z] m, got {self.offset_from_lens_m!r}") from None
+        if len(off) != 3 or not np.all(np.isfinite(off)):
+            raise InputError(f"illumination.offset_from_lens_m: expected 3 finite numbers, got {self.offset_from_lens_m!r}")
+        object.__setattr__(self, "offset_from_lens_m", off)
+
+    @classmethod
+    def from_camera(cls, camera, **overrides) -> "Illumination":
+        """From the profile's ``[illumination]`` table (missing keys: class defaults)."""
+        t = dict(camera.tables.get("illumination") or {})
+        names = set(cls.__dataclass_fields__)
+        kw = {k: v for k, v in t.items() if k in names}
+        for k, v in overrides.items():
+            if k not in names:
+                raise InputError(f"illumination: unknown parameter {k!r}; known {sorted(names)}")
+            if v is not None:
+                kw[k] = v
+        try:
+            return cls(**kw)
+        except InputError as exc:
+            if overrides:
+                raise
+            raise ProfileError(f"camera {camera.name!r}: {exc}") from None
+
+    @property
+    def cos_exponent(self) -> float:
+        """``m`` of ``I0 cos^m``: half intensity at half the full divergence angle."""
+        return float(np.log(0.5) / np.log(np.cos(np.radians(0.5 * self.divergence_full_angle_deg))))
+
+    @property
+    def intensity_w_sr(self) -> float:
+        """Mean on-axis radiant intensity of one emitter, ``duty * flux * (m + 1) / (2 pi)``."""
+        return self.duty_cycle * self.radiant_flux_per_emitter_w * (self.cos_exponent + 1) / (2 * np.pi)
+
+    def positions_cam_m(self) -> np.ndarray:
+        """Emitter centres in the camera frame, shape (n, 3)."""
+        n = int(self.n_emitters)
+        a = 2 * np.pi * (np.arange(n) + 0.5) / n
+        ring = self.ring_radius_m * np.stack([np.cos(a), np.sin(a), np.zeros(n)], 1)
+        return ring + np.asarray(self.offset_from_lens_m)
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d.update(offset_from_lens_m=list(self.offset_from_lens_m), cos_exponent=self.cos_exponent,
+                 intensity_w_sr_per_emitter=self.intensity_w_sr)
+        return d
+
+
+@dataclass(frozen=True)
+class TofOptics:
+    """Thin lens and wavelength of the ToF camera (``[optics]``, ``[tof]``)."""
+
+    focal_length_m: float = 0.0065
+    f_number: float = 1.2
+    focus_distance_m: float = 1.0
+    wavelength_m: float = 850e-9
+
+    @property
+    def aperture_radius_m(self) -> float:
+        return self.focal_length_m / (2.0 * self.f_number)
+
+    @property
+    def aperture_area_m2(self) -> float:
+        return float(np.pi * self.aperture_radius_m**2)
+
+    @property
+    def photon_energy_j(self) -> float:
+        return PLANCK_J_S * C_LIGHT_M_S / self.wavelength_m
+
+    @classmethod
+    def from_camera(cls, camera) -> "TofOptics":
+        o = dict(camera.tables.get("optics") or {})
+        t = dict(camera.tables.get("tof") or {})
+        kw = {k: o[k] for k in ("focal_length_m", "f_number", "focus_distance_m") if k in o}
+        if "wavelength_m" in t:
+            kw["wavelength_m"] = t["wavelength_m"]
+        for k, v in kw.items():
+            try:
+                kw[k] = check_finite_positive(v, f"camera {camera.name!r} {k}")
+            except InputError as exc:
+                raise ProfileError(str(exc)) from None
+        return cls(**kw)
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d.update(aperture_radius_m=self.aperture_radius_m, aperture_area_m2=self.aperture_area_m2)
+        return d
+
+
+def check_pose(R_cam_target, t_cam_target_m):
+    """Finite proper rotation and finite translation, else :class:`InputError`."""
+    R = np.asarray(R_cam_target, float)
+    t = np.asarray(t_cam_target_m, float)
+    if R.shape != (3, 3) or not np.all(np.isfinite(R)):
+        raise InputError(f"R_cam_target: expected a finite 3x3 rotation matrix, got shape {R.shape}")
+    if np.max(np.abs(R @ R.T - np.eye(3))) > 1e-6 or np.linalg.det(R) < 0:
+        raise InputError("R_cam_target: not a proper rotation (R R^T != I or det < 0)")
+    if t.shape != (3,) or not np.all(np.isfinite(t)):
+        raise InputError(f"t_cam_target_m: expected 3 finite numbers (m), got {t!r}")
+    return R, t
+
+
+def marker_truth(camera, target, R, t) -> dict:
+    """Projected marker face centres (the centroid truth), visibility and ranges.
+
+    Returns
+    -------
+    dict
+        ``centres_cam_m`` (N, 3), ``centres_px`` (N, 2) (NaN behind the lens), ``in_image`` (N,)
+        bool, ``range_m`` (N,) radial.
+    """
+    c = np.asarray(target.points_m, float) @ np.asarray(R, float).T + np.asarray(t, float)
+    front = c[:, 2] > 1e-9
+    uv = np.full((c.shape[0], 2), np.nan)
+    if np.any(front):
+        uv[front] = camera.project(c[front])
+    vis = front & camera.in_image(np.nan_to_num(uv, nan=-1e9), 0.5)
+    return {"centres_cam_m": c, "centres_px": uv, "in_image": vis, "range_m": np.linalg.norm(c, axis=1)}
+
+
+def check_target_in_view(camera, target, R, t) -> dict:
+    """:func:`marker_truth`, raising :class:`InputError` when a marker lies behind the lens or
+    no marker projects inside the image (the target is outside the field of view)."""
+    m = marker_truth(camera, target, R, t)
+    z = m["centres_cam_m"][:, 2]
+    if np.any(z <= 0):
+        bad = [int(i) for i, zz in zip(target.ids, z) if zz <= 0]
+        raise InputError(f"pose: marker(s) {bad} lie behind the camera (t_cam_target_m = {np.round(t, 4).tolist()}); "
+                         "the range must be positive and the target in front of the lens")
+    if not np.any(m["in_image"]):
+        raise InputError(f"pose: no marker projects inside the {camera.width}x{camera.height} image (markers at "
+                         f"{np.round(m['centres_px'], 1).tolist()} px); the target is outside the field of view")
+    return m
+
+
+def _pow2(n: int) -> int:
+    return 1 << max(0, (int(n) - 1).bit_length())
+
+
+class TofRenderer:
+    """A loaded ToF scene (camera profile + marker target + options).
+
+    Parameters
+    ----------
+    camera : str, Path or svgs.Camera
+        ToF camera profile (default ``tof-epc660``).
+    target : str, Path or tof.MarkerTarget
+        Marker target (default ``tof-8``).
+    scene_options : None, dict or render.tof.scene.TofSceneOptions
+    spp : int
+        Default samples per pixel (rounded up to a power of two).
+    max_bounces : int
+        1: direct returns only (default); 2-4: also multipath via diffuse inter-reflections.
+    modulation_frequency_hz : float, optional
+        Default: the profile's ``[tof] modulation_frequency_hz``.
+    pinhole : bool
+        Trace through the lens centre only (no defocus).
+    illumination : dict, optional
+        Overrides of :class:`Illumination` fields.
+    background_factor : float
+        Ambient radiance (per unit sky radiance) of pixels that see no geometry; 0 = space.
+    variant : str, optional
+        Passed to :func:`render.variant.select_variant` (a JIT variant is needed).
+
+    Raises
+    ------
+    InputError
+        Unknown profile, bad options, or no JIT variant of Mitsuba.
+    """
+
+    def __init__(self, camera=DEFAULT_CAMERA, target=DEFAULT_PATTERN, *, scene_options=None, spp: int = 64,
+                 max_bounces: int = 1, modulation_frequency_hz: float | None = None, pinhole: bool = False,
+                 illumination: dict | None = None, background_factor: float = 0.0, variant: str | None = None):
+        from render.variant import select_variant
+
+        from .scene import TofSceneOptions, build_tof_scene
+
+        self.camera = camera if hasattr(camera, "fx") else load_camera(camera)
+        self.target = load_target(target)
+        self.options = TofSceneOptions.resolve(scene_options)
+        self.optics = TofOptics.from_camera(self.camera)
+        self.illumination = Illumination.from_camera(self.camera, **(illumination or {}))
+        f = modulation_frequency_hz
+        if f is None:
+            f = (self.camera.tables.get("tof") or {}).get("modulation_frequency_hz", 10.0e6)
+        self.modulation_frequency_hz = check_finite_positive(f, "modulation_frequency_hz")
+        self.spp = self._check_spp(spp)
+        if int(max_bounces) != max_bounces or not 1 <= max_bounces <= 4:
+            raise InputError(f"max_bounces: expected an integer 1..4, got {max_bounces!r}")
+        self.max_bounces = int(max_bounces)
+        self.pinhole = bool(pinhole)
+        self.background_factor = check_finite_positive(background_factor, "background_factor", allow_zero=True)
+        self.variant = select_variant(variant)
+        if self.variant.backend == "scalar":
+            raise InputError(f"the ToF renderer needs Mitsuba's llvm or cuda variant, got {self.variant.name} "
+                             f"({self.variant.notice or 'set SVGS_MI_VARIANT=llvm'})")
+        import drjit as dr
+        import mitsuba as mi
+
+        from render.sensor import CameraModel
+
+        self._mi, self._dr = mi, dr
+        t0 = time.perf_counter()
+        self.scene, self.geometry = build_tof_scene(self.target, self.options)
+        self.model = CameraModel(self.camera, 0.0 if self.pinhole else self.optics.aperture_radius_m,
+                                 self.optics.focus_distance_m)
+        self.load_time_s = time.perf_counter() - t0
+        self._photons = None
+
+    @staticmethod
+    def _check_spp(v) -> int:
+        try:
+            iv = int(v)
+        except (TypeError, ValueError):
+            raise InputError(f"spp: expected a positive integer, got {v!r}") from None
+        if iv != v or iv < 1:
+            raise InputError(f"spp: expected a positive integer, got {v!r}")
+        return _pow2(iv)
+
+    # ------------------------------------------------------------------ geometry helpers
+    def photons_per_radiance(self) -> np.ndarray:
+        """Photons/s per pixel per W m^-2 sr^-1, shape (H, W) (aperture, pixel solid angle, cos^4)."""
+        if self._photons is None:
+            from render.optics import pixel_normalized_grid, radiance_to_photon_rate
+
+            xy = pixel_normalized_grid(self.camera)
+            self._photons = radiance_to_photon_rate(self.camera, self.optics, self.optics.photon_energy_j, xy)
+        return self._photons
+
+    def window(self, R, t, margin_px: int = 2) -> tuple:
+        """Pixel box ``(x0, y0, w, h)`` that can see the scene geometry (full frame if a corner
+        is behind the lens)."""
+        W, H = self.camera.width, self.camera.height
+        pts = [self.geometry.corners_m()]
+        for dd in self.options.distractors:
+            if dd["type"] == "sphere":
+                p, r = np.asarray(dd["position_m"]), dd["radius_m"]
+                lo, hi = p - r, p + r
+            else:
+                lo, hi = np.asarray(dd["lo_m"]), np.asarray(dd["hi_m"])
+            pts.append(np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]))
+        P = np.vstack(pts) @ R.T + t
+        if np.any(P[:, 2] <= 1e-3) or self.camera.has_distortion:
+            return (0, 0, W, H)
+        uv = self.camera.project(P)
+        x0 = int(np.clip(np.floor(uv[:, 0].min()) - margin_px, 0, W))
+        x1 = int(np.clip(np.ceil(uv[:, 0].max()) + margin_px + 1, 0, W))
+        y0 = int(np.clip(np.floor(uv[:, 1].min()) - margin_px, 0, H))
+        y1 = int(np.clip(np.ceil(uv[:, 1].max()) + margin_px + 1, 0, H))
+        return (x0, y0, max(0, x1 - x0), max(0, y1 - y0))
+
+    # ------------------------------------------------------------------ rendering
+    def render(self, R_cam_target, t_cam_target_m, *, seed: int = 0, spp: int | None = None,
+               window: tuple | None = None, modulation_frequency_hz: float | None = None) -> RenderedTof:
+        """Render the noise-free per-pixel means at one pose.
+
+        Parameters
+        ----------
+        R_cam_target : array_like, shape (3, 3)
+        t_cam_target_m : array_like, shape (3,)
+            ``p_cam = R_cam_target @ p_target + t_cam_target_m`` (OpenCV camera frame).
+        seed : int
+            Seed of the sample positions (passes derive theirs with ``numpy.random.SeedSequence``).
+        spp : int, optional
+            Samples per pixel (power of two), default the renderer's.
+        window : (x0, y0, w, h), optional
+            Trace only this pixel box (default: the box that can see the target).
+        modulation_frequency_hz : float, optional
+            Make the phasors for this frequency instead of the renderer's.
+
+        Returns
+        -------
+        RenderedTof
+
+        Raises
+        ------
+        InputError
+            Not a rotation; a marker behind the lens; no marker inside the image.
+        """
+        R, t = check_pose(R_cam_target, t_cam_target_m)
+        seed = int(check_finite(seed, "seed"))
+        spp = self.spp if spp is None else self._check_spp(spp)
+        f_mod = self.modulation_frequency_hz if modulation_frequency_hz is None else \
+            check_finite_positive(modulation_frequency_hz, "modulation_frequency_hz")
+        if self.options.markers:
+            truth_m = check_target_in_view(self.camera, self.target, R, t)
+        else:
+            truth_m = marker_truth(self.camera, self.target, R, t)
+        if t[2] <= 0:
+            raise InputError(f"pose: the plate lies behind the camera (t_cam_target_m = {t.tolist()})")
+        W, H = self.camera.width, self.camera.height
+        if window is None:
+            win = self.window(R, t)
+        else:
+            try:
+                win = tuple(int(v) for v in window)
+            except (TypeError, ValueError):
+                raise InputError(f"window: expected (x0, y0, w, h) pixels, got {window!r}") from None
+            x0, y0, w, h = win
+            if len(win) != 4 or x0 < 0 or y0 < 0 or w < 1 or h < 1 or x0 + w > W or y0 + h > H:
+                raise InputError(f"window: expected a box inside the {W}x{H} image, got {window!r}")
+        timings = {}
+        t0 = time.perf_counter()
+        sums = self._render_window(R, t, win, spp, seed, f_mod)
+        timings["trace_s"] = time.perf_counter() - t0
+        x0, y0, w, h = win
+        n = float(spp)
+        active = np.zeros((H, W))
+        phasor = np.zeros((H, W), complex)
+        amb = np.full((H, W), float(self.background_factor))
+        hit = np.zeros((H, W))
+        rng1 = np.full((H, W), np.nan)
+        sl = (slice(y0, y0 + h), slice(x0, x0 + w))
+        if w > 0 and h > 0:
+            active[sl] = sums["dc"] / n
+            phasor[sl] = (sums["re"] + 1j * sums["im"]) / n
+            amb[sl] = sums["amb"] / n
+            hit[sl] = sums["hit"] / n
+            with np.errstate(invalid="ignore", divide="ignore"):
+                rng1[sl] = np.where(sums["hit"] > 0, sums["r1"] / np.maximum(sums["hit"], 1), np.nan)
+        truth = self.truth(R, t, truth_m, seed=seed, spp=spp, window=win, timings=timings, f_mod=f_mod)
+        return RenderedTof(active_radiance=active, phasor_radiance=phasor, ambient_factor=amb,
+                           photons_per_radiance=self.photons_per_radiance(), hit_fraction=hit, range_first_m=rng1,
+                           modulation_frequency_hz=f_mod, truth=truth)
+
+    def _render_window(self, R, t, win, spp, seed, f_mod) -> dict:
+        x0, y0, w, h = win
+        out = {k: np.zeros((h, w)) for k in ("dc", "re", "im", "amb", "hit", "r1")}
+        if w == 0 or h == 0:
+            return out
+        npx = w * h
+        cap = 1 << max(0, (MAX_LANES_PER_PASS // npx).bit_length() - 1)
+        per_pass = max(1, min(spp, cap))
+        n_pass = max(1, spp // per_pass)
+        self._set_pose(R, t)
+        seeds = np.random.SeedSequence(seed).generate_state(n_pass + 1, dtype=np.uint32)
+        for k in range(n_pass):
+            res = self._trace(win, per_pass, k, int(seeds[k + 1]), int(seeds[0]), f_mod)
+            for name, arr in res.items():
+                out[name] += arr.reshape(h, w)
+        return out
+
+    def _set_pose(self, R, t):
+        mi, dr = self._mi, self._dr
+        R_wc = R.T
+        p_wc = -R.T @ t
+        self.model.set_pose(R_wc, p_wc)
+        em = self.illumination.positions_cam_m() @ R_wc.T + p_wc
+        self._em = [mi.Float(em[:, i].tolist()) for i in range(3)]
+        self._axes = [mi.Vector3f(*R_wc[:, i].tolist()) for i in range(3)]  # camera x, y, z in the world
+        self._lens = mi.Point3f(*p_wc.tolist())
+        dr.make_opaque(*self._em, *self._axes, self._lens)
+
+    def _trace(self, win, spp_pass: int, pass_index: int, seed_pass: int, seed_render: int, f_mod: float) -> dict:
+        """One wavefront pass over the window: per-pixel sums (numpy float64, flat)."""
+        mi, dr = self._mi, self._dr
+        x0, y0, w, h = win
+        n = w * h * spp_pass
+        UInt32, UInt64, Float = mi.UInt32, mi.UInt64, mi.Float
+        idx = dr.arange(UInt32, n)
+        sp = dr.opaque(UInt32, spp_pass)
+        pix = idx // sp
+        j = idx - pix * sp + dr.opaque(UInt32, pass_index * spp_pass)
+        W_ = dr.opaque(UInt32, w)
+        py = pix // W_
+        px = pix - py * W_
+        gx = px + dr.opaque(UInt32, x0)
+        gy = py + dr.opaque(UInt32, y0)
+        # per-pixel Cranley-Patterson shift (same for all passes) of a per-pixel R2 sequence
+        pid = gy * self.camera.width + gx
+        s0, s1 = mi.sample_tea_32(pid, dr.opaque(UInt32, seed_render), 8)
+        fu = Float(j * R2_STEP_U32[0] + s0) * (2.0**-32)
+        fv = Float(j * R2_STEP_U32[1] + s1) * (2.0**-32)
+        one = 1.0 - 2.0**-24
+        u = Float(gx) + dr.minimum(fu, one) - 0.5
+        v = Float(gy) + dr.minimum(fv, one) - 0.5
+        rng = mi.PCG32()
+        a, b = mi.sample_tea_32(idx, dr.opaque(UInt32, seed_pass), 4)
+        rng.seed(UInt64(a) | (UInt64(b) << 32), UInt64(idx))
+
+        def r2():
+            return mi.Point2f(rng.next_float32(), rng.next_float32())
+
+        if self.pinhole:
+            a_cam = mi.Vector3f(0.0)
+        else:
+            a_cam = self.model.aperture_point(r2())
+        ray = self.model.ray(u, v, a_cam)
+        si = self.scene.ray_intersect(ray)
+        hit0 = si.is_valid()
+        r_first = dr.select(hit0, dr.norm(si.p - self._lens), 0.0)
+
+        k_phase = 2.0 * np.pi * f_mod / C_LIGHT_M_S
+        ill = self.illumination
+        n_e = int(ill.n_emitters)
+        m_exp = ill.cos_exponent
+        I0 = ill.intensity_w_sr
+        r_e = 0.5 * ill.emitter_diameter_m
+        ex, ey, ez = self._axes
+        ctx = mi.BSDFContext()
+
+        def scalar(s):
+            return s[0] if len(s) == 1 else (s[0] + s[1] + s[2]) / 3.0
+
+        dc = Float(0.0)
+        re = Float(0.0)
+        im = Float(0.0)
+        amb = dr.select(hit0, Float(0.0), Float(self.background_factor))
+        beta = Float(1.0)
+        opl0 = r_first  # path length from the lens to the current vertex
+        active = mi.Bool(hit0)
+        for bounce in range(self.max_bounces):
+            bsdf = si.bsdf()
+            # next-event estimation towards one emitter point
+            k = UInt32(dr.minimum(rng.next_float32() * n_e, n_e - 1))
+            cx_ = dr.gather(Float, self._em[0], k, active)
+            cy_ = dr.gather(Float, self._em[1], k, active)
+            cz_ = dr.gather(Float, self._em[2], k, active)
+            dsk = mi.warp.square_to_uniform_disk_concentric(r2()) * r_e
+            e_pt = mi.Point3f(cx_, cy_, cz_) + ex * dsk.x + ey * dsk.y
+            dvec = e_pt - si.p
+            dist2 = dr.squared_norm(dvec)
+            dist = dr.sqrt(dist2)
+            wi = dvec / dist
+            cos_e = -dr.dot(wi, ez)
+            intensity = I0 * dr.power(dr.maximum(cos_e, 0.0), m_exp)
+            f = scalar(bsdf.eval(ctx, si, si.to_local(wi), active))
+            vis = ~self.scene.ray_test(si.spawn_ray_to(e_pt), active)
+            L = dr.select(active & vis & (cos_e > 0.0), beta * f * (n_e * intensity) / dist2, 0.0)
+            phase = k_phase * (opl0 + dist)
+            dc += L
+            re += L * dr.cos(phase)
+            im += L * dr.sin(phase)
+            # BSDF-sampled ray: ambient sky if it escapes, next vertex otherwise
+            bs, wgt = bsdf.sample(ctx, si, rng.next_float32(), r2(), active)
+            wgt = scalar(wgt)
+            ray2 = si.spawn_ray(si.to_world(bs.wo))
+            ok = active & (wgt > 0.0)
+            if bounce + 1 < self.max_bounces:
+                si2 = self.scene.ray_intersect(ray2, ok)
+                escaped = ok & ~si2.is_valid()
+                amb += dr.select(escaped, beta * wgt, 0.0)
+                opl0 = opl0 + dr.select(ok & si2.is_valid(), dr.norm(si2.p - si.p), 0.0)
+                beta = beta * wgt
+                active = ok & si2.is_valid()
+                si = si2
+            else:
+                escaped = ok & ~self.scene.ray_test(ray2, ok)
+                amb += dr.select(escaped, beta * wgt, 0.0)
+        hitf = dr.select(hit0, Float(1.0), Float(0.0))
+        chans = [dc, re, im, amb, hitf, r_first]
+        dr.eval(*chans)
+        sums = [dr.block_sum(c, spp_pass) for c in chans]
+        dr.eval(*sums)
+        names = ("dc", "re", "im", "amb", "hit", "r1")
+        return {nm: np.asarray(s, dtype=np.float64) for nm, s in zip(names, sums)}
+
+    # ------------------------------------------------------------------ truth
+    def truth(self, R, t, truth_m, **info) -> dict:
+        """The ground-truth record (JSON-serialisable)."""
+        import drjit as dr
+        import mitsuba as mi
+
+        cam, tgt = self.camera, self.target
+        ids = [str(int(i)) for i in tgt.ids]
+        return {
+            "camera": cam.name,
+            "camera_source": _rel(cam.source),
+            "pattern": tgt.pattern.name,
+            "R_cam_target": np.asarray(R).tolist(),
+            "t_cam_target_m": np.asarray(t).tolist(),
+            "state": state_dict(pose_to_state(R, t)),
+            "range_m": float(t[2]),
+            "targets_px": {i: [float(x) for x in uv] for i, uv in zip(ids, truth_m["centres_px"])},
+            "targets_in_image": {i: bool(b) for i, b in zip(ids, truth_m["in_image"])},
+            "targets_range_m": {i: float(r) for i, r in zip(ids, truth_m["range_m"])},
+            "modulation_frequency_hz": info["f_mod"],
+            "unambiguous_range_m": unambiguous_range_m(info["f_mod"]),
+            "optics": self.optics.to_json(),
+            "illumination": self.illumination.to_json(),
+            "scene": {**self.options.to_json(), "geometry": self.geometry.to_json()},
+            "render": {
+                "variant": self.variant.name, "variant_notice": self.variant.notice,
+                "integrator": "custom AMCW phasor integrator (render/tof/camera.py): NEE to the emitter ring, "
+                              + ("direct returns only" if self.max_bounces == 1 else f"{self.max_bounces} bounces (multipath)"),
+                "max_bounces": self.max_bounces, "pinhole": self.pinhole, "background_factor": self.background_factor,
+                "seed": info["seed"], "spp": info["spp"], "window": list(info["window"]),
+                "timings_s": info["timings"],
+                "versions": {"mitsuba": mi.__version__, "drjit": dr.__version__, "numpy": np.__version__},
+            },
+        }
+
+
+def render_tof(R_cam_target, t_cam_target_m, camera=DEFAULT_CAMERA, target=DEFAULT_PATTERN, *, seed: int = 0,
+               spp: int = 64, **kw) -> RenderedTof:
+    """One-call form of :class:`TofRenderer` (loads the scene every call)."""
+    return TofRenderer(camera, target, spp=spp, **kw).render(R_cam_target, t_cam_target_m, seed=seed)
+
+
+def _rel(path) -> str:
+    """Profile path relative to the repository (never an absolute path of this machine)."""
+    from pathlib import Path
+
+    try:
+        return str(Path(path).resolve().relative_to(Path(__file__).resolve().parents[2]))
+    except (ValueError, OSError, TypeError):
+        return Path(str(path)).name if path else ""
+
+
+__all__ = ["Illumination", "TofOptics", "TofRenderer", "render_tof", "check_pose", "check_target_in_view", "marker_truth"]

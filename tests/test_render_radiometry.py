@@ -1,0 +1,144 @@
+"""Radiometry of the renderer against analytic values (issue 3 acceptance).
+
+- A Lambertian plate lit by the flash has radiance rho * E / pi, E = I cos(i) / d^2.
+- A single corner cube returns E = factor * I / |2V - S|^2 at the lens when the lens is
+  inside the return footprint (hollow: factor 1; solid uncoated N-BK7 at normal
+  incidence: T^2 / (1 - R_F) + R_F = 1), summed over the spot as radiance x pixel solid
+  angle x cos; and (almost) nothing when the flash is beyond the footprint.
+
+The test camera has the Galaxy Nexus focal length and f-number and a 96 x 96 frame; the
+cube sits at the target origin and points at the flash (normal incidence: the front-face
+glint and the retro return coincide, as the analytic sum assumes).
+"""
+
+import numpy as np
+import pytest
+
+from render.optics import pixel_normalized_grid, pixel_solid_angle_sr
+from render.predict import retro_irradiance_w_m2
+from svgs.profiles import Camera, Pattern
+
+pytestmark = pytest.mark.render
+
+I_W_SR = 0.03  # on-axis radiant intensity of the test LED (in band)
+
+
+def _camera(offset_m=0.004, size=96, cos_exponent=1.0):
+    return Camera(name="test-96", width=size, height=size, fx=2450.0, fy=2450.0, cx=(size - 1) / 2, cy=(size - 1) / 2,
+                  tables={"optics": {"focal_length_m": 0.00343, "f_number": 2.4, "focus_distance_m": 1.8,
+                                     "band_nm": [400.0, 700.0]},
+                          "flash": {"led_offsets_m": [[offset_m, 0.0, 0.0]], "emitter_diameter_m": 0.0012,
+                                    "radiant_intensity_w_sr": I_W_SR, "cos_exponent": cos_exponent}})
+
+
+# one cube at the origin; three dummies far outside the field (a pattern needs four points)
+SINGLE = Pattern(name="single-cube", ids=np.arange(1, 5),
+                 points_m=np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 0.0], [0.0, 5.0, 0.0], [5.0, 5.0, -1.0]]))
+
+
+def _pose_facing(point_cam, range_m):
+    """Target at (0, 0, range) in the camera frame, its +z (the cube axis) towards ``point_cam``."""
+    P = np.array([0.0, 0.0, range_m])
+    z = np.asarray(point_cam, float) - P
+    z /= np.linalg.norm(z)
+    x = np.cross([0.0, 1.0, 0.0], z)
+    x /= np.linalg.norm(x)
+    return np.stack([x, np.cross(z, x), z], 1), P
+
+
+def _irradiance(res, cam):
+    """sum(L * Omega_pix * cos theta) over the frame, W/m^2 at the lens."""
+    xy = pixel_normalized_grid(cam)
+    cos = 1.0 / np.sqrt(1.0 + (xy ** 2).sum(-1))
+    return float((res.radiance.astype(np.float64) * pixel_solid_angle_sr(cam, xy) * cos).sum())
+
+
+@pytest.fixture(scope="module")
+def renderers():
+    from render.api import Renderer
+
+    out = {}
+    for kind in ("hollow", "solid"):
+        out[kind] = Renderer(_camera(), SINGLE, reflector=kind, scene_options={"body": "none"}, spp=4, roi_spp=16,
+                             spot_samples=1 << 17)
+    return out
+
+
+@pytest.mark.parametrize("kind", ["hollow", "solid"])
+@pytest.mark.parametrize("range_m", [1.0, 5.0, 20.0, 40.0])
+def test_single_cube_return_matches_geometric_optics(renderers, kind, range_m):
+    r = renderers[kind]
+    S = r.flash.led_offsets_m[0]
+    R, t = _pose_facing(S, range_m)
+    res = r.render(R, t, seed=3)
+    E = _irradiance(res, r.camera)
+    Vref = r.target.reference_m[0] @ R.T + t
+    E_pred = retro_irradiance_w_m2(I_W_SR, S, Vref, r.reflector)
+    # the truth record carries the same prediction, in photons/s
+    ph = res.truth["radiometry"]["retro_photons_per_s_predicted"]["1"]
+    # (it includes the LED's cos profile towards the cube: 4 mm / range off its axis)
+    assert ph == pytest.approx(E_pred * r.optics.aperture_area_m2 / r.flash.photometry["mean_photon_energy_j"], rel=1e-4)
+    assert E / E_pred == pytest.approx(1.0, abs=0.03), f"{kind} at {range_m} m: ratio {E / E_pred:.4f}"
+
+
+@pytest.mark.parametrize("range_m", [1.0, 40.0])
+def test_no_return_when_the_flash_is_beyond_the_footprint(range_m):
+    from render.api import Renderer
+
+    # LED 16 mm from the lens: the footprint (radius ~ cube diameter 12.7 mm, centred on
+    # the LED) no longer covers the lens
+    r = Renderer(_camera(offset_m=0.016), SINGLE, reflector="solid", scene_options={"body": "none"}, spp=4, roi_spp=16,
+                 spot_samples=1 << 15)
+    S = r.flash.led_offsets_m[0]
+    R, t = _pose_facing(S, range_m)
+    res = r.render(R, t, seed=1)
+    E_pred = retro_irradiance_w_m2(I_W_SR, S, r.target.reference_m[0] @ R.T + t, r.reflector)
+    assert _irradiance(res, r.camera) < 0.01 * E_pred
+
+
+def test_brute_force_path_tracing_agrees_at_1m():
+    """The reference: the LED as a disk area emitter, everything path traced."""
+    from render.api import Renderer
+
+    r = Renderer(_camera(), SINGLE, reflector="hollow", scene_options={"body": "none"}, spp=4, roi_spp=1024,
+                 method="path")
+    S = r.flash.led_offsets_m[0]
+    R, t = _pose_facing(S, 1.0)
+    res = r.render(R, t, seed=2)
+    E_pred = retro_irradiance_w_m2(I_W_SR, S, r.target.reference_m[0] @ R.T + t, r.reflector)
+    assert _irradiance(res, r.camera) / E_pred == pytest.approx(1.0, abs=0.03)
+
+
+@pytest.mark.parametrize("range_m", [1.0, 3.0])
+def test_lambertian_plate_radiance(range_m):
+    from render.api import Renderer
+    from render.geometry import box_mesh
+
+    rho = 0.5
+    plate = box_mesh("plate", [-0.3, -0.3, -0.02], [0.3, 0.3, 0.0], "body")
+    # cubes far outside the field; the plate's front face is the plane z = 0 of the target
+    far = Pattern(name="far", ids=np.arange(1, 5),
+                  points_m=np.array([[3.0, 3.0, 0.05], [4.0, 3.0, 0.05], [3.0, 4.0, 0.05], [4.0, 4.0, 0.1]]))
+    cam = _camera(offset_m=0.008, cos_exponent=1.0)
+    r = Renderer(cam, far, scene_options={"body": "none", "body_reflectance": rho}, spp=16, roi_spp=4,
+                 spot_samples=1024, extra_meshes=[plate])
+    # the plate square to the boresight, target origin on the axis
+    R = np.diag([1.0, -1.0, -1.0])
+    t = np.array([0.0, 0.0, range_m])
+    res = r.render(R, t, seed=5, check_fov=False)
+    # analytic radiance at each pixel of a central patch: the plate point seen by the
+    # pixel's chief ray, lit by the LED (Lambertian: I(theta) = I0 cos theta)
+    c = cam.width // 2
+    sl = (slice(c - 8, c + 8), slice(c - 8, c + 8))
+    xy = pixel_normalized_grid(cam)[sl]
+    P = np.concatenate([xy * range_m, np.full(xy.shape[:2] + (1,), range_m)], -1)  # z_cam = range on the plate
+    S = r.flash.led_offsets_m[0]
+    d = P - S
+    dist = np.linalg.norm(d, axis=-1)
+    cos_led = d[..., 2] / dist  # LED axis = +z_cam
+    cos_inc = d[..., 2] / dist  # plate normal = -z_cam
+    E = I_W_SR * cos_led * cos_inc / dist ** 2
+    L_pred = rho * E / np.pi
+    L = res.radiance.astype(np.float64)[sl]
+    assert L.mean() / L_pred.mean() == pytest.approx(1.0, abs=0.02)
+    assert np.abs(L / L_pred - 1).max() < 0.01  # per pixel, 16 spp of a smooth integrand
