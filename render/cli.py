@@ -10,6 +10,8 @@ from __future__ import annotations
 import json
 import sys
 
+import numpy as np
+
 from svgs.errors import InputError
 
 
@@ -41,6 +43,13 @@ def register(sub) -> None:
                    help="'guided' (default) or 'path' (brute force, the reference; slow beyond a few metres)")
     p.add_argument("--full-frame", action="store_true", help="render the whole frame at --spp, no windows")
     p.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
+    p.add_argument("--backdrop-m", type=float, default=None,
+                   help="grey backdrop this far behind the target, m (default 3; 0 = none); added to flux.npy")
+    p.add_argument("--ambient", type=float, default=0.0,
+                   help="ambient scene radiance from room lights, W m^-2 sr^-1 in band (default 0)")
+    p.add_argument("--exposure-s", type=float, default=None, help="exposure time of image.png (default: the phone's)")
+    p.add_argument("--iso", type=float, default=None, help="ISO of image.png (default: the phone's)")
+    p.add_argument("--no-expose", action="store_true", help="write only the flux (no raw.npy / image.png)")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=cmd_render)
@@ -81,7 +90,30 @@ def cmd_render(args) -> int:
         print(f"svgs render: note: {r.variant.notice}", file=sys.stderr)
     res = r.render(R, t, seed=args.seed, full_frame=args.full_frame)
     res.truth["command"] = {k: v for k, v in vars(args).items() if k != "func"}
+    from .simulate import DEFAULT_BACKDROP_DISTANCE_M, Scenario, lab_flux
+
+    back = DEFAULT_BACKDROP_DISTANCE_M if args.backdrop_m is None else (None if args.backdrop_m == 0 else args.backdrop_m)
+    scen = Scenario(camera=args.camera, pattern=args.pattern, range_m=args.range_m, x_m=args.x_m, y_m=args.y_m,
+                    roll_deg=args.roll, pitch_deg=args.pitch, yaw_deg=args.yaw, backdrop_distance_m=back,
+                    ambient_radiance_w_m2_sr=args.ambient)
+    lab, lab_info = lab_flux(camera, scen)
+    res.flux = res.flux + lab
+    res.truth["lab"] = lab_info
+    if not args.no_expose:
+        import cv2
+
+        from .phone import PhoneCamera
+
+        ex = PhoneCamera(camera).expose(res.flux, seed=args.seed, exposure_s=args.exposure_s, iso=args.iso)
+        res.truth["exposure"] = {"exposure_s": ex.exposure_s, "iso": ex.iso, "gain_dn_per_e": ex.gain_dn_per_e,
+                                 **{k: v for k, v in ex.info.items()}}
     paths = res.save(args.out)
+    if not args.no_expose:
+        from pathlib import Path
+
+        np.save(Path(args.out) / "raw.npy", ex.raw_dn.astype(np.float32))
+        cv2.imwrite(str(Path(args.out) / "image.png"), ex.image)
+        paths.update({"raw": str(Path(args.out) / "raw.npy"), "image": str(Path(args.out) / "image.png")})
     summary = {
         "out": paths,
         "variant": r.variant.name,
