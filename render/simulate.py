@@ -55,6 +55,9 @@ class Scenario:
     backdrop_reflectance : float
     ambient_radiance_w_m2_sr : float
         Uniform scene radiance from room lighting, in the camera band.
+    focus_distance_m : float or None
+        Where the lens is focused, m. None: the phone's autofocus locks on the target (the
+        distance to the target origin); both phones of the paper had autofocus.
     spp, roi_spp : int or None
         Samples per pixel of the full frame and of the spot windows (None: the renderer's
         defaults).
@@ -71,6 +74,7 @@ class Scenario:
     backdrop_distance_m: float | None = DEFAULT_BACKDROP_DISTANCE_M
     backdrop_reflectance: float = DEFAULT_BACKDROP_REFLECTANCE
     ambient_radiance_w_m2_sr: float = DEFAULT_AMBIENT_RADIANCE_W_M2_SR
+    focus_distance_m: float | None = None
     spp: int | None = None
     roi_spp: int | None = None
 
@@ -90,6 +94,8 @@ class Scenario:
             raise InputError(f"backdrop_reflectance: expected 0..1, got {self.backdrop_reflectance!r}")
         if self.ambient_radiance_w_m2_sr < 0:
             raise InputError(f"ambient_radiance_w_m2_sr: expected >= 0, got {self.ambient_radiance_w_m2_sr!r}")
+        if self.focus_distance_m is not None and not (np.isfinite(self.focus_distance_m) and self.focus_distance_m > 0):
+            raise InputError(f"focus_distance_m: expected a positive distance or None (autofocus), got {self.focus_distance_m!r}")
         if self.backdrop_distance_m is not None and not (np.isfinite(self.backdrop_distance_m) and self.backdrop_distance_m > 0):
             raise InputError(f"backdrop_distance_m: expected a positive distance or None, got {self.backdrop_distance_m!r}")
         if (self.spp is not None and int(self.spp) < 0) or (self.roi_spp is not None and int(self.roi_spp) < 1):
@@ -117,6 +123,8 @@ class Frame:
     scenario : Scenario
     flux : ndarray, float32, shape (H, W)
         Photons per second per pixel (target render + backdrop + ambient).
+    lab : ndarray, float32, shape (H, W)
+        The backdrop + ambient part of ``flux`` (so ``flux - lab`` is the target alone).
     truth : dict
         The renderer's truth record plus the lab's parameters.
     render_s : float
@@ -127,6 +135,7 @@ class Frame:
     flux: np.ndarray
     truth: dict
     render_s: float = 0.0
+    lab: np.ndarray | None = None
     _phone: object = field(default=None, repr=False)
 
     @property
@@ -140,11 +149,19 @@ class Frame:
             self._phone = PhoneCamera(self.camera)
         return self._phone
 
-    def exposer(self, stages=None):
-        """The phone's exposer for this flux (optics and metering done once)."""
+    def exposer(self, stages=None, *, target_scale: float = 1.0):
+        """The phone's exposer for this flux (optics and metering done once).
+
+        ``target_scale`` multiplies the target's flux (not the lab's): a neutral-density
+        filter of transmission T over every reflector is ``target_scale = T**2`` (two
+        passes; the target body's own diffuse light is ~1e-7 of the spots')."""
         from .phone import ALL_STAGES, Exposer
 
-        return Exposer(self.phone(), self.flux, stages=ALL_STAGES if stages is None else stages)
+        flux = self.flux
+        if target_scale != 1.0:
+            lab = self.lab if self.lab is not None else 0.0
+            flux = (lab + (self.flux - lab) * np.float32(target_scale)).astype(np.float32)
+        return Exposer(self.phone(), flux, stages=ALL_STAGES if stages is None else stages)
 
 
 def lab_flux(camera: Camera, scenario: Scenario) -> tuple[np.ndarray, dict]:
@@ -190,13 +207,15 @@ def render_scenario(scenario: Scenario, *, seed: int = 0) -> Frame:
     R, t = scenario.pose()
     t0 = time.perf_counter()
     kw = {k: int(getattr(scenario, k)) for k in ("spp", "roi_spp") if getattr(scenario, k) is not None}
-    res = render_flux(camera, pattern, R, t, seed=int(seed), **kw)
+    focus = scenario.focus_distance_m if scenario.focus_distance_m is not None else float(np.linalg.norm(t))
+    res = render_flux(camera, pattern, R, t, seed=int(seed), scene_options={"focus_distance_m": focus}, **kw)
     lab, info = lab_flux(camera, scenario)
     dt = time.perf_counter() - t0
     truth = dict(res.truth)
     truth["lab"] = info
     truth["scenario"] = scenario.to_json()
-    return Frame(scenario, res.flux + lab, truth, dt)
+    truth["focus_distance_m"] = focus
+    return Frame(scenario, res.flux + lab, truth, dt, lab)
 
 
 def pose_errors(state, truth_state) -> dict:

@@ -20,7 +20,7 @@ import numpy as np
 from .errors import InputError
 
 #: Optional command modules, in help order.
-COMMAND_MODULES = ("render.cli", "render.sim_cli", "calibration.cli", "calibration.study_cli", "tof.cli", "render.tof.cli", "studies.cli")
+COMMAND_MODULES = ("render.cli", "render.sim_cli", "render.remedies", "calibration.cli", "calibration.study_cli", "tof.cli", "render.tof.cli", "studies.cli")
 
 EXIT_OK, EXIT_NO_SOLUTION, EXIT_BAD_INPUT = 0, 1, 2
 
