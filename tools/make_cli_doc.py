@@ -27,7 +27,18 @@ def _walk(parser: argparse.ArgumentParser, prefix: str):
 def render() -> str:
     import os
 
-    os.environ["COLUMNS"] = "100"
+    old = os.environ.get("COLUMNS")
+    os.environ["COLUMNS"] = "100"  # argparse wraps to $COLUMNS: fix it so the file is stable
+    try:
+        return _render()
+    finally:
+        if old is None:
+            del os.environ["COLUMNS"]
+        else:
+            os.environ["COLUMNS"] = old
+
+
+def _render() -> str:
     parser = build_parser()
     parser.prog = "svgs"
     out = ["# Command reference", "",
