@@ -179,10 +179,7 @@ class Exposer:
         st = self.stages
         t, iso, info = self.settings(exposure_s, iso)
         prnu, dsnu = self.phone.fixed_patterns()
-        mu = self.flux_optics * np.float32(sp.qe * t)
-        if "fpn" in st:
-            mu = mu * prnu
-        e = electrons(mu, sp, t, dsnu, seed, shot="shot" in st, dark="dark" in st, fpn="fpn" in st)
+        e = electrons(self.flux_optics, sp, t, prnu, dsnu, seed, shot="shot" in st, dark="dark" in st, fpn="fpn" in st)
         if "bloom" in st:
             info["bloom"] = bloom(e, sp.full_well_e, sp.anti_blooming_drain, sp.bloom_direction)
         else:
