@@ -8,10 +8,12 @@ traceback by ``svgs.cli.main``).
 from __future__ import annotations
 
 import json
+import weakref
 from pathlib import Path
 
 import numpy as np
 
+from svgs.cli import parse_threshold
 from svgs.errors import InputError
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".pgm", ".ppm", ".npy")
@@ -27,8 +29,23 @@ def register(subparsers) -> None:
     )
     sub = p.add_subparsers(dest="calibrate_command", metavar="METHOD")
     sub.required = True
+    _METHOD_GROUPS[p] = sub
     _add_focal(sub)
     _add_board(sub)
+
+
+#: ``calibrate`` parser -> its METHOD sub-parsers (for :func:`method_subparsers`).
+_METHOD_GROUPS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def method_subparsers(subparsers):
+    """Hook for other modules: the METHOD sub-parsers of ``svgs calibrate`` in this ``svgs``
+    parser, to add more ``svgs calibrate`` sub-commands (see :mod:`calibration.study_cli`).
+    :func:`register` must have run first (``svgs.cli.COMMAND_MODULES`` order)."""
+    parser = subparsers.choices.get("calibrate")
+    if parser is None or parser not in _METHOD_GROUPS:
+        raise RuntimeError("calibration.cli.register must run before calibrate sub-commands are added")
+    return _METHOD_GROUPS[parser]
 
 
 # --------------------------------------------------------------------------- focal
@@ -59,16 +76,7 @@ def _add_focal(sub) -> None:
     p.set_defaults(func=cmd_focal)
 
 
-def _threshold(text):
-    if text is None or text in ("auto", "otsu"):
-        return text
-    try:
-        v = float(text)
-    except ValueError:
-        raise InputError(f"--threshold: expected a number, 'auto' or 'otsu', got {text!r}") from None
-    if not np.isfinite(v) or v < 0:
-        raise InputError(f"--threshold: expected a non-negative finite level, got {text!r}")
-    return v
+_threshold = parse_threshold  # one parser for every command's --threshold
 
 
 def cmd_focal(args) -> int:
@@ -195,4 +203,4 @@ def cmd_board(args) -> int:
     return 0
 
 
-__all__ = ["register", "cmd_focal", "cmd_board", "expand_images"]
+__all__ = ["register", "method_subparsers", "cmd_focal", "cmd_board", "expand_images"]

@@ -52,9 +52,9 @@ def _scenario(args, range_m=None):
 
 
 def _threshold(text):
-    from svgs.cli import _parse_threshold
+    from svgs.cli import parse_threshold
 
-    return _parse_threshold(text)
+    return parse_threshold(text)
 
 
 def _check_camera_renderable(name):

@@ -333,6 +333,25 @@ def lm_frame(R, t, P, meas, W, max_iter, step_tol, rw, Jw):
     return False, it
 
 
+@njit(cache=True)
+def _solve_frame(k, R, t, P, meas, W, max_iter, step_tol, active, conv, iters, rw, cov, min_piv):
+    """Frame ``k`` of a batch: :func:`lm_frame` then :func:`covariance_paper`, into the outputs."""
+    if not active[k]:
+        return
+    Jw = np.empty((2 * P.shape[0], 6))
+    c, it = lm_frame(R[k], t[k], P, meas[k], W[k], max_iter, step_tol, rw[k], Jw)
+    conv[k] = c
+    iters[k] = it
+    if c:
+        min_piv[k] = covariance_paper(R[k], t[k], Jw, cov[k])
+
+
+@njit(cache=True)
+def _outputs(N, m):
+    return (np.zeros(N, np.bool_), np.zeros(N, np.int64), np.full((N, m), np.nan), np.full((N, 6, 6), np.nan),
+            np.zeros(N))
+
+
 @njit(cache=True, parallel=True)
 def lm_batch(R, t, P, meas, W, max_iter, step_tol, active):
     """:func:`lm_frame` over frames in parallel, in place on R (N, 3, 3) and t (N, 3).
@@ -348,55 +367,20 @@ def lm_batch(R, t, P, meas, W, max_iter, step_tol, active):
     min_pivot : (N,) smallest pivot of the scaled information matrix (0: singular)
     """
     N = R.shape[0]
-    m = 2 * P.shape[0]
-    conv = np.zeros(N, np.bool_)
-    iters = np.zeros(N, np.int64)
-    rw = np.full((N, m), np.nan)
-    cov = np.full((N, 6, 6), np.nan)
-    min_piv = np.zeros(N)
+    conv, iters, rw, cov, min_piv = _outputs(N, 2 * P.shape[0])
     for k in prange(N):
-        if not active[k]:
-            continue
-        Jw = np.empty((m, 6))
-        c, it = lm_frame(R[k], t[k], P, meas[k], W[k], max_iter, step_tol, rw[k], Jw)
-        conv[k] = c
-        iters[k] = it
-        if c:
-            min_piv[k] = covariance_paper(R[k], t[k], Jw, cov[k])
+        _solve_frame(k, R, t, P, meas, W, max_iter, step_tol, active, conv, iters, rw, cov, min_piv)
     return conv, iters, rw, cov, min_piv
 
 
 @njit(cache=True)
 def lm_batch_serial(R, t, P, meas, W, max_iter, step_tol, active):
-    """:func:`lm_batch` without threads: small batches, where waking a thread pool costs more
-    than the work.
-
-    Only frames with ``active[k]`` are iterated.
-
-    Returns
-    -------
-    converged : (N,) bool
-    iterations : (N,) int
-    rw : (N, 2n) whitened residuals (px)
-    cov : (N, 6, 6) covariance of the paper state for 1 px centroid noise (NaN if not converged)
-    min_pivot : (N,) smallest pivot of the scaled information matrix (0: singular)
-    """
+    """:func:`lm_batch` without threads: small batches, where waking a thread pool costs
+    more than the work."""
     N = R.shape[0]
-    m = 2 * P.shape[0]
-    conv = np.zeros(N, np.bool_)
-    iters = np.zeros(N, np.int64)
-    rw = np.full((N, m), np.nan)
-    cov = np.full((N, 6, 6), np.nan)
-    min_piv = np.zeros(N)
+    conv, iters, rw, cov, min_piv = _outputs(N, 2 * P.shape[0])
     for k in range(N):
-        if not active[k]:
-            continue
-        Jw = np.empty((m, 6))
-        c, it = lm_frame(R[k], t[k], P, meas[k], W[k], max_iter, step_tol, rw[k], Jw)
-        conv[k] = c
-        iters[k] = it
-        if c:
-            min_piv[k] = covariance_paper(R[k], t[k], Jw, cov[k])
+        _solve_frame(k, R, t, P, meas, W, max_iter, step_tol, active, conv, iters, rw, cov, min_piv)
     return conv, iters, rw, cov, min_piv
 
 

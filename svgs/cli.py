@@ -44,7 +44,8 @@ def _add_solve(sub) -> None:
     p.set_defaults(func=cmd_solve)
 
 
-def _parse_threshold(text):
+def parse_threshold(text):
+    """``--threshold`` text -> None, 'auto', 'otsu' or a non-negative level (InputError otherwise)."""
     if text is None or text in ("auto", "otsu"):
         return text
     try:
@@ -107,7 +108,7 @@ def cmd_solve(args) -> int:
     pattern = Pattern.load(args.pattern)
     if not (np.isfinite(args.sigma_px) and args.sigma_px > 0):
         raise InputError(f"--sigma-px: expected a positive number of pixels, got {args.sigma_px}")
-    result = solve_image(args.image, camera, pattern, threshold=_parse_threshold(args.threshold), sigma_px=args.sigma_px)
+    result = solve_image(args.image, camera, pattern, threshold=parse_threshold(args.threshold), sigma_px=args.sigma_px)
     if args.json:
         print(json.dumps(solution_json(result)))
     else:
