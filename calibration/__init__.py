@@ -4,9 +4,13 @@
   the spacings of the target's spots in images at known ranges.
 * :mod:`calibration.boards` - full intrinsic calibration with OpenCV from chessboard,
   ChArUco and circle-grid images; board geometry, drawing and synthetic views.
-* :mod:`calibration.cli` - ``svgs calibrate focal`` and ``svgs calibrate board``.
+* :mod:`calibration.study` - how intrinsics converge with the number of rendered views,
+  and how each calibration error propagates into pose error versus range.
+* :mod:`calibration.cli`, :mod:`calibration.study_cli` - ``svgs calibrate focal``,
+  ``board``, ``render-board`` and ``study``.
 
-Uses :mod:`svgs` (profiles, detection, identification); never imports Mitsuba.
+Uses :mod:`svgs` (profiles, detection, identification); rendering of board images lives
+in :mod:`render.boards` and is imported only by the study when it renders.
 """
 
 from .boards import (

@@ -1,7 +1,7 @@
 """``svgs tof solve``: the ToF pose pipeline on gray + depth files.
 
 Registered by :mod:`svgs.cli` through :func:`register`. Other modules add their own ``svgs tof``
-sub-commands (e.g. ``render-and-solve`` from ``render.cli``) to the same group with
+sub-commands (``render-and-solve`` from ``render.tof.cli``) to the same group with
 :func:`command_group`, in either registration order.
 
 Input files
