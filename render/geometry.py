@@ -375,8 +375,31 @@ def cylinder_mesh(name, centre_xy, z0, z1, radius, material, segments=32) -> Mes
 
 
 # ------------------------------------------------------------------ target assembly
+
+class OptionsMixin:
+    """``resolve`` (None, a dict of fields or an instance) and ``replace`` for the frozen
+    option dataclasses of the scenes (SVGS and ToF)."""
+
+    @classmethod
+    def resolve(cls, opts=None):
+        """From None (defaults), a dict of fields, or an instance."""
+        if opts is None:
+            return cls()
+        if isinstance(opts, cls):
+            return opts
+        if isinstance(opts, dict):
+            bad = set(opts) - set(cls.__dataclass_fields__)
+            if bad:
+                raise InputError(f"scene_options: unknown keys {sorted(bad)}; known {sorted(cls.__dataclass_fields__)}")
+            return cls(**opts)
+        raise InputError(f"scene_options: expected a dict or {cls.__name__}, got {type(opts).__name__}")
+
+    def replace(self, **kw):
+        return replace(self, **kw)
+
+
 @dataclass(frozen=True)
-class SceneOptions:
+class SceneOptions(OptionsMixin):
     """Everything about the scene besides camera, pattern, pose and reflector model.
 
     Attributes
@@ -433,22 +456,6 @@ class SceneOptions:
         if self.anchor not in ("apparent-vertex", "front-face"):
             raise InputError(f"scene_options.anchor: expected 'apparent-vertex' or 'front-face', got {self.anchor!r}")
         object.__setattr__(self, "distractors", tuple(_check_distractor(d, i) for i, d in enumerate(self.distractors)))
-
-    @classmethod
-    def resolve(cls, opts=None) -> "SceneOptions":
-        if opts is None:
-            return cls()
-        if isinstance(opts, SceneOptions):
-            return opts
-        if isinstance(opts, dict):
-            bad = set(opts) - set(cls.__dataclass_fields__)
-            if bad:
-                raise InputError(f"scene_options: unknown keys {sorted(bad)}; known {sorted(cls.__dataclass_fields__)}")
-            return cls(**opts)
-        raise InputError(f"scene_options: expected a dict or SceneOptions, got {type(opts).__name__}")
-
-    def replace(self, **kw) -> "SceneOptions":
-        return replace(self, **kw)
 
     def to_json(self) -> dict:
         d = asdict(self)

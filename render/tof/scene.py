@@ -17,11 +17,13 @@ variant chosen by :func:`render.variant.select_variant` first.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
 from svgs.errors import InputError, check_finite, check_finite_positive
+
+from ..geometry import OptionsMixin
 
 #: Distractor kinds: ``sphere`` (``position_m``, ``radius_m``) and ``box`` (``lo_m``, ``hi_m``
 #: corners, axis-aligned in the target frame); both take ``albedo`` (Lambertian, default 0.8).
@@ -61,7 +63,7 @@ def _check_distractor(d, i) -> dict:
 
 
 @dataclass(frozen=True)
-class TofSceneOptions:
+class TofSceneOptions(OptionsMixin):
     """What the ToF scene holds besides the pose.
 
     Attributes
@@ -119,23 +121,6 @@ class TofSceneOptions:
             if v >= 1:
                 raise InputError(f"scene_options.post_diameter_ratio: expected < 1, got {v!r}")
         object.__setattr__(self, "distractors", tuple(_check_distractor(d, i) for i, d in enumerate(self.distractors)))
-
-    @classmethod
-    def resolve(cls, opts=None) -> "TofSceneOptions":
-        """From None (defaults), a dict of fields, or an instance."""
-        if opts is None:
-            return cls()
-        if isinstance(opts, TofSceneOptions):
-            return opts
-        if isinstance(opts, dict):
-            bad = set(opts) - set(cls.__dataclass_fields__)
-            if bad:
-                raise InputError(f"scene_options: unknown keys {sorted(bad)}; known {sorted(cls.__dataclass_fields__)}")
-            return cls(**opts)
-        raise InputError(f"scene_options: expected a dict or TofSceneOptions, got {type(opts).__name__}")
-
-    def replace(self, **kw) -> "TofSceneOptions":
-        return replace(self, **kw)
 
     def to_json(self) -> dict:
         d = asdict(self)
