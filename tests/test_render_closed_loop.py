@@ -107,3 +107,19 @@ def test_scenario_validation():
         Scenario(backdrop_reflectance=2)
     with pytest.raises(InputError, match="focus_distance_m"):
         Scenario(focus_distance_m=-1)
+
+
+@pytest.mark.render
+def test_render_trial_kind_runs_the_full_chain_and_groups_renders():
+    """The studies' `render` trial kind: same numbers alone or in a render group."""
+    from render.trials import RENDER, render_group, render_trial
+    from studies.trials import build_scenario
+
+    scen = build_scenario(RENDER, {"camera": "galaxy-nexus", "range_m": 12.0, "yaw_deg": 15.0})
+    alone = render_trial(scen, 7)
+    grouped = render_group([scen, scen], [7, 8])
+    assert alone["ok"] and alone["n_blobs"] == 4
+    assert alone["exposure_s_used"] == pytest.approx(5e-4)
+    assert abs(alone["err_z_m"]) < 0.5 and alone["att_err_deg"] < 3.0
+    assert grouped[0] == alone  # a trial's numbers never depend on its companions
+    assert grouped[1]["err_x_m"] != alone["err_x_m"]  # another seed, another noise draw
