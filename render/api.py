@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from svgs.errors import InputError, check_finite
-from svgs.frames import pose_to_state, state_dict
+from svgs.frames import check_pose, pose_to_state, state_dict
 from svgs.profiles import Camera, Pattern
 
 from .constants import DEFAULT_ROI_SIZE_PX, DEFAULT_ROI_SPP, DEFAULT_ROI_SPP_PATH, DEFAULT_SPOT_SAMPLES, DEFAULT_SPP
@@ -88,18 +88,6 @@ def write_preview(path, flux: np.ndarray) -> None:
         x = np.log(np.clip(f, lo, hi) / lo) / max(np.log(hi / lo), 1e-12)
         img = np.round(255 * x).astype(np.uint8)
     cv2.imwrite(str(path), img)
-
-
-def _check_pose(R, t):
-    R = np.asarray(R, float)
-    t = np.asarray(t, float)
-    if R.shape != (3, 3) or not np.all(np.isfinite(R)):
-        raise InputError(f"R_cam_target: expected a finite 3x3 rotation matrix, got shape {R.shape}")
-    if np.max(np.abs(R @ R.T - np.eye(3))) > 1e-6 or np.linalg.det(R) < 0:
-        raise InputError("R_cam_target: not a proper rotation (R R^T != I or det < 0)")
-    if t.shape != (3,) or not np.all(np.isfinite(t)):
-        raise InputError(f"t_cam_target_m: expected 3 finite numbers (m), got {t!r}")
-    return R, t
 
 
 def _pow4(n: int) -> int:
@@ -409,7 +397,7 @@ class Renderer:
             Not a rotation, a target point behind (or in the plane of) the lens, or no
             target inside the image.
         """
-        R, t = _check_pose(R_cam_target, t_cam_target_m)
+        R, t = check_pose(R_cam_target, t_cam_target_m)
         seed = int(check_finite(seed, "seed"))
         spp = self.spp if spp is None else self._check_spp(spp, "spp", allow_zero=not full_frame)
         roi_spp = self.roi_spp if roi_spp is None else self._check_spp(roi_spp, "roi_spp")

@@ -18,6 +18,7 @@ from studies.trials import (
     STATE_KEYS,
     Parameter,
     TrialKind,
+    estimate_outputs,
     register_trial_kind,
 )
 
@@ -57,7 +58,7 @@ def _frame(key):
 
 
 def _solve_one(scenario: dict, seed: int, frame, exposer) -> dict:
-    from svgs.frames import pose_to_state, rotation_angle_deg, state_to_pose
+    from svgs.frames import pose_to_state
     from svgs.profiles import Pattern
 
     from .simulate import expose_and_solve
@@ -86,17 +87,7 @@ def _solve_one(scenario: dict, seed: int, frame, exposer) -> dict:
                 "exposure_s_used": row["exposure_s"], "iso_used": row["iso"]})
     sol = row["_solution"]
     if row["ok"]:
-        est = np.concatenate([sol.state[:3], np.degrees(sol.state[3:])])
-        err = est - true_deg
-        err[3:] = (err[3:] + 180.0) % 360.0 - 180.0
-        crlb = np.sqrt(np.diag(sol.covariance))
-        crlb = np.concatenate([crlb[:3], np.degrees(crlb[3:])])
-        out.update({f"est_{k}": float(v) for k, v in zip(STATE_KEYS, est)})
-        out.update({f"err_{k}": float(v) for k, v in zip(STATE_KEYS, err)})
-        out.update({f"crlb_{k}": float(v) for k, v in zip(STATE_KEYS, crlb)})
-        out["pos_err_m"] = float(np.linalg.norm(err[:3]))
-        out["att_err_deg"] = float(rotation_angle_deg(sol.R_cam_target, state_to_pose(st)[0]))
-        out["residual_rms_px"] = float(sol.residual_rms_px)
+        out.update(estimate_outputs(sol, st))  # CRLB for the solver's default 0.1 px
     return out
 
 

@@ -377,22 +377,36 @@ def _geometric_expose_solve(scenario: dict, seed: int, rendered) -> dict:
     out["ok"] = reason is None
     out["reason"] = reason
     if reason is None:
-        est = np.concatenate([sol.state[:3], np.degrees(sol.state[3:])])
-        err = est - true_deg
-        err[3:] = (err[3:] + 180.0) % 360.0 - 180.0
-        from svgs.frames import rotation_angle_deg
+        out.update(estimate_outputs(sol, state_true, crlb_scale=scenario["sigma_px"]))
+    return out
 
-        crlb = np.sqrt(np.diag(sol.covariance)) * scenario["sigma_px"]
-        crlb = np.concatenate([crlb[:3], np.degrees(crlb[3:])])
-        out.update({f"est_{k}": float(v) for k, v in zip(STATE_KEYS, est)})
-        out.update({f"err_{k}": float(v) for k, v in zip(STATE_KEYS, err)})
-        out.update({f"crlb_{k}": float(v) for k, v in zip(STATE_KEYS, crlb)})
-        from svgs.frames import state_to_pose
 
-        R_true, _ = state_to_pose(state_true)
-        out["pos_err_m"] = float(np.linalg.norm(err[:3]))
-        out["att_err_deg"] = float(rotation_angle_deg(sol.R_cam_target, R_true))
-        out["residual_rms_px"] = float(sol.residual_rms_px)
+def estimate_outputs(sol, state_true, crlb_scale: float = 1.0) -> dict:
+    """The ``est_*``, ``err_*``, ``crlb_*``, ``pos_err_m``, ``att_err_deg`` and
+    ``residual_rms_px`` outputs of a solved trial.
+
+    Parameters
+    ----------
+    sol : svgs.Solution
+    state_true : ndarray, shape (6,)
+        The true paper state (m, rad).
+    crlb_scale : float
+        Multiplies the solution's 1-sigma bound (its covariance is for ``sol.sigma_px``).
+    """
+    from svgs.frames import rotation_angle_deg, state_to_pose
+
+    true_deg = np.concatenate([state_true[:3], np.degrees(state_true[3:])])
+    est = np.concatenate([sol.state[:3], np.degrees(sol.state[3:])])
+    err = est - true_deg
+    err[3:] = (err[3:] + 180.0) % 360.0 - 180.0
+    crlb = np.sqrt(np.diag(sol.covariance)) * crlb_scale
+    crlb = np.concatenate([crlb[:3], np.degrees(crlb[3:])])
+    out = {f"est_{k}": float(v) for k, v in zip(STATE_KEYS, est)}
+    out.update({f"err_{k}": float(v) for k, v in zip(STATE_KEYS, err)})
+    out.update({f"crlb_{k}": float(v) for k, v in zip(STATE_KEYS, crlb)})
+    out["pos_err_m"] = float(np.linalg.norm(err[:3]))
+    out["att_err_deg"] = float(rotation_angle_deg(sol.R_cam_target, state_to_pose(state_true)[0]))
+    out["residual_rms_px"] = float(sol.residual_rms_px)
     return out
 
 

@@ -158,6 +158,25 @@ def pose_from_scenario(range_m, x_m=0.0, y_m=0.0, roll_deg=0.0, pitch_deg=0.0, y
     return R, t
 
 
+def check_pose(R_cam_target, t_cam_target_m):
+    """A finite proper rotation (3, 3) and a finite translation (3,), else :class:`InputError`.
+
+    Returns
+    -------
+    R_cam_target : ndarray, shape (3, 3)
+    t_cam_target_m : ndarray, shape (3,)
+    """
+    R = np.asarray(R_cam_target, float)
+    t = np.asarray(t_cam_target_m, float)
+    if R.shape != (3, 3) or not np.all(np.isfinite(R)):
+        raise InputError(f"R_cam_target: expected a finite 3x3 rotation matrix, got shape {R.shape}")
+    if np.max(np.abs(R @ R.T - np.eye(3))) > 1e-6 or np.linalg.det(R) < 0:
+        raise InputError("R_cam_target: not a proper rotation (R R^T != I or det < 0)")
+    if t.shape != (3,) or not np.all(np.isfinite(t)):
+        raise InputError(f"t_cam_target_m: expected 3 finite numbers (m), got {t!r}")
+    return R, t
+
+
 def state_dict(state) -> dict:
     """The state as the JSON keys of ``svgs solve --json`` (metres and degrees).
 

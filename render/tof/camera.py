@@ -42,7 +42,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from svgs.errors import InputError, ProfileError, check_finite, check_finite_positive
-from svgs.frames import pose_to_state, state_dict
+from svgs.frames import check_pose, pose_to_state, state_dict
 from tof.camera import DEFAULT_CAMERA, DEFAULT_PATTERN, load_camera, load_target
 
 from .taps import C_LIGHT_M_S, RenderedTof, unambiguous_range_m
@@ -185,19 +185,6 @@ class TofOptics:
         d = asdict(self)
         d.update(aperture_radius_m=self.aperture_radius_m, aperture_area_m2=self.aperture_area_m2)
         return d
-
-
-def check_pose(R_cam_target, t_cam_target_m):
-    """Finite proper rotation and finite translation, else :class:`InputError`."""
-    R = np.asarray(R_cam_target, float)
-    t = np.asarray(t_cam_target_m, float)
-    if R.shape != (3, 3) or not np.all(np.isfinite(R)):
-        raise InputError(f"R_cam_target: expected a finite 3x3 rotation matrix, got shape {R.shape}")
-    if np.max(np.abs(R @ R.T - np.eye(3))) > 1e-6 or np.linalg.det(R) < 0:
-        raise InputError("R_cam_target: not a proper rotation (R R^T != I or det < 0)")
-    if t.shape != (3,) or not np.all(np.isfinite(t)):
-        raise InputError(f"t_cam_target_m: expected 3 finite numbers (m), got {t!r}")
-    return R, t
 
 
 def marker_truth(camera, target, R, t) -> dict:
