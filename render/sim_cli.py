@@ -215,7 +215,8 @@ def plot_sweep(table, path, title):
     ax[0].legend()
     ax[1].plot(r, [d["blobs_median"] for d in table], "o-")
     ax[1].axhline(4, color="grey", lw=0.5)
-    ax[1].set(xlabel="range (m)", ylabel="blobs found (median)", title="blobs")
+    ax[1].set(xlabel="range (m)", ylabel="blobs found (median)", title="blobs",
+              ylim=(0, max(6.0, max(d["blobs_median"] for d in table) + 1)))
     for name in ("x_m", "y_m", "z_m"):
         ax[2].plot(r, [abs(d[f"err_mean_{name}"]) + d[f"err_std_{name}"] for d in table], "o-", label=f"|mean|+std {name}")
     ax[2].set(xlabel="range (m)", ylabel="position error (m)", title="errors", yscale="log")
@@ -245,7 +246,7 @@ def cmd_range_sweep(args) -> int:
     with open(out / "trials.jsonl", "w") as fh:
         for row in rows:
             fh.write(json.dumps(row, default=_json_default) + "\n")
-    plot_sweep(table, out / "range_sweep.png", f"{args.camera}: range sweep ({args.trials} trials x {args.poses} poses per range)")
+    plot_sweep(table, out / "range_sweep.png", f"{args.camera}: range sweep ({args.trials} trials x {args.poses} pose(s) per range)")
     hdr = f"{'range_m':>8} {'blobs':>5} {'4 blobs':>7} {'solved':>6} {'merged':>6} {'exp_ms':>7} {'iso':>5}  err x/y/z (m, mean+-std)        failures"
     print(hdr)
     for d in table:
