@@ -763,6 +763,30 @@ def calibrate(
     )
 
 
+def detect_views(grays, names, board):
+    """Detect the board in each grey image.
+
+    Returns
+    -------
+    object_points : list of ndarray (n_i, 3)
+    image_points : list of ndarray (n_i, 2)
+    used : list of str
+        Names of the views where the board was found.
+    skipped : list of (str, Failure)
+        The others, with the reason.
+    """
+    obj, img, used, skipped = [], [], [], []
+    for g, n in zip(grays, names):
+        det = detect_board(g, board)
+        if det:
+            obj.append(det.object_points_m)
+            img.append(det.image_points_px)
+            used.append(n)
+        else:
+            skipped.append((n, det))
+    return obj, img, used, skipped
+
+
 def calibrate_images(images, board: Board, *, names=None, min_views: int = MIN_VIEWS, **constraints) -> Calibration:
     """Detect the board in each image and calibrate.
 
@@ -817,15 +841,7 @@ def calibrate_images(images, board: Board, *, names=None, min_views: int = MIN_V
         )
         raise InputError(f"calibration images differ in size ({groups}); all views must come from one camera mode")
     (w, h), = sizes.keys()
-    obj, img, used, skipped = [], [], [], []
-    for g, n in zip(grays, names):
-        det = detect_board(g, board)
-        if det:
-            obj.append(det.object_points_m)
-            img.append(det.image_points_px)
-            used.append(n)
-        else:
-            skipped.append((n, det))
+    obj, img, used, skipped = detect_views(grays, names, board)
     if len(used) < max(int(min_views), 1):
         lst = "; ".join(f"{n} ({f.message})" for n, f in skipped[:10]) + (" ..." if len(skipped) > 10 else "")
         hint = {

@@ -45,7 +45,7 @@ import numpy as np
 from svgs.errors import InputError, check_finite_positive
 from svgs.profiles import DISTORTION_KEYS, Camera, Pattern
 
-from .boards import Board, calibrate, detect_board, mapping_error_px
+from .boards import Board, calibrate, detect_views, mapping_error_px
 
 #: Numbers of views the convergence study calibrates from.
 DEFAULT_VIEWS_LIST = (5, 10, 20, 40)
@@ -190,16 +190,7 @@ def detect_all(images, board: Board, names=None) -> Detections:
     sizes = {(g.shape[1], g.shape[0]) for g in grays}
     if len(sizes) > 1:
         raise InputError(f"calibration study: board images differ in size ({sorted(sizes)})")
-    obj, img, used, skipped = [], [], [], []
-    for g, n in zip(grays, names):
-        d = detect_board(g, board)
-        if d:
-            obj.append(d.object_points_m)
-            img.append(d.image_points_px)
-            used.append(n)
-        else:
-            skipped.append((n, d))
-    return Detections(obj, img, used, skipped, sizes.pop())
+    return Detections(*detect_views(grays, names, board), sizes.pop())
 
 
 def calibration_errors(cal, camera_true: Camera, step_px: float | None = None) -> dict:
