@@ -76,19 +76,27 @@ def solution_json(result) -> dict:
     return d
 
 
-def print_solution(result, out=None) -> None:
-    """A readable summary of a Solution or Failure."""
-    out = sys.stdout if out is None else out
+def print_pose_summary(result, out, blobs_label: str = "blobs found") -> bool:
+    """First lines of a readable summary, shared by every sensor's CLI: the failure and
+    its reason, or SOLVED with position and attitude. Returns whether it solved."""
     if not result:
         print(f"NO SOLUTION ({result.reason}): {result.message}", file=out)
         if result.details.get("n_blobs") is not None:
-            print(f"  blobs found: {result.details['n_blobs']}", file=out)
-        return
+            print(f"  {blobs_label}: {result.details['n_blobs']}", file=out)
+        return False
     s = result.state_dict
-    sd = result.std
     print("SOLVED", file=out)
     print(f"  position of the camera in the target frame (m): x {s['x_m']:+.4f}  y {s['y_m']:+.4f}  z {s['z_m']:+.4f}", file=out)
     print(f"  attitude (deg, paper x-y-z sequence): roll {s['roll_deg']:+.3f}  pitch {s['pitch_deg']:+.3f}  yaw {s['yaw_deg']:+.3f}", file=out)
+    return True
+
+
+def print_solution(result, out=None) -> None:
+    """A readable summary of a Solution or Failure."""
+    out = sys.stdout if out is None else out
+    if not print_pose_summary(result, out):
+        return
+    sd = result.std
     print(f"  range along the boresight to the target origin: {result.t_cam_target_m[2]:.4f} m", file=out)
     print(f"  reprojection residual: {result.residual_rms_px:.3f} px RMS; blobs found: {result.n_blobs}", file=out)
     print(

@@ -156,16 +156,11 @@ def solution_json(result, n_frames: int = 1) -> dict:
 
 def print_solution(result, out=None) -> None:
     """A readable summary of a ToF solution or failure (on ``out``, default stdout)."""
+    from svgs.cli import print_pose_summary
+
     out = sys.stdout if out is None else out
-    if not result:
-        print(f"NO SOLUTION ({result.reason}): {result.message}", file=out)
-        if result.details.get("n_blobs") is not None:
-            print(f"  candidate markers found: {result.details['n_blobs']}", file=out)
+    if not print_pose_summary(result, out, "candidate markers found"):
         return
-    s = result.state_dict
-    print("SOLVED", file=out)
-    print(f"  position of the camera in the target frame (m): x {s['x_m']:+.4f}  y {s['y_m']:+.4f}  z {s['z_m']:+.4f}", file=out)
-    print(f"  attitude (deg, paper x-y-z sequence): roll {s['roll_deg']:+.3f}  pitch {s['pitch_deg']:+.3f}  yaw {s['yaw_deg']:+.3f}", file=out)
     t = result.t_cam_target_m
     print(f"  target origin in the camera frame (m): {t[0]:+.4f} {t[1]:+.4f} {t[2]:+.4f}", file=out)
     print(f"  markers matched: {len(result.targets_px)} of {result.n_blobs} candidates; "
