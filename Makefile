@@ -16,7 +16,7 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m render.demo
+	$(PY) -m cli.demo
 
 test: $(STAMP)
 	$(PY) -m pytest -q

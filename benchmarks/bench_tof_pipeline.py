@@ -1,6 +1,6 @@
 """Benchmark of the ToF pose pipeline (tof/) against the camera's frame budget.
 
-Prints, on seeded synthetic 320 x 240 frame pairs (tof.synth) at the paper's two stability
+Prints, on seeded synthetic 320 x 240 frame pairs (synth_tof) at the paper's two stability
 ranges (697 mm and 5712 mm):
 
 1. time per frame pair (median, mean, 95th percentile) against the 20 ms budget of a 50 fps
@@ -10,7 +10,7 @@ ranges (697 mm and 5712 mm):
 3. pose scatter over the frames: fluctuation range (max - min) per axis beside the paper's
    Tables 1-2 (``shared/data/tof_2022_stability.csv``), and the mean error.
 
-The synthetic frames use assumed noise levels (tof.synth), so part 3 illustrates the
+The synthetic frames use assumed noise levels (synth_tof), so part 3 illustrates the
 pipeline; the physical comparison needs the rendered ToF frames (render/).
 
 Usage::
@@ -22,16 +22,19 @@ from __future__ import annotations
 
 import argparse
 import csv
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from svgs.frames import pose_from_scenario, pose_to_state, rotation_angle_deg
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test-only helpers (synth_tof)
+
+from svgs.frames import pose_from_scenario, pose_to_state, rotation_angle_deg  # noqa: E402
 from tof import TofPipeline, load_camera, load_target
 from tof.ellipse import conic_center, project_circle_conic, projected_circle_centre
 from tof.pipeline import STAGES
-from tof.synth import synth_frame
+from synth_tof import synth_frame  # noqa: E402
 
 BUDGET_S = 0.020  # 50 fps (assumed frame rate of the EPC660 set-up, tof-epc660.toml)
 PAPER_CSV = Path(__file__).resolve().parents[2] / "shared" / "data" / "tof_2022_stability.csv"

@@ -13,7 +13,8 @@ import os
 import time
 
 
-from render.tof import TofRenderer, TofSensor
+from camera.amcw import TofSensor
+from render.tof import TofRenderer
 from svgs.frames import pose_from_scenario
 
 SCENARIOS = {"697 mm": (0.697, 0.0022, -0.0105, -0.38, -2.65, -2.53),

@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from studies.campaign import campaign_trials, make_config  # noqa: E402
 from studies.execution import ExecutorSpec, open_executor, run_study  # noqa: E402
 from studies.store import ResultStore  # noqa: E402
-from studies.trials import GEOMETRIC  # noqa: E402
+from sim.trials import GEOMETRIC  # noqa: E402
 
 
 def _study(trials_per_range: int, seed: int):

@@ -4,13 +4,10 @@
   the spacings of the target's spots in images at known ranges.
 * :mod:`calibration.boards` - full intrinsic calibration with OpenCV from chessboard,
   ChArUco and circle-grid images; board geometry, drawing and synthetic views.
-* :mod:`calibration.study` - how intrinsics converge with the number of rendered views,
-  and how each calibration error propagates into pose error versus range.
-* :mod:`calibration.cli`, :mod:`calibration.study_cli` - ``svgs calibrate focal``,
-  ``board``, ``render-board`` and ``study``.
 
-Uses :mod:`svgs` (profiles, detection, identification); rendering of board images lives
-in :mod:`render.boards` and is imported only by the study when it renders.
+Uses :mod:`svgs` only (profiles, detection, identification), so it runs on real photos.
+Rendered board sets are made in :mod:`sim.boards`; the calibration study (how intrinsics
+converge, what their errors cost) is :mod:`studies.calibration`.
 """
 
 from .boards import (

@@ -361,3 +361,37 @@ def _has_backend(dr, which: str) -> bool:
 def current_variant() -> VariantInfo | None:
     """The :class:`VariantInfo` of the last :func:`select_variant` call, or None."""
     return _SELECTED
+
+
+def backend_report(info: VariantInfo) -> dict:
+    """What the selected variant can use, for ``svgs doctor``.
+
+    Parameters
+    ----------
+    info : VariantInfo
+        From :func:`select_variant`.
+
+    Returns
+    -------
+    dict
+        ``mitsuba_variants`` (list of str) and ``backends`` (``{"cuda": bool, "llvm": bool}``).
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    return {
+        "mitsuba_variants": list(mi.variants()),
+        "backends": {"cuda": bool(info.backend == "cuda" or _has_backend(dr, "CUDA")),
+                     "llvm": info.llvm_version is not None},
+    }
+
+
+def renderer_versions() -> dict:
+    """``{"mitsuba": ..., "drjit": ...}`` version strings, or ``{}`` without Mitsuba."""
+    try:
+        import drjit as dr
+        import mitsuba as mi
+    except ImportError:  # pragma: no cover - the render extra is not installed
+        return {}
+    return {"mitsuba": mi.__version__, "drjit": dr.__version__}
+

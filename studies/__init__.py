@@ -1,6 +1,6 @@
 """Studies: campaigns, sensitivity analyses and sweeps over many trials.
 
-One function runs one trial (:mod:`studies.trials`); an executor runs many
+One function runs one trial (:mod:`sim.trials`); an executor runs many
 (:mod:`studies.execution`: local process pool, Dask LocalCluster or an existing Dask
 cluster); a results store appends rows as they finish and lets an interrupted study resume
 (:mod:`studies.store`); seeds are per trial (:mod:`studies.seeding`), so results do not
@@ -8,14 +8,14 @@ depend on the executor. :mod:`studies.campaign` reproduces the 2014 MSFC test ca
 :mod:`studies.sensitivity` computes Sobol'/Morris indices, :mod:`studies.report` writes
 self-contained HTML reports.
 
-Nothing here imports Mitsuba; a render-and-solve trial kind registers itself from
-``render`` (see :data:`studies.trials.KIND_MODULES`).
+Trial kinds (what one trial computes) live in :mod:`sim.trials`. Nothing here imports
+Mitsuba; the ``render`` trial kind (:mod:`sim.render_trial`) loads it when it runs.
 """
 
 from .execution import ExecutorSpec, Trial, executor_spec, open_executor, run_study
 from .seeding import design_rng, trial_seed
 from .store import ResultStore, read_rows, read_table
-from .trials import (GEOMETRIC, Parameter, TrialKind, geometric_scenario, geometric_trial, get_trial_kind,
+from sim.trials import (GEOMETRIC, Parameter, TrialKind, geometric_scenario, geometric_trial, get_trial_kind,
                      register_trial_kind)
 
 __all__ = [

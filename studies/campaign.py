@@ -43,7 +43,7 @@ import numpy as np
 from svgs.errors import InputError
 
 from .seeding import check_seed, design_rng, study_rng, trial_seed
-from .trials import STATE_KEYS, build_scenario, get_trial_kind
+from sim.trials import STATE_KEYS, build_scenario, get_trial_kind
 
 #: The paper's Sensor Mount envelope.
 GIMBAL_ROLL_DEG = 25.0
@@ -77,7 +77,7 @@ def load_paper_results(path=PAPER_CSV) -> dict:
     -------
     dict
         ``{(phone, statistic, range_m): {component: value}}`` with statistic ``mean_error``
-        or ``std`` and components :data:`studies.trials.STATE_KEYS`.
+        or ``std`` and components :data:`sim.trials.STATE_KEYS`.
     """
     out = {}
     with open(path, newline="") as fh:
@@ -139,7 +139,7 @@ def paper_calibration_error(camera, pattern, ranges_m, sigma_px: float, seed: in
     from calibration.focal import estimate_focal
     from svgs.frames import pose_from_scenario
 
-    from .trials import _pattern
+    from sim.trials import _pattern
 
     pat = _pattern(pattern)
     rng = study_rng(seed, 0)
@@ -176,7 +176,7 @@ def make_config(camera: str, *, ranges_m=None, trials_per_range: int = 200, seed
         Explicit errors (``focal_error_frac``, ``pp_error_u_px``, ``pp_error_v_px``,
         ``k1_error``) for ``exact``.
     """
-    from .trials import _camera
+    from sim.trials import _camera
 
     cam = _camera(camera)
     kind = get_trial_kind(trial_kind)
@@ -264,7 +264,7 @@ def summarize(table: dict, config: CampaignConfig, paper: dict | None = None) ->
         ``c``: ``mean_abs_<c>``, ``bias_<c>``, ``std_<c>``, ``crlb_<c>``, ``paper_mean_<c>``,
         ``paper_std_<c>``, ``ratio_mean_<c>``, ``ratio_std_<c>``.
     """
-    from .trials import _camera
+    from sim.trials import _camera
 
     paper = load_paper_results() if paper is None else paper
     phone = _camera(config.camera).name

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 from svgs.errors import InputError
 
-from .trials import TrialKind, run_task, warm_up_worker
+from sim.trials import TrialKind, run_task, warm_up_worker
 
 #: Seconds to wait for a Dask scheduler to answer before giving up.
 SCHEDULER_TIMEOUT_S = 5.0

@@ -35,7 +35,7 @@ import numpy as np
 from svgs.errors import InputError
 
 from .seeding import check_seed, trial_seed
-from .trials import TrialKind, build_scenario, get_trial_kind
+from sim.trials import TrialKind, build_scenario, get_trial_kind
 
 OUTPUTS = ("pos_err_m", "att_err_deg", "success")
 MORRIS_LEVELS = 4
@@ -159,7 +159,7 @@ class SensitivityConfig:
 def make_config(camera: str, vary, *, fixed=None, method: str = "sobol", n: int = 256, seed: int = 0,
                 trial_kind: str = "geometric", pattern: str = "svgs-3u") -> SensitivityConfig:
     """A validated :class:`SensitivityConfig` (all checks before any work)."""
-    from .trials import _camera, _pattern
+    from sim.trials import _camera, _pattern
 
     kind = get_trial_kind(trial_kind)
     if method not in ("sobol", "morris"):

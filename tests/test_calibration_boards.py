@@ -84,7 +84,7 @@ def test_real_acircles_unconstrained_rms_below_0_1_px(real_left):
 
 @needs_real
 def test_cli_board_on_real_images_writes_a_loadable_profile(tmp_path, capsys):
-    from svgs.cli import main
+    from cli.main import main
 
     out = tmp_path / "ximea-left.toml"
     rc = main(["calibrate", "board", str(REAL / "left"), "--board", "acircles", "--cols", "4", "--rows", "11",
@@ -247,7 +247,7 @@ def test_mixed_image_sizes_name_the_files(chess_views):
 def test_cli_bad_input_exits_2_without_traceback(tmp_path, capsys, chess_views):
     import cv2
 
-    from svgs.cli import main
+    from cli.main import main
 
     board, R, t, imgs = chess_views
     cv2.imwrite(str(tmp_path / "a.png"), imgs[0])

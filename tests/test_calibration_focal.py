@@ -149,7 +149,7 @@ def test_bad_input_is_input_error(cams, pattern):
 def pattern_images(tmp_path_factory, cams, pattern):
     import cv2
 
-    from svgs.synth import synth_frame
+    from synth_svgs import synth_frame
 
     true, _ = cams
     rng = np.random.default_rng(42)
@@ -177,7 +177,7 @@ def test_image_level_path_recovers_focal_length(cams, pattern, pattern_images):
 
 def test_cli_focal_prints_estimate_and_writes_profile(tmp_path, capsys, pattern_images):
     from svgs import Camera
-    from svgs.cli import main
+    from cli.main import main
 
     paths, ranges = pattern_images
     start = Camera.load("galaxy-nexus").replace(fx=2300.0, fy=2300.0)
@@ -199,7 +199,7 @@ def test_cli_focal_prints_estimate_and_writes_profile(tmp_path, capsys, pattern_
 
 
 def test_cli_focal_bad_input_exits_2(tmp_path, capsys, pattern_images):
-    from svgs.cli import main
+    from cli.main import main
 
     paths, ranges = pattern_images
     base = ["calibrate", "focal", "--camera", "galaxy-nexus"]

@@ -1,4 +1,4 @@
-"""Rendered calibration sets (render.boards, ``svgs calibrate render-board``).
+"""Rendered calibration sets (sim.boards, ``svgs calibrate render-board``).
 
 The renders are small (a 640 x 480 camera with strong distortion, a few views at 16 spp, about
 a second each on two cores); the acceptance run over 40 views is marked slow. Truth comes from
@@ -17,7 +17,7 @@ if importlib.util.find_spec("mitsuba") is None:
 
 from calibration import Board, calibrate_images, detect_board, mapping_error_px
 from svgs import Camera
-from svgs.cli import main
+from cli.main import main
 
 pytestmark = pytest.mark.render
 
@@ -32,7 +32,7 @@ def small_camera(width=640, height=480):
 
 @pytest.fixture(scope="module")
 def chess_set(tmp_path_factory):
-    from render.boards import render_board_set
+    from sim.boards import render_board_set
 
     out = tmp_path_factory.mktemp("chess")
     board = Board("chessboard", 9, 6, 0.1)
@@ -54,7 +54,7 @@ def test_rendered_corners_agree_with_the_camera_model(chess_set):
 
 
 def test_truth_record_round_trip(chess_set):
-    from render.boards import BoardSet
+    from sim.boards import BoardSet
 
     bs, out = chess_set
     truth = json.loads((out / "truth.json").read_text())
@@ -105,7 +105,7 @@ def test_board_radiance_is_reflectance_times_room_radiance():
 
 def test_charuco_texture_orientation():
     # an asymmetric board: marker ids can only land right if the texture is not mirrored
-    from render.boards import render_board_set
+    from sim.boards import render_board_set
 
     board = Board("charuco", 7, 5, 0.16)
     bs = render_board_set(small_camera(), board, 2, seed=5, spp=4)
@@ -120,7 +120,7 @@ def test_charuco_texture_orientation():
 def test_calibration_from_rendered_set_meets_acceptance(tmp_path):
     # issue 5: fx, fy within 0.2 %, principal point within 1 px, mapping error < 0.1 px
     # (after the best rotation, which absorbs the principal-point error) - 40 views
-    from render.boards import render_board_set
+    from sim.boards import render_board_set
 
     cam = small_camera()
     board = Board("chessboard", 9, 6, 0.1)

@@ -1,4 +1,4 @@
-"""Pose error caused by calibration error (calibration.study, centroid level).
+"""Pose error caused by calibration error (studies.calibration.study, centroid level).
 
 Expected values from first-order geometry: a focal length too long by e makes the solver put
 the target e times farther (Z_L off by e R); a principal point off by d px tilts the camera
@@ -8,7 +8,7 @@ by atan(d / f) and leaves the position where it was; exact intrinsics reproduce 
 import numpy as np
 import pytest
 
-from calibration.study import (
+from studies.calibration.study import (
     error_cases,
     paper_table,
     pose_error_study,

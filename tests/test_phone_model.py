@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from render.phone import Exposer, PhoneCamera, PhoneParams
-from render.phone.optics import apply_psf, core_sigma_px
-from render.phone.params import GlareParams, SensorParams
-from render.phone.sensor import bloom
+from camera.phone import Exposer, PhoneCamera, PhoneParams
+from camera.phone.optics import apply_psf, core_sigma_px
+from camera.phone.params import GlareParams, SensorParams
+from camera.phone.sensor import bloom
 from svgs import Camera, InputError
 
 FLAT_STAGES = ("shot", "dark", "fpn", "read", "bloom", "adc")

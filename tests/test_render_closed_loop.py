@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
-from render.remedies import parse_remedy, scaled_pattern_file
-from render.simulate import Scenario, expose_and_solve, pose_errors, render_scenario
+from cli.exposure import parse_remedy, scaled_pattern_file
+from sim.closed_loop import Scenario, expose_and_solve, pose_errors, render_scenario
 from svgs import InputError, Pattern
-from svgs.cli import main
+from cli.main import main
 
 
 @pytest.mark.render
@@ -112,8 +112,8 @@ def test_scenario_validation():
 @pytest.mark.render
 def test_render_trial_kind_runs_the_full_chain_and_groups_renders():
     """The studies' `render` trial kind: same numbers alone or in a render group."""
-    from render.trials import RENDER, render_group, render_trial
-    from studies.trials import build_scenario
+    from sim.render_trial import RENDER, render_group, render_trial
+    from sim.trials import build_scenario
 
     scen = build_scenario(RENDER, {"camera": "galaxy-nexus", "range_m": 12.0, "yaw_deg": 15.0})
     alone = render_trial(scen, 7)

@@ -182,7 +182,7 @@ def test_missing_flash_table_and_unknown_profile():
 
 
 def test_cli_render_and_bad_input(tmp_path, capsys):
-    from svgs.cli import main
+    from cli.main import main
 
     out = tmp_path / "r10"
     rc = main(["render", "--camera", "galaxy-nexus", "--range", "10", "--roll", "2", "--yaw", "-3",
@@ -211,7 +211,7 @@ def test_cli_render_and_bad_input(tmp_path, capsys):
 
 
 def test_cli_doctor(capsys):
-    from svgs.cli import main
+    from cli.main import main
 
     assert main(["doctor", "--json"]) == 0
     rep = json.loads(capsys.readouterr().out)

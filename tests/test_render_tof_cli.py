@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from svgs.cli import main
+from cli.main import main
 
 SOLVE_KEYS = {"ok", "reason", "state", "R_cam_target", "t_cam_target_m", "targets_px", "n_blobs", "residual_rms_px"}
 STATE_KEYS = {"x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg"}

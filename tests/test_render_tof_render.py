@@ -9,7 +9,8 @@ import pytest
 if importlib.util.find_spec("mitsuba") is None:  # not imported here: render.variant picks the LLVM first
     pytest.skip("Mitsuba is not installed (the 'render' extra)", allow_module_level=True)
 
-from render.tof import TofRenderer, TofSensor, phasor_depth_m, unambiguous_range_m  # noqa: E402
+from camera.amcw import TofSensor, phasor_depth_m, unambiguous_range_m  # noqa: E402
+from render.tof import TofRenderer  # noqa: E402
 from svgs.errors import InputError  # noqa: E402
 from svgs.frames import pose_from_scenario  # noqa: E402
 

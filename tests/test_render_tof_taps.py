@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from render.tof.taps import (C_LIGHT_M_S, RenderedTof, TofSensor, phase_noise_rad, phasor_depth_m,
+from camera.amcw import (C_LIGHT_M_S, RenderedTof, TofSensor, phase_noise_rad, phasor_depth_m,
                              unambiguous_range_m)
 from svgs.errors import InputError
 

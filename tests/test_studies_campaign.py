@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from studies.campaign import PAPER_CSV, PAPER_RANGES_M, campaign_trials, load_paper_results, make_config, summarize
-from svgs.cli import main
+from cli.main import main
 from svgs.errors import InputError
 
 CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",

@@ -13,8 +13,8 @@ import pytest
 from studies.campaign import campaign_trials, make_config
 from studies.execution import (ExecutorSpec, Trial, executor_spec, make_tasks, open_executor, run_study)
 from studies.store import ResultStore, read_rows
-from studies.trials import GEOMETRIC, TrialKind, register_trial_kind
-from svgs.cli import main
+from sim.trials import GEOMETRIC, TrialKind, register_trial_kind
+from cli.main import main
 from svgs.errors import InputError
 
 
@@ -47,7 +47,7 @@ def test_sigkill_halfway_then_rerun_completes_without_duplicates(tmp_path):
     out = tmp_path / "campaign"
     args = ["campaign", "--camera", "galaxy-nexus", "--trials", "150", "--ranges", "5,15", "--out", str(out),
             "--processes", "0", "--chunk-size", "1", "--no-progress", "--seed", "5"]
-    proc = subprocess.Popen([sys.executable, "-m", "svgs.cli", *args], stdout=subprocess.DEVNULL,
+    proc = subprocess.Popen([sys.executable, "-m", "cli.main", *args], stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, start_new_session=True)
     results = out / "results.csv"
     n_at_kill = 0

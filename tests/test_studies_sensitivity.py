@@ -6,7 +6,7 @@ import pytest
 from studies.sensitivity import (SensitivityConfig, Varied, analyze_morris, analyze_sobol, make_config,
                                  morris_design, ranking, sobol_design)
 from studies.store import read_rows
-from svgs.cli import main
+from cli.main import main
 from svgs.errors import InputError
 
 

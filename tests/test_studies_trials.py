@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from studies.seeding import trial_seed
-from studies.trials import (GEOMETRIC, STATE_KEYS, geometric_group, geometric_render_key, geometric_scenario,
+from sim.trials import (GEOMETRIC, STATE_KEYS, geometric_group, geometric_render_key, geometric_scenario,
                             geometric_trial, get_trial_kind)
 from svgs.errors import InputError
 

@@ -5,7 +5,7 @@ import pytest
 
 from svgs.detect import GATES, Blobs, auto_threshold, detect_blobs
 from svgs.errors import InputError
-from svgs.synth import draw_elliptical_spots, draw_gaussian_spots, noise_field, quantize
+from synth_svgs import draw_elliptical_spots, draw_gaussian_spots, noise_field, quantize
 
 
 def _spot_grid(shape, sigma, rng, spacing=None):

@@ -8,7 +8,7 @@ from svgs.detect import detect_blobs
 from svgs.errors import InputError
 from svgs.identify import PAPER_ENVELOPE, Envelope, Identification, identify, pattern_gates
 from svgs.result import REASONS, Failure
-from svgs.synth import random_envelope_pose, synth_frame
+from synth_svgs import random_envelope_pose, synth_frame
 
 
 def _distractor_points(rng, uv, m, shape_wh, near_fraction, clearance_px=8.0):

@@ -6,12 +6,12 @@ import cv2
 import numpy as np
 import pytest
 
-from svgs.cli import main
+from cli.main import main
 from svgs.frames import pose_from_scenario
 from tof import load_camera, load_target
-from tof.synth import synth_frame
+from synth_tof import synth_frame
 
-#: The keys ``svgs solve --json`` prints (svgs.cli), which ``svgs tof solve --json`` shares.
+#: The keys ``svgs solve --json`` prints (cli.main), which ``svgs tof solve --json`` shares.
 SOLVE_KEYS = {"ok", "reason", "state", "R_cam_target", "t_cam_target_m", "targets_px", "n_blobs", "residual_rms_px"}
 STATE_KEYS = {"x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg"}
 
@@ -86,10 +86,10 @@ def test_bad_input_exits_2(files, capsys, gray, depth, extra, message):
 
 
 def test_tof_group_accepts_more_commands():
-    """Other modules (render.cli) add ``svgs tof`` commands to the same group."""
+    """Other modules (cli.render) add ``svgs tof`` commands to the same group."""
     import argparse
 
-    from tof.cli import command_group, register
+    from cli.tof import command_group, register
 
     top = argparse.ArgumentParser().add_subparsers()
     command_group(top).add_parser("render-and-solve")

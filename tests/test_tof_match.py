@@ -8,7 +8,7 @@ from svgs.frames import rotation_angle_deg
 from tof.camera import load_target
 from tof.match import compatibility, match_points, softassign
 from tof.pose import is_degenerate, refine_line_of_sight, weighted_svd_pose
-from tof.synth import random_pose, synth_marker_points
+from synth_tof import random_pose, synth_marker_points
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ import pytest
 from svgs.errors import InputError
 from svgs.frames import pose_from_scenario, rotation_angle_deg
 from tof import TofPipeline, load_camera, load_target, solve_frame, solve_sequence
-from tof.synth import synth_frame
+from synth_tof import synth_frame
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from svgs.cli import build_parser  # noqa: E402
+from cli.main import build_parser  # noqa: E402
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "cli.md"
 

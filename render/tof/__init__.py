@@ -4,14 +4,14 @@
   Mitsuba geometry.
 - :mod:`render.tof.camera`: :class:`TofRenderer`, a custom wavefront integrator that turns
   per-sample optical path lengths into per-pixel AMCW phasors (flying pixels, multipath).
-- :mod:`render.tof.taps`: :class:`TofSensor`, the 4-tap pixel with shot/read/ambient noise,
-  amplitude (gray), depth and passive gray images; numpy only.
-- :mod:`render.tof.cli`: ``svgs tof render-and-solve``.
-- :mod:`render.tof.stability`: the paper's stability runs re-enacted (``docs/reports/``).
+
+The pixel model that turns the rendered phasors into noisy frames (:class:`camera.amcw.TofSensor`)
+is numpy only and lives in :mod:`camera.amcw`; the stability runs in :mod:`sim.tof_stability`.
 
 Importing this package does not import Mitsuba; the renderer's names load on first use.
 
->>> from render.tof import TofRenderer, TofSensor           # doctest: +SKIP
+>>> from render.tof import TofRenderer                      # doctest: +SKIP
+>>> from camera.amcw import TofSensor                       # doctest: +SKIP
 >>> r = TofRenderer("tof-epc660", "tof-8", spp=64)          # doctest: +SKIP
 >>> rendered = r.render(R_cam_target, t_cam_target_m)        # doctest: +SKIP
 >>> frame = TofSensor.from_camera(r.camera).frame(rendered, rng=1)   # doctest: +SKIP
@@ -20,10 +20,7 @@ Importing this package does not import Mitsuba; the renderer's names load on fir
 
 from __future__ import annotations
 
-from .taps import RenderedTof, TofFrame, TofSensor, phase_noise_rad, phasor_depth_m, unambiguous_range_m
-
-__all__ = ["TofRenderer", "Illumination", "TofOptics", "TofSceneOptions", "render_tof", "RenderedTof", "TofFrame",
-           "TofSensor", "phase_noise_rad", "phasor_depth_m", "unambiguous_range_m"]
+__all__ = ["TofRenderer", "Illumination", "TofOptics", "TofSceneOptions", "render_tof"]
 
 
 def __getattr__(name):

@@ -1,8 +1,8 @@
 """The ToF camera rendered with Mitsuba: per-sample path lengths -> per-pixel AMCW phasors.
 
 :class:`TofRenderer` loads the marker scene (:mod:`render.tof.scene`) once and renders a pose
-into a :class:`render.tof.taps.RenderedTof` (noise-free per-pixel means, numpy);
-:class:`render.tof.taps.TofSensor` then draws noisy tap frames from it (render once, many frames).
+into a :class:`camera.amcw.RenderedTof` (noise-free per-pixel means, numpy);
+:class:`camera.amcw.TofSensor` then draws noisy tap frames from it (render once, many frames).
 
 Camera (``assets/cameras/tof-epc660.toml``)
     EPC660 320 x 240, 6.5 mm lens: the OpenCV camera of the profile, exactly (rays from
@@ -45,7 +45,7 @@ from svgs.errors import InputError, ProfileError, check_finite, check_finite_pos
 from svgs.frames import check_pose, pose_to_state, state_dict
 from tof.camera import DEFAULT_CAMERA, DEFAULT_PATTERN, load_camera, load_target
 
-from .taps import C_LIGHT_M_S, RenderedTof, unambiguous_range_m
+from camera.amcw import C_LIGHT_M_S, RenderedTof, unambiguous_range_m
 
 PLANCK_J_S = 6.62607015e-34
 #: Most samples traced in one pass (memory: six float32 channels and the wavefront state per lane).

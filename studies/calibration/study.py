@@ -3,12 +3,12 @@
 Three parts, run by :func:`run_study` (``svgs calibrate study``):
 
 1. **Convergence of a full calibration** (:func:`calibration_convergence`): a rendered board
-   set (:func:`render.boards.render_board_set`: Mitsuba, the profile's exact camera, the
+   set (:func:`sim.boards.render_board_set`: Mitsuba, the profile's exact camera, the
    phone's noise and ISP) is calibrated with OpenCV from N of its views, for N in a list,
    over several subsets; errors of fx, fy, principal point and the mapping error over the
    image (:func:`calibration.mapping_error_px`) against the truth.
 2. **The paper's focal-length method** (:func:`focal_study`) on rendered images of the SVGS
-   target facing the camera at known ranges (:func:`render.simulate.render_scenario`, the
+   target facing the camera at known ranges (:func:`sim.closed_loop.render_scenario`, the
    phone's exposure, detection and identification): its error against the true focal
    length for fewer ranges and added centroid noise.
 3. **Propagation into pose** (:func:`pose_error_study`): centroids projected with the true
@@ -45,7 +45,7 @@ import numpy as np
 from svgs.errors import InputError, check_finite_positive
 from svgs.profiles import DISTORTION_KEYS, Camera, Pattern
 
-from .boards import Board, calibrate, detect_views, mapping_error_px
+from calibration.boards import Board, calibrate, detect_views, mapping_error_px
 
 #: Numbers of views the convergence study calibrates from.
 DEFAULT_VIEWS_LIST = (5, 10, 20, 40)
@@ -180,7 +180,7 @@ def detect_all(images, board: Board, names=None) -> Detections:
     InputError
         No images, or images of different sizes.
     """
-    from .boards import to_gray8
+    from calibration.boards import to_gray8
 
     images = list(images)
     if not images:
@@ -382,7 +382,7 @@ def focal_frames_rendered(camera_true: Camera, believed: Camera, pattern: Patter
                           progress=None) -> FocalFrames:
     """Render the target facing the camera at each range and expose it ``exposures`` times.
 
-    Each frame is :func:`render.simulate.render_scenario` (Mitsuba: the corner cubes under
+    Each frame is :func:`sim.closed_loop.render_scenario` (Mitsuba: the corner cubes under
     the flash, the profile's phone model with its auto-exposure); the targets are found with
     :func:`svgs.detect.detect_blobs` and labelled by :func:`svgs.identify.identify` using
     the ``believed`` (nominal) camera, as a user of the focal method would.
@@ -408,7 +408,7 @@ def focal_frames_rendered(camera_true: Camera, believed: Camera, pattern: Patter
     """
     import tempfile
 
-    from render.simulate import Scenario, render_scenario
+    from sim.closed_loop import Scenario, render_scenario
     from svgs.detect import detect_blobs
     from svgs.frames import pose_from_scenario
     from svgs.identify import identify
@@ -527,7 +527,7 @@ def focal_study(frames: FocalFrames, believed: Camera, pattern: Pattern, f_true_
         All ranges, first identified exposure of each, no added noise: the focal-only
         calibration.
     """
-    from .focal import estimate_focal
+    from calibration.focal import estimate_focal
 
     f_true_px = check_finite_positive(f_true_px, "true focal length")
     ok = frames.ok()
@@ -910,7 +910,7 @@ def run_study(camera, *, views_list=DEFAULT_VIEWS_LIST, seed: int = 0, board: Bo
     t0 = time.perf_counter()
     n_views = vl[-1]
     if geometric:
-        from .boards import sample_board_poses, synthesize_views
+        from calibration.boards import sample_board_poses, synthesize_views
 
         R, t = sample_board_poses(board, cam_true, n_views, seed=s_set)
         images = list(synthesize_views(board, cam_true, R, t, oversample=3, blur_px=0.6, noise_dn=1.5, seed=s_set + 1))
@@ -919,7 +919,7 @@ def run_study(camera, *, views_list=DEFAULT_VIEWS_LIST, seed: int = 0, board: Bo
         set_info = {"source": "geometric (calibration.synthesize_views: blur 0.6 px, noise 1.5 DN)", "n_views": n_views}
         say(f"board set: {n_views} geometric views")
     else:
-        from render.boards import BoardSet, render_board_set
+        from sim.boards import BoardSet, render_board_set
 
         bs = None
         if board_set_dir is not None and (Path(board_set_dir) / "truth.json").is_file():
@@ -936,7 +936,7 @@ def run_study(camera, *, views_list=DEFAULT_VIEWS_LIST, seed: int = 0, board: Bo
                                   progress=lambda s: say("board " + s))
         images, names, img_camera = bs.images, bs.names, bs.camera
         v = bs.truth["views"]
-        set_info = {"source": "rendered (render.boards: Mitsuba, phone model)", "n_views": n_views,
+        set_info = {"source": "rendered (sim.boards: Mitsuba, phone model)", "n_views": n_views,
                     "render_s_mean": float(np.mean([x["timings_s"]["render_s"] for x in v])),
                     "exposure_ms_mean": 1e3 * float(np.mean([x["exposure_s"] for x in v])),
                     "distance_m_range": [float(min(x["distance_m"] for x in v)), float(max(x["distance_m"] for x in v))],
@@ -1345,7 +1345,7 @@ def write_report(result: StudyResult, out_dir, command: str | None = None) -> di
 
     rep.heading("2. The paper's focal-length method on images of the target")
     rep.paragraph(
-        ("Images of the SVGS target facing the camera at each range, rendered (render.simulate.render_scenario: "
+        ("Images of the SVGS target facing the camera at each range, rendered (sim.closed_loop.render_scenario: "
          "corner cubes under the phone's flash, the phone's auto-exposure, noise and ISP), "
          f"{c['focal_exposures']} exposures per range; spots found by svgs.detect and labelled by svgs.identify with "
          "the nominal camera."

@@ -11,7 +11,7 @@ The data path of ``docs/design`` in one place::
   light, both uniform and smooth - is added analytically (nothing to ray trace in a
   Lambertian wall).
 - :class:`Frame` holds one rendered flux and its truth; :meth:`Frame.exposer` gives the
-  phone's :class:`render.phone.Exposer` (render once, expose many).
+  phone's :class:`camera.phone.Exposer` (render once, expose many).
 - :func:`expose_and_solve` makes one exposure and runs the SVGS chain on the delivered
   image, returning a row of results (truth, solution, errors, timings, reasons).
 """
@@ -143,7 +143,7 @@ class Frame:
         return Camera.load(self.scenario.camera)
 
     def phone(self):
-        from .phone import PhoneCamera
+        from camera.phone import PhoneCamera
 
         if self._phone is None:
             self._phone = PhoneCamera(self.camera)
@@ -155,7 +155,7 @@ class Frame:
         ``target_scale`` multiplies the target's flux (not the lab's): a neutral-density
         filter of transmission T over every reflector is ``target_scale = T**2`` (two
         passes; the target body's own diffuse light is ~1e-7 of the spots')."""
-        from .phone import ALL_STAGES, Exposer
+        from camera.phone import ALL_STAGES, Exposer
 
         flux = self.flux
         if target_scale != 1.0:
@@ -173,7 +173,7 @@ def lab_flux(camera: Camera, scenario: Scenario) -> tuple[np.ndarray, dict]:
     plus the ambient radiance; photons per pixel through the aperture from
     :func:`render.optics.radiance_to_photon_rate`.
     """
-    from .optics import Flash, Optics, pixel_normalized_grid, radiance_to_photon_rate
+    from render.optics import Flash, Optics, pixel_normalized_grid, radiance_to_photon_rate
 
     optics = Optics.from_camera(camera)
     flash = Flash.from_camera(camera, optics.band_nm)
@@ -200,7 +200,7 @@ def lab_flux(camera: Camera, scenario: Scenario) -> tuple[np.ndarray, dict]:
 
 def render_scenario(scenario: Scenario, *, seed: int = 0) -> Frame:
     """Render a scenario: Mitsuba for the target, analytic lab light around it."""
-    from . import render_flux
+    from render import render_flux
 
     camera = Camera.load(scenario.camera)
     pattern = Pattern.load(scenario.pattern)
@@ -254,7 +254,7 @@ def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposu
     Parameters
     ----------
     frame : Frame
-    exposer : render.phone.Exposer
+    exposer : camera.phone.Exposer
         From :meth:`Frame.exposer` (reused across calls).
     seed : int
         Noise seed of this exposure.

@@ -36,8 +36,8 @@ from svgs.errors import InputError
 
 #: Modules that may register more trial kinds; imported when an unknown name is asked for
 #: (a module that is not installed is skipped). The render-and-solve trial registers itself
-#: from ``render.trials``.
-KIND_MODULES = ("render.trials",)
+#: from ``sim.render_trial``.
+KIND_MODULES = ("sim.render_trial",)
 
 #: Columns every study row has besides the scenario and the kind's outputs.
 ID_COLUMNS = ("trial_id", "seed")

@@ -16,7 +16,7 @@ import numpy as np
 
 from svgs.errors import InputError
 
-from .params import ExposureParams, SensorParams
+from camera.phone.params import ExposureParams, SensorParams
 
 
 def metering_weights(shape, mode: str) -> np.ndarray:

@@ -41,7 +41,7 @@ def _scene_args(p, with_range=True):
 
 
 def _scenario(args, range_m=None):
-    from .simulate import DEFAULT_BACKDROP_DISTANCE_M, Scenario
+    from sim.closed_loop import DEFAULT_BACKDROP_DISTANCE_M, Scenario
 
     back = DEFAULT_BACKDROP_DISTANCE_M if args.backdrop_m is None else (None if args.backdrop_m == 0 else args.backdrop_m)
     return Scenario(
@@ -52,7 +52,7 @@ def _scenario(args, range_m=None):
 
 
 def _threshold(text):
-    from svgs.cli import parse_threshold
+    from cli.solve import parse_threshold
 
     return parse_threshold(text)
 
@@ -70,7 +70,7 @@ def write_outputs(out: Path, frame, row) -> dict:
     """flux.npy, raw.npy, image.png, preview.png, truth.json, solution.json."""
     import cv2
 
-    from .api import write_preview
+    from render.api import write_preview
 
     out.mkdir(parents=True, exist_ok=True)
     ex = row["_exposure"]
@@ -96,7 +96,7 @@ def _json_default(o):
 
 
 def cmd_render_and_solve(args) -> int:
-    from .simulate import expose_and_solve, render_scenario
+    from sim.closed_loop import expose_and_solve, render_scenario
 
     _check_camera_renderable(args.camera)
     scen = _scenario(args)
@@ -148,7 +148,7 @@ def sweep(camera, ranges, *, trials=20, poses=1, jitter_deg=1.0, jitter_m=0.01, 
     jitter), each exposed ``trials`` times (noise draws). Returns a list of row dicts."""
     from tqdm import tqdm
 
-    from .simulate import Scenario, expose_and_solve, render_scenario
+    from sim.closed_loop import Scenario, expose_and_solve, render_scenario
 
     base = base or Scenario(camera=camera)
     rows = []

@@ -23,8 +23,8 @@ import numpy as np
 from svgs.frames import pose_from_scenario
 from svgs.profiles import Camera
 
-from .camera import MarkerTarget
-from .ellipse import project_circle_conic
+from tof.camera import MarkerTarget
+from tof.ellipse import project_circle_conic
 
 C_LIGHT = 299_792_458.0  # m/s
 

@@ -1,6 +1,6 @@
 """The ``render`` trial kind for studies: Mitsuba render -> phone exposure -> SVGS solve.
 
-Registers with :mod:`studies.trials`, so ``svgs campaign --trial-kind render`` and
+Registers with :mod:`sim.trials`, so ``svgs campaign --trial-kind render`` and
 ``svgs sensitivity --trial-kind render`` run the full physical chain. Trials that share
 the geometry (camera, pattern, pose, lab) share one render (``render_key``/``run_group``):
 render once, expose many. Each trial's numbers depend only on its scenario and seed.
@@ -12,7 +12,7 @@ import functools
 
 import numpy as np
 
-from studies.trials import (
+from sim.trials import (
     GEOMETRIC_OUTPUTS,
     GEOMETRIC_PARAMETERS,
     STATE_KEYS,
@@ -47,7 +47,7 @@ def render_key(scenario: dict):
 
 @functools.lru_cache(maxsize=2)
 def _frame(key):
-    from .simulate import Scenario, render_scenario
+    from sim.closed_loop import Scenario, render_scenario
 
     camera, pattern, rng, x, y, roll, pitch, yaw, back, amb = key
     scen = Scenario(camera=camera, pattern=pattern, range_m=rng, x_m=x, y_m=y, roll_deg=roll, pitch_deg=pitch,
@@ -61,7 +61,7 @@ def _solve_one(scenario: dict, seed: int, frame, exposer) -> dict:
     from svgs.frames import pose_to_state
     from svgs.profiles import Pattern
 
-    from .simulate import expose_and_solve
+    from sim.closed_loop import expose_and_solve
 
     cam = frame.camera
     solver_cam = cam.replace(
@@ -104,7 +104,7 @@ def render_group(scenarios, seeds) -> list[dict]:
 
 
 def _warm_up():
-    from .variant import select_variant
+    from render.variant import select_variant
 
     select_variant()
 

@@ -65,7 +65,7 @@ def run_study(camera, ranges, remedies, *, trials=5, seed=0, out: Path, pattern=
 
     from svgs.profiles import Camera
 
-    from .simulate import Scenario, expose_and_solve, render_scenario
+    from sim.closed_loop import Scenario, expose_and_solve, render_scenario
 
     cam = Camera.load(camera)
     base_iso = float((cam.tables.get("sensor") or {}).get("base_iso", 100.0))
@@ -116,7 +116,7 @@ def cmd_exposure_study(args) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .sim_cli import _check_camera_renderable, _parse_ranges
+    from cli.sim import _check_camera_renderable, _parse_ranges
 
     _check_camera_renderable(args.camera)
     ranges = _parse_ranges(args.ranges)

@@ -1,8 +1,7 @@
 """``svgs tof solve``: the ToF pose pipeline on gray + depth files.
 
-Registered by :mod:`svgs.cli` through :func:`register`. Other modules add their own ``svgs tof``
-sub-commands (``render-and-solve`` from ``render.tof.cli``) to the same group with
-:func:`command_group`, in either registration order.
+Registered in the ``tof`` group of :data:`cli.main.COMMANDS` (``render-and-solve`` comes from
+:mod:`cli.tof_render`).
 
 Input files
     ``.npy``: any numeric array; a 3-D array ``(N, H, W)`` is a sequence of N frames.
@@ -19,7 +18,6 @@ Exit codes: 0 solved, 1 no solution (the reason is printed), 2 bad input.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -28,39 +26,11 @@ import numpy as np
 
 from svgs.errors import InputError
 
-EXIT_OK, EXIT_NO_SOLUTION, EXIT_BAD_INPUT = 0, 1, 2
+from cli.exit_codes import EXIT_NO_SOLUTION, EXIT_OK
 
 
-def command_group(subparsers) -> argparse._SubParsersAction:
-    """The ``svgs tof`` sub-command group, created on first use.
-
-    Parameters
-    ----------
-    subparsers : argparse._SubParsersAction
-        The top-level ``svgs`` sub-parsers.
-
-    Returns
-    -------
-    argparse._SubParsersAction
-        Add ``svgs tof <command>`` parsers to it.
-    """
-    parser = subparsers.choices.get("tof")
-    if parser is None:
-        parser = subparsers.add_parser(
-            "tof", help="time-of-flight sensor (Zhu et al. 2022): pose from gray + depth frames",
-            description="Time-of-flight sensor commands (second seed, Zhu et al. 2022).",
-        )
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            return action
-    group = parser.add_subparsers(dest="tof_command", metavar="TOF_COMMAND")
-    group.required = True
-    return group
-
-
-def register(subparsers) -> None:
-    """Add ``svgs tof solve`` to the ``svgs`` command line."""
-    group = command_group(subparsers)
+def register(group) -> None:
+    """Add ``solve`` to the ``svgs tof`` group's sub-parsers."""
     p = group.add_parser(
         "solve",
         help="solve the pose from ToF gray + depth frames",
@@ -146,7 +116,7 @@ def solution_json(result, n_frames: int = 1) -> dict:
     if result:
         d = result.to_json()
     else:
-        from svgs.cli import solution_json as svgs_json
+        from cli.solve import solution_json as svgs_json
 
         details = {k: v for k, v in result.details.items() if k != "timings_s"}
         d = svgs_json(type(result)(result.reason, result.message, details))
@@ -156,7 +126,7 @@ def solution_json(result, n_frames: int = 1) -> dict:
 
 def print_solution(result, out=None) -> None:
     """A readable summary of a ToF solution or failure (on ``out``, default stdout)."""
-    from svgs.cli import print_pose_summary
+    from cli.solve import print_pose_summary
 
     out = sys.stdout if out is None else out
     if not print_pose_summary(result, out, "candidate markers found"):
@@ -170,8 +140,8 @@ def print_solution(result, out=None) -> None:
 
 
 def cmd_solve(args) -> int:
-    from .camera import load_camera, load_target
-    from .pipeline import TofPipeline
+    from tof.camera import load_camera, load_target
+    from tof.pipeline import TofPipeline
 
     camera = load_camera(args.camera)
     target = load_target(args.pattern)

@@ -1,7 +1,6 @@
 """``svgs tof render-and-solve``: render the ToF camera once, draw N noisy frames, solve each.
 
-Registered by :mod:`svgs.cli` (``render.tof.cli`` in ``COMMAND_MODULES``) into the ``svgs tof``
-group of :mod:`tof.cli` (:func:`tof.cli.command_group`, either registration order). No
+Registered in the ``tof`` group of :data:`cli.main.COMMANDS`. No
 Mitsuba import at module level: the handler imports the renderer when it runs.
 
 Exit codes (as ``svgs solve``): 0 the last frame solved, 1 no solution (reason printed),
@@ -20,7 +19,7 @@ import numpy as np
 
 from svgs.errors import InputError, check_finite, check_finite_positive
 
-EXIT_OK, EXIT_NO_SOLUTION, EXIT_BAD_INPUT = 0, 1, 2
+from cli.exit_codes import EXIT_NO_SOLUTION, EXIT_OK
 #: Frames written by ``--out`` at most (gray.npy / depth.npy stacks).
 MAX_SAVED_FRAMES = 200
 STATE_KEYS = ("x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg")
@@ -32,11 +31,8 @@ POSE_ARGS = (("--x", "x_m", "lateral offset of the target origin, right (m)"),
              ("--yaw", "yaw_deg", "yaw (deg)"))
 
 
-def register(subparsers) -> None:
-    """Add ``svgs tof render-and-solve`` to the ``svgs tof`` group."""
-    from tof.cli import command_group
-
-    group = command_group(subparsers)
+def register(group) -> None:
+    """Add ``render-and-solve`` to the ``svgs tof`` group's sub-parsers."""
     p = group.add_parser(
         "render-and-solve",
         help="render the ToF camera (Mitsuba), draw noisy frames and solve them",
@@ -138,7 +134,7 @@ def run_frames(rendered, sensor, pipe, n_frames: int, seed, truth_state, keep_fr
     states : ndarray, shape (K, 6)
         Solved states.
     """
-    from render.simulate import pose_errors
+    from sim.closed_loop import pose_errors
 
     rows, kept, states, last = [], [], [], None
     for k, fr in enumerate(sensor.frames(rendered, n_frames, seed)):
@@ -184,10 +180,10 @@ def write_preview(path, gray, depth_m) -> None:
 def cmd_render_and_solve(args) -> int:
     from svgs.frames import pose_from_scenario, pose_to_state, state_dict
     from tof import TofPipeline, load_camera, load_target
-    from tof.cli import print_solution, solution_json
+    from cli.tof import print_solution, solution_json
 
-    from .camera import check_target_in_view
-    from .taps import TofSensor
+    from render.tof.camera import check_target_in_view
+    from camera.amcw import TofSensor
 
     _check_args(args)
     camera = load_camera(args.camera)
@@ -196,7 +192,7 @@ def cmd_render_and_solve(args) -> int:
     check_target_in_view(camera, target, R, t)
     sensor = TofSensor.from_camera(camera, ambient_lux=args.ambient_lux, modulation_frequency_hz=args.modulation_frequency_hz,
                                    integration_time_s=args.integration_time_s)
-    from .camera import TofRenderer
+    from render.tof.camera import TofRenderer
 
     if not args.json:
         print(f"rendering {camera.name} / {target.pattern.name} at {args.range_m:g} m ...", file=sys.stderr)

@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 from scipy.signal import fftconvolve
 
-from .params import GlareParams
+from camera.phone.params import GlareParams
 
 #: Coarse grid size for the wing convolution, pixels.
 WING_GRID_PX = 1 << 19

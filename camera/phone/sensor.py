@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 from numba import njit, prange
 
-from .params import SensorParams
+from camera.phone.params import SensorParams
 
 
 def fixed_patterns(params: SensorParams, shape) -> tuple[np.ndarray, np.ndarray]:

@@ -1,31 +1,22 @@
-"""The ``svgs`` command line.
+"""``svgs solve``: detect, identify and solve the pose from one image (a real photo or a render),
+and the readable and JSON forms of a solution that the other sensor commands share.
 
-``svgs solve`` lives here. Other sub-commands come from optional command modules
-(``render.cli``, ``calibration.cli``, ``tof.cli``): each exposes ``register(subparsers)``
-and is imported only to add its parsers - none of them imports Mitsuba before its command
-runs, so ``svgs solve`` works on a machine without a renderer.
-
-Exit codes: 0 solved / done, 1 no solution (the reason is printed), 2 bad input or usage.
+Imports only :mod:`svgs`: solving a photo loads no renderer, study or calibration code.
 """
 
 from __future__ import annotations
 
-import argparse
-import importlib
 import json
 import sys
 
 import numpy as np
 
-from .errors import InputError
-
-#: Optional command modules, in help order.
-COMMAND_MODULES = ("render.cli", "render.sim_cli", "render.remedies", "calibration.cli", "calibration.study_cli", "tof.cli", "render.tof.cli", "studies.cli")
-
-EXIT_OK, EXIT_NO_SOLUTION, EXIT_BAD_INPUT = 0, 1, 2
+from cli.exit_codes import EXIT_NO_SOLUTION, EXIT_OK
+from svgs.errors import InputError
 
 
-def _add_solve(sub) -> None:
+def register(sub) -> None:
+    """Add ``svgs solve``."""
     p = sub.add_parser(
         "solve",
         help="solve the 6-DOF pose from one image of the target",
@@ -109,8 +100,8 @@ def print_solution(result, out=None) -> None:
 
 
 def cmd_solve(args) -> int:
-    from .pipeline import solve_image
-    from .profiles import Camera, Pattern
+    from svgs.pipeline import solve_image
+    from svgs.profiles import Camera, Pattern
 
     camera = Camera.load(args.camera)
     pattern = Pattern.load(args.pattern)
@@ -122,46 +113,3 @@ def cmd_solve(args) -> int:
     else:
         print_solution(result)
     return EXIT_OK if result else EXIT_NO_SOLUTION
-
-
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="svgs",
-        description="Smartphone Video Guidance Sensor simulator: render, expose, detect, solve.",
-    )
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    sub.required = True
-    _add_solve(sub)
-    for name in COMMAND_MODULES:
-        try:
-            mod = importlib.import_module(name)
-        except ModuleNotFoundError as exc:
-            if exc.name and (exc.name == name or name.startswith(exc.name + ".")):
-                continue  # that command module is not part of this installation
-            raise
-        mod.register(sub)
-    return parser
-
-
-def main(argv=None) -> int:
-    """Run the CLI; returns the exit code (also used by tests in-process)."""
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # argparse: usage errors exit 2, --help exits 0
-        return int(exc.code or 0)
-    try:
-        return int(args.func(args))
-    except InputError as exc:
-        print(f"svgs {args.command}: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print(f"svgs {args.command}: interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:  # output piped into a program that stopped reading (e.g. head)
-        sys.stderr.close()
-        return 0
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

@@ -22,10 +22,10 @@ import numpy as np
 
 from svgs.errors import InputError
 
-from .isp import ExposureSolver, auto_exposure, downscale, jpeg_roundtrip, metering_weights, tone_lut
-from .optics import apply_psf, core_sigma_px
-from .params import ALL_STAGES, PhoneParams, check_stages
-from .sensor import bloom, electrons, fixed_patterns, readout
+from camera.phone.isp import ExposureSolver, auto_exposure, downscale, jpeg_roundtrip, metering_weights, tone_lut
+from camera.phone.optics import apply_psf, core_sigma_px
+from camera.phone.params import ALL_STAGES, PhoneParams, check_stages
+from camera.phone.sensor import bloom, electrons, fixed_patterns, readout
 
 __all__ = ["PhoneCamera", "Exposer", "Exposure", "PhoneParams", "ALL_STAGES"]
 

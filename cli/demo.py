@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import sys
 
-from svgs.cli import main as svgs_main
+from cli.main import main as svgs_main
 
 DEMO_ARGS = ["render-and-solve", "--camera", "galaxy-nexus", "--range", "10", "--x", "0.3", "--y", "-0.2",
              "--roll", "5", "--pitch", "-3", "--yaw", "10", "--seed", "1", "--out", "out/demo"]

@@ -1,9 +1,8 @@
 """``svgs calibrate render-board`` and ``svgs calibrate study`` (issue 5, items 3-4).
 
-Registered by :mod:`svgs.cli` (``COMMAND_MODULES``) after :mod:`calibration.cli`, into the
-``svgs calibrate`` group through :func:`calibration.cli.method_subparsers`. Nothing here
+Registered in the ``calibrate`` group of :data:`cli.main.COMMANDS`. Nothing here
 imports Mitsuba: the handlers import :mod:`render` when they run. Exit codes: 0 done, 2 bad
-input (:class:`svgs.errors.InputError`, printed without a traceback by ``svgs.cli.main``).
+input (:class:`svgs.errors.InputError`, printed without a traceback by ``cli.main.main``).
 """
 
 from __future__ import annotations
@@ -17,17 +16,14 @@ import numpy as np
 from svgs.errors import InputError
 
 
-def register(subparsers) -> None:
-    """Add ``render-board`` and ``study`` to the ``svgs calibrate`` group."""
-    from .cli import method_subparsers
-
-    sub = method_subparsers(subparsers)
+def register(sub) -> None:
+    """Add ``render-board`` and ``study`` to the ``svgs calibrate`` group's sub-parsers."""
     _add_render_board(sub)
     _add_study(sub)
 
 
 def _board_options(p, required: bool) -> None:
-    from .boards import BOARD_KINDS, DEFAULT_DICTIONARY
+    from calibration.boards import BOARD_KINDS, DEFAULT_DICTIONARY
 
     kw = {"required": True} if required else {}
     p.add_argument("--board", choices=BOARD_KINDS, default=None if required else "chessboard", **kw,
@@ -43,7 +39,7 @@ def _board_options(p, required: bool) -> None:
 
 
 def _make_board(args):
-    from .boards import Board
+    from calibration.boards import Board
 
     if args.spacing_mm is None or not np.isfinite(args.spacing_mm) or args.spacing_mm <= 0:
         raise InputError(f"--spacing-mm: expected a positive size in mm, got {args.spacing_mm}")
@@ -81,7 +77,7 @@ def _positive_int(v, name):
 
 # --------------------------------------------------------------------------- render-board
 def _add_render_board(sub) -> None:
-    from render.boards import DEFAULT_BOARD_SPP, DEFAULT_EXPOSURE_FILL
+    from sim.boards import DEFAULT_BOARD_SPP, DEFAULT_EXPOSURE_FILL
 
     p = sub.add_parser(
         "render-board",
@@ -119,7 +115,7 @@ def cmd_render_board(args) -> int:
         raise InputError(f"--out {str(out)!r} exists and is not a folder")
     if out.is_dir() and (out / "truth.json").exists():
         raise InputError(f"--out {str(out)!r} already holds a rendered set (truth.json); choose an empty folder")
-    from render.boards import render_board_set
+    from sim.boards import render_board_set
 
     progress = None if args.json else (lambda s: print(s, file=sys.stderr))
     bs = render_board_set(cam, board, n, seed=args.seed, spp=spp, pinhole=args.pinhole,
@@ -139,7 +135,7 @@ def cmd_render_board(args) -> int:
 
 # --------------------------------------------------------------------------- study
 def _add_study(sub) -> None:
-    from .study import (
+    from studies.calibration.study import (
         DEFAULT_FOCAL_EXPOSURES,
         DEFAULT_POSES_PER_RANGE,
         DEFAULT_SUBSETS,
@@ -190,7 +186,7 @@ def _add_study(sub) -> None:
 
 
 def cmd_study(args) -> int:
-    from .study import parse_number_list, run_study, summary_text, write_report
+    from studies.calibration.study import parse_number_list, run_study, summary_text, write_report
 
     board = _make_board(args)
     cam = _camera(args)

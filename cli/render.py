@@ -1,6 +1,6 @@
 """``svgs render`` and ``svgs doctor``.
 
-Registered by :mod:`svgs.cli` through :func:`register`. Nothing here imports mitsuba or
+Registered by :mod:`cli.main` through :func:`register`. Nothing here imports mitsuba or
 drjit at import time: the handlers do, after :func:`render.variant.select_variant` has
 chosen the LLVM library.
 """
@@ -78,8 +78,8 @@ def cmd_render(args) -> int:
         raise InputError(f"--range: expected a positive range in metres, got {args.range_m}")
     R, t = pose_from_scenario(args.range_m, args.x_m, args.y_m, args.roll, args.pitch, args.yaw)
 
-    from .api import Renderer
-    from .constants import DEFAULT_ROI_SPP, DEFAULT_ROI_SPP_PATH, DEFAULT_SPOT_SAMPLES, DEFAULT_SPP
+    from render.api import Renderer
+    from render.constants import DEFAULT_ROI_SPP, DEFAULT_ROI_SPP_PATH, DEFAULT_SPOT_SAMPLES, DEFAULT_SPP
 
     opts = {} if args.body is None else {"body": args.body}
     spp = DEFAULT_SPP if args.spp is None else args.spp
@@ -90,7 +90,7 @@ def cmd_render(args) -> int:
         print(f"svgs render: note: {r.variant.notice}", file=sys.stderr)
     res = r.render(R, t, seed=args.seed, full_frame=args.full_frame)
     res.truth["command"] = {k: v for k, v in vars(args).items() if k != "func"}
-    from .simulate import DEFAULT_BACKDROP_DISTANCE_M, Scenario, lab_flux
+    from sim.closed_loop import DEFAULT_BACKDROP_DISTANCE_M, Scenario, lab_flux
 
     back = DEFAULT_BACKDROP_DISTANCE_M if args.backdrop_m is None else (None if args.backdrop_m == 0 else args.backdrop_m)
     scen = Scenario(camera=args.camera, pattern=args.pattern, range_m=args.range_m, x_m=args.x_m, y_m=args.y_m,
@@ -102,7 +102,7 @@ def cmd_render(args) -> int:
     if not args.no_expose:
         import cv2
 
-        from .phone import PhoneCamera
+        from camera.phone import PhoneCamera
 
         ex = PhoneCamera(camera).expose(res.flux, seed=args.seed, exposure_s=args.exposure_s, iso=args.iso)
         res.truth["exposure"] = {"exposure_s": ex.exposure_s, "iso": ex.iso, "gain_dn_per_e": ex.gain_dn_per_e,
@@ -136,7 +136,7 @@ def doctor_report(variant=None) -> dict:
     import importlib.metadata as md
     import platform
 
-    from .variant import MIN_LLVM_MAJOR, llvm_candidates, pick_llvm, select_variant
+    from render.variant import MIN_LLVM_MAJOR, backend_report, llvm_candidates, pick_llvm, select_variant
 
     rep = {"python": platform.python_version(), "platform": platform.platform()}
     versions = {}
@@ -157,14 +157,7 @@ def doctor_report(variant=None) -> dict:
     try:
         info = select_variant(variant)
         rep["variant"] = info.to_json()
-        import drjit as dr
-        import mitsuba as mi
-
-        rep["mitsuba_variants"] = list(mi.variants())
-        rep["backends"] = {
-            "cuda": bool(info.backend == "cuda" or _safe_has(dr, "CUDA")),
-            "llvm": info.llvm_version is not None,
-        }
+        rep.update(backend_report(info))
         rep["usable"] = True
         rep["warning"] = info.notice or ("scalar variant: rendering works but is slow" if info.backend == "scalar" else "")
     except InputError:
@@ -175,13 +168,6 @@ def doctor_report(variant=None) -> dict:
         rep["error"] = f"{type(exc).__name__}: {exc}"
     rep["ok"] = ok
     return rep
-
-
-def _safe_has(dr, which):
-    try:
-        return bool(dr.has_backend(getattr(dr.JitBackend, which)))
-    except Exception:  # noqa: BLE001
-        return False
 
 
 def cmd_doctor(args) -> int:

@@ -22,9 +22,9 @@ import cv2
 import numpy as np
 from scipy.special import erf
 
-from .errors import InputError
-from .frames import pose_from_scenario
-from .profiles import Camera, Pattern
+from svgs.errors import InputError
+from svgs.frames import pose_from_scenario
+from svgs.profiles import Camera, Pattern
 
 #: Half-width of a spot's drawing window in Gaussian sigmas (the flux beyond is < 1e-12).
 WINDOW_SIGMAS = 7.0

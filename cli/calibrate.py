@@ -1,51 +1,27 @@
 """``svgs calibrate`` sub-commands: ``focal`` (the paper's method) and ``board`` (OpenCV).
 
-Registered by :mod:`svgs.cli` through :func:`register`. Nothing here imports Mitsuba.
+Registered by :mod:`cli.main` through :func:`register`. Nothing here imports Mitsuba.
 Exit codes: 0 done, 2 bad input (:class:`svgs.errors.InputError`, printed without a
-traceback by ``svgs.cli.main``).
+traceback by ``cli.main.main``).
 """
 
 from __future__ import annotations
 
 import json
-import weakref
 from pathlib import Path
 
 import numpy as np
 
-from svgs.cli import parse_threshold
+from cli.solve import parse_threshold
 from svgs.errors import InputError
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".pgm", ".ppm", ".npy")
 
 
-def register(subparsers) -> None:
-    """Add ``calibrate focal`` and ``calibrate board`` to the ``svgs`` parser."""
-    p = subparsers.add_parser(
-        "calibrate",
-        help="calibrate a camera: focal length from the target at known ranges, or full intrinsics from boards",
-        description="Camera calibration. 'focal': the paper's focal length from spot spacings at known "
-        "ranges. 'board': full intrinsics and distortion from chessboard, ChArUco or circle-grid images.",
-    )
-    sub = p.add_subparsers(dest="calibrate_command", metavar="METHOD")
-    sub.required = True
-    _METHOD_GROUPS[p] = sub
+def register(sub) -> None:
+    """Add ``focal`` and ``board`` to the ``svgs calibrate`` group's sub-parsers."""
     _add_focal(sub)
     _add_board(sub)
-
-
-#: ``calibrate`` parser -> its METHOD sub-parsers (for :func:`method_subparsers`).
-_METHOD_GROUPS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
-
-def method_subparsers(subparsers):
-    """Hook for other modules: the METHOD sub-parsers of ``svgs calibrate`` in this ``svgs``
-    parser, to add more ``svgs calibrate`` sub-commands (see :mod:`calibration.study_cli`).
-    :func:`register` must have run first (``svgs.cli.COMMAND_MODULES`` order)."""
-    parser = subparsers.choices.get("calibrate")
-    if parser is None or parser not in _METHOD_GROUPS:
-        raise RuntimeError("calibration.cli.register must run before calibrate sub-commands are added")
-    return _METHOD_GROUPS[parser]
 
 
 # --------------------------------------------------------------------------- focal
@@ -82,7 +58,7 @@ _threshold = parse_threshold  # one parser for every command's --threshold
 def cmd_focal(args) -> int:
     from svgs.profiles import Camera, Pattern
 
-    from .focal import estimate_focal_from_images
+    from calibration.focal import estimate_focal_from_images
 
     if len(args.image) != len(args.range):
         raise InputError(f"give one --range per --image: got {len(args.image)} images and {len(args.range)} ranges")
@@ -112,7 +88,7 @@ def cmd_focal(args) -> int:
 
 # --------------------------------------------------------------------------- board
 def _add_board(sub) -> None:
-    from .boards import BOARD_KINDS, DEFAULT_DICTIONARY, MIN_VIEWS
+    from calibration.boards import BOARD_KINDS, DEFAULT_DICTIONARY, MIN_VIEWS
 
     p = sub.add_parser(
         "board",
@@ -166,7 +142,7 @@ def expand_images(paths) -> list[Path]:
 def cmd_board(args) -> int:
     from svgs.profiles import Camera
 
-    from .boards import Board, calibrate_images
+    from calibration.boards import Board, calibrate_images
 
     if args.spacing_mm is None or not np.isfinite(args.spacing_mm) or args.spacing_mm <= 0:
         raise InputError(f"--spacing-mm: expected a positive size in mm, got {args.spacing_mm}")
@@ -203,4 +179,4 @@ def cmd_board(args) -> int:
     return 0
 
 
-__all__ = ["register", "method_subparsers", "cmd_focal", "cmd_board", "expand_images"]
+__all__ = ["register", "cmd_focal", "cmd_board", "expand_images"]

@@ -1,6 +1,6 @@
 """``svgs campaign`` and ``svgs sensitivity``: studies from the command line.
 
-Discovered by :mod:`svgs.cli` (``register(subparsers)``). Nothing heavy is imported until a
+Discovered by :mod:`cli.main` (``register(subparsers)``). Nothing heavy is imported until a
 handler runs. Exit codes: 0 done, 2 bad input (an :class:`~svgs.errors.InputError`, raised
 before any trial runs).
 """
@@ -115,8 +115,8 @@ def _safe(name: str) -> str:
 
 
 def cmd_campaign(args) -> int:
-    from .campaign import make_config, print_summary, run_campaign
-    from .execution import executor_spec
+    from studies.campaign import make_config, print_summary, run_campaign
+    from studies.execution import executor_spec
 
     spec = executor_spec(args.processes, args.workers, args.scheduler)
     du, dv = _pp(args.pp_error_px)
@@ -152,8 +152,8 @@ def cmd_campaign(args) -> int:
 
 
 def cmd_sensitivity(args) -> int:
-    from .execution import executor_spec
-    from .sensitivity import OUTPUTS, make_config, ranking, run_sensitivity
+    from studies.execution import executor_spec
+    from studies.sensitivity import OUTPUTS, make_config, ranking, run_sensitivity
 
     spec = executor_spec(args.processes, args.workers, args.scheduler)
     config = make_config(args.camera, args.vary, fixed=args.fixed, method=args.method, n=args.n, seed=args.seed,

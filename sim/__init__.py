@@ -1,0 +1,11 @@
+"""Simulation: scenarios, the closed loop and the trial kinds.
+
+- :mod:`sim.closed_loop` - Scenario -> rendered flux -> phone image -> SVGS solution -> errors.
+- :mod:`sim.trials` - trial kinds (what one trial of a study computes): the registry and the
+  geometric kind; :mod:`sim.render_trial` - the rendered (Mitsuba + phone) kind.
+- :mod:`sim.boards` - rendered calibration board sets (Mitsuba + phone camera).
+- :mod:`sim.tof_stability` - the ToF paper's stability runs re-enacted.
+
+Layer: above :mod:`render`, :mod:`camera`, :mod:`calibration`, :mod:`tof` and :mod:`svgs`;
+below :mod:`studies` and :mod:`cli`. Mitsuba is reached only through :mod:`render`.
+"""
