@@ -223,7 +223,6 @@ class Board:
         q = self.quiet_zone_m if quiet_zone_m is None else float(quiet_zone_m)
         x0, y0, x1, y1 = self.extent_m
         if self.kind == "charuco":
-            import cv2
 
             sq_px = max(int(np.ceil(self.spacing_m * ppm)), 8)
             margin_px = max(int(round(q / self.spacing_m * sq_px)), 0)

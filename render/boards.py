@@ -27,10 +27,8 @@ imported inside :class:`BoardRenderer` only, after :func:`render.variant.select_
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 

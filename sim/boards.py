@@ -10,14 +10,14 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from render.boards import (DEFAULT_BOARD_SPP, DEFAULT_EXPOSURE_FILL, DEFAULT_TEXELS_PER_PX, MAX_MANUAL_EXPOSURE_S,
                            BoardRenderer, texture_px_per_m)
-from svgs.errors import InputError, ProfileError, check_finite_positive
+from svgs.errors import InputError
 from svgs.profiles import Camera
 
 

@@ -35,8 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[2]
-PAPER_CSV = REPO.parent / "shared" / "data" / "tof_2022_stability.csv"
+from assets.papers import tof_2022_stability
+
+REPO = Path(__file__).resolve().parents[1]
 #: Paper column -> (our quantity, index); position columns from t_cam_target (mm).
 COLUMNS = (("x_mm", "t", 0), ("y_mm", "t", 1), ("z_mm", "t", 2),
            ("pitch_deg", "ang", 0), ("yaw_deg", "ang", 1), ("roll_deg", "ang", 2))
@@ -45,15 +46,6 @@ SCENARIOS = {
     697: {"table": "1", "t_mm": (2.193, -10.457, 697.604), "angles_deg": (-0.382, -2.653, -2.528)},
     5712: {"table": "2", "t_mm": (5.097, -2.381, 5712.362), "angles_deg": (3.823, 1.324, -2.053)},
 }
-
-
-def paper_rows(path=PAPER_CSV) -> list[dict]:
-    """Rows of the paper's stability CSV (empty when the file is not there)."""
-    p = Path(path)
-    if not p.is_file():
-        return []
-    with open(p, encoding="utf-8") as fh:
-        return list(csv.DictReader(line for line in fh if not line.startswith("#")))
 
 
 def scenario_pose(sc: dict):
@@ -285,7 +277,7 @@ def main(argv=None) -> int:
                 run["frames"] = args.variant_frames
                 variants.append((label, {"frames": args.variant_frames}, run))
                 print(f"  {label}, {r} mm: std " + ", ".join(f"{n} {v:.3f}" for (n, _, _), v in zip(COLUMNS, summarise(run)["std"])))
-    c, m = write_report(runs, Path(args.out), args, paper_rows(), variants)
+    c, m = write_report(runs, Path(args.out), args, tof_2022_stability(), variants)
     print(f"wrote {c} and {m}")
     return 0
 

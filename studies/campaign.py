@@ -33,7 +33,6 @@ Calibration practice (``calibration="paper"``)
 
 from __future__ import annotations
 
-import csv
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,6 +42,7 @@ import numpy as np
 from svgs.errors import InputError
 
 from .seeding import check_seed, design_rng, study_rng, trial_seed
+from assets.papers import svgs_2014_results
 from sim.trials import STATE_KEYS, build_scenario, get_trial_kind
 
 #: The paper's Sensor Mount envelope.
@@ -63,28 +63,10 @@ PAPER_CALIBRATION_SPREAD = {"pp_error_u_px": 15.0, "pp_error_v_px": 15.0, "k1_er
 PAPER_RANGE_SIGMA_M = 0.02
 CALIBRATION_KEYS = ("focal_error_frac", "pp_error_u_px", "pp_error_v_px", "k1_error")
 
-PAPER_CSV = Path(__file__).resolve().parent.parent / "assets" / "data" / "svgs_2014_results.csv"
 
 COMPONENT_LABELS = {"x_m": "X (m)", "y_m": "Y (m)", "z_m": "Z (m)",
                     "roll_deg": "roll (deg)", "pitch_deg": "pitch (deg)", "yaw_deg": "yaw (deg)"}
 SHORT = {"x_m": "X", "y_m": "Y", "z_m": "Z", "roll_deg": "roll", "pitch_deg": "pitch", "yaw_deg": "yaw"}
-
-
-def load_paper_results(path=PAPER_CSV) -> dict:
-    """The paper's Tables 2-5.
-
-    Returns
-    -------
-    dict
-        ``{(phone, statistic, range_m): {component: value}}`` with statistic ``mean_error``
-        or ``std`` and components :data:`sim.trials.STATE_KEYS`.
-    """
-    out = {}
-    with open(path, newline="") as fh:
-        lines = [ln for ln in fh if not ln.startswith("#")]
-    for r in csv.DictReader(lines):
-        out[(r["phone"], r["statistic"], float(r["range_m"]))] = {k: float(r[k]) for k in STATE_KEYS}
-    return out
 
 
 @dataclass(frozen=True)
@@ -266,7 +248,7 @@ def summarize(table: dict, config: CampaignConfig, paper: dict | None = None) ->
     """
     from sim.trials import _camera
 
-    paper = load_paper_results() if paper is None else paper
+    paper = svgs_2014_results() if paper is None else paper
     phone = _camera(config.camera).name
     out = []
     for r in config.ranges_m:

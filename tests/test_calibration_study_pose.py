@@ -6,11 +6,12 @@ by atan(d / f) and leaves the position where it was; exact intrinsics reproduce 
 """
 
 import numpy as np
+
+from assets.papers import svgs_2014_rows
 import pytest
 
 from studies.calibration.study import (
     error_cases,
-    paper_table,
     pose_error_study,
     pose_errors_batch,
     power_law_exponent,
@@ -99,7 +100,7 @@ def test_power_law_exponent():
 
 
 def test_table4_comparison_reads_the_paper():
-    paper = paper_table("galaxy-nexus", "mean_error")
+    paper = svgs_2014_rows("galaxy-nexus", "mean_error")
     assert [p["range_m"] for p in paper] == [5, 10, 15, 20, 30]
     assert paper[-1]["y_m"] == 1.53  # Table 4, 30 m, Y
     rows = [{"case": "c", "range_m": float(r), "noise_px": 0.0, **{k: 0.01 * r for k in

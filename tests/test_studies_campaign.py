@@ -11,7 +11,8 @@ from html.parser import HTMLParser
 import numpy as np
 import pytest
 
-from studies.campaign import PAPER_CSV, PAPER_RANGES_M, campaign_trials, load_paper_results, make_config, summarize
+from assets.papers import SVGS_2014_CSV, svgs_2014_results
+from studies.campaign import PAPER_RANGES_M, campaign_trials, make_config, summarize
 from cli.main import main
 from svgs.errors import InputError
 
@@ -20,8 +21,8 @@ CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic
 
 
 def test_paper_tables_come_from_assets():
-    assert PAPER_CSV.parent.name == "data" and PAPER_CSV.parent.parent.name == "assets"
-    paper = load_paper_results()
+    assert SVGS_2014_CSV.parent.name == "data" and SVGS_2014_CSV.parent.parent.name == "assets"
+    paper = svgs_2014_results()
     assert paper[("galaxy-nexus", "mean_error", 30.0)]["y_m"] == 1.53  # Table 4
     assert paper[("htc-amaze-4g", "std", 6.5)]["roll_deg"] == 0.44  # Table 3
     for phone, ranges in PAPER_RANGES_M.items():

@@ -6,27 +6,19 @@ Usage: python tools/compare_paper.py SWEEP_DIR PHONE > SWEEP_DIR/comparison.md
 
 from __future__ import annotations
 
-import csv
 import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
-PAPER = Path(__file__).resolve().parents[1] / "assets" / "data" / "svgs_2014_results.csv"
-KEYS = ("x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg")
+from assets.papers import SVGS_STATE_KEYS, svgs_2014_results
+
+KEYS = SVGS_STATE_KEYS
 
 
 def paper(phone):
-    out = {}
-    with open(PAPER) as fh:
-        rows = [r for r in csv.reader(fh) if r and not r[0].startswith("#")]
-    hdr = rows[0]
-    for r in rows[1:]:
-        d = dict(zip(hdr, r))
-        if d["phone"] == phone:
-            out[(d["statistic"], float(d["range_m"]))] = [float(d[k]) for k in KEYS]
-    return out
+    return {(st, rng): [v[k] for k in KEYS] for (ph, st, rng), v in svgs_2014_results().items() if ph == phone}
 
 
 def main(sweep_dir, phone):

@@ -42,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from assets.papers import svgs_2014_rows
 from svgs.errors import InputError, check_finite_positive
 from svgs.profiles import DISTORTION_KEYS, Camera, Pattern
 
@@ -85,7 +86,6 @@ DEFAULT_FLOOR_NOISE_PX = (0.1, 0.3)
 #: Centroid noise of the geometric (no-render) focal frames, px per axis.
 GEOMETRIC_CENTROID_NOISE_PX = 0.1
 #: The paper's results (Tables 2-5).
-PAPER_RESULTS = Path(__file__).resolve().parent.parent / "assets" / "data" / "svgs_2014_results.csv"
 
 
 # --------------------------------------------------------------------------- helpers
@@ -739,19 +739,6 @@ def paper_phone(camera_name: str):
     return next((p for p in PAPER_PHONES if str(camera_name).startswith(p)), None)
 
 
-def paper_table(phone: str = "galaxy-nexus", statistic: str = "mean_error") -> list[dict]:
-    """Rows of the paper's results for one phone and statistic (Tables 2-5)."""
-    import csv
-
-    rows = []
-    with open(PAPER_RESULTS, newline="") as fh:
-        lines = [ln for ln in fh if not ln.startswith("#")]
-    for r in csv.DictReader(lines):
-        if r["phone"] == phone and r["statistic"] == statistic:
-            rows.append({k: (float(v) if k not in ("phone", "statistic") else v) for k, v in r.items()})
-    return rows
-
-
 def power_law_exponent(ranges_m, values) -> float:
     """Least-squares ``p`` of ``values ~ a * range^p`` (log-log), NaN with fewer than 2 points."""
     r = np.asarray(ranges_m, float)
@@ -772,13 +759,13 @@ def table4_comparison(pose_rows, phone: str | None = "galaxy-nexus") -> dict:
         ``error ~ R^p``), ``z_over_range_pct`` (the paper's z error / range), ``rows``
         (range, component, paper value, and each case's value, at the paper's ranges).
     """
-    paper = paper_table(phone, "mean_error") if phone else []
+    paper = svgs_2014_rows(phone, "mean_error") if phone else []
     if not paper:
         return {"paper": [], "exponents": {}, "z_over_range_pct": [], "rows": [], "phone": phone}
     pr = [p["range_m"] for p in paper]
     tm, ts, _ = PAPER_PHONES.get(phone, ("Table 4", "Table 5", phone))
     exps = {f"paper {tm}": {c: power_law_exponent(pr, [p[c] for p in paper]) for c in STATE_COLS}}
-    std = paper_table(phone, "std")
+    std = svgs_2014_rows(phone, "std")
     if std:
         exps[f"paper {ts} (std)"] = {c: power_law_exponent([p["range_m"] for p in std], [p[c] for p in std])
                                        for c in STATE_COLS}
@@ -1051,7 +1038,7 @@ def table4_conclusion(result: StudyResult) -> list[str]:
     worst = max(result.focal_rows, key=lambda r: r["rms_err_pct"])
     att0 = min(paper[0]["roll_deg"], paper[0]["pitch_deg"]), max(paper[0]["roll_deg"], paper[0]["pitch_deg"])
     floor = [k for k in ex if k.startswith("exact (noise")]
-    std = {p["range_m"]: p for p in paper_table(t4["phone"], "std")}
+    std = {p["range_m"]: p for p in svgs_2014_rows(t4["phone"], "std")}
     rat = [p[c] / std[p["range_m"]][c] for p in paper for c in ("x_m", "y_m")
            if p["range_m"] in std and std[p["range_m"]][c] > 0]
     ratio = (min(rat), max(rat)) if rat else (np.nan, np.nan)
