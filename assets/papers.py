@@ -17,8 +17,8 @@ DATA_DIR = Path(__file__).resolve().parent / "data"
 SVGS_2014_CSV = DATA_DIR / "svgs_2014_results.csv"
 TOF_2022_CSV = DATA_DIR / "tof_2022_stability.csv"
 
-#: The SVGS state components of Tables 2-5, in the paper's order (m, deg).
-SVGS_STATE_KEYS = ("x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg")
+#: Columns of the SVGS table that identify a row (the rest are state components, m and deg).
+SVGS_ROW_KEYS = ("phone", "statistic", "range_m")
 
 
 def read_table(path) -> list[dict]:
@@ -44,9 +44,10 @@ def svgs_2014_results(path=SVGS_2014_CSV) -> dict:
     -------
     dict
         ``{(phone, statistic, range_m): {component: value}}``; ``statistic`` is
-        ``"mean_error"`` or ``"std"``, components are :data:`SVGS_STATE_KEYS`.
+        ``"mean_error"`` or ``"std"``, components are the file's other columns
+        (``x_m ... yaw_deg``, the paper's state: :data:`svgs.frames.STATE_KEYS`).
     """
-    return {(r["phone"], r["statistic"], float(r["range_m"])): {k: float(r[k]) for k in SVGS_STATE_KEYS}
+    return {(r["phone"], r["statistic"], float(r["range_m"])): {k: float(v) for k, v in r.items() if k not in SVGS_ROW_KEYS}
             for r in read_table(path)}
 
 

@@ -177,6 +177,11 @@ def check_pose(R_cam_target, t_cam_target_m):
     return R, t
 
 
+#: The paper's state vector as named keys, in order: the camera's position in the target
+#: frame (m) and the x-y-z attitude sequence (deg). The one definition; JSON and CSV use it.
+STATE_KEYS = ("x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg")
+
+
 def state_dict(state) -> dict:
     """The state as the JSON keys of ``svgs solve --json`` (metres and degrees).
 
@@ -185,14 +190,8 @@ def state_dict(state) -> dict:
     state : array_like, shape (6,)
     """
     s = np.asarray(state, float)
-    return {
-        "x_m": float(s[0]),
-        "y_m": float(s[1]),
-        "z_m": float(s[2]),
-        "roll_deg": float(np.degrees(s[3])),
-        "pitch_deg": float(np.degrees(s[4])),
-        "yaw_deg": float(np.degrees(s[5])),
-    }
+    values = (*s[:3], *np.degrees(s[3:6]))
+    return {k: float(v) for k, v in zip(STATE_KEYS, values)}
 
 
 def rotation_angle_deg(R_a, R_b) -> np.ndarray:

@@ -71,3 +71,27 @@ def test_svgs_solve_loads_no_renderer_study_or_calibration_code(tmp_path):
     loaded = set(out["mods"])
     for forbidden in ("render", "sim", "studies", "calibration", "camera", "tof", "mitsuba", "drjit"):
         assert forbidden not in loaded, f"svgs solve loaded {forbidden}"
+
+
+def test_every_registered_command_is_in_the_parser():
+    """The registry (cli.main.COMMANDS) is the parser: each command and group exists once."""
+    from cli.main import COMMANDS, build_parser
+
+    parser = build_parser()
+    top = next(a for a in parser._actions if a.dest == "command")
+    for group, _module, names in COMMANDS:
+        choices = top.choices
+        if group is not None:
+            sub = next(a for a in top.choices[group]._actions if hasattr(a, "choices") and a.choices)
+            choices = sub.choices
+        for name in names:
+            assert name in choices, (group, name)
+
+
+def test_building_one_command_registers_only_its_modules():
+    from cli.main import _selected
+
+    assert _selected(["solve", "x.png", "--camera", "galaxy-nexus"]) == {"cli.solve"}
+    assert _selected(["calibrate", "focal"]) == {"cli.calibrate", "cli.calibrate_study"}
+    assert _selected(["tof", "solve"]) == {"cli.tof", "cli.tof_render"}
+    assert _selected(["--help"]) is None and _selected(["no-such-command"]) is None

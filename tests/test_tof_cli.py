@@ -83,15 +83,3 @@ def test_bad_input_exits_2(files, capsys, gray, depth, extra, message):
     rc, out = _run(capsys, "--gray", d / gray, "--depth", d / depth, *extra)
     assert rc == 2
     assert message in out.err and "Traceback" not in out.err
-
-
-def test_tof_group_accepts_more_commands():
-    """Other modules (cli.render) add ``svgs tof`` commands to the same group."""
-    import argparse
-
-    from cli.tof import command_group, register
-
-    top = argparse.ArgumentParser().add_subparsers()
-    command_group(top).add_parser("render-and-solve")
-    register(top)
-    assert set(command_group(top).choices) == {"render-and-solve", "solve"}

@@ -12,9 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-from assets.papers import SVGS_STATE_KEYS, svgs_2014_results
+from assets.papers import svgs_2014_results
+from svgs.frames import STATE_KEYS
 
-KEYS = SVGS_STATE_KEYS
+KEYS = STATE_KEYS
 
 
 def paper(phone):
