@@ -22,15 +22,14 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from svgs import Camera, Pattern, solve_centroids  # noqa: E402
-from svgs.frames import pose_from_scenario  # noqa: E402
+from svgs.frames import pose_from_scenario, sample_envelope_scenario  # noqa: E402
 
 
 def envelope_points(n, seed, cam, pat, sigma_px=0.1):
     rng = np.random.default_rng(seed)
-    r = np.exp(rng.uniform(np.log(1.0), np.log(40.0), n))
     Rs, ts = [], []
-    for k in range(n):
-        R, t = pose_from_scenario(r[k], *(rng.uniform(-0.15, 0.15, 2) * r[k]), *rng.uniform([-25, -25, -45], [25, 25, 45]))
+    for _ in range(n):
+        R, t = pose_from_scenario(**sample_envelope_scenario(rng))
         Rs.append(R)
         ts.append(t)
     uv = cam.project_target(pat.points_m, np.array(Rs), np.array(ts))

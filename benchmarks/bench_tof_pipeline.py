@@ -8,7 +8,7 @@ ranges (697 mm and 5712 mm):
 2. centroid error against the projected marker centres, with and without the
    projected-circle-centre correction (and the analytic Kanatani check);
 3. pose scatter over the frames: fluctuation range (max - min) per axis beside the paper's
-   Tables 1-2 (``shared/data/tof_2022_stability.csv``), and the mean error.
+   Tables 1-2 (``assets/data/tof_2022_stability.csv``, read by :mod:`assets.papers`), and the mean error.
 
 The synthetic frames use assumed noise levels (synth_tof), so part 3 illustrates the
 pipeline; the physical comparison needs the rendered ToF frames (render/).
@@ -21,7 +21,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import csv
 import sys
 import time
 from pathlib import Path
@@ -37,17 +36,16 @@ from tof.pipeline import STAGES
 from synth_tof import synth_frame  # noqa: E402
 
 BUDGET_S = 0.020  # 50 fps (assumed frame rate of the EPC660 set-up, tof-epc660.toml)
-PAPER_CSV = Path(__file__).resolve().parents[2] / "shared" / "data" / "tof_2022_stability.csv"
 # The paper's average attitudes (Tables 1-2) as (pitch, yaw, roll) deg; set as our (roll, pitch, yaw)
 # = (about x, about y, about the boresight) - the axis mapping is our ASSUMPTION.
 SCENARIOS = {
-    "697 mm": dict(range_m=0.697, x_m=0.0022, y_m=-0.0105, angles=(-0.38, -2.65, -2.53)),
-    "5712 mm": dict(range_m=5.712, x_m=0.0051, y_m=-0.0024, angles=(3.82, 1.32, -2.05)),
+    "697 mm": dict(range_m=0.697, target_x_m=0.0022, target_y_m=-0.0105, angles=(-0.38, -2.65, -2.53)),
+    "5712 mm": dict(range_m=5.712, target_x_m=0.0051, target_y_m=-0.0024, angles=(3.82, 1.32, -2.05)),
 }
 
 
 def make_frames(cam, tgt, sc, n, seed):
-    R, t = pose_from_scenario(sc["range_m"], sc["x_m"], sc["y_m"], *sc["angles"])
+    R, t = pose_from_scenario(sc["range_m"], sc["target_x_m"], sc["target_y_m"], *sc["angles"])
     gain = 800.0 * max(1.0, (sc["range_m"] / 0.8) ** 2)  # exposure scaled with range
     seeds = np.random.SeedSequence(seed).spawn(n)
     return R, t, [synth_frame(cam, tgt, R, t, seed=s, gray_scale_dn=gain) for s in seeds]
@@ -83,14 +81,10 @@ def _load() -> str:
 
 
 def paper_fluctuations():
-    if not PAPER_CSV.is_file():
-        return {}
+    from assets.papers import tof_2022_stability
+
     out = {}
-    with open(PAPER_CSV, encoding="utf-8") as fh:
-        rows = [r for r in csv.reader(l for l in fh if not l.startswith("#"))]
-    head = rows[0]
-    for r in rows[1:]:
-        d = dict(zip(head, r))
+    for d in tof_2022_stability():
         if d["statistic"] == "fluctuation" and d["table"] in ("2", "3"):
             out[f"{d['range_mm']} mm"] = d
     return out

@@ -293,75 +293,139 @@ def estimate_focal(
         centroid_sigma_px = check_finite_positive(centroid_sigma_px, "centroid_sigma_px")
     range_sigma_m = check_finite_positive(range_sigma_m, "range_sigma_m", allow_zero=True)
     aspect = camera.fy / camera.fx
-    P = pattern.points_m
     f = float(camera.fx)
     it = 0
     n_pts = np.array([int(np.all(np.isfinite(p), axis=1).sum()) for p in pts])
     dof = int(2 * n_pts.sum() - (len(pts) * (2 + (1 if allow_roll else 0)) + 1))
     for it in range(1, int(max_iter) + 1):
-        cam_f = camera.replace(fx=f, fy=f * aspect)
-        C, S, obs_list, mod_list = [], [], [], []
-        for p, R in zip(pts, rng):
-            ok = np.all(np.isfinite(p), axis=1)
-            uv = p[ok]
-            if camera.has_distortion:  # undistorted pixel coordinates
-                xy = cam_f.pixels_to_normalized(uv)
-                uv = np.stack([f * xy[:, 0] + camera.cx, f * aspect * xy[:, 1] + camera.cy], -1)
-            # complex pixels in fx units: y = u + j v / aspect; principal point likewise
-            y = uv[:, 0] + 1j * uv[:, 1] / aspect
-            pp = camera.cx + 1j * camera.cy / aspect
-            Pk = P[ok]
-            w = 1.0 / (R - Pk[:, 2])  # perspective factor of each target
-            g = w / w.mean()
-            # y_i = pp + f (exp(j theta) P_i + O) w_i, P_i = x_i - j y_i (OpenCV camera frame),
-            # O the lateral offset. With T = pp + f O mean(w) (the pattern's image position):
-            # y_i - pp (1 - g_i) = T g_i + f exp(j theta) P_i w_i  - linear in T and f exp(j theta)
-            y2 = y - pp * (1.0 - g)
-            b = (Pk[:, 0] - 1j * Pk[:, 1]) * w
-            # eliminate T: project both sides orthogonally to g
-            z_obs = y2 - g * (np.dot(g, y2) / np.dot(g, g))
-            a = b - g * (np.dot(g, b) / np.dot(g, g))
-            c = np.sum(np.conj(a) * z_obs)
-            C.append(c if allow_roll else complex(c.real, 0.0))
-            S.append(float(np.sum(np.abs(a) ** 2)))
-            obs_list.append(z_obs)
-            mod_list.append(a)
-        C = np.array(C)
-        S = np.array(S)
-        if np.any(S <= 0):
-            raise InputError("estimate_focal: degenerate pattern geometry (targets project onto one point)")
-        f_k = (np.abs(C) if allow_roll else C.real) / S
-        theta = np.angle(C) if allow_roll else np.zeros(len(C))
-        # least squares under centroid noise alone; its residuals estimate the noise
-        f_ls = float(np.sum(f_k * S) / np.sum(S))
-        rss_ls = sum(float(np.sum(np.abs(o - f_ls * np.exp(1j * th) * a) ** 2)) for o, a, th in zip(obs_list, mod_list, theta))
-        res_sigma = float(np.sqrt(rss_ls / dof)) if dof > 0 else float("nan")
-        sigma = centroid_sigma_px if centroid_sigma_px is not None else res_sigma
-        if not np.isfinite(sigma):
-            raise InputError(
-                f"estimate_focal: {len(pts)} image(s) with {int(n_pts.sum())} centroids leave no residual degrees "
-                "of freedom to estimate the centroid noise; give centroid_sigma_px (--centroid-sigma-px) or more images"
-            )
-        # per-image variances: centroid noise + range uncertainty (f_k scales with R_k)
-        v_noise = sigma**2 / S
-        v_range = (f_ls * range_sigma_m / rng) ** 2
-        inv_v = 1.0 / (v_noise + v_range)
-        f_new = float(np.sum(f_k * inv_v) / np.sum(inv_v))
-        if not np.isfinite(f_new) or f_new <= 0:
-            raise InputError(
-                "estimate_focal: no positive focal length fits these centroids; check that they are "
-                f"ordered by target id {pattern.ids.tolist()} and that the ranges belong to the images"
-            )
-        done = abs(f_new - f) <= 1e-12 * f_new
-        f = f_new
+        st = _focal_step(pts, rng, pattern, camera, f, aspect, allow_roll=allow_roll, dof=dof, n_pts=n_pts,
+                         centroid_sigma_px=centroid_sigma_px, range_sigma_m=range_sigma_m)
+        done = abs(st.f_new - f) <= 1e-12 * st.f_new
+        f = st.f_new
         if done or not camera.has_distortion:
             break
+    return _focal_estimate(st, f, names, rng, n_pts, dof, aspect, it)
 
+
+def _image_terms(p, R: float, P, camera: Camera, cam_f: Camera, f: float, aspect: float):
+    """The linear model of one image's centroids after eliminating the pattern's image position.
+
+    ``y_i = pp + f (exp(j theta) P_i + O) w_i`` in complex pixels (fx units), ``P_i = x_i - j y_i``
+    (OpenCV camera frame), ``w_i = 1 / (R - z_i)`` the perspective factor and ``O`` the lateral
+    offset. With ``T = pp + f O mean(w)`` (the pattern's image position) and ``g = w / mean(w)``:
+    ``y_i - pp (1 - g_i) = T g_i + f exp(j theta) P_i w_i``, linear in ``T`` and ``f exp(j theta)``;
+    both sides are projected orthogonally to ``g`` to eliminate ``T``.
+
+    Parameters
+    ----------
+    p : ndarray, shape (N, 2)
+        Centroids by target id, pixels (NaN rows: targets not seen).
+    R : float
+        Range of the image, metres.
+    P : ndarray, shape (N, 3)
+        Target points in the target frame, metres.
+    cam_f : Camera
+        ``camera`` with the current focal length ``f`` (for the undistortion).
+
+    Returns
+    -------
+    c : complex
+        ``sum(conj(a) z_obs)``: ``f exp(j theta)`` times ``s`` at the least-squares fit.
+    s : float
+        ``sum(|a|^2)``.
+    z_obs, a : ndarray of complex, shape (n,)
+        Projected observations (px) and model (normalised: ``f exp(j theta) a`` predicts
+        ``z_obs``) of the targets seen.
+    """
+    ok = np.all(np.isfinite(p), axis=1)
+    uv = p[ok]
+    if camera.has_distortion:  # undistorted pixel coordinates
+        xy = cam_f.pixels_to_normalized(uv)
+        uv = np.stack([f * xy[:, 0] + camera.cx, f * aspect * xy[:, 1] + camera.cy], -1)
+    # complex pixels in fx units: y = u + j v / aspect; principal point likewise
+    y = uv[:, 0] + 1j * uv[:, 1] / aspect
+    pp = camera.cx + 1j * camera.cy / aspect
+    Pk = P[ok]
+    w = 1.0 / (R - Pk[:, 2])  # perspective factor of each target
+    g = w / w.mean()
+    y2 = y - pp * (1.0 - g)
+    b = (Pk[:, 0] - 1j * Pk[:, 1]) * w
+    # eliminate T: project both sides orthogonally to g
+    z_obs = y2 - g * (np.dot(g, y2) / np.dot(g, g))
+    a = b - g * (np.dot(g, b) / np.dot(g, g))
+    c = np.sum(np.conj(a) * z_obs)
+    return c, float(np.sum(np.abs(a) ** 2)), z_obs, a
+
+
+@dataclass
+class _FocalStep:
+    """One fixed-point iteration of :func:`estimate_focal`: per-image focal lengths (``f_k``,
+    ``theta`` rad), their variances (px^2) and the combined focal length ``f_new`` (px)."""
+
+    f_k: np.ndarray
+    theta: np.ndarray
+    obs: list
+    mod: list
+    res_sigma: float
+    sigma: float
+    v_noise: np.ndarray
+    v_range: np.ndarray
+    inv_v: np.ndarray
+    f_new: float
+
+
+def _focal_step(pts, rng, pattern: Pattern, camera: Camera, f: float, aspect: float, *, allow_roll: bool,
+                dof: int, n_pts, centroid_sigma_px, range_sigma_m: float) -> _FocalStep:
+    """Per-image focal lengths at the current ``f`` and their inverse-variance weighted mean.
+
+    ``n_pts`` (shape (K,)) counts each image's centroids; ``dof`` is the residual degrees of
+    freedom of the least-squares fit that estimates the centroid noise.
+    """
+    cam_f = camera.replace(fx=f, fy=f * aspect)
+    C, S, obs_list, mod_list = [], [], [], []
+    for p, R in zip(pts, rng):
+        c, s_k, z_obs, a = _image_terms(p, R, pattern.points_m, camera, cam_f, f, aspect)
+        C.append(c if allow_roll else complex(c.real, 0.0))
+        S.append(s_k)
+        obs_list.append(z_obs)
+        mod_list.append(a)
+    C = np.array(C)
+    S = np.array(S)
+    if np.any(S <= 0):
+        raise InputError("estimate_focal: degenerate pattern geometry (targets project onto one point)")
+    f_k = (np.abs(C) if allow_roll else C.real) / S
+    theta = np.angle(C) if allow_roll else np.zeros(len(C))
+    # least squares under centroid noise alone; its residuals estimate the noise
+    f_ls = float(np.sum(f_k * S) / np.sum(S))
+    rss_ls = sum(float(np.sum(np.abs(o - f_ls * np.exp(1j * th) * a) ** 2)) for o, a, th in zip(obs_list, mod_list, theta))
+    res_sigma = float(np.sqrt(rss_ls / dof)) if dof > 0 else float("nan")
+    sigma = centroid_sigma_px if centroid_sigma_px is not None else res_sigma
+    if not np.isfinite(sigma):
+        raise InputError(
+            f"estimate_focal: {len(pts)} image(s) with {int(n_pts.sum())} centroids leave no residual degrees "
+            "of freedom to estimate the centroid noise; give centroid_sigma_px (--centroid-sigma-px) or more images"
+        )
+    # per-image variances: centroid noise + range uncertainty (f_k scales with R_k)
+    v_noise = sigma**2 / S
+    v_range = (f_ls * range_sigma_m / rng) ** 2
+    inv_v = 1.0 / (v_noise + v_range)
+    f_new = float(np.sum(f_k * inv_v) / np.sum(inv_v))
+    if not np.isfinite(f_new) or f_new <= 0:
+        raise InputError(
+            "estimate_focal: no positive focal length fits these centroids; check that they are "
+            f"ordered by target id {pattern.ids.tolist()} and that the ranges belong to the images"
+        )
+    return _FocalStep(f_k, theta, obs_list, mod_list, res_sigma, sigma, v_noise, v_range, inv_v, f_new)
+
+
+def _focal_estimate(st: _FocalStep, f: float, names, rng, n_pts, dof: int, aspect: float, it: int) -> FocalEstimate:
+    """The :class:`FocalEstimate` of the last iteration ``st`` at the focal length ``f``."""
+    inv_v, v_noise, v_range, f_k, theta = st.inv_v, st.v_noise, st.v_range, st.f_k, st.theta
     w = inv_v / inv_v.sum()
     sig_noise = float(np.sqrt(np.sum(w**2 * v_noise)))
     sig_range = float(np.sqrt(np.sum(w**2 * v_range)))
     chi2 = float(np.sum((f_k - f) ** 2 * inv_v))
-    rss_k = np.array([np.sum(np.abs(o - f * np.exp(1j * th) * a) ** 2) for o, a, th in zip(obs_list, mod_list, theta)])
+    rss_k = np.array([np.sum(np.abs(o - f * np.exp(1j * th) * a) ** 2) for o, a, th in zip(st.obs, st.mod, theta)])
     per = tuple(
         ImageFocal(
             name=n, range_m=float(R), f_px=float(fk), sigma_f_px=float(np.sqrt(vn + vr)),
@@ -375,15 +439,14 @@ def estimate_focal(
         per_image=per,
         sigma_f_noise_px=sig_noise,
         sigma_f_range_px=sig_range,
-        centroid_sigma_px=float(sigma),
-        residual_sigma_px=res_sigma,
+        centroid_sigma_px=float(st.sigma),
+        residual_sigma_px=st.res_sigma,
         residual_rms_px=float(np.sqrt(rss_k.sum() / (2 * n_pts.sum()))),
         dof=dof,
         consistency_chi2=chi2,
         aspect=float(aspect),
         iterations=it,
     )
-
 
 def estimate_focal_from_images(
     images,

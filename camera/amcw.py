@@ -34,18 +34,22 @@ mode: illumination off, no suppression, gray = the mean of the taps (ambient ima
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, fields, replace
 
 import numpy as np
 
+from svgs.constants import SPEED_OF_LIGHT_M_S
 from svgs.errors import InputError, ProfileError, check_finite_positive
 
-C_LIGHT_M_S = 299_792_458.0
+from camera.rendered import RenderedFrame
 
 
 @dataclass
-class RenderedTof:
+class RenderedTof(RenderedFrame):
     """Noise-free per-pixel means of one rendered ToF frame (what :class:`TofSensor` draws from).
+
+    A :class:`camera.rendered.RenderedFrame` (``truth``, ``timings_s``, ``pose()``): ``flux``
+    is the photon rate of the illumination's return, ``active_radiance * photons_per_radiance``.
 
     Attributes
     ----------
@@ -66,7 +70,9 @@ class RenderedTof:
     modulation_frequency_hz : float
         Frequency the phasors were made for.
     truth : dict
-        Pose, marker projections, render settings (JSON-serialisable).
+        Pose, marker projections, render settings (JSON-serialisable; keyword-only).
+    timings_s : dict
+        Render stage timings (keyword-only; also in ``truth["render"]["timings_s"]``).
     """
 
     active_radiance: np.ndarray
@@ -76,11 +82,15 @@ class RenderedTof:
     hit_fraction: np.ndarray
     range_first_m: np.ndarray
     modulation_frequency_hz: float
-    truth: dict = field(default_factory=dict)
 
     @property
     def shape(self) -> tuple:
         return self.active_radiance.shape
+
+    @property
+    def flux(self) -> np.ndarray:
+        """Photons per second per pixel of the illumination's return (no QE), shape (H, W)."""
+        return self.active_radiance * self.photons_per_radiance
 
     @property
     def depth_m(self) -> np.ndarray:
@@ -101,21 +111,22 @@ class RenderedTof:
         import json
 
         with np.load(path, allow_pickle=False) as z:
+            truth = json.loads(str(z["truth"]))
             return cls(z["active_radiance"], z["phasor_radiance"], z["ambient_factor"], z["photons_per_radiance"],
-                       z["hit_fraction"], z["range_first_m"], float(z["modulation_frequency_hz"]),
-                       json.loads(str(z["truth"])))
+                       z["hit_fraction"], z["range_first_m"], float(z["modulation_frequency_hz"]), truth=truth,
+                       timings_s=dict((truth.get("render") or {}).get("timings_s") or {}))
 
 
 def unambiguous_range_m(modulation_frequency_hz: float) -> float:
     """``c / (2 f)``: depth wraps to 0 beyond this."""
-    return C_LIGHT_M_S / (2.0 * float(modulation_frequency_hz))
+    return SPEED_OF_LIGHT_M_S / (2.0 * float(modulation_frequency_hz))
 
 
 def phasor_depth_m(phasor, modulation_frequency_hz: float) -> np.ndarray:
     """Depth ``c arg(P) / (4 pi f)`` in ``[0, c / 2f)``; NaN where ``P == 0``."""
     p = np.asarray(phasor)
     phi = np.mod(np.angle(p), 2 * np.pi)
-    d = C_LIGHT_M_S * phi / (4 * np.pi * float(modulation_frequency_hz))
+    d = SPEED_OF_LIGHT_M_S * phi / (4 * np.pi * float(modulation_frequency_hz))
     d = np.where(d >= unambiguous_range_m(modulation_frequency_hz), 0.0, d)  # 2 pi rounding
     return np.where(np.abs(p) > 0, d, np.nan)
 
@@ -374,7 +385,7 @@ class TofSensor:
         amp = 0.5 * np.hypot(re, im)
         if mode == "active":
             phi = np.mod(np.arctan2(im, re), 2 * np.pi)
-            depth = C_LIGHT_M_S * phi / (4 * np.pi * self.modulation_frequency_hz)
+            depth = SPEED_OF_LIGHT_M_S * phi / (4 * np.pi * self.modulation_frequency_hz)
             depth = np.where(depth >= unambiguous_range_m(self.modulation_frequency_hz), 0.0, depth)
             ok = (amp >= self.min_amplitude_dn) & ~sat
             depth = np.where(ok, depth, np.nan)

@@ -88,7 +88,8 @@ def cmd_focal(args) -> int:
 
 # --------------------------------------------------------------------------- board
 def _add_board(sub) -> None:
-    from calibration.boards import BOARD_KINDS, DEFAULT_DICTIONARY, MIN_VIEWS
+    from calibration.boards import BOARD_KINDS, DEFAULT_DICTIONARY
+    from calibration.intrinsics import MIN_VIEWS
 
     p = sub.add_parser(
         "board",
@@ -142,7 +143,8 @@ def expand_images(paths) -> list[Path]:
 def cmd_board(args) -> int:
     from svgs.profiles import Camera
 
-    from calibration.boards import Board, calibrate_images
+    from calibration.boards import Board
+    from calibration.intrinsics import calibrate_images
 
     if args.spacing_mm is None or not np.isfinite(args.spacing_mm) or args.spacing_mm <= 0:
         raise InputError(f"--spacing-mm: expected a positive size in mm, got {args.spacing_mm}")

@@ -135,7 +135,7 @@ def cmd_render_board(args) -> int:
 
 # --------------------------------------------------------------------------- study
 def _add_study(sub) -> None:
-    from studies.calibration.study import (
+    from studies.calibration.common import (
         DEFAULT_FOCAL_EXPOSURES,
         DEFAULT_POSES_PER_RANGE,
         DEFAULT_SUBSETS,
@@ -154,7 +154,9 @@ def _add_study(sub) -> None:
         "point, distortion, the focal-only calibration, the full calibrations - and report pose error versus "
         "range (1-40 m), beside the paper's Table 4. The true camera is the profile plus --true-pp-offset-px "
         "and --true-dist (ASSUMED real-lens differences; '0 0' and '0,0,0,0,0' take the profile as the truth). "
-        "Writes DIR/report.html (self-contained), CSV tables and summary.json; prints a short summary.",
+        "Writes DIR/report.html (self-contained), CSV tables and summary.json; prints a short summary. The trials of "
+        "the three parts run on the executor chosen as for 'svgs campaign' and are stored in DIR/trials/ as they "
+        "finish: rerun the same command to resume an interrupted study.",
     )
     p.add_argument("--camera", required=True, help="nominal camera profile (name or .toml path)")
     p.add_argument("--out", default=None, metavar="DIR", help="report folder (default calibration-study-CAMERA)")
@@ -182,11 +184,20 @@ def _add_study(sub) -> None:
     p.add_argument("--cache", default=None, metavar="DIR",
                    help="keep the rendered board set and focal frames here, and reuse them on a rerun")
     _size_options(p)
+    from cli.studies import add_executor_options
+
+    add_executor_options(p)
     p.set_defaults(func=cmd_study)
 
 
 def cmd_study(args) -> int:
-    from studies.calibration.study import parse_number_list, run_study, summary_text, write_report
+    from cli.studies import executor_from_args
+    from studies.calibration import (
+        parse_number_list,
+        run_calibration_study,
+        summary_text,
+        write_report,
+    )
 
     board = _make_board(args)
     cam = _camera(args)
@@ -208,17 +219,24 @@ def cmd_study(args) -> int:
         if cache.exists() and not cache.is_dir():
             raise InputError(f"--cache {str(cache)!r} exists and is not a folder")
         cache.mkdir(parents=True, exist_ok=True)
-    say = lambda s: print(s, file=sys.stderr)  # noqa: E731
-    res = run_study(
-        cam, views_list=views, seed=args.seed, board=board, subsets=subsets, spp=spp, geometric=args.geometric,
+    spec = executor_from_args(args)
+    say = lambda s: print(s, file=sys.stderr)
+    res = run_calibration_study(
+        cam, out, views_list=views, seed=args.seed, board=board, subsets=subsets, spp=spp, geometric=args.geometric,
         true_pp_offset_px=tuple(args.true_pp_offset_px), true_dist=true_dist, focal_ranges_m=focal_ranges,
         focal_exposures=exposures, pose_ranges_m=pose_ranges, poses_per_range=ppr, pattern=args.pattern,
         board_set_dir=None if cache is None else cache / "board-set",
         focal_cache=None if cache is None else cache / "focal_frames.npz", progress=say,
+        spec=spec, chunk_size=args.chunk_size, show_progress=not args.no_progress,
     )
     command = _study_command(args)
     files = write_report(res, out, command=command)
     print(summary_text(res))
+    for part, st in res.run_stats.items():
+        print(f"{part}: ran {st.n_run} trial(s) in {st.elapsed_s:.1f} s ({st.executor}); "
+              f"{st.n_already_done} were already done")
+    if not res.run_stats:
+        print("all trials were already done; report rebuilt from the stored results")
     print(f"wrote {files['report']} and {len([k for k in files if k not in ('report', 'summary')])} CSV tables in {out}/")
     return 0
 
@@ -240,7 +258,9 @@ def _study_command(args) -> str:
         parts += ["--width", str(args.width), "--height", str(args.height)]
     if args.geometric:
         parts.append("--geometric")
-    return " ".join(shlex.quote(p) for p in parts)
+    from cli.studies import executor_argv
+
+    return " ".join(shlex.quote(p) for p in parts + executor_argv(args))
 
 
-__all__ = ["register", "cmd_render_board", "cmd_study"]
+__all__ = ["cmd_render_board", "cmd_study", "register"]

@@ -29,8 +29,10 @@ def register(sub) -> None:
     p.add_argument("--camera", required=True, help="camera profile name or .toml path (needs [optics] and [flash])")
     p.add_argument("--pattern", default="svgs-3u", help="target pattern name or .toml path (default: svgs-3u)")
     p.add_argument("--range", dest="range_m", type=float, required=True, help="range along the boresight, m")
-    p.add_argument("--x", dest="x_m", type=float, default=0.0, help="lateral offset of the target origin, m (right)")
-    p.add_argument("--y", dest="y_m", type=float, default=0.0, help="lateral offset of the target origin, m (up)")
+    p.add_argument("--x", dest="target_x_m", type=float, default=0.0,
+                   help="lateral offset of the target origin from the boresight, camera right, m")
+    p.add_argument("--y", dest="target_y_m", type=float, default=0.0,
+                   help="lateral offset of the target origin from the boresight, camera up, m")
     p.add_argument("--roll", type=float, default=0.0, help="roll (phi), deg")
     p.add_argument("--pitch", type=float, default=0.0, help="pitch (theta), deg")
     p.add_argument("--yaw", type=float, default=0.0, help="yaw (psi), deg")
@@ -76,7 +78,7 @@ def cmd_render(args) -> int:
     pattern = Pattern.load(args.pattern)
     if not (args.range_m == args.range_m) or args.range_m <= 0:
         raise InputError(f"--range: expected a positive range in metres, got {args.range_m}")
-    R, t = pose_from_scenario(args.range_m, args.x_m, args.y_m, args.roll, args.pitch, args.yaw)
+    R, t = pose_from_scenario(args.range_m, args.target_x_m, args.target_y_m, args.roll, args.pitch, args.yaw)
 
     from render.api import Renderer
     from render.constants import DEFAULT_ROI_SPP, DEFAULT_ROI_SPP_PATH, DEFAULT_SPOT_SAMPLES, DEFAULT_SPP
@@ -93,9 +95,9 @@ def cmd_render(args) -> int:
     from sim.closed_loop import DEFAULT_BACKDROP_DISTANCE_M, Scenario, lab_flux
 
     back = DEFAULT_BACKDROP_DISTANCE_M if args.backdrop_m is None else (None if args.backdrop_m == 0 else args.backdrop_m)
-    scen = Scenario(camera=args.camera, pattern=args.pattern, range_m=args.range_m, x_m=args.x_m, y_m=args.y_m,
-                    roll_deg=args.roll, pitch_deg=args.pitch, yaw_deg=args.yaw, backdrop_distance_m=back,
-                    ambient_radiance_w_m2_sr=args.ambient)
+    scen = Scenario(camera=args.camera, pattern=args.pattern, range_m=args.range_m,
+                    target_x_m=args.target_x_m, target_y_m=args.target_y_m, roll_deg=args.roll, pitch_deg=args.pitch,
+                    yaw_deg=args.yaw, backdrop_distance_m=back, ambient_radiance_w_m2_sr=args.ambient)
     lab, lab_info = lab_flux(camera, scen)
     res.flux = res.flux + lab
     res.truth["lab"] = lab_info

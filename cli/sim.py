@@ -5,7 +5,6 @@ No Mitsuba import at module level: the handlers import the renderer when they ru
 
 from __future__ import annotations
 
-import csv
 import json
 import sys
 from pathlib import Path
@@ -14,8 +13,10 @@ import numpy as np
 
 from svgs.errors import InputError
 
-POSE_ARGS = (("--x", "x_m", "lateral offset of the target origin, right (m)"),
-             ("--y", "y_m", "lateral offset of the target origin, up (m)"),
+#: (flag, dest, help). ``--x``/``--y`` set the target's lateral offset (Scenario.target_x_m,
+#: target_y_m), not the camera position ``x_m``/``y_m`` of the solved state.
+POSE_ARGS = (("--x", "target_x_m", "lateral offset of the target origin from the boresight, camera right (m)"),
+             ("--y", "target_y_m", "lateral offset of the target origin from the boresight, camera up (m)"),
              ("--roll", "roll_deg", "roll, paper x-y-z sequence (deg)"),
              ("--pitch", "pitch_deg", "pitch (deg)"),
              ("--yaw", "yaw_deg", "yaw (deg)"))
@@ -46,7 +47,7 @@ def _scenario(args, range_m=None):
     back = DEFAULT_BACKDROP_DISTANCE_M if args.backdrop_m is None else (None if args.backdrop_m == 0 else args.backdrop_m)
     return Scenario(
         camera=args.camera, pattern=args.pattern, range_m=args.range_m if range_m is None else range_m,
-        x_m=args.x_m, y_m=args.y_m, roll_deg=args.roll_deg, pitch_deg=args.pitch_deg, yaw_deg=args.yaw_deg,
+        target_x_m=args.target_x_m, target_y_m=args.target_y_m, roll_deg=args.roll_deg, pitch_deg=args.pitch_deg, yaw_deg=args.yaw_deg,
         backdrop_distance_m=back, ambient_radiance_w_m2_sr=args.ambient, spp=args.spp, roi_spp=args.roi_spp,
     )
 
@@ -119,9 +120,9 @@ def cmd_render_and_solve(args) -> int:
             s = row["state"]
             print(f"solution: x {s['x_m']:+.4f} y {s['y_m']:+.4f} z {s['z_m']:+.4f} m   "
                   f"roll {s['roll_deg']:+.3f} pitch {s['pitch_deg']:+.3f} yaw {s['yaw_deg']:+.3f} deg")
-            pe, ae = row["pos_err_m"], row["att_err_deg"]
-            print(f"errors:   pos_err_m [{pe[0]:+.4f}, {pe[1]:+.4f}, {pe[2]:+.4f}]   "
-                  f"att_err_deg [{ae[0]:+.3f}, {ae[1]:+.3f}, {ae[2]:+.3f}]   residual {row['residual_rms_px']:.3f} px")
+            pe, ae = row["pos_err_vec_m"], row["att_err_vec_deg"]
+            print(f"errors:   pos_err_vec_m [{pe[0]:+.4f}, {pe[1]:+.4f}, {pe[2]:+.4f}]   "
+                  f"att_err_vec_deg [{ae[0]:+.3f}, {ae[1]:+.3f}, {ae[2]:+.3f}]   residual {row['residual_rms_px']:.3f} px")
         else:
             print(f"NO SOLUTION ({row['reason']}): {row['message']}")
         for k, v in paths.items():
@@ -142,126 +143,43 @@ def _parse_ranges(text) -> list[float]:
     return vals
 
 
-def sweep(camera, ranges, *, trials=20, poses=1, jitter_deg=1.0, jitter_m=0.01, seed=0, threshold=None,
-          base=None, progress=True):
-    """Range sweep: at each range, ``poses`` renders (nominal pose plus small seeded
-    jitter), each exposed ``trials`` times (noise draws). Returns a list of row dicts."""
-    from tqdm import tqdm
-
-    from sim.closed_loop import Scenario, expose_and_solve, render_scenario
-
-    base = base or Scenario(camera=camera)
-    rows = []
-    total = len(ranges) * poses * trials
-    bar = tqdm(total=total, desc="range sweep", unit="trial", disable=not progress, file=sys.stderr)
-    for ri, rng_m in enumerate(ranges):
-        for pk in range(poses):
-            g = np.random.default_rng([seed, ri, pk])
-            j = g.normal(0, 1, 5) * ([jitter_m] * 2 + [jitter_deg] * 3) if pk > 0 else np.zeros(5)
-            scen = base.replace(camera=camera, range_m=rng_m, x_m=base.x_m + j[0], y_m=base.y_m + j[1],
-                                roll_deg=base.roll_deg + j[2], pitch_deg=base.pitch_deg + j[3], yaw_deg=base.yaw_deg + j[4])
-            frame = render_scenario(scen, seed=int(g.integers(2**31)))
-            exposer = frame.exposer()
-            for k in range(trials):
-                row = expose_and_solve(frame, exposer, seed=int(g.integers(2**31)), threshold=threshold)
-                row = {k2: v for k2, v in row.items() if not k2.startswith("_")}
-                row.update({"range_m": rng_m, "pose_index": pk, "trial": k})
-                rows.append(row)
-                bar.update(1)
-    bar.close()
-    return rows
-
-
-def summarise(rows) -> list[dict]:
-    """Per-range table: blobs, success rate, merged rate, mean and std of errors."""
-    out = []
-    for r in sorted({row["range_m"] for row in rows}):
-        rr = [x for x in rows if x["range_m"] == r]
-        ok = [x for x in rr if x["ok"]]
-        reasons = {}
-        for x in rr:
-            if not x["ok"]:
-                reasons[x["reason"]] = reasons.get(x["reason"], 0) + 1
-        d = {
-            "range_m": r, "trials": len(rr),
-            "blobs_median": float(np.median([x["n_blobs"] or 0 for x in rr])),
-            "four_blobs_rate": float(np.mean([(x["n_blobs"] or 0) == 4 for x in rr])),
-            "success_rate": len(ok) / len(rr),
-            "merged_rate": reasons.get("merged_spots", 0) / len(rr),
-            "failures": ";".join(f"{k}:{v}" for k, v in sorted(reasons.items())),
-            "exposure_s": float(np.median([x["exposure_s"] for x in rr])),
-            "iso": float(np.median([x["iso"] for x in rr])),
-        }
-        for name, key, idx in (("x_m", "pos_err_m", 0), ("y_m", "pos_err_m", 1), ("z_m", "pos_err_m", 2),
-                               ("roll_deg", "att_err_deg", 0), ("pitch_deg", "att_err_deg", 1), ("yaw_deg", "att_err_deg", 2)):
-            v = np.array([x[key][idx] for x in ok]) if ok else np.array([np.nan])
-            d[f"err_mean_{name}"] = float(np.mean(v))
-            d[f"err_std_{name}"] = float(np.std(v))
-        out.append(d)
-    return out
-
-
-def plot_sweep(table, path, title):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    r = [d["range_m"] for d in table]
-    fig, ax = plt.subplots(1, 3, figsize=(14, 4))
-    ax[0].plot(r, [d["success_rate"] for d in table], "o-", label="solved")
-    ax[0].plot(r, [d["merged_rate"] for d in table], "s--", label="failed: merged spots")
-    ax[0].set(xlabel="range (m)", ylabel="fraction of trials", ylim=(-0.05, 1.05), title="success")
-    ax[0].legend()
-    ax[1].plot(r, [d["blobs_median"] for d in table], "o-")
-    ax[1].axhline(4, color="grey", lw=0.5)
-    ax[1].set(xlabel="range (m)", ylabel="blobs found (median)", title="blobs",
-              ylim=(0, max(6.0, max(d["blobs_median"] for d in table) + 1)))
-    for name in ("x_m", "y_m", "z_m"):
-        ax[2].plot(r, [abs(d[f"err_mean_{name}"]) + d[f"err_std_{name}"] for d in table], "o-", label=f"|mean|+std {name}")
-    ax[2].set(xlabel="range (m)", ylabel="position error (m)", title="errors", yscale="log")
-    ax[2].legend(fontsize=8)
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
 def cmd_range_sweep(args) -> int:
+    from cli.studies import executor_from_args
+    from sim.closed_loop import DEFAULT_BACKDROP_DISTANCE_M
+    from studies.range_sweep import format_table, make_config, run_range_sweep
+
     _check_camera_renderable(args.camera)
     ranges = _parse_ranges(args.ranges)
-    if args.trials < 1 or args.poses < 1:
-        raise InputError(f"--trials and --poses must be >= 1, got {args.trials} and {args.poses}")
-    args.range_m = ranges[0]
-    base = _scenario(args, range_m=ranges[0])
-    rows = sweep(args.camera, ranges, trials=args.trials, poses=args.poses, jitter_deg=args.jitter_deg,
-                 jitter_m=args.jitter_m, seed=args.seed, threshold=_threshold(args.threshold), base=base)
-    table = summarise(rows)
+    spec = executor_from_args(args)
+    scene = {"pattern": args.pattern, "threshold": _threshold(args.threshold), "target_x_m": args.target_x_m,
+             "target_y_m": args.target_y_m, "roll_deg": args.roll_deg, "pitch_deg": args.pitch_deg,
+             "yaw_deg": args.yaw_deg,
+             "backdrop_distance_m": DEFAULT_BACKDROP_DISTANCE_M if args.backdrop_m is None else args.backdrop_m,
+             "ambient_radiance_w_m2_sr": args.ambient, "spp": -1 if args.spp is None else args.spp,
+             "roi_spp": -1 if args.roi_spp is None else args.roi_spp,
+             "exposure_s": args.exposure_s or 0.0, "iso": args.iso or 0.0}
+    cfg = make_config(args.camera, ranges, trials=args.trials, poses=args.poses, jitter_deg=args.jitter_deg,
+                      jitter_m=args.jitter_m, seed=args.seed, **scene)
     out = Path(args.out or f"range-sweep-{Path(str(args.camera)).stem}")
-    out.mkdir(parents=True, exist_ok=True)
-    with open(out / "summary.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(table[0]))
-        w.writeheader()
-        w.writerows(table)
-    with open(out / "trials.jsonl", "w") as fh:
-        for row in rows:
-            fh.write(json.dumps(row, default=_json_default) + "\n")
-    plot_sweep(table, out / "range_sweep.png", f"{args.camera}: range sweep ({args.trials} trials x {args.poses} pose(s) per range)")
-    hdr = f"{'range_m':>8} {'blobs':>5} {'4 blobs':>7} {'solved':>6} {'merged':>6} {'exp_ms':>7} {'iso':>5}  err x/y/z (m, mean+-std)        failures"
-    print(hdr)
-    for d in table:
-        errs = " ".join(f"{d[f'err_mean_{n}']:+.3f}+-{d[f'err_std_{n}']:.3f}" for n in ("x_m", "y_m", "z_m"))
-        print(f"{d['range_m']:8.2f} {d['blobs_median']:5.1f} {d['four_blobs_rate']:7.2f} {d['success_rate']:6.2f} "
-              f"{d['merged_rate']:6.2f} {d['exposure_s'] * 1e3:7.2f} {d['iso']:5.0f}  {errs}  {d['failures']}")
-    print(f"wrote {out / 'summary.csv'}, {out / 'trials.jsonl'}, {out / 'range_sweep.png'}")
+    table, stats = run_range_sweep(cfg, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress)
+    print("\n".join(format_table(table)))
+    if stats is not None:
+        print(f"ran {stats.n_run} trial(s) in {stats.elapsed_s:.1f} s ({stats.executor}); "
+              f"{stats.n_already_done} were already done")
+    else:
+        print("all trials were already done; outputs rebuilt from the stored results")
+    print(f"wrote {out / 'summary.csv'}, {out / 'trials.jsonl'}, {out / 'range_sweep.png'} "
+          f"(results: {out / 'results.csv'})")
     return 0
 
 
 def register(sub) -> None:
+    from cli.studies import add_executor_options
+
     p = sub.add_parser("render-and-solve", help="render a scenario, expose it with the phone model and solve it",
                        description="Render the target under the phone's flash (Mitsuba), expose the flux with the "
                        "phone camera model, run the SVGS detector and solver on the delivered image, and print "
-                       "truth, solution and errors (pos_err_m, att_err_deg). Exit 0 solved, 1 no solution, 2 bad input.")
+                       "truth, solution and errors (pos_err_vec_m, att_err_vec_deg). Exit 0 solved, 1 no solution, 2 bad input.")
     _scene_args(p)
     p.add_argument("--out", default=None, help="write flux.npy, raw.npy, image.png, preview.png, truth.json, solution.json here")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -271,12 +189,15 @@ def register(sub) -> None:
                        description="At each range, render the scenario (nominal pose, or --poses jittered poses) "
                        "and expose it --trials times (noise draws: render once, expose many); print a table of "
                        "blobs found, success rate, merged-spot failures and errors, and write summary.csv, "
-                       "trials.jsonl and range_sweep.png.")
+                       "trials.jsonl and range_sweep.png. Trials are stored as they finish (results.csv, "
+                       "manifest.json): rerunning the same command resumes; other options are refused.")
     _scene_args(p, with_range=False)
     p.add_argument("--ranges", required=True, help="comma-separated ranges in metres, e.g. 1,2,4,6.5,8,10")
     p.add_argument("--trials", type=int, default=20, help="exposures (noise draws) per rendered pose (default 20)")
     p.add_argument("--poses", type=int, default=1, help="rendered poses per range; beyond the first they are jittered (default 1)")
     p.add_argument("--jitter-deg", type=float, default=1.0, help="attitude jitter of the extra poses, deg (1 sigma)")
     p.add_argument("--jitter-m", type=float, default=0.01, help="lateral jitter of the extra poses, m (1 sigma)")
-    p.add_argument("--out", default=None, help="output folder (default range-sweep-CAMERA)")
+    p.add_argument("--out", default=None, help="output folder (default range-sweep-CAMERA); rerun with the same "
+                   "options to resume an interrupted sweep")
+    add_executor_options(p)
     p.set_defaults(func=cmd_range_sweep)

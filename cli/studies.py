@@ -13,7 +13,9 @@ import sys
 from svgs.errors import InputError
 
 
-def _add_executor_options(p) -> None:
+def add_executor_options(p) -> None:
+    """The executor options of every study command (``--processes``/``--workers``/``--scheduler``,
+    ``--chunk-size``, ``--no-progress``); read them back with :func:`executor_from_args`."""
     g = p.add_argument_group("where the trials run (choose one; default: a local process pool, one process per core)")
     x = g.add_mutually_exclusive_group()
     x.add_argument("--processes", type=int, default=None, metavar="N",
@@ -27,7 +29,19 @@ def _add_executor_options(p) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
 
 
-def _executor_argv(args) -> list[str]:
+def executor_from_args(args):
+    """The validated :class:`studies.execution.ExecutorSpec` of :func:`add_executor_options`'s
+    options (:class:`InputError` for a bad ``--chunk-size`` too)."""
+    from studies.execution import executor_spec
+
+    spec = executor_spec(args.processes, args.workers, args.scheduler)
+    if args.chunk_size is not None and args.chunk_size < 1:
+        raise InputError(f"--chunk-size: expected a positive integer, got {args.chunk_size}")
+    return spec
+
+
+def executor_argv(args) -> list[str]:
+    """The executor options of ``args`` as command-line words (for a report's command line)."""
     out = []
     for flag, v in (("--processes", args.processes), ("--workers", args.workers), ("--scheduler", args.scheduler),
                     ("--chunk-size", args.chunk_size)):
@@ -62,7 +76,7 @@ def register(sub) -> None:
     p.add_argument("--k1-error", type=float, default=0.0, help="solver's radial distortion k1 error")
     p.add_argument("--merge-px", type=float, default=0.0,
                    help="spots closer than this many px merge (geometric trial; 0: never)")
-    _add_executor_options(p)
+    add_executor_options(p)
     p.set_defaults(func=cmd_campaign)
 
     s = sub.add_parser(
@@ -83,7 +97,7 @@ def register(sub) -> None:
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--trial-kind", default="geometric")
     s.add_argument("--pattern", default="svgs-3u")
-    _add_executor_options(s)
+    add_executor_options(s)
     s.set_defaults(func=cmd_sensitivity)
 
 
@@ -138,7 +152,7 @@ def cmd_campaign(args) -> int:
                  "--k1-error", repr(args.k1_error)]
     if args.merge_px:
         argv += ["--merge-px", repr(args.merge_px)]
-    argv += _executor_argv(args)
+    argv += executor_argv(args)
     summary, stats, path = run_campaign(config, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress,
                                         command=shlex.join(argv))
     print_summary(summary, config)
@@ -167,14 +181,14 @@ def cmd_sensitivity(args) -> int:
     for v in args.fixed:
         argv += ["--fixed", v]
     argv += ["--method", args.method, "--n", str(args.n), "--out", out, "--seed", str(args.seed),
-             "--trial-kind", args.trial_kind, "--pattern", args.pattern] + _executor_argv(args)
+             "--trial-kind", args.trial_kind, "--pattern", args.pattern] + executor_argv(args)
     print(f"{args.method}: {config.n_trials} trials over {len(config.varied)} parameters", file=sys.stderr)
     result, stats, path, n_groups = run_sensitivity(config, out, spec, chunk_size=args.chunk_size,
                                                     progress=not args.no_progress, command=shlex.join(argv))
     label = "ST" if args.method == "sobol" else "mu*"
     for k in OUTPUTS:
         rk = ranking(result, config, k)
-        print(f"{k:12s} ranked by {label}: " + ", ".join(f"{n} {s:.3f}" for n, s in rk))
+        print(f"{k:14s} ranked by {label}: " + ", ".join(f"{n} {s:.3f}" for n, s in rk))
     print(f"failed trials: {100 * result['failure_fraction']:.1f} %; renders needed: {n_groups} of {config.n_trials} trials")
     if stats is not None:
         print(f"ran {stats.n_run} trial(s) in {stats.elapsed_s:.1f} s ({stats.executor})")

@@ -18,14 +18,17 @@ from pathlib import Path
 import numpy as np
 
 from svgs.errors import InputError, check_finite, check_finite_positive
+from svgs.frames import STATE_KEYS
 
 from cli.exit_codes import EXIT_NO_SOLUTION, EXIT_OK
+
 #: Frames written by ``--out`` at most (gray.npy / depth.npy stacks).
 MAX_SAVED_FRAMES = 200
-STATE_KEYS = ("x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg")
 
-POSE_ARGS = (("--x", "x_m", "lateral offset of the target origin, right (m)"),
-             ("--y", "y_m", "lateral offset of the target origin, up (m)"),
+#: (flag, dest, help). ``--x``/``--y`` set the target's lateral offset (not the camera
+#: position ``x_m``/``y_m`` of the solved state).
+POSE_ARGS = (("--x", "target_x_m", "lateral offset of the target origin from the boresight, camera right (m)"),
+             ("--y", "target_y_m", "lateral offset of the target origin from the boresight, camera up (m)"),
              ("--roll", "roll_deg", "roll, paper x-y-z sequence (deg)"),
              ("--pitch", "pitch_deg", "pitch (deg)"),
              ("--yaw", "yaw_deg", "yaw (deg)"))
@@ -71,8 +74,8 @@ def _check_args(args):
     r = check_finite(args.range_m, "--range")
     if r <= 0:
         raise InputError(f"--range: expected a positive distance in metres, got {args.range_m!r}")
-    for _, dest, _ in POSE_ARGS:
-        check_finite(getattr(args, dest), "--" + dest.split("_")[0])
+    for flag, dest, _ in POSE_ARGS:
+        check_finite(getattr(args, dest), flag)
     if args.frames < 1:
         raise InputError(f"--frames: expected a positive number of frames, got {args.frames}")
     if args.spp < 1:
@@ -126,15 +129,15 @@ def run_frames(rendered, sensor, pipe, n_frames: int, seed, truth_state, keep_fr
     Returns
     -------
     rows : list of dict
-        Per frame: ``frame, ok, reason, state (paper keys) or None, pos_err_m, att_err_deg,
-        rot_err_deg, residual_rms_px, n_blobs``.
+        Per frame: ``frame, ok, reason, state (paper keys) or None, residual_rms_px, n_blobs``
+        and the :data:`sim.metrics.POSE_ERROR_KEYS` (None when unsolved).
     last : TofSolution or Failure
     kept : list of TofFrame
         The first ``keep_frames`` frames.
     states : ndarray, shape (K, 6)
         Solved states.
     """
-    from sim.closed_loop import pose_errors
+    from sim.metrics import no_pose_errors, pose_errors
 
     rows, kept, states, last = [], [], [], None
     for k, fr in enumerate(sensor.frames(rendered, n_frames, seed)):
@@ -147,7 +150,7 @@ def run_frames(rendered, sensor, pipe, n_frames: int, seed, truth_state, keep_fr
             row.update({"state": res.state_dict, "residual_rms_px": float(res.residual_rms_px),
                         **pose_errors(res.state, truth_state)})
         else:
-            row.update({"state": None, "residual_rms_px": None, "pos_err_m": None, "att_err_deg": None, "rot_err_deg": None})
+            row.update({"state": None, "residual_rms_px": None, **no_pose_errors()})
         rows.append(row)
         if k < keep_frames:
             kept.append(fr)
@@ -166,15 +169,9 @@ def write_preview(path, gray, depth_m) -> None:
     """Gray (square-root scaled) beside depth (near = bright), 8-bit PNG."""
     import cv2
 
-    g = np.asarray(gray, float)
-    a = np.sqrt(np.clip(g / max(float(g.max()), 1e-12), 0, 1))
-    d = np.asarray(depth_m, float)
-    ok = np.isfinite(d)
-    b = np.zeros_like(d)
-    if ok.any():
-        lo, hi = np.percentile(d[ok], [1, 99])
-        b[ok] = 1.0 - np.clip((d[ok] - lo) / max(hi - lo, 1e-9), 0, 1)
-    cv2.imwrite(str(path), np.round(255 * np.hstack([a, b])).astype(np.uint8))
+    from camera.tonemap import depth_stretch, encode_u8, sqrt_stretch
+
+    cv2.imwrite(str(path), encode_u8(np.hstack([sqrt_stretch(gray), depth_stretch(depth_m)])))
 
 
 def cmd_render_and_solve(args) -> int:
@@ -184,11 +181,12 @@ def cmd_render_and_solve(args) -> int:
 
     from render.tof.camera import check_target_in_view
     from camera.amcw import TofSensor
+    from sim.metrics import POSE_ERROR_KEYS
 
     _check_args(args)
     camera = load_camera(args.camera)
     target = load_target(args.pattern)
-    R, t = pose_from_scenario(args.range_m, args.x_m, args.y_m, args.roll_deg, args.pitch_deg, args.yaw_deg)
+    R, t = pose_from_scenario(args.range_m, args.target_x_m, args.target_y_m, args.roll_deg, args.pitch_deg, args.yaw_deg)
     check_target_in_view(camera, target, R, t)
     sensor = TofSensor.from_camera(camera, ambient_lux=args.ambient_lux, modulation_frequency_hz=args.modulation_frequency_hz,
                                    integration_time_s=args.integration_time_s)
@@ -214,7 +212,7 @@ def cmd_render_and_solve(args) -> int:
     lr = rows[-1]
     out.update({
         "truth_state": state_dict(truth_state),
-        "pos_err_m": lr["pos_err_m"], "att_err_deg": lr["att_err_deg"], "rot_err_deg": lr["rot_err_deg"],
+        **{k: lr[k] for k in POSE_ERROR_KEYS},
         "n_solved": int(states.shape[0]),
         "frame_statistics": stats,
         "integration_time_s": float(T),
@@ -235,9 +233,9 @@ def cmd_render_and_solve(args) -> int:
               f"{T * 1e3:.3f} ms integration, {sensor.ambient_lux:g} lux ambient; solved {out['n_solved']}/{args.frames}")
         print_solution(last)
         if last:
-            pe, ae = out["pos_err_m"], out["att_err_deg"]
-            print(f"  errors (last frame): pos_err_m [{pe[0]:+.4f}, {pe[1]:+.4f}, {pe[2]:+.4f}]  "
-                  f"att_err_deg [{ae[0]:+.3f}, {ae[1]:+.3f}, {ae[2]:+.3f}]")
+            pe, ae = out["pos_err_vec_m"], out["att_err_vec_deg"]
+            print(f"  errors (last frame): pos_err_vec_m [{pe[0]:+.4f}, {pe[1]:+.4f}, {pe[2]:+.4f}]  "
+                  f"att_err_vec_deg [{ae[0]:+.3f}, {ae[1]:+.3f}, {ae[2]:+.3f}]")
         if out["n_solved"] > 1:
             fl, me = stats["fluctuation"], stats["mean_error"]
             print("  over the frames: fluctuation (max - min) " + ", ".join(f"{k} {fl[k]:.4g}" for k in STATE_KEYS))

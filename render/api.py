@@ -21,18 +21,21 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from svgs.errors import InputError, check_finite
-from svgs.frames import check_pose, pose_to_state, state_dict
+from svgs.frames import check_pose
 from svgs.profiles import Camera, Pattern
+
+from camera.rendered import RenderedFrame
 
 from .constants import DEFAULT_ROI_SIZE_PX, DEFAULT_ROI_SPP, DEFAULT_ROI_SPP_PATH, DEFAULT_SPOT_SAMPLES, DEFAULT_SPP
 from .geometry import Reflector, SceneOptions
 from .optics import Flash, Optics, pixel_normalized_grid, radiance_to_photon_rate
-from .predict import retro_factor, retro_irradiance_w_m2, spot_direction_cam
+from .sampling import check_spp, film_to_numpy, to_numpy
+from .windows import background_tiles, spot_windows
 from .variant import select_variant
 
 #: Upper bound of samples in one Mitsuba pass (memory: ~100 bytes per lane).
@@ -40,25 +43,25 @@ MAX_SAMPLES_PER_PASS = 1 << 24
 
 
 @dataclass
-class RenderResult:
-    """One rendered frame.
+class RenderResult(RenderedFrame):
+    """One rendered frame: a :class:`camera.rendered.RenderedFrame` (``truth``, ``timings_s``,
+    ``pose()``) with the flux and radiance of the SVGS renderer.
 
     Attributes
     ----------
     flux : ndarray of float32, shape (H, W)
         Photons per second reaching each pixel, in the camera band (noise-free
         expectation, up to Monte Carlo error).
-    truth : dict
-        Pose, projections, every physical parameter used (JSON-serialisable).
     radiance : ndarray of float32, shape (H, W)
         Mean radiance over each pixel and the aperture, W m^-2 sr^-1 in band.
+    truth : dict
+        Pose, projections, every physical parameter used (JSON-serialisable; keyword-only).
     timings_s : dict
+        Keyword-only.
     """
 
     flux: np.ndarray
-    truth: dict
     radiance: np.ndarray
-    timings_s: dict = field(default_factory=dict)
 
     def save(self, out_dir) -> dict:
         """Write ``flux.npy``, ``truth.json`` and ``preview.png`` into ``out_dir``."""
@@ -78,24 +81,9 @@ def write_preview(path, flux: np.ndarray) -> None:
     the lit pixels and the maximum (the spots are ~1e7 x the background)."""
     import cv2
 
-    f = np.asarray(flux, np.float64)
-    pos = f[f > 0]
-    if pos.size == 0:
-        img = np.zeros(f.shape, np.uint8)
-    else:
-        lo = max(np.percentile(pos, 1.0), pos.max() * 1e-9)
-        hi = pos.max()
-        x = np.log(np.clip(f, lo, hi) / lo) / max(np.log(hi / lo), 1e-12)
-        img = np.round(255 * x).astype(np.uint8)
-    cv2.imwrite(str(path), img)
+    from camera.tonemap import encode_u8, log_stretch
 
-
-def _pow4(n: int) -> int:
-    """Smallest power of four >= n (at least 4): the sample counts ``ldsampler`` accepts."""
-    k = 4
-    while k < int(n):
-        k *= 4
-    return k
+    cv2.imwrite(str(path), encode_u8(log_stretch(flux)))
 
 
 class Renderer:
@@ -153,16 +141,23 @@ class Renderer:
         if roi < 4:
             raise InputError(f"roi_size_px: expected >= 4, got {roi_size_px!r}")
         self.roi_size_px = min(roi, self.camera.width, self.camera.height)
-        self.spp = self._check_spp(spp, "spp", allow_zero=True)
+        self.spp = check_spp(spp, "spp", allow_zero=True)
         if roi_spp is None:
             roi_spp = DEFAULT_ROI_SPP if method == "guided" else DEFAULT_ROI_SPP_PATH
-        self.roi_spp = self._check_spp(roi_spp, "roi_spp")
+        self.roi_spp = check_spp(roi_spp, "roi_spp")
         self.n_windows = int(self.pattern.n)
         if method not in ("guided", "path"):
             raise InputError(f"method: expected 'guided' or 'path', got {method!r}")
         self.method = method
-        self.spot_samples = self._check_spp(spot_samples, "spot_samples")
+        self.spot_samples = check_spp(spot_samples, "spot_samples")
         self.variant = select_variant(variant)
+        t0 = time.perf_counter()
+        self._load_scene(extra_meshes)
+        self.load_time_s = time.perf_counter() - t0
+        self._factor_full = None
+
+    def _load_scene(self, extra_meshes) -> None:
+        """Build the Mitsuba scene, its sensors and camera model, and the spot estimator."""
         import drjit as dr
         import mitsuba as mi
 
@@ -171,9 +166,8 @@ class Renderer:
         from .spots import SpotEstimator
 
         self._mi, self._dr = mi, dr
-        t0 = time.perf_counter()
         self.scene, h = build_scene(self.camera, self.pattern, self.optics, self.flash, self.reflector, self.options,
-                                    self.roi_size_px, self.n_windows, extra_meshes=extra_meshes, method=method)
+                                    self.roi_size_px, self.n_windows, extra_meshes=extra_meshes, method=self.method)
         self._sensor_full, self._sensor_roi = h["sensor_full"], h["sensor_roi"]
         self._sensor_tiles = h["sensor_tiles"]
         self.target = h["target"]
@@ -183,117 +177,35 @@ class Renderer:
         for s in (self._sensor_full, self._sensor_roi, *self._sensor_tiles.values()):
             s.set_model(self.model)
         bb = self.scene.bbox()
-        lo, hi = np.array(bb.min, float), np.array(bb.max, float)
+        lo, hi = to_numpy(bb.min), to_numpy(bb.max)
         self._scene_corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         self._sensor_full.set_windows(np.zeros((1, 2)), self.camera.height)
         self._glints = [d for d in self.options.distractors if d["type"] == "glint"]
         n_leds = self.flash.led_offsets_m.shape[0]
         self._n_strategies = self.pattern.n * n_leds * 3 + len(self._glints) * n_leds
         self.spots = None
-        if method == "guided":
+        if self.method == "guided":
             self.spots = SpotEstimator(self.scene, self.model, self._n_strategies, n_leds,
                                        0.5 * self.flash.emitter_diameter_m, self.flash.radiance_w_m2_sr,
                                        self.flash.cos_exponent, self.options.max_depth, self.camera.width,
                                        self.camera.height)
-        self.load_time_s = time.perf_counter() - t0
-        self._factor_full = None
-
-    @staticmethod
-    def _check_spp(v, name, allow_zero=False):
-        try:
-            iv = int(v)
-        except (TypeError, ValueError):
-            raise InputError(f"{name}: expected a positive integer, got {v!r}") from None
-        if iv != v or iv < (0 if allow_zero else 1):
-            raise InputError(f"{name}: expected a {'non-negative' if allow_zero else 'positive'} integer, got {v!r}")
-        return 0 if iv == 0 else _pow4(iv)
 
     # ------------------------------------------------------------------ geometry
     def predicted_spots_px(self, R_cam_target, t_cam_target_m) -> np.ndarray:
-        """Geometric-optics spot centre of every target, averaged over the LEDs.
+        """Geometric-optics spot centre of every target, averaged over the LEDs
+        (:func:`render.predict.predicted_spots_px`), shape (N, 2) px."""
+        from .predict import predicted_spots_px
 
-        Returns
-        -------
-        ndarray, shape (N, 2)
-            Pixels (OpenCV convention), distortion included.
-        """
-        R, t = np.asarray(R_cam_target, float), np.asarray(t_cam_target_m, float)
-        V = self.target.cube_vertex_m @ R.T + t
-        A = self.target.cube_axis @ R.T
-        out = np.zeros((V.shape[0], 2))
-        for i in range(V.shape[0]):
-            uv = []
-            for S in self.flash.led_offsets_m:
-                d = spot_direction_cam(S, V[i], A[i], self.reflector, self.optics.band_nm)
-                uv.append(self.camera.project(d if d[2] > 0 else np.array([d[0], d[1], 1e-12])))
-            out[i] = np.mean(uv, axis=0)
-        return out
+        return predicted_spots_px(self.camera, self.flash, self.reflector, self.optics, self.target,
+                                  R_cam_target, t_cam_target_m)
 
     def predicted_centroids_px(self, R_cam_target, t_cam_target_m) -> np.ndarray:
-        """Geometric-optics pixel centroid of every retro spot, binned into pixels.
+        """Geometric-optics pixel centroid of every retro spot, binned into pixels
+        (:func:`render.predict.predicted_centroids_px`), shape (N, 2) px."""
+        from .predict import predicted_centroids_px
 
-        The flash image through each cube (virtual source at ``2V - S`` along the exact
-        chief-ray direction, see :func:`render.predict.spot_direction_cam`), defocused by
-        the thin lens and accumulated into pixels (:func:`render.predict.binned_spot`),
-        averaged over the LEDs. Valid when the lens lies inside every return footprint
-        and no glint overlaps the spot.
-
-        Returns
-        -------
-        ndarray, shape (N, 2)
-        """
-        from .predict import binned_spot, virtual_source_cam
-
-        R, t = np.asarray(R_cam_target, float), np.asarray(t_cam_target_m, float)
-        V = self.target.cube_vertex_m @ R.T + t
-        A = self.target.cube_axis @ R.T
-        Vref = self.target.reference_m @ R.T + t
-        out = np.zeros((V.shape[0], 2))
-        for i in range(V.shape[0]):
-            acc = []
-            for S in self.flash.led_offsets_m:
-                d = spot_direction_cam(S, V[i], A[i], self.reflector, self.optics.band_nm)
-                X = d * np.linalg.norm(virtual_source_cam(S, Vref[i]))
-                c, _ = binned_spot(self.camera, self.optics.aperture_radius_m, self.optics.focus_distance_m, X,
-                                   0.5 * self.flash.emitter_diameter_m)
-                acc.append(c)
-            out[i] = np.mean(acc, axis=0)
-        return out
-
-    def _windows(self, spots_px, visible):
-        """Top-left corners (integers) of the windows, clamped into the frame."""
-        w = self.roi_size_px
-        c = np.where(np.isfinite(spots_px), spots_px, 0.0)
-        x0 = np.clip(np.round(c[:, 0] + 0.5 - w / 2.0), 0, self.camera.width - w).astype(int)
-        y0 = np.clip(np.round(c[:, 1] + 0.5 - w / 2.0), 0, self.camera.height - w).astype(int)
-        return np.stack([x0, y0], 1)
-
-    def _tiles(self, R, t):
-        """Origins of the tiles covering the projected scene, shape (n, 2); None: use the
-        whole frame (scene partly behind the lens, or more tiles than the largest mosaic)."""
-        from .scene import TILE_COUNTS, TILE_SIZE_PX as T
-
-        p = self._scene_corners @ R.T + t
-        if np.any(p[:, 2] <= 1e-3):
-            return None
-        uv = self.camera.project(p)
-        if self.camera.has_distortion:
-            return None  # a box's edges are not straight under distortion: be safe
-        W, H = self.camera.width, self.camera.height
-        u0, v0 = np.floor(uv.min(0) - 2.0)
-        u1, v1 = np.ceil(uv.max(0) + 2.0)
-        u0, v0 = max(0, int(u0)), max(0, int(v0))
-        u1, v1 = min(W, int(u1) + 1), min(H, int(v1) + 1)
-        if u1 <= u0 or v1 <= v0:
-            return np.zeros((0, 2), int)
-        xs = np.arange(u0, u1, T)
-        ys = np.arange(v0, v1, T)
-        if len(xs) * len(ys) > max(TILE_COUNTS) or (len(xs) * len(ys)) * T * T >= W * H:
-            return None
-        # keep tiles inside the frame (a last tile may overlap its neighbour)
-        xs = np.minimum(xs, max(0, W - T)) if W >= T else xs
-        ys = np.minimum(ys, max(0, H - T)) if H >= T else ys
-        return np.array([[x, y] for y in ys for x in xs], int)
+        return predicted_centroids_px(self.camera, self.flash, self.reflector, self.optics, self.target,
+                                      R_cam_target, t_cam_target_m)
 
     def _set_pose(self, R, t):
         mi = self._mi
@@ -349,9 +261,7 @@ class Renderer:
         acc = None
         seeds = np.random.SeedSequence(int(seed)).generate_state(n_pass, dtype=np.uint32)
         for k in range(n_pass):
-            img = mi.render(self.scene, sensor=sensor, spp=per_pass, seed=int(seeds[k]))
-            a = np.asarray(img, dtype=np.float64)
-            a = a.mean(axis=2) if a.ndim == 3 else a
+            a = film_to_numpy(mi.render(self.scene, sensor=sensor, spp=per_pass, seed=int(seeds[k])))
             acc = a if acc is None else acc + a
         return acc / n_pass
 
@@ -365,6 +275,73 @@ class Renderer:
             return self._factor_full
         xy = pixel_normalized_grid(self.camera, u0, v0, width, height)
         return radiance_to_photon_rate(self.camera, self.optics, ph, xy)
+
+    def _project_targets(self, R, t, check_fov: bool):
+        """Projected targets ``(N, 2)`` px and their visibility ``(N,)``; InputError for a target
+        behind the lens or (``check_fov``) none inside the image."""
+        cam, pat = self.camera, self.pattern
+        p_cam = pat.points_m @ R.T + t
+        if np.any(p_cam[:, 2] <= 0.0):
+            bad = [int(i) for i, z in zip(pat.ids, p_cam[:, 2]) if z <= 0]
+            raise InputError(
+                f"pose: target(s) {bad} lie behind the camera (z_cam <= 0; t_cam_target_m = {t.tolist()}); "
+                "the range must be positive and the target in front of the lens"
+            )
+        targets_px = cam.project(p_cam)
+        visible = cam.in_image(targets_px)
+        if check_fov and not np.any(visible):
+            raise InputError(
+                f"pose: no target projects inside the {cam.width}x{cam.height} image "
+                f"(targets_px = {np.round(targets_px, 1).tolist()}); the target is outside the field of view"
+            )
+        return targets_px, visible
+
+    def _background(self, R, t, spp: int, seed: int, timings: dict) -> np.ndarray:
+        """The diffuse background at ``spp``: over the tiles covering the projected scene (or the
+        full frame), zeros elsewhere; float64 (H, W). ``spp == 0``: zeros."""
+        from .scene import TILE_COUNTS, TILE_SIZE_PX as T
+
+        H, W = self.camera.height, self.camera.width
+        rad = np.zeros((H, W))
+        if spp <= 0:
+            return rad
+        t0 = time.perf_counter()
+        tiles = background_tiles(self.camera, self._scene_corners, R, t, T, TILE_COUNTS)
+        if tiles is None:
+            rad = self._radiance(self._sensor_full, spp, seed)
+            timings["background_tiles"] = "full frame"
+        else:
+            n = next(c for c in sorted(self._sensor_tiles) if c >= len(tiles))
+            org = np.concatenate([tiles, np.repeat(tiles[-1:], n - len(tiles), axis=0)])
+            sensor = self._sensor_tiles[n]
+            sensor.set_windows(org, T)
+            mosaic = self._radiance(sensor, spp, seed)
+            for k, (x0, y0) in enumerate(tiles):
+                rad[y0:y0 + T, x0:x0 + T] = mosaic[k * T:(k + 1) * T, :][: H - y0, : W - x0]
+            timings["background_tiles"] = int(len(tiles))
+        timings["background_s"] = time.perf_counter() - t0
+        return rad
+
+    def _render_windows(self, rad, spots, roi_spp: int, seed: int, timings: dict) -> list:
+        """Render the window around every spot (one mosaic pass) into ``rad`` (in place; where
+        windows overlap, their mean). Returns the windows' records for the truth."""
+        H, W = self.camera.height, self.camera.width
+        t0 = time.perf_counter()
+        win = spot_windows(spots, self.roi_size_px, W, H)
+        w = self.roi_size_px
+        self._sensor_roi.set_windows(win, w)
+        mosaic = self._radiance(self._sensor_roi, roi_spp, seed)
+        acc = np.zeros((H, W))
+        cnt = np.zeros((H, W))
+        rois = []
+        for k, (x0, y0) in enumerate(win):
+            acc[y0:y0 + w, x0:x0 + w] += mosaic[k * w:(k + 1) * w, :]
+            cnt[y0:y0 + w, x0:x0 + w] += 1
+            rois.append({"target": int(self.pattern.ids[k]), "x0": int(x0), "y0": int(y0), "width": w, "height": w})
+        m = cnt > 0
+        rad[m] = acc[m] / cnt[m]
+        timings["roi_s"] = time.perf_counter() - t0
+        return rois
 
     # ------------------------------------------------------------------ rendering
     def render(self, R_cam_target, t_cam_target_m, *, seed: int = 0, spp: int | None = None,
@@ -399,68 +376,22 @@ class Renderer:
         """
         R, t = check_pose(R_cam_target, t_cam_target_m)
         seed = int(check_finite(seed, "seed"))
-        spp = self.spp if spp is None else self._check_spp(spp, "spp", allow_zero=not full_frame)
-        roi_spp = self.roi_spp if roi_spp is None else self._check_spp(roi_spp, "roi_spp")
-        cam, pat = self.camera, self.pattern
-        p_cam = pat.points_m @ R.T + t
-        if np.any(p_cam[:, 2] <= 0.0):
-            bad = [int(i) for i, z in zip(pat.ids, p_cam[:, 2]) if z <= 0]
-            raise InputError(
-                f"pose: target(s) {bad} lie behind the camera (z_cam <= 0; t_cam_target_m = {t.tolist()}); "
-                "the range must be positive and the target in front of the lens"
-            )
-        targets_px = cam.project(p_cam)
-        visible = cam.in_image(targets_px)
-        if check_fov and not np.any(visible):
-            raise InputError(
-                f"pose: no target projects inside the {cam.width}x{cam.height} image "
-                f"(targets_px = {np.round(targets_px, 1).tolist()}); the target is outside the field of view"
-            )
+        spp = self.spp if spp is None else check_spp(spp, "spp", allow_zero=not full_frame)
+        roi_spp = self.roi_spp if roi_spp is None else check_spp(roi_spp, "roi_spp")
+        targets_px, visible = self._project_targets(R, t, check_fov)
         timings = {}
         t0 = time.perf_counter()
         self._set_pose(R, t)
         spots = self.predicted_spots_px(R, t)
         timings["setup_s"] = time.perf_counter() - t0
-        H, W = cam.height, cam.width
         rois = []
         if full_frame:
             t0 = time.perf_counter()
             rad = self._radiance(self._sensor_full, spp, seed)
             timings["full_frame_s"] = time.perf_counter() - t0
         else:
-            rad = np.zeros((H, W))
-            if spp > 0:
-                t0 = time.perf_counter()
-                tiles = self._tiles(R, t)
-                if tiles is None:
-                    rad = self._radiance(self._sensor_full, spp, seed)
-                    timings["background_tiles"] = "full frame"
-                else:
-                    from .scene import TILE_SIZE_PX as T
-
-                    n = next(c for c in sorted(self._sensor_tiles) if c >= len(tiles))
-                    org = np.concatenate([tiles, np.repeat(tiles[-1:], n - len(tiles), axis=0)])
-                    sensor = self._sensor_tiles[n]
-                    sensor.set_windows(org, T)
-                    mosaic = self._radiance(sensor, spp, seed)
-                    for k, (x0, y0) in enumerate(tiles):
-                        rad[y0:y0 + T, x0:x0 + T] = mosaic[k * T:(k + 1) * T, :][: H - y0, : W - x0]
-                    timings["background_tiles"] = int(len(tiles))
-                timings["background_s"] = time.perf_counter() - t0
-            t0 = time.perf_counter()
-            win = self._windows(spots, visible)
-            w = self.roi_size_px
-            self._sensor_roi.set_windows(win, w)
-            mosaic = self._radiance(self._sensor_roi, roi_spp, seed + 0x9E3779B1)
-            acc = np.zeros((H, W))
-            cnt = np.zeros((H, W))
-            for k, (x0, y0) in enumerate(win):
-                acc[y0:y0 + w, x0:x0 + w] += mosaic[k * w:(k + 1) * w, :]
-                cnt[y0:y0 + w, x0:x0 + w] += 1
-                rois.append({"target": int(pat.ids[k]), "x0": int(x0), "y0": int(y0), "width": w, "height": w})
-            m = cnt > 0
-            rad[m] = acc[m] / cnt[m]
-            timings["roi_s"] = time.perf_counter() - t0
+            rad = self._background(R, t, spp, seed, timings)
+            rois = self._render_windows(rad, spots, roi_spp, seed + 0x9E3779B1, timings)
         strategies = []
         if self.spots is not None:
             t0 = time.perf_counter()
@@ -476,83 +407,10 @@ class Renderer:
 
     # ------------------------------------------------------------------ truth
     def truth(self, R, t, targets_px, visible, spots, **render_info) -> dict:
-        """The ground-truth record of a frame (JSON-serialisable)."""
-        import drjit as dr
-        import mitsuba as mi
+        """The ground-truth record of a frame (JSON-serialisable; :func:`render.truth.svgs_frame_truth`)."""
+        from .truth import svgs_frame_truth
 
-        cam, pat, fl, op = self.camera, self.pattern, self.flash, self.optics
-        V_ref = pat.points_m @ R.T + t
-        intens, irr = {}, {}
-        for i, tid in enumerate(pat.ids):
-            I_tot, E_tot = 0.0, 0.0
-            for S in fl.led_offsets_m:
-                d = V_ref[i] - S
-                I = float(fl.intensity_w_sr(d[2] / np.linalg.norm(d)))
-                I_tot += I
-                E_tot += retro_irradiance_w_m2(I, S, V_ref[i], self.reflector, op.band_nm)
-            intens[str(tid)] = I_tot
-            irr[str(tid)] = E_tot
-        ph = fl.photometry["mean_photon_energy_j"]
-        return {
-            "camera": cam.name,
-            "camera_source": _rel(cam.source),
-            "pattern": pat.name,
-            "R_cam_target": np.asarray(R).tolist(),
-            "t_cam_target_m": np.asarray(t).tolist(),
-            "state": state_dict(pose_to_state(R, t)),
-            "range_m": float(t[2]),
-            "targets_px": {str(i): [float(u), float(v)] for i, (u, v) in zip(pat.ids, targets_px)},
-            "targets_in_image": {str(i): bool(b) for i, b in zip(pat.ids, visible)},
-            "spots_px_predicted": {str(i): [float(u), float(v)] for i, (u, v) in zip(pat.ids, spots)},
-            "intrinsics": {"width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy},
-            "distortion": {k: float(v) for k, v in zip(("k1", "k2", "p1", "p2", "k3"), cam.dist)},
-            "optics": op.to_json(),
-            "flash": fl.to_json(),
-            "reflector": self.reflector.to_json(op.band_nm),
-            "scene": self.options.to_json(),
-            "geometry": self.target.info,
-            "radiometry": {
-                "flux_unit": "photons per second per pixel, in optics.band_nm",
-                "radiance_unit": "W m^-2 sr^-1 in band (rendered)",
-                "chain": "flux = L * aperture_area_m2 * cos(theta)^4 / (fx * fy * |det J_distortion|) / mean_photon_energy_j",
-                "aperture_area_m2": op.aperture_area_m2,
-                "mean_photon_energy_j": ph,
-                "led_radiance_w_m2_sr": fl.radiance_w_m2_sr,
-                "flash_intensity_towards_target_w_sr": intens,
-                "retro_factor": retro_factor(self.reflector, op.band_nm),
-                "retro_irradiance_at_lens_predicted_w_m2": irr,
-                "retro_photons_per_s_predicted": {k: v * op.aperture_area_m2 / ph for k, v in irr.items()},
-            },
-            "render": {
-                "variant": self.variant.name,
-                "variant_notice": self.variant.notice,
-                "method": self.method,
-                "integrator": "path" + (" (diffuse, LED as point light) + guided spot estimator" if self.method == "guided" else " (LED as disk area emitter)"),
-                "spot_samples_per_strategy": self.spot_samples if self.method == "guided" else None,
-                "spot_strategies": render_info.get("strategies", []),
-                "max_depth": int(self.options.max_depth),
-                "sampler": "ldsampler",
-                "seed": render_info["seed"],
-                "spp": render_info["spp"],
-                "roi_spp": None if render_info["full_frame"] else render_info["roi_spp"],
-                "roi_size_px": None if render_info["full_frame"] else self.roi_size_px,
-                "full_frame": render_info["full_frame"],
-                "rois": render_info["rois"],
-                "timings_s": render_info["timings"],
-                "versions": {"mitsuba": mi.__version__, "drjit": dr.__version__, "numpy": np.__version__},
-            },
-        }
-
-
-def _rel(path: str) -> str:
-    """Profile path relative to the repository (no machine-specific absolute paths)."""
-    from pathlib import Path
-
-    try:
-        root = Path(__file__).resolve().parent.parent
-        return str(Path(path).resolve().relative_to(root))
-    except (ValueError, OSError):
-        return Path(path).name if path else ""
+        return svgs_frame_truth(self, R, t, targets_px, visible, spots, **render_info)
 
 
 _CACHE: dict = {}

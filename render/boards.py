@@ -35,6 +35,8 @@ import numpy as np
 from svgs.errors import InputError, ProfileError, check_finite_positive
 from svgs.profiles import Camera
 
+from .sampling import film_to_numpy, round_up_power
+
 #: Samples per pixel of a board render (rounded up to a power of four for ``ldsampler``).
 DEFAULT_BOARD_SPP = 16
 #: Radiance of the room's uniform light, W m^-2 sr^-1 in the camera band. ASSUMPTION: an
@@ -57,13 +59,6 @@ MAX_TEXELS = 1 << 25
 MAX_SAMPLES_PER_PASS = 1 << 22
 #: Longest manual exposure, s (a tripod scene); beyond it the ISO goes up.
 MAX_MANUAL_EXPOSURE_S = 1.0
-
-
-def _pow4(n: int) -> int:
-    k = 1
-    while k < int(n):
-        k *= 4
-    return k
 
 
 def texture_px_per_m(board, camera: Camera, R_cam_board, t_cam_board_m, texels_per_px: float = DEFAULT_TEXELS_PER_PX) -> float:
@@ -169,7 +164,7 @@ class BoardRenderer:
             raise ProfileError(f"camera {self.camera.name!r}: {exc}") from None
         if isinstance(spp, bool) or not isinstance(spp, (int, np.integer)) or spp < 1:
             raise InputError(f"spp: expected a positive integer, got {spp!r}")
-        self.spp = _pow4(int(spp))
+        self.spp = round_up_power(int(spp))
         self.pinhole = bool(pinhole)
         self.ambient = check_finite_positive(ambient_radiance_w_m2_sr, "ambient_radiance_w_m2_sr")
         for name, v in (("paper_reflectance", paper_reflectance), ("ink_reflectance", ink_reflectance),
@@ -273,7 +268,7 @@ class BoardRenderer:
         pts = self.board.object_points() @ R.T + t
         if np.any(pts[:, 2] <= 0):
             raise InputError("board pose: the board is (partly) behind the camera")
-        spp = self.spp if spp is None else _pow4(max(1, int(spp)))
+        spp = self.spp if spp is None else round_up_power(max(1, int(spp)))
         n_pass = max(1, spp // self._spp_pass)
         t0 = time.perf_counter()
         self.model.set_pose(R.T, -R.T @ t)
@@ -287,9 +282,7 @@ class BoardRenderer:
             self._sensor.set_windows(np.array([[0.0, float(y0c)]]), hs)
             acc = np.zeros((hs, W))
             for _ in range(n_pass):
-                img = np.asarray(mi.render(self.scene, sensor=self._sensor, spp=self._spp_pass, seed=int(seeds[k])),
-                                 dtype=np.float64)
-                acc += img.mean(axis=2) if img.ndim == 3 else img
+                acc += film_to_numpy(mi.render(self.scene, sensor=self._sensor, spp=self._spp_pass, seed=int(seeds[k])))
                 k += 1
             rad[y0c:y0c + hs] = acc / n_pass
         t1 = time.perf_counter()

@@ -1,12 +1,14 @@
-"""Physical constants and renderer defaults - one home, units in the names."""
+"""Renderer data and defaults - one home, units in the names.
+
+The universal constants live in :mod:`svgs.constants` (every layer needs them) and are
+re-exported here for the renderer's modules.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
-PLANCK_J_S = 6.62607015e-34  # exact (SI 2019)
-SPEED_OF_LIGHT_M_S = 299_792_458.0  # exact
-LUMINOUS_EFFICACY_MAX_LM_W = 683.002  # K_m, lm/W at 555 nm (SI definition of the candela)
+from svgs.constants import LUMINOUS_EFFICACY_MAX_LM_W, PLANCK_J_S, SPEED_OF_LIGHT_M_S  # noqa: F401 (re-exported)
 
 #: CIE 1924 photopic luminous efficiency V(lambda), 380-780 nm in 10 nm steps
 #: (CIE 018:2019 / ISO 23539:2005 tabulation, rounded as published).
@@ -35,7 +37,7 @@ def nbk7_index(wavelength_nm) -> np.ndarray:
 DEFAULT_SPP = 4  # full-frame samples per pixel (the background: dark, diffuse)
 DEFAULT_ROI_SPP = 256  # samples per pixel inside the windows around the targets (guided method)
 DEFAULT_ROI_SPP_PATH = 4096  # the same for the brute-force method (the spots are path traced)
-DEFAULT_ROI_SIZE_PX = 32
-DEFAULT_SPOT_SAMPLES = 1 << 16  # guided samples per virtual source (render.spots)  # side of the square window rendered around each spot
+DEFAULT_ROI_SIZE_PX = 32  # side of the square window rendered around each spot
+DEFAULT_SPOT_SAMPLES = 1 << 16  # guided samples per virtual source (render.spots)
 DEFAULT_MAX_DEPTH = 12  # camera -> front face -> 3 TIR -> front face -> LED needs >= 7 (use more)
 DEFAULT_MESH_SEGMENTS = 48  # rim segments per cube face (aperture area error ~1e-4)

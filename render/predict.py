@@ -359,3 +359,71 @@ def binned_spot(camera, aperture_radius_m, focus_distance_m, X_cam, source_radiu
     iu = np.floor(uv[:, 0] + 0.5)
     iv = np.floor(uv[:, 1] + 0.5)
     return np.array([iu.mean(), iv.mean()]), camera.project(X)
+
+
+def predicted_spots_px(camera, flash, refl: Reflector, optics, target, R_cam_target, t_cam_target_m) -> np.ndarray:
+    """Geometric-optics spot centre of every target, averaged over the LEDs.
+
+    Parameters
+    ----------
+    camera : svgs.Camera
+    flash : render.optics.Flash
+    refl : Reflector
+    optics : render.optics.Optics
+        Its ``band_nm``.
+    target : render.geometry target handle
+        ``cube_vertex_m`` (N, 3) and ``cube_axis`` (N, 3) in the target frame.
+    R_cam_target : array_like, shape (3, 3)
+    t_cam_target_m : array_like, shape (3,)
+
+    Returns
+    -------
+    ndarray, shape (N, 2)
+        Pixels (OpenCV convention), distortion included.
+    """
+    R, t = np.asarray(R_cam_target, float), np.asarray(t_cam_target_m, float)
+    V = target.cube_vertex_m @ R.T + t
+    A = target.cube_axis @ R.T
+    out = np.zeros((V.shape[0], 2))
+    for i in range(V.shape[0]):
+        uv = []
+        for S in flash.led_offsets_m:
+            d = spot_direction_cam(S, V[i], A[i], refl, optics.band_nm)
+            uv.append(camera.project(d if d[2] > 0 else np.array([d[0], d[1], 1e-12])))
+        out[i] = np.mean(uv, axis=0)
+    return out
+
+
+def predicted_centroids_px(camera, flash, refl: Reflector, optics, target, R_cam_target, t_cam_target_m) -> np.ndarray:
+    """Geometric-optics pixel centroid of every retro spot, binned into pixels.
+
+    The flash image through each cube (virtual source at ``2V - S`` along the exact
+    chief-ray direction, see :func:`spot_direction_cam`), defocused by the thin lens and
+    accumulated into pixels (:func:`binned_spot`), averaged over the LEDs. Valid when the
+    lens lies inside every return footprint and no glint overlaps the spot.
+
+    Parameters
+    ----------
+    camera, flash, refl, optics, target, R_cam_target, t_cam_target_m
+        As :func:`predicted_spots_px` (``optics``: ``band_nm``, ``aperture_radius_m``,
+        ``focus_distance_m``; ``target``: also ``reference_m`` (N, 3)).
+
+    Returns
+    -------
+    ndarray, shape (N, 2)
+    """
+    R, t = np.asarray(R_cam_target, float), np.asarray(t_cam_target_m, float)
+    V = target.cube_vertex_m @ R.T + t
+    A = target.cube_axis @ R.T
+    Vref = target.reference_m @ R.T + t
+    out = np.zeros((V.shape[0], 2))
+    for i in range(V.shape[0]):
+        acc = []
+        for S in flash.led_offsets_m:
+            d = spot_direction_cam(S, V[i], A[i], refl, optics.band_nm)
+            X = d * np.linalg.norm(virtual_source_cam(S, Vref[i]))
+            c, _ = binned_spot(camera, optics.aperture_radius_m, optics.focus_distance_m, X,
+                               0.5 * flash.emitter_diameter_m)
+            acc.append(c)
+        out[i] = np.mean(acc, axis=0)
+    return out

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .sampling import to_numpy
 
 #: Ray-spawn offset at a delta bounce, metres (scaled by 1 + |p|).
 EPS_M = 1e-6
@@ -103,29 +104,68 @@ class SpotEstimator:
             return img
         if not self.jit:
             return self._render_scalar(sources_cam, radii_px, counts, led_centres_world, led_normal_world, seed)
-        mi, dr = self.mi, self.dr
-        K = self.K
+        strat, sx, sy, sz, rr, dens = self._upload_strategies(sources_cam, radii_px, counts)
+        lc, ln = self._upload_leds(led_centres_world, led_normal_world)
+        rng = self._lane_rng(total, seed)
+        a, u, v, denom = self._sample_film(rng, strat, sx, sy, sz, rr, dens)
+        result = self._trace_to_leds(self.model.ray(u, v, a), rng, lc, ln)
+        return self._splat(u, v, result, denom)
+
+    def _upload_strategies(self, sources_cam, radii_px, counts):
+        """The strategies as opaque Dr.Jit arrays and each lane's strategy index.
+
+        Returns
+        -------
+        strat : mi.UInt32, shape (sum(counts),)
+        sx, sy, sz, rr, dens : mi.Float, shape (K,)
+            Virtual sources (camera frame, m), disk radii (px), sample densities
+            ``N_k / (pi rho_k^2)`` (per px^2).
+        """
+        mi = self.mi
         src = np.asarray(sources_cam, float)
         rad = np.asarray(radii_px, float)
         sx, sy, sz = self._arr(src[:, 0]), self._arr(src[:, 1]), self._arr(src[:, 2])
         rr = self._arr(rad)
         dens = self._arr(np.where(rad > 0, counts / (np.pi * np.maximum(rad, 1e-30) ** 2), 0.0))
-        strat = mi.UInt32(np.repeat(np.arange(K, dtype=np.uint32), counts))
+        strat = mi.UInt32(np.repeat(np.arange(self.K, dtype=np.uint32), counts))
+        return strat, sx, sy, sz, rr, dens
+
+    def _upload_leds(self, led_centres_world, led_normal_world):
+        """LED disk centres (list of mi.Point3f) and their common normal (mi.Vector3f), opaque."""
+        mi, dr = self.mi, self.dr
         leds = np.asarray(led_centres_world, float)
         lc = [mi.Point3f(*p.tolist()) for p in leds]
         ln = mi.Vector3f(*np.asarray(led_normal_world, float).tolist())
         dr.make_opaque(ln, *lc)
+        return lc, ln
 
+    def _lane_rng(self, total: int, seed: int):
+        """One PCG32 stream per lane, decorrelated: Mitsuba's independent-sampler hashing
+        (PCG streams that differ only by consecutive increments are correlated); opaque
+        seeds so that a new seed does not mean a new kernel."""
+        mi, dr = self.mi, self.dr
         ss = np.random.SeedSequence(int(seed)).generate_state(2, dtype=np.uint64)
-        # decorrelated per-lane streams (hashed, as Mitsuba's independent sampler does: PCG
-        # streams that differ only by consecutive increments are correlated); opaque seeds
-        # so that a new seed does not mean a new kernel
         lane = dr.arange(mi.UInt32, total)
         s0 = dr.opaque(mi.UInt32, int(ss[0] & 0xFFFFFFFF))
         s1 = dr.opaque(mi.UInt32, int(ss[1] & 0xFFFFFFFF))
         v0, v1 = mi.sample_tea_32(s0, lane)
         w0, w1 = mi.sample_tea_32(s1, lane)
-        rng = mi.PCG32(size=total, initstate=mi.UInt64(v0) << 32 | mi.UInt64(v1), initseq=mi.UInt64(w0) << 32 | mi.UInt64(w1))
+        return mi.PCG32(size=total, initstate=mi.UInt64(v0) << 32 | mi.UInt64(v1), initseq=mi.UInt64(w0) << 32 | mi.UInt64(w1))
+
+    def _sample_film(self, rng, strat, sx, sy, sz, rr, dens):
+        """Per lane: an aperture point, a film position in its strategy's disk and the
+        balance-heuristic density over all strategies.
+
+        Returns
+        -------
+        a : mi.Point3f
+            Aperture point.
+        u, v : mi.Float
+            Film position, px.
+        denom : mi.Float
+            ``sum_k N_k [p in B_k(a)] / (pi rho_k^2)``.
+        """
+        mi, dr = self.mi, self.dr
         model = self.model
         a = model.aperture_point(mi.Point2f(rng.next_float32(), rng.next_float32()))
         Xj = mi.Vector3f(dr.gather(mi.Float, sx, strat), dr.gather(mi.Float, sy, strat), dr.gather(mi.Float, sz, strat))
@@ -136,15 +176,20 @@ class SpotEstimator:
         v = vc + disk.y * rj
         # balance heuristic over all strategies
         denom = mi.Float(0.0)
-        for k in range(K):
+        for k in range(self.K):
             Xk = mi.Vector3f(dr.gather(mi.Float, sx, mi.UInt32(k)), dr.gather(mi.Float, sy, mi.UInt32(k)),
                              dr.gather(mi.Float, sz, mi.UInt32(k)))
             uk, vk = model.image_of(Xk, a)
             rk = dr.gather(mi.Float, rr, mi.UInt32(k))
             inside = dr.square(u - uk) + dr.square(v - vk) <= dr.square(rk)
             denom += dr.select(inside, dr.gather(mi.Float, dens, mi.UInt32(k)), 0.0)
-        ray = model.ray(u, v, a)
-        # trace delta bounces (symbolic loop: finished lanes stop)
+        return a, u, v, denom
+
+    def _trace_to_leds(self, ray, rng, lc, ln):
+        """Follow delta (glass, mirror) bounces until a ray meets an LED disk first (scoring
+        ``L0 cos^(m-1)`` times the path throughput) or anything else; symbolic loop, finished
+        lanes stop. Returns the score per lane (mi.Float)."""
+        mi, dr = self.mi, self.dr
         ctx = mi.BSDFContext()
         r2 = self.r_led * self.r_led
         L0, m_1 = self.L0, self.m - 1.0
@@ -184,6 +229,12 @@ class SpotEstimator:
 
         ray, beta, result, active, depth, rng = dr.while_loop(
             (ray, mi.Float(1.0), mi.Float(0.0), mi.Bool(True), mi.UInt32(0), rng), cond, body)
+        return result
+
+    def _splat(self, u, v, result, denom) -> np.ndarray:
+        """Each lane's ``result / denom`` added to the pixel containing ``(u, v)``: the
+        radiance image, float64 (H, W)."""
+        mi, dr = self.mi, self.dr
         val = result / denom
         ui = mi.Int32(dr.floor(u + 0.5))
         vi = mi.Int32(dr.floor(v + 0.5))
@@ -191,15 +242,15 @@ class SpotEstimator:
         idx = dr.select(ok, mi.UInt32(vi) * self.W + mi.UInt32(ui), 0)
         val = dr.select(ok, val, 0.0)
         dr.eval(idx, val)
-        idx_np = np.asarray(idx, dtype=np.int64)
-        val_np = np.asarray(val, dtype=np.float64)
+        idx_np = to_numpy(idx, np.int64)
+        val_np = to_numpy(val, np.float64)
         nz = val_np > 0
         acc = np.bincount(idx_np[nz], weights=val_np[nz], minlength=self.W * self.H)
         return acc.reshape(self.H, self.W)
 
     def _render_scalar(self, sources_cam, radii_px, counts, led_centres_world, led_normal_world, seed):
         """Same estimator, one sample at a time (scalar variants; slow)."""
-        mi, dr = self.mi, self.dr
+        mi = self.mi
         rng = np.random.default_rng(seed)
         src = np.asarray(sources_cam, float)
         rad = np.asarray(radii_px, float)
@@ -229,35 +280,43 @@ class SpotEstimator:
                         if (u - uj) ** 2 + (v - vj) ** 2 <= rad[j] ** 2:
                             den += dens[j]
                 ray = model.ray(u, v, mi.ScalarVector3f(a[0], a[1], 0.0))
-                beta = 1.0
-                for _depth in range(self.max_depth + 1):
-                    o = np.array(ray.o, float)
-                    d = np.array(ray.d, float)
-                    dn = float(d @ ln)
-                    t_led, cos_led = np.inf, 0.0
-                    for c in leds:
-                        if dn < 0:
-                            t = float((c - o) @ ln) / dn
-                            if t > 1e-6 and np.sum((o + d * t - c) ** 2) <= self.r_led ** 2 and t < t_led:
-                                t_led, cos_led = t, -dn
-                    si = self.scene.ray_intersect(ray)
-                    if t_led < float(si.t):
-                        ui, vi = int(np.floor(u + 0.5)), int(np.floor(v + 0.5))
-                        if 0 <= ui < self.W and 0 <= vi < self.H and den > 0:
-                            img[vi, ui] += beta * self.L0 * cos_led ** (self.m - 1.0) / den
-                        break
-                    if not si.is_valid():
-                        break
-                    bsdf = si.bsdf()
-                    if not mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta):
-                        break
-                    r2 = rng.random(3)
-                    bs, w = bsdf.sample(ctx, si, float(r2[0]), mi.ScalarPoint2f(r2[1], r2[2]))
-                    beta *= float(np.mean(np.array(w, float)))
-                    if beta <= 0:
-                        break
-                    wo = si.to_world(bs.wo)
-                    eps = EPS_M * (1.0 + float(np.max(np.abs(np.array(si.p, float)))))
-                    eps = eps if float(np.dot(np.array(si.n, float), np.array(wo, float))) >= 0 else -eps
-                    ray = mi.Ray3f(si.p + si.n * eps, wo)
+                score = self._scalar_trace(ray, rng, leds, ln, ctx)
+                if score is not None:
+                    ui, vi = int(np.floor(u + 0.5)), int(np.floor(v + 0.5))
+                    if 0 <= ui < self.W and 0 <= vi < self.H and den > 0:
+                        img[vi, ui] += score / den
         return img
+
+    def _scalar_trace(self, ray, rng, leds, ln, ctx):
+        """One scalar ray through delta bounces: ``beta L0 cos^(m-1)`` if it meets an LED disk
+        first, None if it escapes, meets a non-delta surface or loses its throughput."""
+        mi = self.mi
+        beta = 1.0
+        for _depth in range(self.max_depth + 1):
+            o = to_numpy(ray.o)
+            d = to_numpy(ray.d)
+            dn = float(d @ ln)
+            t_led, cos_led = np.inf, 0.0
+            for c in leds:
+                if dn < 0:
+                    t = float((c - o) @ ln) / dn
+                    if t > 1e-6 and np.sum((o + d * t - c) ** 2) <= self.r_led ** 2 and t < t_led:
+                        t_led, cos_led = t, -dn
+            si = self.scene.ray_intersect(ray)
+            if t_led < float(si.t):
+                return beta * self.L0 * cos_led ** (self.m - 1.0)
+            if not si.is_valid():
+                return None
+            bsdf = si.bsdf()
+            if not mi.has_flag(bsdf.flags(), mi.BSDFFlags.Delta):
+                return None
+            r2 = rng.random(3)
+            bs, w = bsdf.sample(ctx, si, float(r2[0]), mi.ScalarPoint2f(r2[1], r2[2]))
+            beta *= float(np.mean(to_numpy(w)))
+            if beta <= 0:
+                return None
+            wo = si.to_world(bs.wo)
+            eps = EPS_M * (1.0 + float(np.max(np.abs(to_numpy(si.p)))))
+            eps = eps if float(np.dot(to_numpy(si.n), to_numpy(wo))) >= 0 else -eps
+            ray = mi.Ray3f(si.p + si.n * eps, wo)
+        return None

@@ -358,11 +358,6 @@ def _has_backend(dr, which: str) -> bool:
         return False
 
 
-def current_variant() -> VariantInfo | None:
-    """The :class:`VariantInfo` of the last :func:`select_variant` call, or None."""
-    return _SELECTED
-
-
 def backend_report(info: VariantInfo) -> dict:
     """What the selected variant can use, for ``svgs doctor``.
 

@@ -176,7 +176,7 @@ def render_board_set(camera, board, n_views: int, *, seed: int = 0, spp: int = D
     -------
     BoardSet
     """
-    from calibration.boards import sample_board_poses
+    from calibration.synthetic import sample_board_poses
 
     from camera.phone import PhoneCamera
     from sim.closed_loop import solver_camera

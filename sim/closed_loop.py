@@ -24,7 +24,8 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from svgs.errors import InputError
-from svgs.frames import pose_from_scenario, pose_to_state, rotation_angle_deg, state_dict
+from sim.metrics import no_pose_errors, pose_errors
+from svgs.frames import pose_from_scenario, pose_to_state, state_dict
 from svgs.profiles import Camera, Pattern
 
 #: Default lab: a matt grey backdrop 3 m behind the target, room lights off (the paper's
@@ -46,8 +47,10 @@ class Scenario:
         Target pattern name or path.
     range_m : float
         Along the boresight to the target origin, m.
-    x_m, y_m : float
-        Lateral offsets of the target origin (right, up in the paper's camera frame), m.
+    target_x_m, target_y_m : float
+        Lateral offsets of the target origin from the boresight (right, up in the paper's
+        camera frame), m. Not the camera position ``x_m``, ``y_m`` of the paper state
+        (:data:`svgs.frames.STATE_KEYS`), which is in the target frame.
     roll_deg, pitch_deg, yaw_deg : float
         The paper's attitude (x-y-z sequence), degrees.
     backdrop_distance_m : float or None
@@ -66,8 +69,8 @@ class Scenario:
     camera: str = "galaxy-nexus"
     pattern: str = "svgs-3u"
     range_m: float = 10.0
-    x_m: float = 0.0
-    y_m: float = 0.0
+    target_x_m: float = 0.0
+    target_y_m: float = 0.0
     roll_deg: float = 0.0
     pitch_deg: float = 0.0
     yaw_deg: float = 0.0
@@ -79,7 +82,7 @@ class Scenario:
     roi_spp: int | None = None
 
     def __post_init__(self):
-        for k in ("range_m", "x_m", "y_m", "roll_deg", "pitch_deg", "yaw_deg", "backdrop_reflectance",
+        for k in ("range_m", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg", "backdrop_reflectance",
                   "ambient_radiance_w_m2_sr"):
             v = getattr(self, k)
             try:
@@ -103,7 +106,8 @@ class Scenario:
 
     def pose(self):
         """(R_cam_target, t_cam_target_m) of this scenario."""
-        return pose_from_scenario(self.range_m, self.x_m, self.y_m, self.roll_deg, self.pitch_deg, self.yaw_deg)
+        return pose_from_scenario(self.range_m, self.target_x_m, self.target_y_m, self.roll_deg, self.pitch_deg,
+                                  self.yaw_deg)
 
     def replace(self, **kw) -> "Scenario":
         d = asdict(self)
@@ -218,29 +222,6 @@ def render_scenario(scenario: Scenario, *, seed: int = 0) -> Frame:
     return Frame(scenario, res.flux + lab, truth, dt, lab)
 
 
-def pose_errors(state, truth_state) -> dict:
-    """Errors of a paper-convention state against the truth.
-
-    Returns
-    -------
-    dict
-        ``pos_err_m`` [dX_L, dY_L, dZ_L], ``att_err_deg`` [droll, dpitch, dyaw] (wrapped to
-        +/-180), ``rot_err_deg`` (angle of the relative rotation).
-    """
-    s, tr = np.asarray(state, float), np.asarray(truth_state, float)
-    d = s - tr
-    d[3:] = (d[3:] + np.pi) % (2 * np.pi) - np.pi
-    from svgs.frames import state_to_pose
-
-    Ra, _ = state_to_pose(s)
-    Rb, _ = state_to_pose(tr)
-    return {
-        "pos_err_m": d[:3].tolist(),
-        "att_err_deg": np.degrees(d[3:]).tolist(),
-        "rot_err_deg": float(rotation_angle_deg(Ra, Rb)),
-    }
-
-
 def solver_camera(camera: Camera, image_shape) -> Camera:
     """The camera geometry of a delivered image (scaled when the ISP downscaled it)."""
     h, w = image_shape[:2]
@@ -269,7 +250,9 @@ def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposu
     -------
     dict
         ``ok``, ``reason``, ``message``, ``n_blobs``, ``state`` (solved, paper keys) or None,
-        ``truth_state``, ``pos_err_m``, ``att_err_deg``, ``rot_err_deg``, ``residual_rms_px``,
+        ``truth_state``, the :data:`sim.metrics.POSE_ERROR_KEYS` (``pos_err_vec_m``,
+        ``att_err_vec_deg``, ``pos_err_norm_m``, ``rot_err_deg``; None when unsolved),
+        ``residual_rms_px``,
         ``exposure_s``, ``iso``, ``expose_s``, ``solve_s``; and ``_exposure`` / ``_solution``
         (objects, for callers that write images).
     """
@@ -297,8 +280,8 @@ def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposu
         "_solution": sol,
     }
     if sol:
-        row.update({"state": sol.state_dict, "residual_rms_px": sol.residual_rms_px, **pose_errors(sol.state, truth_state)})
+        row.update({"state": sol.state_dict, "residual_rms_px": sol.residual_rms_px,
+                    **pose_errors(sol.state, truth_state)})
     else:
-        row.update({"state": None, "residual_rms_px": sol.details.get("residual_rms_px"),
-                    "pos_err_m": None, "att_err_deg": None, "rot_err_deg": None})
+        row.update({"state": None, "residual_rms_px": sol.details.get("residual_rms_px"), **no_pose_errors()})
     return row

@@ -12,17 +12,19 @@ import functools
 
 import numpy as np
 
+from sim.metrics import state_m_deg
 from sim.trials import (
     GEOMETRIC_OUTPUTS,
     GEOMETRIC_PARAMETERS,
-    STATE_KEYS,
     Parameter,
     TrialKind,
+    camera_with_calibration_errors,
     estimate_outputs,
     register_trial_kind,
 )
+from svgs.frames import STATE_KEYS
 
-_POSE = ("range_m", "x_m", "y_m", "roll_deg", "pitch_deg", "yaw_deg")
+_POSE = ("range_m", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg")
 
 RENDER_PARAMETERS = {
     **{k: GEOMETRIC_PARAMETERS[k] for k in _POSE},
@@ -50,8 +52,9 @@ def _frame(key):
     from sim.closed_loop import Scenario, render_scenario
 
     camera, pattern, rng, x, y, roll, pitch, yaw, back, amb = key
-    scen = Scenario(camera=camera, pattern=pattern, range_m=rng, x_m=x, y_m=y, roll_deg=roll, pitch_deg=pitch,
-                    yaw_deg=yaw, backdrop_distance_m=back if back > 0 else None, ambient_radiance_w_m2_sr=amb)
+    scen = Scenario(camera=camera, pattern=pattern, range_m=rng, target_x_m=x, target_y_m=y, roll_deg=roll,
+                    pitch_deg=pitch, yaw_deg=yaw, backdrop_distance_m=back if back > 0 else None,
+                    ambient_radiance_w_m2_sr=amb)
     # the render's own Monte Carlo seed is part of the geometry key, so it is fixed
     frame = render_scenario(scen, seed=0)
     return frame, frame.exposer()
@@ -64,22 +67,16 @@ def _solve_one(scenario: dict, seed: int, frame, exposer) -> dict:
     from sim.closed_loop import expose_and_solve
 
     cam = frame.camera
-    solver_cam = cam.replace(
-        fx=cam.fx * (1.0 + scenario["focal_error_frac"]), fy=cam.fy * (1.0 + scenario["focal_error_frac"]),
-        cx=cam.cx + scenario["pp_error_u_px"], cy=cam.cy + scenario["pp_error_v_px"],
-        dist=cam.dist + np.array([scenario["k1_error"], 0.0, 0.0, 0.0, 0.0]),
-    )
     row = expose_and_solve(
         frame, exposer, seed=seed,
         threshold=scenario["threshold"] if scenario["threshold"] > 0 else None,
         exposure_s=scenario["exposure_s"] or None, iso=scenario["iso"] or None,
-        solver_camera_profile=solver_cam,
+        solver_camera_profile=camera_with_calibration_errors(cam, scenario),
     )
     out = {k: None for k in RENDER_OUTPUTS}
     R, t = frame.scenario.pose()
     st = pose_to_state(R, t)
-    true_deg = np.concatenate([st[:3], np.degrees(st[3:])])
-    out.update({f"true_{k}": float(v) for k, v in zip(STATE_KEYS, true_deg)})
+    out.update({f"true_{k}": float(v) for k, v in zip(STATE_KEYS, state_m_deg(st))})
     uv = cam.project_target(Pattern.load(scenario["pattern"]).points_m, R, t)
     d = np.linalg.norm(uv[:, None] - uv[None], axis=-1) + np.eye(len(uv)) * 1e12
     out["min_separation_px"] = float(d.min())

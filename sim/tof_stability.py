@@ -86,6 +86,8 @@ def run_range(renderer, sensor, range_mm: int, frames: int, seed: int, persisten
     import tof
     from svgs.frames import rotation_angle_deg
 
+    from sim.metrics import ROT_ERR_DEG
+
     sc = SCENARIOS[range_mm]
     R, t = scenario_pose(sc)
     t0 = time.perf_counter()
@@ -118,7 +120,7 @@ def run_range(renderer, sensor, range_mm: int, frames: int, seed: int, persisten
     frames_s = time.perf_counter() - t0
     C = np.array(cols).reshape(-1, 6)
     truth = pose_columns(R, t, R)
-    return {"range_mm": range_mm, "table": sc["table"], "truth": truth, "cols": C, "rot_err_deg": np.array(rot_err),
+    return {"range_mm": range_mm, "table": sc["table"], "truth": truth, "cols": C, ROT_ERR_DEG: np.array(rot_err),
             "fails": fails, "render_s": render_s, "frames_s": frames_s, "frames": frames,
             "integration_time_s": clean.integration_time_s, "centroids_clean": cen,
             "centroids_noisy": {k: np.array(v) for k, v in cen_noisy.items()},

@@ -26,24 +26,24 @@ from __future__ import annotations
 
 import functools
 import importlib
-import time
 from dataclasses import dataclass, field
 from typing import Callable, Hashable, Mapping
 
 import numpy as np
 
+from sim.metrics import ERR_KEYS, POS_ERR_NORM_M, ROT_ERR_DEG, error_columns, state_m_deg
 from svgs.errors import InputError
+from svgs.frames import STATE_KEYS
 
 #: Modules that may register more trial kinds; imported when an unknown name is asked for
 #: (a module that is not installed is skipped). The render-and-solve trial registers itself
-#: from ``sim.render_trial``.
-KIND_MODULES = ("sim.render_trial",)
+#: from ``sim.render_trial``, the closed-loop trial of the range sweep and exposure study from
+#: ``sim.sweep_trial``. Studies run the trials with :func:`studies.execution.run_task`.
+KIND_MODULES = ("sim.render_trial", "sim.sweep_trial")
 
 #: Columns every study row has besides the scenario and the kind's outputs.
 ID_COLUMNS = ("trial_id", "seed")
 TIMING_COLUMNS = ("wall_s", "cpu_s")
-
-STATE_KEYS = ("x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg")
 
 
 @dataclass(frozen=True)
@@ -178,71 +178,14 @@ def get_trial_kind(name: str) -> TrialKind:
         raise InputError(f"--trial-kind: unknown trial kind {name!r}; known: {', '.join(sorted(_REGISTRY))}") from None
 
 
-# --------------------------------------------------------------------------- task runner
-def run_task(kind_ref: tuple[str, str], items: list) -> list[dict]:
-    """Run one task of a study (in a worker process): trials sharing a render key or a chunk.
-
-    Parameters
-    ----------
-    kind_ref : (module, name)
-        Where the trial kind is registered.
-    items : list of (trial_id, scenario, seed)
-
-    Returns
-    -------
-    list of dict
-        One row per trial: ``trial_id``, ``seed``, the scenario, the outputs, ``wall_s`` and
-        ``cpu_s`` (wall-clock and worker CPU seconds, averaged over a render group).
-    """
-    module, name = kind_ref
-    importlib.import_module(module)
-    kind = _REGISTRY[name]
-    _warm(kind)
-    rows = []
-    # consecutive items with the same render key form one group
-    groups: list[list] = []
-    for it in items:
-        key = kind.render_key(it[1]) if (kind.render_key and kind.run_group) else None
-        if groups and key is not None and groups[-1][0] == key:
-            groups[-1][1].append(it)
-        else:
-            groups.append([key, [it]])
-    for key, grp in groups:
-        t0, c0 = time.perf_counter(), time.process_time()
-        if key is not None and len(grp) > 1:
-            outs = kind.run_group([g[1] for g in grp], [g[2] for g in grp])
-        else:
-            outs = [kind.run_trial(g[1], g[2]) for g in grp]
-        dt, dc = (time.perf_counter() - t0) / len(grp), (time.process_time() - c0) / len(grp)
-        for (tid, scen, seed), out in zip(grp, outs):
-            rows.append({"trial_id": int(tid), "seed": int(seed), **scen, **out, "wall_s": dt, "cpu_s": dc})
-    return rows
-
-
-_WARMED: set = set()
-
-
-def _warm(kind: TrialKind) -> None:
-    if kind.warm_up is not None and kind.name not in _WARMED:
-        kind.warm_up()
-        _WARMED.add(kind.name)
-
-
-def warm_up_worker(kind_ref: tuple[str, str]) -> None:
-    """Process-pool initializer: import the kind's module and warm it up."""
-    module, name = kind_ref
-    importlib.import_module(module)
-    _warm(_REGISTRY[name])
-
-
 # --------------------------------------------------------------------------- geometric trial
 GEOMETRIC_PARAMETERS = {
     p.name: p
     for p in (
         Parameter("range_m", "m", "distance from the camera to the target origin along the boresight", 10.0, True,
                   lower=0.0, lower_open=True),
-        Parameter("x_m", "m", "lateral offset of the target origin, camera right", 0.0, True),
-        Parameter("y_m", "m", "lateral offset of the target origin, camera up", 0.0, True),
+        Parameter("target_x_m", "m", "lateral offset of the target origin from the boresight, camera right", 0.0, True),
+        Parameter("target_y_m", "m", "lateral offset of the target origin from the boresight, camera up", 0.0, True),
         Parameter("roll_deg", "deg", "relative attitude, rotation about the target x axis (paper phi)", 0.0, True,
                   lower=-90.0, upper=90.0),
         Parameter("pitch_deg", "deg", "relative attitude, rotation about the target y axis (paper theta)", 0.0, True,
@@ -265,8 +208,8 @@ GEOMETRIC_OUTPUTS = (
     "ok", "reason",
     *(f"true_{k}" for k in STATE_KEYS),
     *(f"est_{k}" for k in STATE_KEYS),
-    *(f"err_{k}" for k in STATE_KEYS),
-    "pos_err_m", "att_err_deg", "residual_rms_px", "min_separation_px",
+    *ERR_KEYS,
+    POS_ERR_NORM_M, ROT_ERR_DEG, "residual_rms_px", "min_separation_px",
     *(f"crlb_{k}" for k in STATE_KEYS),
 )
 
@@ -283,6 +226,30 @@ def _pattern(name: str):
     from svgs.profiles import Pattern
 
     return Pattern.load(name)
+
+
+def camera_with_calibration_errors(camera, scenario: Mapping):
+    """The camera the solver believes: ``camera`` with the scenario's calibration errors.
+
+    Parameters
+    ----------
+    camera : svgs.profiles.Camera
+        The true camera.
+    scenario : mapping
+        ``focal_error_frac`` (fx and fy scaled by ``1 + e``), ``pp_error_u_px``,
+        ``pp_error_v_px`` (added to cx, cy), ``k1_error`` (added to the radial k1).
+
+    Returns
+    -------
+    svgs.profiles.Camera
+    """
+    return camera.replace(
+        fx=camera.fx * (1.0 + scenario["focal_error_frac"]),
+        fy=camera.fy * (1.0 + scenario["focal_error_frac"]),
+        cx=camera.cx + scenario["pp_error_u_px"],
+        cy=camera.cy + scenario["pp_error_v_px"],
+        dist=camera.dist + np.array([scenario["k1_error"], 0.0, 0.0, 0.0, 0.0]),
+    )
 
 
 def build_scenario(kind: TrialKind, values: dict, labels: dict | None = None) -> dict:
@@ -334,7 +301,7 @@ def _geometric_render(scenario: dict):
     from svgs.frames import pose_from_scenario, pose_to_state
 
     cam, pat = _camera(scenario["camera"]), _pattern(scenario["pattern"])
-    R, t = pose_from_scenario(scenario["range_m"], scenario["x_m"], scenario["y_m"],
+    R, t = pose_from_scenario(scenario["range_m"], scenario["target_x_m"], scenario["target_y_m"],
                               scenario["roll_deg"], scenario["pitch_deg"], scenario["yaw_deg"])
     p_cam = pat.points_m @ R.T + t
     depth_ok = bool(np.all(p_cam[:, 2] > 0))
@@ -350,8 +317,7 @@ def _geometric_expose_solve(scenario: dict, seed: int, rendered) -> dict:
     rng = np.random.default_rng(seed)
     uv = uv_true + scenario["sigma_px"] * rng.standard_normal(uv_true.shape)
     out = {k: None for k in GEOMETRIC_OUTPUTS}
-    true_deg = np.concatenate([state_true[:3], np.degrees(state_true[3:])])
-    out.update({f"true_{k}": float(v) for k, v in zip(STATE_KEYS, true_deg)})
+    out.update({f"true_{k}": float(v) for k, v in zip(STATE_KEYS, state_m_deg(state_true))})
     d = np.linalg.norm(uv_true[:, None] - uv_true[None], axis=-1) + np.eye(len(uv_true)) * 1e12
     out["min_separation_px"] = float(d.min())
     reason = None
@@ -360,13 +326,7 @@ def _geometric_expose_solve(scenario: dict, seed: int, rendered) -> dict:
     elif scenario["merge_px"] > 0 and d.min() < scenario["merge_px"]:
         reason = "merged_spots"
     if reason is None:
-        solver_cam = cam.replace(
-            fx=cam.fx * (1.0 + scenario["focal_error_frac"]),
-            fy=cam.fy * (1.0 + scenario["focal_error_frac"]),
-            cx=cam.cx + scenario["pp_error_u_px"],
-            cy=cam.cy + scenario["pp_error_v_px"],
-            dist=cam.dist + np.array([scenario["k1_error"], 0.0, 0.0, 0.0, 0.0]),
-        )
+        solver_cam = camera_with_calibration_errors(cam, scenario)
         try:
             sol = solve_centroids(uv, solver_cam, pat, sigma_px=1.0)
         except InputError:  # a degenerate image (e.g. all points on one line)
@@ -382,8 +342,8 @@ def _geometric_expose_solve(scenario: dict, seed: int, rendered) -> dict:
 
 
 def estimate_outputs(sol, state_true, crlb_scale: float = 1.0) -> dict:
-    """The ``est_*``, ``err_*``, ``crlb_*``, ``pos_err_m``, ``att_err_deg`` and
-    ``residual_rms_px`` outputs of a solved trial.
+    """The ``est_*``, ``err_*``, ``crlb_*``, ``pos_err_norm_m``, ``rot_err_deg`` and
+    ``residual_rms_px`` outputs of a solved trial (errors from :mod:`sim.metrics`).
 
     Parameters
     ----------
@@ -393,19 +353,10 @@ def estimate_outputs(sol, state_true, crlb_scale: float = 1.0) -> dict:
     crlb_scale : float
         Multiplies the solution's 1-sigma bound (its covariance is for ``sol.sigma_px``).
     """
-    from svgs.frames import rotation_angle_deg, state_to_pose
-
-    true_deg = np.concatenate([state_true[:3], np.degrees(state_true[3:])])
-    est = np.concatenate([sol.state[:3], np.degrees(sol.state[3:])])
-    err = est - true_deg
-    err[3:] = (err[3:] + 180.0) % 360.0 - 180.0
-    crlb = np.sqrt(np.diag(sol.covariance)) * crlb_scale
-    crlb = np.concatenate([crlb[:3], np.degrees(crlb[3:])])
-    out = {f"est_{k}": float(v) for k, v in zip(STATE_KEYS, est)}
-    out.update({f"err_{k}": float(v) for k, v in zip(STATE_KEYS, err)})
+    crlb = state_m_deg(np.sqrt(np.diag(sol.covariance)) * crlb_scale)
+    out = {f"est_{k}": float(v) for k, v in zip(STATE_KEYS, state_m_deg(sol.state))}
+    out.update(error_columns(sol.state, state_true, R_cam_target_est=sol.R_cam_target))
     out.update({f"crlb_{k}": float(v) for k, v in zip(STATE_KEYS, crlb)})
-    out["pos_err_m"] = float(np.linalg.norm(err[:3]))
-    out["att_err_deg"] = float(rotation_angle_deg(sol.R_cam_target, state_to_pose(state_true)[0]))
     out["residual_rms_px"] = float(sol.residual_rms_px)
     return out
 
@@ -427,8 +378,8 @@ def geometric_trial(scenario: dict, seed: int) -> dict:
         :data:`GEOMETRIC_OUTPUTS`: ``ok``, ``reason`` (a :data:`svgs.result.REASONS` code or
         None), ``true_*``/``est_*``/``err_*`` for x, y, z (m; the camera's perspective centre in
         the target frame) and roll, pitch, yaw (deg; paper angles, errors wrapped to
-        [-180, 180)), ``pos_err_m`` (norm), ``att_err_deg`` (rotation angle between solved
-        and true attitude), ``residual_rms_px``, ``min_separation_px`` (closest pair of true
+        [-180, 180)), ``pos_err_norm_m`` (norm of the position error), ``rot_err_deg``
+        (rotation angle between solved and true attitude; see :mod:`sim.metrics`), ``residual_rms_px``, ``min_separation_px`` (closest pair of true
         image points) and ``crlb_*`` (Cramer-Rao 1-sigma for ``sigma_px``, at the estimate).
     """
     return _geometric_expose_solve(scenario, seed, _geometric_render(scenario))
@@ -442,7 +393,8 @@ def geometric_group(scenarios: list, seeds: list) -> list[dict]:
 
 def geometric_render_key(scenario: dict):
     """What decides the geometric "render": camera, pattern, pose."""
-    return (scenario["camera"], scenario["pattern"], scenario["range_m"], scenario["x_m"], scenario["y_m"],
+    return (scenario["camera"], scenario["pattern"], scenario["range_m"], scenario["target_x_m"],
+            scenario["target_y_m"],
             scenario["roll_deg"], scenario["pitch_deg"], scenario["yaw_deg"])
 
 

@@ -43,7 +43,8 @@ from svgs.errors import InputError
 
 from .seeding import check_seed, design_rng, study_rng, trial_seed
 from assets.papers import svgs_2014_results
-from sim.trials import STATE_KEYS, build_scenario, get_trial_kind
+from sim.trials import build_scenario, get_trial_kind
+from svgs.frames import STATE_KEYS
 
 #: The paper's Sensor Mount envelope.
 GIMBAL_ROLL_DEG = 25.0

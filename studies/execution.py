@@ -22,6 +22,7 @@ per-task overhead; the packing does not change any trial's numbers either.
 from __future__ import annotations
 
 import contextlib
+import importlib
 import logging
 import multiprocessing
 import os
@@ -34,7 +35,7 @@ from dataclasses import dataclass
 
 from svgs.errors import InputError
 
-from sim.trials import TrialKind, run_task, warm_up_worker
+from sim.trials import TrialKind, get_trial_kind
 
 #: Seconds to wait for a Dask scheduler to answer before giving up.
 SCHEDULER_TIMEOUT_S = 5.0
@@ -151,6 +152,67 @@ def check_executor(spec: ExecutorSpec) -> None:
                 f"--scheduler: cannot reach a Dask scheduler at {spec.scheduler} ({exc.strerror or exc}); "
                 "is it running and reachable from here?"
             ) from None
+
+
+# --------------------------------------------------------------------------- in the workers
+def run_task(kind_ref: tuple[str, str], items: list) -> list[dict]:
+    """Run one task of a study (in a worker process): trials sharing a render key or a chunk.
+
+    Parameters
+    ----------
+    kind_ref : (module, name)
+        Where the trial kind is registered (:attr:`sim.trials.TrialKind.ref`).
+    items : list of (trial_id, scenario, seed)
+
+    Returns
+    -------
+    list of dict
+        One row per trial: ``trial_id``, ``seed``, the scenario, the outputs, ``wall_s`` and
+        ``cpu_s`` (wall-clock and worker CPU seconds, averaged over a render group).
+    """
+    kind = _kind(kind_ref)
+    _warm(kind)
+    rows = []
+    # consecutive items with the same render key form one group
+    groups: list[list] = []
+    for it in items:
+        key = kind.render_key(it[1]) if (kind.render_key and kind.run_group) else None
+        if groups and key is not None and groups[-1][0] == key:
+            groups[-1][1].append(it)
+        else:
+            groups.append([key, [it]])
+    for key, grp in groups:
+        t0, c0 = time.perf_counter(), time.process_time()
+        if key is not None and len(grp) > 1:
+            outs = kind.run_group([g[1] for g in grp], [g[2] for g in grp])
+        else:
+            outs = [kind.run_trial(g[1], g[2]) for g in grp]
+        dt, dc = (time.perf_counter() - t0) / len(grp), (time.process_time() - c0) / len(grp)
+        for (tid, scen, seed), out in zip(grp, outs):
+            rows.append({"trial_id": int(tid), "seed": int(seed), **scen, **out, "wall_s": dt, "cpu_s": dc})
+    return rows
+
+
+def _kind(kind_ref: tuple[str, str]) -> TrialKind:
+    """Import the module that registers the kind (in a fresh worker), then look it up."""
+    module, name = kind_ref
+    importlib.import_module(module)
+    return get_trial_kind(name)
+
+
+#: Trial kinds already warmed up in this process.
+_WARMED: set = set()
+
+
+def _warm(kind: TrialKind) -> None:
+    if kind.warm_up is not None and kind.name not in _WARMED:
+        kind.warm_up()
+        _WARMED.add(kind.name)
+
+
+def warm_up_worker(kind_ref: tuple[str, str]) -> None:
+    """Process-pool initializer: import the kind's module and warm it up."""
+    _warm(_kind(kind_ref))
 
 
 class InlineExecutor(Executor):

@@ -18,7 +18,8 @@ Noise as common random numbers
     same per trajectory.
 
 Outputs analysed
-    ``pos_err_m`` (norm of the position error), ``att_err_deg`` (attitude error angle) and
+    ``pos_err_norm_m`` (norm of the position error), ``rot_err_deg`` (attitude error angle;
+    names from :mod:`sim.metrics`) and
     ``success`` (1 solved, 0 failed). A failed trial has no error: it is given the largest
     error seen for that output (a penalty) and the failure fraction is reported.
 """
@@ -35,9 +36,10 @@ import numpy as np
 from svgs.errors import InputError
 
 from .seeding import check_seed, trial_seed
+from sim.metrics import POS_ERR_NORM_M, ROT_ERR_DEG, SCALAR_ERROR_KEYS
 from sim.trials import TrialKind, build_scenario, get_trial_kind
 
-OUTPUTS = ("pos_err_m", "att_err_deg", "success")
+OUTPUTS = (POS_ERR_NORM_M, ROT_ERR_DEG, "success")
 MORRIS_LEVELS = 4
 CONFIDENCE = 0.95
 N_BOOTSTRAP = 499
@@ -284,7 +286,7 @@ def output_values(table: dict) -> dict:
     """
     ok = table["ok"] == 1
     out = {"success": ok.astype(float)}
-    for k in ("pos_err_m", "att_err_deg"):
+    for k in SCALAR_ERROR_KEYS:
         v = np.array(table[k], float)
         worst = np.nanmax(v[ok]) if np.any(ok) else 1.0
         v[~ok | ~np.isfinite(v)] = worst
@@ -380,7 +382,7 @@ def analyze(table: dict, config: SensitivityConfig, layout: dict) -> dict:
     return res
 
 
-def ranking(result: dict, config: SensitivityConfig, output: str = "pos_err_m") -> list[tuple[str, float]]:
+def ranking(result: dict, config: SensitivityConfig, output: str = POS_ERR_NORM_M) -> list[tuple[str, float]]:
     """Parameters ranked by total index (Sobol) or mu* (Morris) for ``output``, largest first."""
     r = result["outputs"][output]
     score = r["ST"] if config.method == "sobol" else r["mu_star"]
@@ -393,24 +395,12 @@ def ranking(result: dict, config: SensitivityConfig, output: str = "pos_err_m") 
 def write_sensitivity_report(out_dir, config: SensitivityConfig, table: dict, result: dict, *, command: str,
                              versions: dict, stats=None, n_render_groups: int | None = None) -> Path:
     """``DIR/report.html`` and ``DIR/indices.csv``."""
-    from matplotlib.figure import Figure
-
     from .report import Report, write_csv
 
     out_dir = Path(out_dir)
     names = [v.name for v in config.varied]
     d = len(names)
-    rows = []
-    for k in OUTPUTS:
-        r = result["outputs"][k]
-        for i, nm in enumerate(names):
-            if config.method == "sobol":
-                rows.append({"output": k, "parameter": nm, "S1": r["S1"][i], "S1_low": r["S1_ci"][i, 0],
-                             "S1_high": r["S1_ci"][i, 1], "ST": r["ST"][i], "ST_low": r["ST_ci"][i, 0],
-                             "ST_high": r["ST_ci"][i, 1]})
-            else:
-                rows.append({"output": k, "parameter": nm, "mu_star": r["mu_star"][i], "mu_star_low": r["mu_star_ci"][i, 0],
-                             "mu_star_high": r["mu_star_ci"][i, 1], "mu": r["mu"][i], "sigma": r["sigma"][i]})
+    rows = _index_rows(result, config, names)
     cols = list(rows[0])
     write_csv(out_dir / "indices.csv", cols, rows)
 
@@ -429,6 +419,37 @@ def write_sensitivity_report(out_dir, config: SensitivityConfig, table: dict, re
                for v in config.varied], text_columns=["unit", "acts", "meaning"], digits=4)
     if config.fixed:
         rep.table(["fixed parameter", "value"], sorted(config.fixed.items()), digits=4)
+    _report_ranking(rep, result, config)
+    rep.heading("Indices")
+    for k in OUTPUTS:
+        sub = [r for r in rows if r["output"] == k]
+        rep.table(cols[1:], [[r[c] for c in cols[1:]] for r in sub],
+                  caption=f"{k}: indices with {int(100 * CONFIDENCE)} % bootstrap intervals")
+        rep.figure(_index_figure(result["outputs"][k], k, config, names),
+                   f"{k}: sensitivity indices with {int(100 * CONFIDENCE)} % confidence intervals.")
+    rep.figure(_scatter_figure(table, config, names),
+               "Position error against each varied parameter (independent design rows).")
+    return rep.write(out_dir / "report.html")
+
+
+def _index_rows(result: dict, config: SensitivityConfig, names: list) -> list[dict]:
+    """One row per (output, parameter): the indices and their bootstrap interval (``indices.csv``)."""
+    rows = []
+    for k in OUTPUTS:
+        r = result["outputs"][k]
+        for i, nm in enumerate(names):
+            if config.method == "sobol":
+                rows.append({"output": k, "parameter": nm, "S1": r["S1"][i], "S1_low": r["S1_ci"][i, 0],
+                             "S1_high": r["S1_ci"][i, 1], "ST": r["ST"][i], "ST_low": r["ST_ci"][i, 0],
+                             "ST_high": r["ST_ci"][i, 1]})
+            else:
+                rows.append({"output": k, "parameter": nm, "mu_star": r["mu_star"][i], "mu_star_low": r["mu_star_ci"][i, 0],
+                             "mu_star_high": r["mu_star_ci"][i, 1], "mu": r["mu"][i], "sigma": r["sigma"][i]})
+    return rows
+
+
+def _report_ranking(rep, result: dict, config: SensitivityConfig) -> None:
+    """The report's "Ranking" section: parameters by total index or mu*, and how to read them."""
     rep.heading("Ranking")
     for k in OUTPUTS:
         rk = ranking(result, config, k)
@@ -451,46 +472,52 @@ def write_sensitivity_report(out_dir, config: SensitivityConfig, table: dict, re
             "How to read this. mu* is the mean absolute change of the output when the parameter moves across "
             "two-thirds of its range (the 4-level grid step), sigma the spread of that change: sigma comparable to mu* "
             "means the effect depends on the other parameters (interactions or non-linearity).", "note")
-    rep.heading("Indices")
-    for k in OUTPUTS:
-        sub = [r for r in rows if r["output"] == k]
-        rep.table(cols[1:], [[r[c] for c in cols[1:]] for r in sub],
-                  caption=f"{k}: indices with {int(100 * CONFIDENCE)} % bootstrap intervals")
-        fig = Figure(figsize=(max(6, 0.9 * d + 2), 3.4))
-        ax = fig.subplots()
-        x = np.arange(d)
-        res = result["outputs"][k]
-        if config.method == "sobol":
-            for off, key, lab in ((-0.18, "S1", "first order S1"), (0.18, "ST", "total ST")):
-                v, ci = res[key], res[f"{key}_ci"]
-                ax.bar(x + off, v, 0.36, label=lab,
-                       yerr=np.abs(np.stack([v - ci[:, 0], ci[:, 1] - v])), capsize=3)
-            ax.set_ylabel("Sobol' index")
-        else:
-            v, ci = res["mu_star"], res["mu_star_ci"]
-            ax.bar(x, v, 0.5, label="mu*", yerr=np.abs(np.stack([v - ci[:, 0], ci[:, 1] - v])), capsize=3)
-            ax.set_ylabel("mu* (output per unit normalised range)")
-        ax.set_xticks(x, names, rotation=30, ha="right")
-        ax.grid(alpha=0.3, axis="y")
-        ax.legend(fontsize=8)
-        ax.set_title(k)
-        fig.tight_layout()
-        rep.figure(fig, f"{k}: sensitivity indices with {int(100 * CONFIDENCE)} % confidence intervals.")
-    # scatter of the output against each parameter (A and B rows, or all trajectory points)
+
+
+def _index_figure(res: dict, k: str, config: SensitivityConfig, names: list):
+    """Bar chart of one output's indices (S1 and ST, or mu*) with their confidence intervals."""
+    from matplotlib.figure import Figure
+
+    d = len(names)
+    fig = Figure(figsize=(max(6, 0.9 * d + 2), 3.4))
+    ax = fig.subplots()
+    x = np.arange(d)
+    if config.method == "sobol":
+        for off, key, lab in ((-0.18, "S1", "first order S1"), (0.18, "ST", "total ST")):
+            v, ci = res[key], res[f"{key}_ci"]
+            ax.bar(x + off, v, 0.36, label=lab,
+                   yerr=np.abs(np.stack([v - ci[:, 0], ci[:, 1] - v])), capsize=3)
+        ax.set_ylabel("Sobol' index")
+    else:
+        v, ci = res["mu_star"], res["mu_star_ci"]
+        ax.bar(x, v, 0.5, label="mu*", yerr=np.abs(np.stack([v - ci[:, 0], ci[:, 1] - v])), capsize=3)
+        ax.set_ylabel("mu* (output per unit normalised range)")
+    ax.set_xticks(x, names, rotation=30, ha="right")
+    ax.grid(alpha=0.3, axis="y")
+    ax.legend(fontsize=8)
+    ax.set_title(k)
+    fig.tight_layout()
+    return fig
+
+
+def _scatter_figure(table: dict, config: SensitivityConfig, names: list):
+    """The position error against each varied parameter (A and B rows, or all trajectory points)."""
+    from matplotlib.figure import Figure
+
+    d = len(names)
     vals = output_values(table)
     X = np.array([[table[nm][j] for nm in names] for j in range(len(table["trial_id"]))])
     sel = slice(0, 2 * config.n) if config.method == "sobol" else slice(None)
     fig = Figure(figsize=(min(3.0 * d, 18), 3.0))
     axes = np.atleast_1d(fig.subplots(1, d))
     for i, ax in enumerate(axes):
-        ax.plot(X[sel, i], vals["pos_err_m"][sel], ".", ms=2, alpha=0.5)
+        ax.plot(X[sel, i], vals[POS_ERR_NORM_M][sel], ".", ms=2, alpha=0.5)
         ax.set_yscale("log")
         ax.set_xlabel(f"{names[i]} ({config.varied[i].unit})")
         ax.grid(alpha=0.3)
-    axes[0].set_ylabel("pos_err_m")
+    axes[0].set_ylabel(POS_ERR_NORM_M)
     fig.tight_layout()
-    rep.figure(fig, "Position error against each varied parameter (independent design rows).")
-    return rep.write(out_dir / "report.html")
+    return fig
 
 
 def run_sensitivity(config: SensitivityConfig, out_dir, spec, *, chunk_size=None, progress: bool = True,

@@ -69,8 +69,6 @@ COARSE_MAX_REGIONS = 400
 WIN_MAX_ITER = 20
 WIN_TOL_PX = 1e-4
 WIN_MIN_SIGMA_PX = 0.8
-#: Rec. 601 luminance weights (R, G, B).
-LUMA_RGB = (0.299, 0.587, 0.114)
 
 GATES = ("min_area", "max_area", "eccentricity", "roundness", "max_blobs")
 
@@ -477,31 +475,61 @@ def detect_blobs(
         For a bad ``image`` (see :func:`to_gray`) or bad options.
     """
     gray = to_gray(image)
+    _check_options(centroid, min_area_px, max_area_px, max_blobs)
+    sat = _default_saturation(gray.dtype) if saturation_level is None else float(saturation_level)
+    level, bg, sigma = _resolve_threshold(gray, threshold, k_sigma, peak_fraction)
+    meta = dict(threshold_used=level, background_level=bg, noise_sigma=sigma, saturation_level=sat,
+                image_shape=tuple(gray.shape))
+    binary = _binarise(gray, level)
+    if binary is None:
+        return Blobs.empty(**meta)
+    rejected = {g: 0 for g in GATES}
+    cand, n_components = _size_gated_candidates(binary, min_area_px, max_area_px, max_blobs, rejected)
+    rows = []
+    for c in cand:
+        row = _measure_candidate(gray, c, bg, sat, centroid, max_eccentricity, min_roundness,
+                                 shape_gate_min_area_px, rejected)
+        if row is not None:
+            rows.append(row)
+    meta.update(rejected=rejected, n_components=n_components)
+    return _blobs_from_rows(rows, meta)
+
+
+def _check_options(centroid: str, min_area_px, max_area_px, max_blobs) -> None:
+    """Raise :class:`InputError` for a bad centroid method or a non-positive integer gate."""
     if centroid not in ("window", "component"):
         raise InputError(f"centroid: expected 'window' or 'component', got {centroid!r}")
     for nm, v in (("min_area_px", min_area_px), ("max_area_px", max_area_px), ("max_blobs", max_blobs)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
             raise InputError(f"{nm}: expected a positive integer, got {v!r}")
-    sat = _default_saturation(gray.dtype) if saturation_level is None else float(saturation_level)
-    level, bg, sigma = _resolve_threshold(gray, threshold, k_sigma, peak_fraction)
-    meta = dict(threshold_used=level, background_level=bg, noise_sigma=sigma, saturation_level=sat,
-                image_shape=tuple(gray.shape))
 
-    # binarise: strictly above the level
+
+def _binarise(gray: np.ndarray, level: float):
+    """Foreground mask (uint8 0/255, shape (H, W)): pixels strictly above ``level``; None when
+    no pixel of an integer image can exceed it."""
     if np.issubdtype(gray.dtype, np.integer):
         top = np.iinfo(gray.dtype).max
         if level >= top:
-            return Blobs.empty(**meta)
+            return None
         lev = np.floor(level) if level >= 0 else -1
-        binary = cv2.compare(gray, float(lev), cv2.CMP_GT) if level >= 0 else np.full(gray.shape, 255, np.uint8)
-    else:
-        binary = cv2.compare(gray, float(level), cv2.CMP_GT)
+        return cv2.compare(gray, float(lev), cv2.CMP_GT) if level >= 0 else np.full(gray.shape, 255, np.uint8)
+    return cv2.compare(gray, float(level), cv2.CMP_GT)
 
-    comps = _components(binary)
-    rejected = {g: 0 for g in GATES}
-    cand = []  # (area, x, y, w, h, labels, lab, lx0, ly0) in image coordinates
+
+def _size_gated_candidates(binary: np.ndarray, min_area_px: int, max_area_px: int, max_blobs: int,
+                           rejected: dict) -> tuple[list, int]:
+    """Connected components that pass the size gates, the ``max_blobs`` largest.
+
+    Returns
+    -------
+    cand : list of tuple
+        ``(area, x, y, w, h, labels, lab, lx0, ly0)`` in image coordinates.
+    n_components : int
+        Components found before the gates. ``rejected`` counts the gated ones.
+    """
+    cand = []
     n_components = 0
-    for labels, stats, ox, oy in comps:
+    for labels, stats, ox, oy in _components(binary):
         n_components += len(stats)
         areas = stats[:, cv2.CC_STAT_AREA]
         small = areas < min_area_px
@@ -515,45 +543,56 @@ def detect_blobs(
         cand.sort(key=lambda c: -c[0])
         rejected["max_blobs"] = len(cand) - max_blobs
         cand = cand[:max_blobs]
+    return cand, n_components
 
-    rows = []
-    for a, x, y, w, h, labels, lab, ox, oy in cand:
-        mask = labels[y - oy: y - oy + h, x - ox: x - ox + w] == lab
-        vals = gray[y: y + h, x: x + w]
-        if a >= shape_gate_min_area_px:
-            ecc, rnd = _shape(mask, a)
-            if ecc > max_eccentricity:
-                rejected["eccentricity"] += 1
-                continue
-            if rnd < min_roundness:
-                rejected["roundness"] += 1
-                continue
-        else:
-            ecc, rnd = _shape(mask, a)
-        pad = max(2, int(round(0.5 * np.sqrt(a))))
-        bgl = _ring_background(gray, x, y, w, h, pad, bg)
-        v = vals[mask].astype(np.float64)
-        I = np.clip(v - bgl, 0.0, None)
-        flux = float(I.sum())
-        peak = float(v.max())
-        satf = float(np.count_nonzero(v >= sat)) / a
-        yy, xx = np.nonzero(mask)
-        if flux > 0:
-            uc = float((I * xx).sum() / flux) + x
-            vc = float((I * yy).sum() / flux) + y
-        else:
-            uc, vc = float(xx.mean()) + x, float(yy.mean()) + y
-        if centroid == "window" and flux > 0:
-            half = 0.5 * (peak - bgl)
-            a_half = max(int(np.count_nonzero(v - bgl >= half)), 1)
-            fwhm = 2.0 * np.sqrt(a_half / np.pi)
-            sw = max(fwhm / 2.3548, WIN_MIN_SIGMA_PX)
-            res = windowed_centroid(gray, uc, vc, sw, bgl)
-            if res is not None:
-                uc, vc = res
-        rows.append((uc, vc, a, x, y, w, h, peak, satf, ecc, rnd, flux, bgl))
 
-    meta.update(rejected=rejected, n_components=n_components)
+def _measure_candidate(gray, cand, bg, sat, centroid, max_eccentricity, min_roundness, shape_gate_min_area_px,
+                       rejected: dict):
+    """Shape gates and measurements of one candidate component.
+
+    Returns
+    -------
+    tuple or None
+        ``(u, v, area, x, y, w, h, peak, saturated_fraction, eccentricity, roundness, flux,
+        background)``; None when a shape gate rejects it (counted in ``rejected``).
+    """
+    a, x, y, w, h, labels, lab, ox, oy = cand
+    mask = labels[y - oy: y - oy + h, x - ox: x - ox + w] == lab
+    vals = gray[y: y + h, x: x + w]
+    ecc, rnd = _shape(mask, a)
+    if a >= shape_gate_min_area_px:
+        if ecc > max_eccentricity:
+            rejected["eccentricity"] += 1
+            return None
+        if rnd < min_roundness:
+            rejected["roundness"] += 1
+            return None
+    pad = max(2, int(round(0.5 * np.sqrt(a))))
+    bgl = _ring_background(gray, x, y, w, h, pad, bg)
+    v = vals[mask].astype(np.float64)
+    I = np.clip(v - bgl, 0.0, None)
+    flux = float(I.sum())
+    peak = float(v.max())
+    satf = float(np.count_nonzero(v >= sat)) / a
+    yy, xx = np.nonzero(mask)
+    if flux > 0:
+        uc = float((I * xx).sum() / flux) + x
+        vc = float((I * yy).sum() / flux) + y
+    else:
+        uc, vc = float(xx.mean()) + x, float(yy.mean()) + y
+    if centroid == "window" and flux > 0:
+        half = 0.5 * (peak - bgl)
+        a_half = max(int(np.count_nonzero(v - bgl >= half)), 1)
+        fwhm = 2.0 * np.sqrt(a_half / np.pi)
+        sw = max(fwhm / 2.3548, WIN_MIN_SIGMA_PX)
+        res = windowed_centroid(gray, uc, vc, sw, bgl)
+        if res is not None:
+            uc, vc = res
+    return (uc, vc, a, x, y, w, h, peak, satf, ecc, rnd, flux, bgl)
+
+
+def _blobs_from_rows(rows: list, meta: dict) -> Blobs:
+    """:class:`Blobs` from the measured rows (see :func:`_measure_candidate`), brightest first."""
     if not rows:
         return Blobs.empty(**meta)
     r = np.array(rows, dtype=np.float64)
@@ -571,6 +610,5 @@ def detect_blobs(
         background=r[:, 12].copy(),
         **meta,
     )
-
 
 __all__ = ["Blobs", "detect_blobs", "to_gray", "auto_threshold", "background_stats", "windowed_centroid", "GATES"]

@@ -208,3 +208,41 @@ def rotation_angle_deg(R_a, R_b) -> np.ndarray:
         np.stack([dR[..., 2, 1] - dR[..., 1, 2], dR[..., 0, 2] - dR[..., 2, 0], dR[..., 1, 0] - dR[..., 0, 1]], -1), axis=-1
     )
     return np.degrees(np.arctan2(s, c))
+
+
+def sample_envelope_scenario(rng, *, range_m=(1.0, 40.0), roll_deg=25.0, pitch_deg=25.0, yaw_deg=45.0,
+                             lateral_fraction=0.15) -> dict:
+    """One pose drawn over a test envelope (default: the paper's, "Test Setup"), as the
+    keyword arguments of :func:`pose_from_scenario`.
+
+    Range log-uniform in ``range_m``; lateral offsets of the target origin uniform up to
+    +/-``lateral_fraction`` of the range; roll and pitch uniform in +/-``roll_deg``,
+    +/-``pitch_deg``, yaw in +/-``yaw_deg``. Six scalar draws from ``rng``, in the order
+    range, x, y, roll, pitch, yaw (the one envelope sampler of tests and benchmarks; the
+    identification gates draw their own inflated envelope, :mod:`svgs.identify`).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    range_m : (float, float)
+        Nearest and farthest range along the boresight, m.
+    roll_deg, pitch_deg, yaw_deg : float
+        Largest absolute attitude angles, deg.
+    lateral_fraction : float
+        Largest lateral offset as a fraction of the range.
+
+    Returns
+    -------
+    dict
+        ``range_m, x_m, y_m, roll_deg, pitch_deg, yaw_deg`` (``x_m``, ``y_m``: the target's
+        lateral offset, the arguments of :func:`pose_from_scenario`).
+    """
+    r = float(np.exp(rng.uniform(np.log(range_m[0]), np.log(range_m[1]))))
+    return {
+        "range_m": r,
+        "x_m": float(rng.uniform(-lateral_fraction, lateral_fraction) * r),
+        "y_m": float(rng.uniform(-lateral_fraction, lateral_fraction) * r),
+        "roll_deg": float(rng.uniform(-roll_deg, roll_deg)),
+        "pitch_deg": float(rng.uniform(-pitch_deg, pitch_deg)),
+        "yaw_deg": float(rng.uniform(-yaw_deg, yaw_deg)),
+    }

@@ -381,77 +381,19 @@ def identify(
         Failure reasons: ``no_blobs``, ``too_few_blobs``, ``merged_spots``,
         ``no_consistent_set``.
     """
-    from .solver import solve_centroids
-
     camera = Camera.load(camera)
     pattern = Pattern.load(pattern)
-    for nm, v in (("tolerance_px", tolerance_px), ("max_residual_px", max_residual_px)):
-        if not (isinstance(v, (int, float, np.floating, np.integer)) and np.isfinite(v) and v > 0):
-            raise InputError(f"{nm}: expected a positive number of pixels, got {v!r}")
-    for nm, v in (("max_blobs", max_blobs), ("max_verify", max_verify)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-            raise InputError(f"{nm}: expected a positive integer, got {v!r}")
+    _check_options(tolerance_px, max_residual_px, max_blobs, max_verify)
     pts, blobs = _as_points(blobs_or_points)
     n_t = pattern.n
     n_all = pts.shape[0]
-    base = {"n_blobs": n_all}
-    if n_all == 0:
-        return Failure("no_blobs", "no bright blob was found (nothing above the threshold passed the size and "
-                       "shape gates)", base)
-    if n_all < n_t:
-        merged = _merged_failure(blobs, n_t, single_spot_area_px)
-        if merged is not None:
-            return merged
-        return Failure("too_few_blobs", f"found {n_all} blob(s) where the pattern has {n_t} targets", base)
-
+    if (too_few := _count_failure(n_all, blobs, n_t, single_spot_area_px)) is not None:
+        return too_few
     # brightest first (Blobs are sorted by flux); keep at most max_blobs
     idx_all = np.arange(n_all)[:max_blobs]
     pts = pts[idx_all]
     N = pts.shape[0]
-    g = pattern_gates(pattern, envelope)
-    K = len(g.others)
-
-    # undistorted normalised coordinates, scaled by fx to work in ideal pixels
-    z = camera.pixels_to_normalized(pts)
-    z = (z[:, 0] + 1j * z[:, 1]) * camera.fx
-    ii, jj = np.nonzero(~np.eye(N, dtype=bool))  # ordered pairs (i -> a, j -> b)
-    L = np.abs(z[jj] - z[ii])
-    keep = (L >= g.base_min * camera.fx) & (L <= g.base_max * camera.fx)
-    ii, jj, L = ii[keep], jj[keep], L[keep]
-    n_pairs = int(ii.size)
-    sets = np.zeros((0, n_t), int)
-    scores = np.zeros(0)
-    if n_pairs:
-        w = (z[None, :] - z[ii, None]) / (z[jj] - z[ii])[:, None]  # (p, N)
-        Wv = np.stack([w.real, w.imag], -1)  # (p, N, 2)
-        dist = np.empty((n_pairs, N, K))
-        lim = np.empty((n_pairs, K))
-        for k in range(K):
-            u = (Wv - g.mean[k]) @ g.whiten[k].T
-            dist[:, :, k] = np.sqrt(np.sum(u * u, -1))
-            lim[:, k] = g.radius[k] + 3.0 * tolerance_px / L * g.inv_sqrt_lmin[k]
-        inside = dist <= lim[:, None, :]
-        rows = np.arange(n_pairs)
-        inside[rows, ii, :] = False
-        inside[rows, jj, :] = False
-        # vectorised join: partial sets (pair, blob for others[0], blob for others[1], ...)
-        part_p = np.flatnonzero(np.all(inside.any(1), axis=1))
-        part_sel = np.zeros((part_p.size, 0), int)
-        part_d2 = np.zeros(part_p.size)
-        for k in range(K):
-            r_, c_ = np.nonzero(inside[part_p, :, k])
-            new_p = part_p[r_]
-            new_sel = np.concatenate([part_sel[r_], c_[:, None]], 1)
-            new_d2 = part_d2[r_] + (dist[new_p, c_, k] / g.radius[k]) ** 2
-            if k:  # distinct blobs
-                distinct = np.all(new_sel[:, :-1] != c_[:, None], axis=1)
-                new_p, new_sel, new_d2 = new_p[distinct], new_sel[distinct], new_d2[distinct]
-            part_p, part_sel, part_d2 = new_p, new_sel, new_d2
-        if part_p.size:
-            sets = np.empty((part_p.size, n_t), int)
-            sets[:, g.a], sets[:, g.b] = ii[part_p], jj[part_p]
-            sets[:, list(g.others)] = part_sel
-            scores = part_d2 / K
+    sets, scores, n_pairs = _candidate_sets(pts, camera, pattern_gates(pattern, envelope), n_t, tolerance_px)
     n_cand = int(sets.shape[0])
     diag = {"n_blobs": n_all, "n_pairs": n_pairs, "n_candidates": n_cand}
     hint, hint_d = _merge_hint(blobs, idx_all)
@@ -468,52 +410,190 @@ def identify(
         return Identification(pts[sel], idx_all[sel], pattern.ids.copy(), n_blobs=n_all, n_pairs=n_pairs,
                               n_candidates=n_cand, n_verified=0, score=float(scores[0]))
 
-    # rank by a cheap pose fit (POSIT, vectorised) and its reprojection residual
-    pres = _posit_residual(pts[sets], camera, pattern)
-    rank = np.argsort(pres, kind="stable")
-    rank = rank[pres[rank] <= max(POSIT_GATE_FACTOR * max_residual_px, POSIT_GATE_MIN_PX)][:max_verify]
+    pres, rank = _posit_rank(pts, sets, camera, pattern, max_residual_px, max_verify)
     if rank.size == 0:
         return Failure(
             "no_consistent_set",
             f"{n_cand} candidate set(s) of the {N} blobs fit the pattern's layout, but no pose reproduces any of them "
-            f"(best approximate residual {float(np.min(pres)):.3g} px)"
-            + hint,
+            f"(best approximate residual {float(np.min(pres)):.3g} px)" + hint,
             {**diag, "n_verified": 0, **hint_d},
         )
-    vsets = sets[rank]
-    # solve without the solver's retries first (cheap); retry the best few only if none fits
+    n_ver = int(rank.size)
+    vsets, batch, good = _solve_candidates(pts, sets[rank], camera, pattern, sigma_px, max_residual_px, envelope,
+                                           pose_margin_deg)
+    res = np.asarray(batch.residual_rms_px, float)
+    if not np.any(good):
+        return _unverified_failure(res, n_cand, N, n_ver, max_residual_px, hint, diag, hint_d)
+    best = _pick(vsets, res, good, blobs, idx_all)
+    return _identification(pts, idx_all, pattern, vsets, batch, good, best, float(scores[rank[best]]),
+                           float(pres[rank[best]]), n_blobs=n_all, n_pairs=n_pairs, n_candidates=n_cand,
+                           n_verified=n_ver)
+
+
+def _unverified_failure(res, n_cand: int, N: int, n_ver: int, max_residual_px: float, hint: str, diag: dict,
+                        hint_d: dict):
+    """The Failure when no solved candidate set is consistent (``res``: their RMS residuals, px)."""
+    best = float(np.nanmin(res)) if np.any(np.isfinite(res)) else None
+    return Failure(
+        "no_consistent_set",
+        f"{n_cand} candidate set(s) of the {N} blobs fit the pattern's layout, but none of the {n_ver} solved "
+        f"reproduces it within {max_residual_px:g} px inside the envelope"
+        + (f" (best RMS residual {best:.3g} px)" if best is not None else "") + hint,
+        {**diag, "n_verified": n_ver, "best_residual_px": best, **hint_d},
+    )
+
+
+def _posit_rank(pts, sets, camera, pattern, max_residual_px, max_verify):
+    """Candidate sets ranked by the residual of a cheap pose fit (POSIT, vectorised).
+
+    Returns
+    -------
+    pres : ndarray, shape (M,)
+        POSIT reprojection residual of each set, px (inf when no pose).
+    rank : ndarray of int, shape (<= max_verify,)
+        Indices of the sets worth solving, best first.
+    """
+    pres = _posit_residual(pts[sets], camera, pattern)
+    rank = np.argsort(pres, kind="stable")
+    rank = rank[pres[rank] <= max(POSIT_GATE_FACTOR * max_residual_px, POSIT_GATE_MIN_PX)][:max_verify]
+    return pres, rank
+
+
+def _identification(pts, idx_all, pattern, vsets, batch, good, best, score, posit_residual_px,
+                    **counts) -> Identification:
+    """The :class:`Identification` of the chosen set ``vsets[best]`` with its solution."""
+    res = np.asarray(batch.residual_rms_px, float)
+    sel = vsets[best]
+    sol = batch[best]
+    sol.targets_px = {int(i): pts[sel[k]].tolist() for k, i in enumerate(pattern.ids)}
+    sol.n_blobs = counts["n_blobs"]
+    ok_res = np.sort(res[good])
+    return Identification(
+        pts[sel], idx_all[sel], pattern.ids.copy(), residual_rms_px=float(res[best]), solution=sol, score=score,
+        details={"n_consistent": int(good.sum()), "second_residual_px": float(ok_res[1]) if ok_res.size > 1 else None,
+                 "posit_residual_px": posit_residual_px},
+        **counts,
+    )
+
+
+def _check_options(tolerance_px, max_residual_px, max_blobs, max_verify) -> None:
+    """Raise :class:`InputError` for a non-positive pixel tolerance or count."""
+    for nm, v in (("tolerance_px", tolerance_px), ("max_residual_px", max_residual_px)):
+        if not (isinstance(v, (int, float, np.floating, np.integer)) and np.isfinite(v) and v > 0):
+            raise InputError(f"{nm}: expected a positive number of pixels, got {v!r}")
+    for nm, v in (("max_blobs", max_blobs), ("max_verify", max_verify)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            raise InputError(f"{nm}: expected a positive integer, got {v!r}")
+
+
+def _count_failure(n_all: int, blobs, n_t: int, single_spot_area_px):
+    """The Failure of a frame with no blob or fewer blobs than targets, else None."""
+    base = {"n_blobs": n_all}
+    if n_all == 0:
+        return Failure("no_blobs", "no bright blob was found (nothing above the threshold passed the size and "
+                       "shape gates)", base)
+    if n_all < n_t:
+        merged = _merged_failure(blobs, n_t, single_spot_area_px)
+        if merged is not None:
+            return merged
+        return Failure("too_few_blobs", f"found {n_all} blob(s) where the pattern has {n_t} targets", base)
+    return None
+
+
+def _candidate_sets(pts: np.ndarray, camera: Camera, g: _Gates, n_t: int, tolerance_px: float):
+    """Blob sets that pass the pattern's geometric gates.
+
+    Every ordered blob pair within the baseline's length range is tried as the base targets
+    ``(a, b)``; the other targets' blobs must fall inside their gates in the pair's frame.
+
+    Parameters
+    ----------
+    pts : ndarray, shape (N, 2)
+        Blob centroids, pixels.
+    g : _Gates
+        :func:`pattern_gates` of the pattern.
+
+    Returns
+    -------
+    sets : ndarray of int, shape (M, n_t)
+        Blob index of each target, in pattern order.
+    scores : ndarray, shape (M,)
+        Mean squared normalised gate distance (smaller is better).
+    n_pairs : int
+        Base pairs tried.
+    """
+    N = pts.shape[0]
+    K = len(g.others)
+    # undistorted normalised coordinates, scaled by fx to work in ideal pixels
+    z = camera.pixels_to_normalized(pts)
+    z = (z[:, 0] + 1j * z[:, 1]) * camera.fx
+    ii, jj = np.nonzero(~np.eye(N, dtype=bool))  # ordered pairs (i -> a, j -> b)
+    L = np.abs(z[jj] - z[ii])
+    keep = (L >= g.base_min * camera.fx) & (L <= g.base_max * camera.fx)
+    ii, jj, L = ii[keep], jj[keep], L[keep]
+    n_pairs = int(ii.size)
+    sets = np.zeros((0, n_t), int)
+    scores = np.zeros(0)
+    if not n_pairs:
+        return sets, scores, n_pairs
+    w = (z[None, :] - z[ii, None]) / (z[jj] - z[ii])[:, None]  # (p, N)
+    Wv = np.stack([w.real, w.imag], -1)  # (p, N, 2)
+    dist = np.empty((n_pairs, N, K))
+    lim = np.empty((n_pairs, K))
+    for k in range(K):
+        u = (Wv - g.mean[k]) @ g.whiten[k].T
+        dist[:, :, k] = np.sqrt(np.sum(u * u, -1))
+        lim[:, k] = g.radius[k] + 3.0 * tolerance_px / L * g.inv_sqrt_lmin[k]
+    inside = dist <= lim[:, None, :]
+    rows = np.arange(n_pairs)
+    inside[rows, ii, :] = False
+    inside[rows, jj, :] = False
+    # vectorised join: partial sets (pair, blob for others[0], blob for others[1], ...)
+    part_p = np.flatnonzero(np.all(inside.any(1), axis=1))
+    part_sel = np.zeros((part_p.size, 0), int)
+    part_d2 = np.zeros(part_p.size)
+    for k in range(K):
+        r_, c_ = np.nonzero(inside[part_p, :, k])
+        new_p = part_p[r_]
+        new_sel = np.concatenate([part_sel[r_], c_[:, None]], 1)
+        new_d2 = part_d2[r_] + (dist[new_p, c_, k] / g.radius[k]) ** 2
+        if k:  # distinct blobs
+            distinct = np.all(new_sel[:, :-1] != c_[:, None], axis=1)
+            new_p, new_sel, new_d2 = new_p[distinct], new_sel[distinct], new_d2[distinct]
+        part_p, part_sel, part_d2 = new_p, new_sel, new_d2
+    if part_p.size:
+        sets = np.empty((part_p.size, n_t), int)
+        sets[:, g.a], sets[:, g.b] = ii[part_p], jj[part_p]
+        sets[:, list(g.others)] = part_sel
+        scores = part_d2 / K
+    return sets, scores, n_pairs
+
+
+def _solve_candidates(pts, vsets, camera, pattern, sigma_px, max_residual_px, envelope, pose_margin_deg):
+    """Solve the candidate sets to verify; keep the consistent solutions.
+
+    Solves without the solver's retries first (cheap) and retries the best
+    :data:`RETRY_VERIFY` only if none is consistent.
+
+    Returns
+    -------
+    vsets : ndarray of int, shape (M, n)
+        The sets solved (the retried ones when the retry found a consistent set).
+    batch : BatchSolution
+    good : ndarray of bool, shape (M,)
+        Consistent: solved, within ``max_residual_px`` and inside the envelope.
+    """
+    from .solver import solve_centroids
+
     batch = solve_centroids(pts[vsets], camera, pattern, sigma_px=sigma_px, max_residual_px=np.inf)
     good = _consistent(batch, max_residual_px, envelope, pose_margin_deg)
-    n_ver = int(vsets.shape[0])
     if not np.any(good):
-        m = min(RETRY_VERIFY, n_ver)
+        m = min(RETRY_VERIFY, int(vsets.shape[0]))
         retry = solve_centroids(pts[vsets[:m]], camera, pattern, sigma_px=sigma_px, max_residual_px=max_residual_px)
         g2 = _consistent(retry, max_residual_px, envelope, pose_margin_deg)
         if np.any(g2):
             vsets, batch, good = vsets[:m], retry, g2
-    res = np.asarray(batch.residual_rms_px, float)
-    if not np.any(good):
-        best = float(np.nanmin(res)) if np.any(np.isfinite(res)) else None
-        return Failure(
-            "no_consistent_set",
-            f"{n_cand} candidate set(s) of the {N} blobs fit the pattern's layout, but none of the {n_ver} solved "
-            f"reproduces it within {max_residual_px:g} px inside the envelope"
-            + (f" (best RMS residual {best:.3g} px)" if best is not None else "") + hint,
-            {**diag, "n_verified": n_ver, "best_residual_px": best, **hint_d},
-        )
-    best = _pick(vsets, res, good, blobs, idx_all)
-    sel = vsets[best]
-    sol = batch[best]
-    sol.targets_px = {int(i): pts[sel[k]].tolist() for k, i in enumerate(pattern.ids)}
-    sol.n_blobs = n_all
-    ok_res = np.sort(res[good])
-    return Identification(
-        pts[sel], idx_all[sel], pattern.ids.copy(), residual_rms_px=float(res[best]), solution=sol, n_blobs=n_all,
-        n_pairs=n_pairs, n_candidates=n_cand, n_verified=n_ver, score=float(scores[rank[best]]),
-        details={"n_consistent": int(good.sum()), "second_residual_px": float(ok_res[1]) if ok_res.size > 1 else None,
-                 "posit_residual_px": float(pres[rank[best]])},
-    )
-
+    return vsets, batch, good
 
 def _pick(vsets, res, good, blobs, idx_all) -> int:
     """Index of the chosen set among the consistent ones.

@@ -5,6 +5,13 @@ A camera profile needs only an ``[intrinsics]`` table to solve; ``[distortion]``
 optional (zero when absent); any other table (``[sensor]``, ``[optics]``, ``[flash]``,
 ``[isp]``, ``[sources]``...) is kept verbatim in :attr:`Camera.tables` for the renderer and
 camera model, and is not needed for solving real photos.
+
+Fitted values live apart from the physical profile: ``assets/cameras/fitted/<name>.toml``
+(in general ``fitted/<file name>`` beside the profile) lists each value that was fitted to a
+result of a paper, with what it was fitted to, its plausible physical range and that
+range's source. :meth:`Camera.load` applies the overlay by default;
+``Camera.load(name, fitted=False)`` gives the unfitted profile (the documented priors),
+which the model tests use.
 """
 
 from __future__ import annotations
@@ -22,6 +29,13 @@ CAMERAS_DIR = ASSETS_DIR / "cameras"
 PATTERNS_DIR = ASSETS_DIR / "patterns"
 
 DISTORTION_KEYS = ("k1", "k2", "p1", "p2", "k3")
+
+#: Folder, beside a camera profile, of its fitted overlay (same file name).
+FITTED_DIRNAME = "fitted"
+#: Fields every ``[[fit]]`` entry of an overlay must have.
+FIT_FIELDS = ("key", "value", "fitted_to", "range", "range_source")
+#: Tables an overlay may not change: the solve geometry is calibrated, never fitted.
+UNFITTABLE_TABLES = ("name", "intrinsics", "distortion", "sources", "fitted")
 
 
 def _available(folder: Path) -> list[str]:
@@ -56,6 +70,106 @@ def _read_toml(path: Path, kind: str) -> dict:
         raise ProfileError(f"{kind} file {str(path)!r} is not valid TOML: {exc}") from None
     except OSError as exc:
         raise ProfileError(f"{kind} file {str(path)!r} cannot be read: {exc}") from None
+
+
+def fitted_overlay_path(profile_path) -> Path | None:
+    """The fitted overlay of a camera profile file, or None when it has none.
+
+    Parameters
+    ----------
+    profile_path : str or Path
+        A camera profile (``.../<name>.toml``).
+
+    Returns
+    -------
+    Path or None
+        ``.../fitted/<name>.toml`` if that file exists.
+    """
+    p = Path(profile_path)
+    o = p.parent / FITTED_DIRNAME / p.name
+    return o if o.is_file() else None
+
+
+def read_fitted_overlay(path, base: dict | None = None) -> list[dict]:
+    """Read and check a fitted overlay.
+
+    The file holds ``[[fit]]`` tables, each with ``key`` (``"table.name"``), ``value``,
+    ``fitted_to`` (which table or figure of which paper, and how), ``range`` (``[lo, hi]``
+    for a number, the list of choices for a string) and ``range_source``.
+
+    Parameters
+    ----------
+    path : str or Path
+    base : dict, optional
+        The profile's TOML structure; when given, every fitted table must exist in it.
+
+    Returns
+    -------
+    list of dict
+        The entries, in file order.
+
+    Raises
+    ------
+    ProfileError
+        Naming the file and the entry: a missing field, a key that is not
+        ``table.name`` or names a geometry table, a value outside its range, a key twice.
+    """
+    path = Path(path)
+    data = _read_toml(path, "fitted overlay")
+    fits = data.get("fit")
+    where = f"fitted overlay {str(path)!r}"
+    if not isinstance(fits, list) or not fits:
+        raise ProfileError(f"{where}: expected [[fit]] tables with {', '.join(FIT_FIELDS)}")
+    seen = set()
+    for i, f in enumerate(fits):
+        missing = [k for k in FIT_FIELDS if k not in f or f[k] in ("", [])]
+        if missing:
+            raise ProfileError(f"{where}: fit #{i + 1} lacks {', '.join(missing)}")
+        key = f["key"]
+        parts = key.split(".") if isinstance(key, str) else []
+        if len(parts) != 2 or not all(parts):
+            raise ProfileError(f"{where}: fit #{i + 1} key {key!r} must be 'table.name'")
+        if parts[0] in UNFITTABLE_TABLES:
+            raise ProfileError(f"{where}: fit {key!r}: [{parts[0]}] cannot be fitted")
+        if base is not None and not isinstance(base.get(parts[0]), dict):
+            raise ProfileError(f"{where}: fit {key!r}: the profile has no [{parts[0]}] table")
+        if key in seen:
+            raise ProfileError(f"{where}: fit {key!r} is given twice")
+        seen.add(key)
+        v, rng = f["value"], f["range"]
+        if isinstance(v, str):
+            if not isinstance(rng, list) or v not in rng:
+                raise ProfileError(f"{where}: fit {key!r} = {v!r} is not one of its range {rng!r}")
+        else:
+            ok = (isinstance(rng, list) and len(rng) == 2 and all(isinstance(x, (int, float)) for x in rng)
+                  and not isinstance(v, bool) and isinstance(v, (int, float)))
+            if not ok:
+                raise ProfileError(f"{where}: fit {key!r}: expected a number and range = [lo, hi], got {v!r}, {rng!r}")
+            if not (rng[0] <= v <= rng[1]):
+                raise ProfileError(f"{where}: fit {key!r} = {v} lies outside its plausible range {rng}")
+    return fits
+
+
+def apply_fitted(data: dict, fits: list[dict], overlay_name: str = "") -> dict:
+    """The profile structure with the fitted values in place (``data`` is not changed).
+
+    The result carries a ``[fitted]`` table: for each fitted key its value, what it was
+    fitted to, range, range source, the overlay's file name and (where the profile had one)
+    the unfitted ``prior``.
+    """
+    out = {k: (dict(v) if isinstance(v, dict) else v) for k, v in data.items()}
+    record = {}
+    for f in fits:
+        table, name = f["key"].split(".")
+        entry = {k: f[k] for k in ("value", "fitted_to", "range", "range_source")}
+        if name in out[table]:
+            entry["prior"] = out[table][name]
+        if overlay_name:
+            entry["overlay"] = overlay_name
+        out[table][name] = f["value"]
+        record[f["key"]] = entry
+    out["fitted"] = record
+    return out
 
 
 @dataclass(frozen=True)
@@ -113,12 +227,31 @@ class Camera:
 
     # ------------------------------------------------------------------ loading
     @classmethod
-    def load(cls, name_or_path) -> "Camera":
-        """Load a camera profile by name (``assets/cameras/<name>.toml``) or path."""
+    def load(cls, name_or_path, *, fitted: bool = True) -> "Camera":
+        """Load a camera profile by name (``assets/cameras/<name>.toml``) or path.
+
+        Parameters
+        ----------
+        name_or_path : str, Path or Camera
+            A profile name, a path to a ``.toml`` file, or a camera (returned as is).
+        fitted : bool
+            Apply the profile's fitted overlay (``fitted/<file name>`` beside it), if it
+            has one: the values fitted to the papers' results (default). ``False`` gives
+            the unfitted profile, its documented priors.
+
+        Returns
+        -------
+        Camera
+            With ``tables["fitted"]`` recording each fitted value when an overlay applied.
+        """
         if isinstance(name_or_path, Camera):
             return name_or_path
         path = _resolve(name_or_path, CAMERAS_DIR, "camera profile")
-        return cls.from_dict(_read_toml(path, "camera profile"), source=str(path), default_name=path.stem)
+        data = _read_toml(path, "camera profile")
+        overlay = fitted_overlay_path(path) if fitted else None
+        if overlay is not None:
+            data = apply_fitted(data, read_fitted_overlay(overlay, data), f"{FITTED_DIRNAME}/{overlay.name}")
+        return cls.from_dict(data, source=str(path), default_name=path.stem)
 
     @classmethod
     def from_dict(cls, data: dict, source: str = "", default_name: str = "camera") -> "Camera":

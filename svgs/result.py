@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
-
 #: Machine-readable failure reasons and what they mean.
 REASONS = {
     "no_blobs": "no bright blob passed the threshold and the size/shape gates",
@@ -46,8 +44,3 @@ class Failure:
 
     def to_json(self) -> dict:
         return {"ok": False, "reason": self.reason, "message": self.message, **self.details}
-
-
-def as_list(a) -> list:
-    """ndarray -> nested list of floats for JSON."""
-    return np.asarray(a, float).tolist()

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InputError
-from .frames import D_CAM_PHOTO, pose_to_state, rotation_from_angles, state_dict, state_to_pose
+from .frames import D_CAM_PHOTO, STATE_KEYS, pose_to_state, rotation_from_angles, state_dict, state_to_pose
 from .profiles import Camera, Pattern
 from .result import Failure
 
@@ -46,49 +46,6 @@ MAX_ITER = 200
 #: Reprojection residual (px RMS) above which a converged solution is not accepted as "ok"
 #: unless the caller raises it. Noise-free data converge to ~1e-9 px.
 DEFAULT_MAX_RESIDUAL_PX = 5.0
-
-
-# --------------------------------------------------------------------------- derivatives
-def _rotations_and_derivatives(angles):
-    """M = R3(psi) R2(theta) R1(phi) and its derivatives, element by element.
-
-    Parameters
-    ----------
-    angles : ndarray, shape (N, 3)
-
-    Returns
-    -------
-    M : list of 3 lists of 3 ndarrays, each shape (N, 1)
-        ``M[i][j]``, kept as separate arrays (explicit products beat batched 3x3 matmul).
-    dM : list of 3 such matrices
-        ``dM[a]`` is dM / d angle_a (a = phi, theta, psi).
-    """
-    c1, s1 = np.cos(angles[:, 0:1]), np.sin(angles[:, 0:1])
-    c2, s2 = np.cos(angles[:, 1:2]), np.sin(angles[:, 1:2])
-    c3, s3 = np.cos(angles[:, 2:3]), np.sin(angles[:, 2:3])
-    s2c3, s2s3, c2c3, c2s3 = s2 * c3, s2 * s3, c2 * c3, c2 * s3
-    z = np.zeros_like(c1)
-    M = [
-        [c2c3, c1 * s3 + s1 * s2c3, s1 * s3 - c1 * s2c3],
-        [-c2s3, c1 * c3 - s1 * s2s3, s1 * c3 + c1 * s2s3],
-        [s2, -s1 * c2, c1 * c2],
-    ]
-    d_phi = [
-        [z, -s1 * s3 + c1 * s2c3, c1 * s3 + s1 * s2c3],
-        [z, -s1 * c3 - c1 * s2s3, c1 * c3 - s1 * s2s3],
-        [z, -c1 * c2, -s1 * c2],
-    ]
-    d_theta = [
-        [-s2c3, s1 * c2c3, -c1 * c2c3],
-        [s2s3, -s1 * c2s3, c1 * c2s3],
-        [c2, s1 * s2, -c1 * s2],
-    ]
-    d_psi = [
-        [-c2s3, M[1][1], M[1][2]],
-        [-c2c3, -M[0][1], -M[0][2]],
-        [z, z, z],
-    ]
-    return M, [d_phi, d_theta, d_psi]
 
 
 def azel_from_normalized(xy: np.ndarray) -> np.ndarray:
@@ -105,54 +62,6 @@ def azel_from_normalized(xy: np.ndarray) -> np.ndarray:
     """
     x, y = xy[..., 0], xy[..., 1]
     return np.stack([np.arctan(x), np.arcsin(-y / np.sqrt(x * x + y * y + 1.0))], -1)
-
-
-def model_azel(state: np.ndarray, points_m: np.ndarray, with_jacobian: bool = True):
-    """Predicted azimuth/elevation and their Jacobian with respect to the state.
-
-    Parameters
-    ----------
-    state : ndarray, shape (N, 6)
-    points_m : ndarray, shape (n, 3)
-        Target points in the target frame.
-
-    Returns
-    -------
-    azel : ndarray, shape (N, n, 2)
-    J : ndarray, shape (N, n, 2, 6) (only when ``with_jacobian``)
-    vz : ndarray, shape (N, n)
-        Depth coordinate in the paper camera frame (negative in front of the camera).
-    """
-    L = state[:, :3]
-    M, dM = _rotations_and_derivatives(state[:, 3:])
-    d = points_m[None, :, :] - L[:, None, :]  # (N, n, 3)
-    dx_, dy_, dz_ = d[..., 0], d[..., 1], d[..., 2]
-
-    def rot(R):  # R as nested element lists applied to d -> three (N, n) arrays
-        return [R[i][0] * dx_ + R[i][1] * dy_ + R[i][2] * dz_ for i in range(3)]
-
-    vx, vy, vz = rot(M)
-    rho2 = vx * vx + vz * vz
-    r2 = rho2 + vy * vy
-    azel = np.empty(d.shape[:2] + (2,))
-    azel[..., 0] = np.arctan2(vx, -vz)
-    azel[..., 1] = np.arcsin(np.clip(vy / np.sqrt(r2), -1.0, 1.0))
-    if not with_jacobian:
-        return azel, None, vz
-    rho = np.sqrt(rho2)
-    a_x, a_z = -vz / rho2, vx / rho2  # dAz/dv (dAz/dvy = 0)
-    k = -vy / (r2 * rho)
-    e_x, e_y, e_z = vx * k, vy * k + 1.0 / rho, vz * k  # dEl/dv
-    J = np.empty(d.shape[:2] + (2, 6))
-    for j in range(3):  # dv/dL_j = -M[:, :, j]
-        mx, my, mz = -M[0][j], -M[1][j], -M[2][j]
-        J[..., 0, j] = a_x * mx + a_z * mz
-        J[..., 1, j] = e_x * mx + e_y * my + e_z * mz
-    for a in range(3):  # dv/dangle_a = dM_a @ d
-        wx, wy, wz = rot(dM[a])
-        J[..., 0, 3 + a] = a_x * wx + a_z * wz
-        J[..., 1, 3 + a] = e_x * wx + e_y * wy + e_z * wz
-    return azel, J, vz
 
 
 def azel_pixel_jacobian(uv_px: np.ndarray, camera: Camera, h_px: float = 1e-3) -> np.ndarray:
@@ -216,12 +125,6 @@ def posit(xy: np.ndarray, points_m: np.ndarray, n_iter: int = 10):
     return R, t
 
 
-def _state_from_pose(R, t):
-    from .frames import pose_to_state
-
-    return pose_to_state(R, t)
-
-
 # --------------------------------------------------------------------------- results
 @dataclass
 class Solution:
@@ -282,7 +185,7 @@ class Solution:
             "residual_rms_px": float(self.residual_rms_px),
             "iterations": int(self.iterations),
             "crlb_std": dict(zip(
-                ["x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg"],
+                STATE_KEYS,
                 [float(v) for v in np.concatenate([self.std[:3], np.degrees(self.std[3:])])],
             )),
             "crlb_sigma_px": float(self.sigma_px),
@@ -451,13 +354,7 @@ def solve_centroids(
         raise InputError(f"sigma_px: expected a positive centroid noise in px, got {sigma_px!r}")
     pts, single = _check_points(points_px, pattern)
     N, n = pts.shape[:2]
-    xy = camera.pixels_to_normalized(pts)
-    meas = azel_from_normalized(xy)
-    G = azel_pixel_jacobian(pts, camera)  # (N, n, 2, 2) rad/px
-    detG = G[..., 0, 0] * G[..., 1, 1] - G[..., 0, 1] * G[..., 1, 0]
-    Winv_sqrt = np.stack([np.stack([G[..., 1, 1], -G[..., 0, 1]], -1),
-                          np.stack([-G[..., 1, 0], G[..., 0, 0]], -1)], -2) / detG[..., None, None]
-    # Winv_sqrt = G^-1 whitens: az/el residual -> px residual
+    xy, meas, Winv_sqrt = _measurements(pts, camera)
     P = pattern.points_m
 
     if initial_state is None:
@@ -466,45 +363,12 @@ def solve_centroids(
         R0, t0 = state_to_pose(np.broadcast_to(np.asarray(initial_state, float), (N, 6)))
     R, t, conv, iters, rw, cov1, piv = _lm(R0, t0, meas, Winv_sqrt, P, max_iter, step_tol)
     res = np.sqrt(np.sum(rw * rw, 1) / n)
-
-    # retry frames that did not converge or fit badly from other starts
-    bad = ~conv | ~(res <= max_residual_px) | ~np.all(np.isfinite(t), 1)
-    if np.any(bad):
-        bi = np.flatnonzero(bad)
-        n_starts = len(_alternative_starts(xy[:1], P))
-        for k in range(n_starts):
-            Rs, ts = state_to_pose(_alternative_starts(xy[bi], P)[k])
-            Rk, tk, cs, its, rws, covk, pivk = _lm(Rs, ts, meas[bi], Winv_sqrt[bi], P, max_iter, step_tol)
-            rs = np.sqrt(np.sum(rws * rws, 1) / n)
-            take = cs & (rs < np.where(np.isfinite(res[bi]) & conv[bi], res[bi], np.inf))
-            R[bi[take]], t[bi[take]] = Rk[take], tk[take]
-            cov1[bi[take]], piv[bi[take]] = covk[take], pivk[take]
-            conv[bi[take]] = True
-            res[bi[take]] = rs[take]
-            iters[bi[take]] += its[take]
-            bad = ~conv | ~(res <= max_residual_px)
-            bi = np.flatnonzero(bad)
-            if bi.size == 0:
-                break
-
+    fit = [R, t, conv, iters, res, cov1, piv]
+    _retry_from_other_starts(fit, xy, meas, Winv_sqrt, P, max_iter, step_tol, max_residual_px)
     x = pose_to_state(R, t)
-    depth_ok = np.all(np.einsum("kij,nj->kni", R, P)[..., 2] + t[:, None, 2] > 0, axis=1)
-    ok = conv & (res <= max_residual_px) & np.all(np.isfinite(x), 1) & depth_ok
-    reason = np.full(N, None, dtype=object)
-    reason[~ok] = "diverged"
-    reason[conv & ~depth_ok] = "behind_camera"
-    if front_side_only:
-        # the reflectors face the target's +z: a camera at Z_L <= 0 cannot see their return
-        back = conv & depth_ok & (x[:, 2] <= 0)
-        ok &= ~back
-        reason[back] = "behind_target"
-
+    ok, reason = _verdicts(R, t, x, conv, res, piv, P, max_residual_px, front_side_only)
     # Cramer-Rao bound: (J^T Sigma^-1 J)^-1 with Sigma = G G^T sigma^2 per point, from the kernel
     cov = cov1 * sigma_px**2
-    degenerate = ok & ~(piv > 1e-14)
-    ok[degenerate] = False
-    reason[degenerate] = "degenerate"
-
     x[~ok] = np.nan
     R[~ok] = np.nan
     t[~ok] = np.nan
@@ -523,6 +387,83 @@ def solve_centroids(
     sol.targets_px = {int(i): pts[0, k].tolist() for k, i in enumerate(pattern.ids)}
     return sol
 
+
+def _measurements(pts: np.ndarray, camera: Camera):
+    """Normalised coordinates, az/el measurements and their whitening of centroids (N, n, 2).
+
+    Returns
+    -------
+    xy : ndarray, shape (N, n, 2)
+        Undistorted normalised coordinates (OpenCV camera frame).
+    meas : ndarray, shape (N, n, 2)
+        Azimuth and elevation, rad.
+    Winv_sqrt : ndarray, shape (N, n, 2, 2)
+        ``G^-1`` (px/rad): whitens az/el residuals into pixel residuals.
+    """
+    xy = camera.pixels_to_normalized(pts)
+    meas = azel_from_normalized(xy)
+    G = azel_pixel_jacobian(pts, camera)  # (N, n, 2, 2) rad/px
+    detG = G[..., 0, 0] * G[..., 1, 1] - G[..., 0, 1] * G[..., 1, 0]
+    Winv_sqrt = np.stack([np.stack([G[..., 1, 1], -G[..., 0, 1]], -1),
+                          np.stack([-G[..., 1, 0], G[..., 0, 0]], -1)], -2) / detG[..., None, None]
+    return xy, meas, Winv_sqrt
+
+
+def _retry_from_other_starts(fit: list, xy, meas, Winv_sqrt, P, max_iter: int, step_tol: float,
+                             max_residual_px: float) -> None:
+    """Re-solve the frames that did not converge or fit badly from :func:`_alternative_starts`.
+
+    ``fit`` is ``[R, t, conv, iters, res, cov1, piv]`` (arrays over frames), updated in place
+    where a start converges to a smaller residual.
+    """
+    R, t, conv, iters, res, cov1, piv = fit
+    n = xy.shape[1]
+    bad = ~conv | ~(res <= max_residual_px) | ~np.all(np.isfinite(t), 1)
+    if not np.any(bad):
+        return
+    bi = np.flatnonzero(bad)
+    n_starts = len(_alternative_starts(xy[:1], P))
+    for k in range(n_starts):
+        Rs, ts = state_to_pose(_alternative_starts(xy[bi], P)[k])
+        Rk, tk, cs, its, rws, covk, pivk = _lm(Rs, ts, meas[bi], Winv_sqrt[bi], P, max_iter, step_tol)
+        rs = np.sqrt(np.sum(rws * rws, 1) / n)
+        take = cs & (rs < np.where(np.isfinite(res[bi]) & conv[bi], res[bi], np.inf))
+        R[bi[take]], t[bi[take]] = Rk[take], tk[take]
+        cov1[bi[take]], piv[bi[take]] = covk[take], pivk[take]
+        conv[bi[take]] = True
+        res[bi[take]] = rs[take]
+        iters[bi[take]] += its[take]
+        bad = ~conv | ~(res <= max_residual_px)
+        bi = np.flatnonzero(bad)
+        if bi.size == 0:
+            break
+
+
+def _verdicts(R, t, x, conv, res, piv, P, max_residual_px: float, front_side_only: bool):
+    """Which frames are solved, and the reason code of the others.
+
+    Returns
+    -------
+    ok : ndarray of bool, shape (N,)
+    reason : ndarray of object, shape (N,)
+        ``None`` where solved, else ``diverged``, ``behind_camera``, ``behind_target`` or
+        ``degenerate``.
+    """
+    N = x.shape[0]
+    depth_ok = np.all(np.einsum("kij,nj->kni", R, P)[..., 2] + t[:, None, 2] > 0, axis=1)
+    ok = conv & (res <= max_residual_px) & np.all(np.isfinite(x), 1) & depth_ok
+    reason = np.full(N, None, dtype=object)
+    reason[~ok] = "diverged"
+    reason[conv & ~depth_ok] = "behind_camera"
+    if front_side_only:
+        # the reflectors face the target's +z: a camera at Z_L <= 0 cannot see their return
+        back = conv & depth_ok & (x[:, 2] <= 0)
+        ok &= ~back
+        reason[back] = "behind_target"
+    degenerate = ok & ~(piv > 1e-14)
+    ok[degenerate] = False
+    reason[degenerate] = "degenerate"
+    return ok, reason
 
 def _alternative_starts(xy, P):
     """Fallback starting states (N, 6): the target facing the camera at the POSIT-free range
@@ -560,7 +501,6 @@ __all__ = [
     "Solution",
     "BatchSolution",
     "solve_centroids",
-    "model_azel",
     "azel_from_normalized",
     "azel_pixel_jacobian",
     "posit",

@@ -13,7 +13,7 @@ SHARED = REPO.parent / "shared"
 def nexus():
     from svgs import Camera
 
-    return Camera.load("galaxy-nexus")
+    return Camera.load("galaxy-nexus", fitted=False)  # geometry for model tests: no fitted values
 
 
 @pytest.fixture(scope="session")
@@ -26,16 +26,12 @@ def pattern():
 def random_envelope_poses(n, seed, range_m=(1.0, 40.0)):
     """Poses drawn over the paper's test envelope: range log-uniform, roll/pitch +/-25 deg,
     yaw +/-45 deg, lateral offsets up to +/-15 % of range. Returns (R (n,3,3), t (n,3))."""
-    from svgs.frames import pose_from_scenario
+    from svgs.frames import pose_from_scenario, sample_envelope_scenario
 
     rng = np.random.default_rng(seed)
     Rs, ts = [], []
     for _ in range(n):
-        r = float(np.exp(rng.uniform(np.log(range_m[0]), np.log(range_m[1]))))
-        R, t = pose_from_scenario(
-            r, rng.uniform(-0.15, 0.15) * r, rng.uniform(-0.15, 0.15) * r,
-            rng.uniform(-25, 25), rng.uniform(-25, 25), rng.uniform(-45, 45),
-        )
+        R, t = pose_from_scenario(**sample_envelope_scenario(rng, range_m=range_m))
         Rs.append(R)
         ts.append(t)
     return np.array(Rs), np.array(ts)

@@ -23,7 +23,7 @@ import numpy as np
 from scipy.special import erf
 
 from svgs.errors import InputError
-from svgs.frames import pose_from_scenario
+from svgs.frames import pose_from_scenario, sample_envelope_scenario
 from svgs.profiles import Camera, Pattern
 
 #: Half-width of a spot's drawing window in Gaussian sigmas (the flux beyond is < 1e-12).
@@ -186,16 +186,8 @@ def random_envelope_pose(rng=None, *, range_m=(1.0, 40.0), roll_deg=25.0, pitch_
     scenario : dict
         ``range_m, x_m, y_m, roll_deg, pitch_deg, yaw_deg``.
     """
-    rng = _rng(rng)
-    r = float(np.exp(rng.uniform(np.log(range_m[0]), np.log(range_m[1]))))
-    sc = {
-        "range_m": r,
-        "x_m": float(rng.uniform(-lateral_fraction, lateral_fraction) * r),
-        "y_m": float(rng.uniform(-lateral_fraction, lateral_fraction) * r),
-        "roll_deg": float(rng.uniform(-roll_deg, roll_deg)),
-        "pitch_deg": float(rng.uniform(-pitch_deg, pitch_deg)),
-        "yaw_deg": float(rng.uniform(-yaw_deg, yaw_deg)),
-    }
+    sc = sample_envelope_scenario(_rng(rng), range_m=range_m, roll_deg=roll_deg, pitch_deg=pitch_deg, yaw_deg=yaw_deg,
+                                  lateral_fraction=lateral_fraction)
     R, t = pose_from_scenario(**sc)
     return R, t, sc
 

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibration.boards import (
+from calibration import (
     Board,
     calibrate,
     calibrate_images,

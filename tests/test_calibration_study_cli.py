@@ -9,7 +9,7 @@ from cli.main import main
 
 QUICK = ["--camera", "galaxy-nexus", "--width", "640", "--height", "480", "--geometric", "--views-list", "4,8",
          "--subsets", "2", "--focal-ranges", "1,3,5,10", "--focal-exposures", "2", "--pose-ranges", "2,5,10,20,30",
-         "--poses-per-range", "4"]
+         "--poses-per-range", "4", "--processes", "0", "--no-progress"]
 
 
 def _csv(path):
@@ -53,6 +53,8 @@ def test_study_writes_report_csv_and_summary(tmp_path, capsys, monkeypatch):
     (["--subsets", "0"], "--subsets"),
     (["--width", "100"], "--width and --height"),
     (["--camera", "nope"], "unknown camera"),
+    (["--processes", "-1"], "--processes"),
+    (["--scheduler", "tcp://127.0.0.1:1"], "--scheduler"),  # unreachable (or Dask missing): before any work
 ])
 def test_study_bad_input(tmp_path, capsys, args, what):
     argv = ["calibrate", "study", "--camera", "galaxy-nexus", "--geometric", "--out", str(tmp_path / "o"), *args]

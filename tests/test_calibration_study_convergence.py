@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from calibration import Board, calibrate, sample_board_poses, synthesize_views
-from studies.calibration.study import (
+from studies.calibration import (
     calibration_convergence,
     calibration_errors,
     convergence_summary,

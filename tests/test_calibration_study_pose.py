@@ -1,4 +1,4 @@
-"""Pose error caused by calibration error (studies.calibration.study, centroid level).
+"""Pose error caused by calibration error (studies.calibration.pose, centroid level).
 
 Expected values from first-order geometry: a focal length too long by e makes the solver put
 the target e times farther (Z_L off by e R); a principal point off by d px tilts the camera
@@ -6,11 +6,10 @@ by atan(d / f) and leaves the position where it was; exact intrinsics reproduce 
 """
 
 import numpy as np
-
-from assets.papers import svgs_2014_rows
 import pytest
 
-from studies.calibration.study import (
+from assets.papers import svgs_2014_rows
+from studies.calibration import (
     error_cases,
     pose_error_study,
     pose_errors_batch,
@@ -55,7 +54,7 @@ def test_principal_point_error_is_an_attitude_bias(cams, pattern):
     expected = np.degrees(np.arctan(20.0 / cam.fx))  # 0.47 deg for f = 2450 px
     assert res["rot_err_deg"] == pytest.approx([expected] * 2, rel=0.05)
     # the camera's position in the target frame barely moves (< 0.2 % of the range)
-    assert np.all(res["pos_err_m"] < 2e-3 * np.array(ranges))
+    assert np.all(res["pos_err_norm_m"] < 2e-3 * np.array(ranges))
 
 
 def test_exact_intrinsics_reproduce_the_truth_and_noise_is_shared(cams, pattern):
@@ -69,7 +68,7 @@ def test_exact_intrinsics_reproduce_the_truth_and_noise_is_shared(cams, pattern)
     b = pose_errors_batch(cam, cam, pattern, R, t, noise_px=0.2, seed=9)
     assert np.array_equal(a["d_state"], b["d_state"])  # seeded: the same draws for every case
     # noise errors grow faster than linearly with range (the spacing shrinks as 1/R)
-    far, near = a["pos_err_m"][rr == 40.0].mean(), a["pos_err_m"][rr == 1.0].mean()
+    far, near = a["pos_err_norm_m"][rr == 40.0].mean(), a["pos_err_norm_m"][rr == 1.0].mean()
     assert far / near > 40.0
 
 
@@ -79,10 +78,10 @@ def test_pose_error_study_rows(cams, pattern):
     cases["nominal (focal-only style)"] = nominal
     rows = pose_error_study(cam, cases, pattern, [5.0, 30.0], poses_per_range=8, seed=1)
     by = {(r["case"], r["range_m"]): r for r in rows}
-    assert by[("exact", 5.0)]["pos_err_m"] < 1e-6
+    assert by[("exact", 5.0)]["pos_err_norm_m"] < 1e-6
     # a focal error's position bias grows linearly, its attitude bias does not
     f5, f30 = by[("focal +1 %", 5.0)], by[("focal +1 %", 30.0)]
-    assert f30["pos_err_m"] / f5["pos_err_m"] == pytest.approx(6.0, rel=0.1)
+    assert f30["pos_err_norm_m"] / f5["pos_err_norm_m"] == pytest.approx(6.0, rel=0.1)
     assert f5["mean_z_m"] == pytest.approx(0.05, rel=0.05)
     p5, p30 = by[("principal point +20 px (u)", 5.0)], by[("principal point +20 px (u)", 30.0)]
     assert p30["rot_err_deg"] == pytest.approx(p5["rot_err_deg"], rel=0.1)

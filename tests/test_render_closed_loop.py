@@ -5,7 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from cli.exposure import parse_remedy, scaled_pattern_file
+from sim.sweep_trial import scaled_pattern_file
+from studies.exposure_study import parse_remedy
 from sim.closed_loop import Scenario, expose_and_solve, pose_errors, render_scenario
 from svgs import InputError, Pattern
 from cli.main import main
@@ -18,8 +19,8 @@ def test_galaxy_nexus_10m_solves_within_a_few_cm():
     assert row["ok"], row["message"]
     assert row["n_blobs"] == 4
     # errors of the order of the paper's Table 4 at 10 m (0.1-0.16 m, ~1 deg), far below 1 m / 5 deg
-    assert np.abs(row["pos_err_m"]).max() < 0.5
-    assert np.abs(row["att_err_deg"]).max() < 3.0
+    assert np.abs(row["pos_err_vec_m"]).max() < 0.5
+    assert np.abs(row["att_err_vec_deg"]).max() < 3.0
     ex = row["_exposure"]
     assert ex.image.dtype == np.uint8 and ex.image.shape == (1944, 2592)
     # the manual 0.5 ms exposure of the Nexus profile
@@ -52,7 +53,7 @@ def test_render_and_solve_cli_writes_outputs(tmp_path, capsys):
         assert (out / name).is_file()
     truth = json.loads((out / "truth.json").read_text())
     assert truth["exposure"]["exposure_s"] == pytest.approx(5e-4)
-    assert len(res["pos_err_m"]) == 3 and len(res["att_err_deg"]) == 3
+    assert len(res["pos_err_vec_m"]) == 3 and len(res["att_err_vec_deg"]) == 3
     raw = np.load(out / "raw.npy")
     assert raw.max() <= 1023 and raw.shape == (1944, 2592)
 
@@ -85,8 +86,9 @@ def test_bad_input_exit_2(argv, match, capsys, tmp_path, monkeypatch):
 
 def test_pose_errors_wrap_and_norms():
     e = pose_errors([1, 2, 3, np.radians(179), 0, 0], [1, 2, 3.5, np.radians(-179), 0, 0])
-    assert e["pos_err_m"] == pytest.approx([0, 0, -0.5])
-    assert e["att_err_deg"][0] == pytest.approx(-2.0)
+    assert e["pos_err_vec_m"] == pytest.approx([0, 0, -0.5])
+    assert e["pos_err_norm_m"] == pytest.approx(0.5)
+    assert e["att_err_vec_deg"][0] == pytest.approx(-2.0)
     assert e["rot_err_deg"] == pytest.approx(2.0)
 
 
@@ -120,6 +122,6 @@ def test_render_trial_kind_runs_the_full_chain_and_groups_renders():
     grouped = render_group([scen, scen], [7, 8])
     assert alone["ok"] and alone["n_blobs"] == 4
     assert alone["exposure_s_used"] == pytest.approx(5e-4)
-    assert abs(alone["err_z_m"]) < 0.5 and alone["att_err_deg"] < 3.0
+    assert abs(alone["err_z_m"]) < 0.5 and alone["rot_err_deg"] < 3.0
     assert grouped[0] == alone  # a trial's numbers never depend on its companions
     assert grouped[1]["err_x_m"] != alone["err_x_m"]  # another seed, another noise draw

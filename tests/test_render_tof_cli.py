@@ -9,6 +9,7 @@ import pytest
 from cli.main import main
 
 SOLVE_KEYS = {"ok", "reason", "state", "R_cam_target", "t_cam_target_m", "targets_px", "n_blobs", "residual_rms_px"}
+#: The documented JSON state keys, written out: an independent check of svgs.frames.STATE_KEYS.
 STATE_KEYS = {"x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg"}
 needs_mitsuba = pytest.mark.skipif(importlib.util.find_spec("mitsuba") is None, reason="Mitsuba is not installed")
 
@@ -45,7 +46,7 @@ def test_render_and_solve_json_and_outputs(capsys, tmp_path):
     assert SOLVE_KEYS <= set(js) and set(js["state"]) == STATE_KEYS and js["ok"] is True
     assert js["n_frames"] == 4 and js["n_solved"] == 4
     assert set(js["targets_px"]) == {str(k) for k in range(1, 9)}
-    assert np.linalg.norm(js["pos_err_m"]) < 0.01 and np.max(np.abs(js["att_err_deg"])) < 0.5
+    assert np.linalg.norm(js["pos_err_vec_m"]) < 0.01 and np.max(np.abs(js["att_err_vec_deg"])) < 0.5
     assert js["frame_statistics"]["fluctuation"]["z_m"] < 0.01
     for name in ("gray.npy", "depth.npy", "rendered.npz", "truth.json", "solution.json", "frames.csv", "preview.png"):
         assert (tmp_path / name).is_file(), name

@@ -1,11 +1,12 @@
-"""The AMCW 4-tap pixel model (render/tof/taps.py): numpy only, no rendering."""
+"""The AMCW 4-tap pixel model (camera/amcw.py): numpy only, no rendering."""
 
 import numpy as np
 import pytest
 
-from camera.amcw import (C_LIGHT_M_S, RenderedTof, TofSensor, phase_noise_rad, phasor_depth_m,
-                             unambiguous_range_m)
+from camera.amcw import RenderedTof, TofSensor, phase_noise_rad, phasor_depth_m, unambiguous_range_m
 from svgs.errors import InputError
+
+C_LIGHT_M_S = 299_792_458.0  # exact (SI); the test's own value, not the code's
 
 F_MOD = 10.0e6
 

@@ -83,13 +83,45 @@ def test_sigkill_halfway_then_rerun_completes_without_duplicates(tmp_path):
 
 
 def test_tasks_keep_render_groups_together():
-    scen = [{"camera": "c", "pattern": "p", "range_m": r, "x_m": 0.0, "y_m": 0.0, "roll_deg": 0.0, "pitch_deg": 0.0,
+    scen = [{"camera": "c", "pattern": "p", "range_m": r, "target_x_m": 0.0, "target_y_m": 0.0, "roll_deg": 0.0, "pitch_deg": 0.0,
              "yaw_deg": 0.0, "sigma_px": s} for r in (1.0, 2.0, 3.0) for s in (0.1, 0.2, 0.3)]
     trials = [Trial(i, s, i) for i, s in enumerate(scen[::-1])]
     tasks = make_tasks(GEOMETRIC, trials, chunk_size=2)
     for task in tasks:
         assert len({it[1]["range_m"] for it in task}) == 1  # a group of 3 is never split by chunk_size 2
     assert sorted(it[0] for task in tasks for it in task) == list(range(9))
+
+
+_WARM_CALLS = []
+
+
+def _echo(scenario, seed):
+    return {"y": scenario["range_m"] * 2.0, "s": seed}
+
+
+def _echo_group(scenarios, seeds):
+    return [dict(_echo(s, k), grouped=1) for s, k in zip(scenarios, seeds)]
+
+
+def test_run_task_rows_ids_scenario_outputs_and_one_warm_up():
+    """studies.execution.run_task: the kind's outputs under the trial's id, seed and scenario; a render
+    group goes to run_group, a lone trial to run_trial; the kind warms up once per process."""
+    from studies.execution import run_task, warm_up_worker
+
+    kind = register_trial_kind(TrialKind("test-echo", _echo, ("y", "s", "grouped"), {}, text_keys=(),
+                                         run_group=_echo_group, render_key=lambda s: s["range_m"],
+                                         warm_up=lambda: _WARM_CALLS.append(1)))
+    items = [(10, {"range_m": 1.0}, 5), (11, {"range_m": 1.0}, 6), (12, {"range_m": 3.0}, 7)]
+    rows = run_task(kind.ref, items)
+    warm_up_worker(kind.ref)
+    assert len(_WARM_CALLS) == 1
+    assert [{k: r[k] for k in ("trial_id", "seed", "range_m", "y", "s")} for r in rows] == [
+        {"trial_id": 10, "seed": 5, "range_m": 1.0, "y": 2.0, "s": 5},
+        {"trial_id": 11, "seed": 6, "range_m": 1.0, "y": 2.0, "s": 6},
+        {"trial_id": 12, "seed": 7, "range_m": 3.0, "y": 6.0, "s": 7},
+    ]
+    assert [r.get("grouped") for r in rows] == [1, 1, None]
+    assert all(r["wall_s"] >= 0 and r["cpu_s"] >= 0 for r in rows)
 
 
 def _boom(scenario, seed):

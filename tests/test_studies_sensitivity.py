@@ -92,7 +92,7 @@ def test_sobol_over_seven_parameters_ranks_them(tmp_path, capsys):
         argv += ["--vary", v]
     assert main(argv) == 0
     text = capsys.readouterr().out
-    assert "pos_err_m    ranked by ST: range_m" in text  # errors grow as range squared: range dominates
+    assert "pos_err_norm_m ranked by ST: range_m" in text  # errors grow as range squared: range dominates
     rows = read_rows(out / "results.csv")
     assert len(rows) == 32 * 9 and len({r["trial_id"] for r in rows}) == 32 * 9
     # render once, expose many: AB rows of sigma, focal, pp and merge_px (not part of the projection) reuse
@@ -103,8 +103,8 @@ def test_sobol_over_seven_parameters_ranks_them(tmp_path, capsys):
     with open(out / "indices.csv", newline="") as fh:
         idx = {(r["output"], r["parameter"]): r for r in csv.DictReader(fh)}
     # merge_px never triggers (the spots are > 30 px apart): no effect, exactly
-    assert float(idx[("pos_err_m", "merge_px")]["ST"]) == 0.0
-    assert float(idx[("pos_err_m", "range_m")]["ST"]) > 0.3
+    assert float(idx[("pos_err_norm_m", "merge_px")]["ST"]) == 0.0
+    assert float(idx[("pos_err_norm_m", "range_m")]["ST"]) > 0.3
     html = (out / "report.html").read_text()
     assert html.count("data:image/png;base64,") >= 4 and "<table>" in html and "svgs sensitivity" in html
 

@@ -5,17 +5,18 @@ import numpy as np
 import pytest
 
 from studies.seeding import trial_seed
-from sim.trials import (GEOMETRIC, STATE_KEYS, geometric_group, geometric_render_key, geometric_scenario,
-                            geometric_trial, get_trial_kind)
+from sim.trials import (GEOMETRIC, geometric_group, geometric_render_key, geometric_scenario, geometric_trial,
+                        get_trial_kind)
+from svgs.frames import STATE_KEYS
 from svgs.errors import InputError
 
 
 def test_noise_free_trial_recovers_the_pose_exactly():
-    s = geometric_scenario(camera="galaxy-nexus", range_m=12.0, x_m=0.3, y_m=-0.2, roll_deg=20.0, pitch_deg=-15.0,
+    s = geometric_scenario(camera="galaxy-nexus", range_m=12.0, target_x_m=0.3, target_y_m=-0.2, roll_deg=20.0, pitch_deg=-15.0,
                            yaw_deg=40.0, sigma_px=0.0)
     r = geometric_trial(s, 1)
     assert r["ok"] and r["reason"] is None
-    assert r["pos_err_m"] < 1e-6 and r["att_err_deg"] < 1e-6 and r["residual_rms_px"] < 1e-6
+    assert r["pos_err_norm_m"] < 1e-6 and r["rot_err_deg"] < 1e-6 and r["residual_rms_px"] < 1e-6
     assert all(r[f"crlb_{k}"] == 0.0 for k in STATE_KEYS)
     # truth in the paper convention: the camera's distance to the target origin is |(x, y, range)|
     dist = np.linalg.norm([r["true_x_m"], r["true_y_m"], r["true_z_m"]])
@@ -58,7 +59,7 @@ def test_principal_point_error_tilts_the_attitude():
     s = geometric_scenario(camera="galaxy-nexus", range_m=10.0, sigma_px=0.0, pp_error_u_px=24.5)
     r = geometric_trial(s, 0)
     assert r["ok"]
-    assert r["att_err_deg"] == pytest.approx(np.degrees(24.5 / 2450.0), rel=0.05)
+    assert r["rot_err_deg"] == pytest.approx(np.degrees(24.5 / 2450.0), rel=0.05)
 
 
 def test_group_gives_the_rows_of_single_trials():
@@ -71,8 +72,8 @@ def test_group_gives_the_rows_of_single_trials():
 
 
 def test_failures_are_values_with_reasons():
-    out = geometric_trial(geometric_scenario(camera="galaxy-nexus", range_m=5.0, x_m=20.0), 0)
-    assert not out["ok"] and out["reason"] == "too_few_blobs" and out["pos_err_m"] is None
+    out = geometric_trial(geometric_scenario(camera="galaxy-nexus", range_m=5.0, target_x_m=20.0), 0)
+    assert not out["ok"] and out["reason"] == "too_few_blobs" and out["pos_err_norm_m"] is None
     r = geometric_trial(geometric_scenario(camera="htc-amaze-4g", range_m=30.0), 0)
     merged = geometric_trial(geometric_scenario(camera="htc-amaze-4g", range_m=30.0,
                                                 merge_px=r["min_separation_px"] + 1), 0)

@@ -98,3 +98,132 @@ def test_scaled_camera_projects_consistently(nexus):
     uv_small = small.project(p)
     np.testing.assert_allclose(uv_small, (uv_full + 0.5) * sx - 0.5, atol=1e-9)
     assert small.fx == pytest.approx(nexus.fx * sx)
+
+
+# ------------------------------------------------------------------ fitted overlays
+def _raw_toml(path):
+    import tomllib
+
+    with open(path, "rb") as fh:
+        return tomllib.load(fh)
+
+
+def _flat(tables, skip=("sources", "fitted")):
+    """{(table, key): value} over a profile's tables (the provenance tables left out)."""
+    return {(t, k): v for t, tab in tables.items() if isinstance(tab, dict) and t not in skip for k, v in tab.items()}
+
+
+def _overlays():
+    from svgs.profiles import CAMERAS_DIR
+
+    return sorted((CAMERAS_DIR / "fitted").glob("*.toml"))
+
+
+def test_every_fitted_overlay_belongs_to_a_shipped_profile():
+    from svgs.profiles import known_cameras
+
+    names = [p.stem for p in _overlays()]
+    assert {"galaxy-nexus", "htc-amaze-4g"} <= set(names)  # the two phones carry the fitted glare
+    assert set(names) <= set(known_cameras())
+
+
+@pytest.mark.parametrize("overlay", _overlays(), ids=lambda p: p.stem)
+def test_overlay_changes_exactly_its_listed_keys(overlay):
+    """The fitted camera differs from the unfitted one in the overlay's keys and nowhere
+    else; the unfitted one is the profile file as written (read here with tomllib)."""
+    fits = _raw_toml(overlay)["fit"]
+    listed = {tuple(f["key"].split(".")): f["value"] for f in fits}
+    base_file = _raw_toml(overlay.parent.parent / overlay.name)
+    fitted, unfitted = Camera.load(overlay.stem), Camera.load(overlay.stem, fitted=False)
+    assert _flat(unfitted.tables) == _flat({k: v for k, v in base_file.items() if k not in ("intrinsics", "distortion")})
+    a, b = _flat(fitted.tables), _flat(unfitted.tables)
+    changed = {k for k in a.keys() | b.keys() if a.get(k, None) != b.get(k, None)}
+    assert changed == set(listed)
+    for k, v in listed.items():
+        assert a[k] == v
+    # the geometry is never fitted
+    assert (fitted.width, fitted.height, fitted.fx, fitted.fy, fitted.cx, fitted.cy) == (
+        unfitted.width, unfitted.height, unfitted.fx, unfitted.fy, unfitted.cx, unfitted.cy)
+    np.testing.assert_array_equal(fitted.dist, unfitted.dist)
+    # the loaded camera records what was fitted, and the prior it replaced
+    assert set(fitted.tables["fitted"]) == {f["key"] for f in fits}
+    for f in fits:
+        t, k = f["key"].split(".")
+        rec = fitted.tables["fitted"][f["key"]]
+        assert rec["fitted_to"] == f["fitted_to"] and rec.get("prior") == base_file[t].get(k)
+    assert "fitted" not in unfitted.tables
+    # by path, a shipped profile is the same camera as by name
+    assert Camera.load(overlay.parent.parent / overlay.name).to_dict() == fitted.to_dict()
+
+
+@pytest.mark.parametrize("overlay", _overlays(), ids=lambda p: p.stem)
+def test_overlay_entries_name_their_fit_target_and_range(overlay):
+    """Each fitted value says what it was fitted to (a paper's table or figure), lies in a
+    plausible physical range and says where that range comes from; the profile's
+    [sources] line for the table points at the overlay and states the prior."""
+    base_file = _raw_toml(overlay.parent.parent / overlay.name)
+    for f in _raw_toml(overlay)["fit"]:
+        assert set(f) == {"key", "value", "fitted_to", "range", "range_source"}, f["key"]
+        assert "2014" in f["fitted_to"] or "fitted/" in f["fitted_to"], f["key"]  # the paper, or the fit it shares
+        assert ("Table" in f["fitted_to"]) or ("fitted/" in f["fitted_to"]), f["key"]
+        assert len(f["range_source"]) > 20, f["key"]
+        if isinstance(f["value"], str):
+            assert f["value"] in f["range"]
+        else:
+            lo, hi = f["range"]
+            assert lo <= f["value"] <= hi, f["key"]
+            prior = base_file[f["key"].split(".")[0]].get(f["key"].split(".")[1])
+            if prior is not None:  # the prior is a physical value too
+                assert lo <= prior <= hi, f["key"]
+        table = f["key"].split(".")[0]
+        line = base_file["sources"][table]
+        assert "PRIOR" in line and "fitted/" in line, table
+    # no FITTED value is left in the base profile's sources
+    assert not any(v.startswith("FITTED") for v in base_file["sources"].values())
+
+
+def test_profiles_without_overlay_load_the_same_either_way():
+    a, b = Camera.load("tof-epc660"), Camera.load("tof-epc660", fitted=False)
+    assert a.to_dict() == b.to_dict()
+
+
+def _write_profile(tmp_path, overlay_body):
+    (tmp_path / "fitted").mkdir()
+    (tmp_path / "c.toml").write_text("[intrinsics]\nwidth = 64\nheight = 48\nfx = 50\nfy = 50\ncx = 31.5\ncy = 23.5\n"
+                                     "[glare]\nveiling_fraction = 0.03\n")
+    (tmp_path / "fitted" / "c.toml").write_text(overlay_body)
+    return tmp_path / "c.toml"
+
+
+FIT_OK = ('[[fit]]\nkey = "glare.veiling_fraction"\nvalue = 0.05\nfitted_to = "Table 1"\nrange = [0.01, 0.1]\n'
+          'range_source = "a standard"\n')
+
+
+def test_user_profile_with_overlay(tmp_path):
+    path = _write_profile(tmp_path, FIT_OK)
+    assert Camera.load(path).tables["glare"]["veiling_fraction"] == 0.05
+    assert Camera.load(path, fitted=False).tables["glare"]["veiling_fraction"] == 0.03
+    # a saved fitted camera keeps its values and its record; loading it again changes nothing
+    back = Camera.load(Camera.load(path).save(tmp_path / "saved" / "c.toml"))
+    assert back.tables["glare"]["veiling_fraction"] == 0.05
+    assert back.tables["fitted"]["glare.veiling_fraction"]["prior"] == 0.03
+
+
+@pytest.mark.parametrize(
+    "body, match",
+    [
+        (FIT_OK.replace("value = 0.05", "value = 0.5"), "outside its plausible range"),
+        (FIT_OK.replace('fitted_to = "Table 1"\n', ""), "lacks fitted_to"),
+        (FIT_OK.replace('range_source = "a standard"\n', 'range_source = ""\n'), "lacks range_source"),
+        (FIT_OK.replace('"glare.veiling_fraction"', '"intrinsics.fx"'), r"\[intrinsics\] cannot be fitted"),
+        (FIT_OK.replace('"glare.veiling_fraction"', '"veiling_fraction"'), "must be 'table.name'"),
+        (FIT_OK.replace('"glare.veiling_fraction"', '"flash.cos_exponent"'), r"no \[flash\] table"),
+        (FIT_OK + FIT_OK, "given twice"),
+        ("camera = 'c'\n", r"expected \[\[fit\]\]"),
+    ],
+)
+def test_bad_overlays_name_the_entry(tmp_path, body, match):
+    path = _write_profile(tmp_path, body)
+    with pytest.raises(ProfileError, match=match):
+        Camera.load(path)
+    Camera.load(path, fitted=False)  # the unfitted profile never reads the overlay

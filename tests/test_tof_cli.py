@@ -13,6 +13,7 @@ from synth_tof import synth_frame
 
 #: The keys ``svgs solve --json`` prints (cli.main), which ``svgs tof solve --json`` shares.
 SOLVE_KEYS = {"ok", "reason", "state", "R_cam_target", "t_cam_target_m", "targets_px", "n_blobs", "residual_rms_px"}
+#: The documented JSON state keys, written out: an independent check of svgs.frames.STATE_KEYS.
 STATE_KEYS = {"x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg"}
 
 

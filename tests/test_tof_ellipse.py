@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from tof.camera import load_camera
-from tof.ellipse import (centre_correction_px, circle_poses_from_conic, conic_center, conic_from_moments,
-                         conic_to_ellipse, detect_ellipse_arcs, ellipse_to_conic, fit_ellipse, fit_ellipse_subpixel,
-                         level_crossings, predicted_centre_bias_px, project_circle_conic, projected_circle_centre)
+from tof.ellipse import (centre_correction_px, circle_poses_from_conic, conic_center, detect_ellipse_arcs,
+                         ellipse_to_conic, fit_ellipse, fit_ellipse_subpixel, level_crossings, project_circle_conic,
+                         projected_circle_centre)
 
 
 def _random_circles(n, seed, radius_m=0.04, z_range=(0.5, 6.0)):
@@ -21,18 +21,15 @@ def _random_circles(n, seed, radius_m=0.04, z_range=(0.5, 6.0)):
     return out
 
 
-def test_conic_roundtrip():
+def test_ellipse_conic_holds_the_parametric_ellipse():
     C = ellipse_to_conic((12.5, -3.25), (7.0, 2.5), 0.7)
-    c, ax, ang = conic_to_ellipse(C)
-    np.testing.assert_allclose(c, [12.5, -3.25], atol=1e-12)
-    np.testing.assert_allclose(ax, [7.0, 2.5], atol=1e-12)
-    assert np.cos(2 * (ang - 0.7)) == pytest.approx(1.0)
-    np.testing.assert_allclose(conic_to_ellipse(-3 * C)[1], [7.0, 2.5], atol=1e-12)  # scale-free
-    # a uniform ellipse's moments give back its conic
-    R = np.array([[np.cos(0.7), -np.sin(0.7)], [np.sin(0.7), np.cos(0.7)]])
-    cov = R @ np.diag([7.0**2 / 4, 2.5**2 / 4]) @ R.T
-    Cm = conic_from_moments([12.5, -3.25], cov)
-    np.testing.assert_allclose(Cm / Cm[0, 0], C / C[0, 0], atol=1e-12)
+    t = np.linspace(0, 2 * np.pi, 37)
+    ca, sa = np.cos(0.7), np.sin(0.7)
+    on = np.stack([12.5 + 7.0 * np.cos(t) * ca - 2.5 * np.sin(t) * sa,
+                   -3.25 + 7.0 * np.cos(t) * sa + 2.5 * np.sin(t) * ca, np.ones_like(t)], 1)
+    np.testing.assert_allclose(np.einsum("ij,jk,ik->i", on, C, on), 0.0, atol=1e-12)
+    assert np.array([12.5, -3.25, 1.0]) @ C @ np.array([12.5, -3.25, 1.0]) == pytest.approx(-1.0)  # inside < 0
+    np.testing.assert_allclose(conic_center(C), [12.5, -3.25], atol=1e-12)
 
 
 def test_projected_circle_centre_is_exact_and_the_ellipse_centre_is_biased():
@@ -49,7 +46,8 @@ def test_projected_circle_centre_is_exact_and_the_ellipse_centre_is_biased():
         worst_corr = max(worst_corr, np.abs(corrected - truth).max())
         raw = conic_center(C)
         bias = raw - truth
-        pred = predicted_centre_bias_px(cam.fx, cam.fy, c, n, r)
+        m = c[:2] / c[2]  # the module notes' first-order bias f (r/Z)^2 [n_z n_xy + m_xy (1 - n_z^2)]
+        pred = np.array([cam.fx, cam.fy]) * (r / c[2]) ** 2 * (n[2] * n[:2] + m * (1 - n[2] ** 2))
         np.testing.assert_allclose(centre_correction_px(C, K, n), -bias, atol=1e-9)
         biases.append(np.linalg.norm(bias))
         if np.linalg.norm(bias) > 1e-3:

@@ -5,7 +5,7 @@ import pytest
 
 from svgs.errors import InputError
 from svgs.frames import pose_from_scenario, rotation_angle_deg
-from tof import TofPipeline, load_camera, load_target, solve_frame, solve_sequence
+from tof import TofPipeline, load_camera, load_target, solve_frame
 from synth_tof import synth_frame
 
 
@@ -85,12 +85,10 @@ def test_glint_glued_to_a_marker_is_repaired_by_ellipse_detection(cam, tgt):
 
 def test_sequence_with_temporal_median_and_persistence(cam, tgt):
     frames = [_frame(cam, tgt, 2.0, (3.0, -4.0, 5.0), seed=20 + k) for k in range(3)]
-    res = solve_sequence([f.gray for f in frames], [f.depth_m for f in frames], cam, tgt,
-                         persistence_window=3, persistence_min_count=2)
+    pipe = TofPipeline(cam, tgt, persistence_window=3, persistence_min_count=2)
+    res = [pipe.process(f.gray, f.depth_m) for f in frames]
     assert all(res)
     assert np.abs(res[-1].t_cam_target_m - frames[0].t_cam_target_m).max() < 0.003
-    with pytest.raises(InputError, match="length"):
-        solve_sequence([frames[0].gray], [], cam, tgt)
 
 
 def test_bad_input_raises_input_error(near, cam, tgt):

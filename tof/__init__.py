@@ -11,7 +11,7 @@ numpy / OpenCV / scipy / scikit-image only - never Mitsuba, so it runs on real T
 from .camera import (DEFAULT_CAMERA, DEFAULT_PATTERN, MarkerTarget, line_of_sight, load_camera, load_target,
                      points_from_depth)
 from .match import match_points
-from .pipeline import PipelineParams, TofPipeline, TofSolution, solve_frame, solve_sequence, validate_frames
+from .pipeline import PipelineParams, TofPipeline, TofSolution, solve_frame, validate_frames
 from .pose import refine_line_of_sight, weighted_svd_pose
 
 __all__ = [
@@ -29,6 +29,5 @@ __all__ = [
     "TofPipeline",
     "TofSolution",
     "solve_frame",
-    "solve_sequence",
     "validate_frames",
 ]

@@ -67,10 +67,6 @@ class ActiveSet:
     def n(self) -> int:
         return int(self.rows.size)
 
-    @property
-    def capped(self) -> bool:
-        return self.n_above > self.n
-
     def mask(self) -> np.ndarray:
         """Boolean image of the set, shape ``(H, W)``."""
         m = np.zeros(self.shape, bool)

@@ -91,10 +91,6 @@ class Blobs:
         m[self.rows, self.cols] = True
         return m
 
-    def pixels(self, i: int) -> np.ndarray:
-        """Indices (into the member arrays) of blob ``i``'s pixels."""
-        return np.flatnonzero(self.blob_of_pixel == i)
-
 
 def _moments(lab, rows, cols, nlab):
     """Count, centroid, covariance per label (labels 0..nlab-1) via bincount."""

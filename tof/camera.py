@@ -96,12 +96,6 @@ def points_from_depth(camera: Camera, uv_px, depth_m, kind: str | None = None) -
     return np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], -1) * d
 
 
-def range_from_point(p_cam_m, kind: str = "radial") -> np.ndarray:
-    """Inverse of :func:`points_from_depth` for the depth value: shape (..., 3) -> (...)."""
-    p = np.asarray(p_cam_m, float)
-    return np.linalg.norm(p, axis=-1) if kind == "radial" else p[..., 2]
-
-
 @dataclass(frozen=True)
 class MarkerTarget:
     """The ToF marker target: a pattern plus each marker's size and standoff.

@@ -139,138 +139,6 @@ def blob_depth(d, w, k_sigma: float = 3.0, floor_m: float = 1e-3) -> tuple[float
     return mean, max(spread, 1e-4) / np.sqrt(n), n
 
 
-def local_intensity(signal, u, v, min_plane_pixels: int = 20, interior_frac: float = 0.7):
-    """Model of a marker's own (background-free) intensity across its blob.
-
-    A plane ``a + b u + c v`` fitted to the interior pixels (signal above ``interior_frac``
-    of the 90th percentile) when the blob has at least ``min_plane_pixels`` pixels, else
-    the constant 90th percentile.
-
-    Parameters
-    ----------
-    signal : ndarray, shape (m,)
-        Gray minus background of the blob's pixels.
-    u, v : ndarray, shape (m,)
-
-    Returns
-    -------
-    callable
-        ``model(u, v) -> intensity``, arrays of any shape.
-    """
-    sig = np.asarray(signal, float)
-    k = int(0.9 * (sig.size - 1))
-    p90 = float(np.partition(sig, k)[k]) if sig.size else 0.0
-    if p90 <= 0:
-        return lambda uu, vv: np.full(np.shape(uu), np.inf)
-    if sig.size >= min_plane_pixels:
-        inner = sig >= interior_frac * p90
-        if inner.sum() >= 6:
-            ui, vi, si = u[inner].astype(float), v[inner].astype(float), sig[inner]
-            uc, vc = ui.mean(), vi.mean()
-            du, dv = ui - uc, vi - vc
-            M = np.array([[du @ du, du @ dv], [du @ dv, dv @ dv]])
-            try:
-                bu, bv = np.linalg.solve(M, [du @ si, dv @ si])
-            except np.linalg.LinAlgError:
-                bu = bv = 0.0
-            c = (si.mean() - bu * uc - bv * vc, bu, bv)
-
-            def plane(uu, vv):
-                pl = c[0] + c[1] * np.asarray(uu, float) + c[2] * np.asarray(vv, float)
-                return np.where(pl > 0.5 * p90, pl, p90)
-
-            return plane
-    return lambda uu, vv: np.full(np.shape(uu), p90)
-
-
-def coverage_weights(signal, u, v, min_plane_pixels: int = 20, interior_frac: float = 0.7) -> np.ndarray:
-    """Pixel coverage estimates ``clip(signal / I_local, 0, 1)`` of one blob's pixels.
-
-    ``I_local`` is :func:`local_intensity`. Interior pixels weigh ~1 whatever the
-    illumination gradient across the marker; rim pixels weigh by how much of them the marker
-    covers.
-
-    Parameters
-    ----------
-    signal : ndarray, shape (m,)
-        Gray minus background, >= 0.
-    u, v : ndarray, shape (m,)
-        Pixel coordinates.
-
-    Returns
-    -------
-    ndarray, shape (m,)
-    """
-    model = local_intensity(signal, u, v, min_plane_pixels, interior_frac)
-    return np.clip(np.asarray(signal, float) / model(u, v), 0.0, 1.0)
-
-
-def _dilate8(m):
-    d = m.copy()
-    d[1:] |= m[:-1]
-    d[:-1] |= m[1:]
-    e = d.copy()
-    e[:, 1:] |= d[:, :-1]
-    e[:, :-1] |= d[:, 1:]
-    return e
-
-
-def coverage_centroid(gray, rows, cols, background: float, other_mask=None,
-                      local_background: bool = True) -> tuple[np.ndarray, float]:
-    """Coverage-weighted centroid of a blob including its one-pixel rim.
-
-    The rim (8-neighbours of the blob outside it, and outside ``other_mask``) holds the
-    marker's partly covered edge pixels that fell below the active-set threshold; leaving
-    them out truncates the blob unevenly and biases small blobs.
-
-    Parameters
-    ----------
-    gray : ndarray, shape (H, W)
-    rows, cols : ndarray of int, shape (m,)
-        The blob's pixels.
-    background : float
-    other_mask : ndarray of bool, shape (H, W), optional
-        Pixels of other blobs, never part of the rim.
-    local_background : bool
-        Use the median of the ring 2-3 px around the blob (the plate behind the marker) as
-        background when it is brighter than ``background``.
-
-    Returns
-    -------
-    uv_px : ndarray, shape (2,)
-    weight_sum : float
-        Sum of the coverage weights (~ the marker's area in pixels).
-    """
-    H, W = gray.shape
-    pad = 3
-    v0, v1 = max(int(rows.min()) - pad, 0), min(int(rows.max()) + pad, H - 1)
-    u0, u1 = max(int(cols.min()) - pad, 0), min(int(cols.max()) + pad, W - 1)
-    m = np.zeros((v1 - v0 + 1, u1 - u0 + 1), bool)
-    m[rows - v0, cols - u0] = True
-    e = _dilate8(m)
-    other = None if other_mask is None else (other_mask[v0:v1 + 1, u0:u1 + 1] & ~m)
-    if other is not None:
-        e &= ~other
-    if local_background:
-        # the plate around the marker: pixels 2-3 px from the blob, not in another blob
-        ring = _dilate8(_dilate8(e)) & ~e
-        if other is not None:
-            ring &= ~_dilate8(other)
-        if ring.sum() >= 8:
-            background = max(background, float(np.median(gray[v0:v1 + 1, u0:u1 + 1][ring])))
-    rr, cc = np.nonzero(e)
-    rr = rr + v0
-    cc = cc + u0
-    sig_all = np.clip(gray[rr, cc].astype(float) - background, 0, None)
-    sig_in = np.clip(gray[rows, cols].astype(float) - background, 0, None)
-    model = local_intensity(sig_in, cols, rows)
-    w = np.clip(sig_all / model(cc, rr), 0.0, 1.0)
-    sw = float(w.sum())
-    if sw <= 0:
-        return np.array([cols.mean(), rows.mean()], float), 0.0
-    return np.array([w @ cc, w @ rr]) / sw, sw
-
-
 def _penalty(ecc, n_pixels, cov, peak, peak_max):
     lam = np.linalg.eigvalsh(cov)
     area = np.pi * 4 * np.sqrt(np.clip(lam[..., 0], 1e-12, None) * lam[..., 1])
@@ -340,12 +208,15 @@ def _pixels_of_both(mask, hi, lo):
 
 def coverage_centroids(gray, blobs: Blobs, background: float, local_background: bool = True,
                        min_plane_pixels: int = 20, interior_frac: float = 0.7) -> np.ndarray:
-    """Coverage-weighted centroids of all blobs at once (vectorised :func:`coverage_centroid`).
+    """Coverage-weighted centroids of all blobs at once, each blob including its one-pixel rim.
 
     Each blob's pixels plus its one-pixel rim (pixels next to this blob only) are weighted by
     ``clip((gray - b_i) / I_i(u, v), 0, 1)``: ``b_i`` the local background (median of the ring
-    2-3 px around the blob, next to no other blob), ``I_i`` the marker intensity model of
-    :func:`local_intensity` (plane fitted to the interior, or the 90th percentile).
+    2-3 px around the blob, next to no other blob), ``I_i`` the marker's own intensity: a plane
+    ``a + b u + c v`` fitted to the interior pixels (signal above ``interior_frac`` of the 90th
+    percentile) when the blob has at least ``min_plane_pixels`` pixels, else the 90th
+    percentile. The rim holds the marker's partly covered edge pixels that fell below the
+    active-set threshold; leaving them out truncates the blob unevenly and biases small blobs.
 
     Returns
     -------
@@ -488,7 +359,7 @@ def measure_candidates(
     weighting : {"coverage", "intensity"}
         Centroid weights: ``"intensity"`` is the paper's ``w = gray - background``;
         ``"coverage"`` (default) weighs each pixel of the blob and of its one-pixel rim by
-        its estimated coverage (:func:`coverage_centroid`): interior pixels weigh alike and
+        its estimated coverage (:func:`coverage_centroids`): interior pixels weigh alike and
         only edge pixels weigh by how much of them the marker covers. The intensity weighting pulls the centroid towards
         the brighter side of a marker whose illumination falls off across it
         (``cos i / r^2``): by 0.2-0.5 px for an 80 mm marker at 0.7 m in our noise-free
@@ -500,12 +371,34 @@ def measure_candidates(
     """
     gray = np.asarray(gray, np.float32)
     depth = np.asarray(depth_m, np.float32)
-    n = blobs.n
-    starts = np.searchsorted(blobs.blob_of_pixel, np.arange(n + 1))
     w_all = np.clip(blobs.gray - background, 0, None).astype(float)
+    uvw = _weighted_centroids(gray, blobs, background, weighting, w_all)
+    d_all = depth[blobs.rows, blobs.cols]
+    m = _moment_measures(blobs, uvw, d_all, w_all)
+    if ellipse_fit not in ("auto", "always", "never"):
+        raise InputError(f"ellipse_fit: expected 'auto', 'always' or 'never', got {ellipse_fit!r}")
+    fit_me = _blobs_to_fit(blobs, gray.shape, ellipse_fit, expected, ellipse_min_pixels, fill_tol)
+    _fit_ellipses(m, gray, blobs, fit_me, uvw, d_all, w_all, background, max_fit_rms_px, supplement)
+    pen, ok, notes = _gate(blobs, gray.shape, m, expected, max_penalty, max_box_px)
+    cands = Candidates(m["uv"][ok], m["conics"][ok], m["dep"][ok], m["dstd"][ok], m["nd"][ok], blobs.n_pixels[ok],
+                       blobs.eccentricity[ok], m["semi"][ok], pen[ok], m["rms"][ok], m["source"][ok], notes)
+    if supplement and expected is not None and cands.n < expected and len(blobs.rejected_rows):
+        extra = _supplement(blobs, gray, depth, background, cands.uv_px, max_fit_rms_px)
+        if extra is not None and extra.n:
+            cands = _concat(cands, extra)
+            cands.notes["supplemented"] = int(extra.n)
+    return cands
+
+
+def _weighted_centroids(gray, blobs: Blobs, background: float, weighting: str, w_all) -> np.ndarray:
+    """Blob centroids, shape (n, 2): coverage-weighted or the paper's intensity weighting.
+
+    ``w_all`` (shape (m,)) holds the member pixels' ``gray - background``, clipped at 0.
+    """
+    n = blobs.n
     if weighting == "coverage":
-        uvw = coverage_centroids(gray, blobs, background)
-    elif weighting == "intensity":
+        return coverage_centroids(gray, blobs, background)
+    if weighting == "intensity":
         sw = np.bincount(blobs.blob_of_pixel, w_all, n)
         su = np.bincount(blobs.blob_of_pixel, w_all * blobs.cols, n)
         sv = np.bincount(blobs.blob_of_pixel, w_all * blobs.rows, n)
@@ -513,29 +406,54 @@ def measure_candidates(
             uvw = np.stack([su / sw, sv / sw], -1)
         bad_w = ~(sw > 0)
         uvw[bad_w] = blobs.centroid_px[bad_w]
-    else:
-        raise InputError(f"weighting: expected 'coverage' or 'intensity', got {weighting!r}")
-    d_all = depth[blobs.rows, blobs.cols]
-    uv = uvw.copy()
-    conics = np.empty((n, 3, 3))
-    dep = np.full(n, np.nan)
-    dstd = np.full(n, np.nan)
-    nd = np.zeros(n, int)
-    rms = np.full(n, np.nan)
-    semi = np.empty(n)
-    confirmed = np.ones(n, bool)
-    fitted = np.zeros(n, bool)
-    source = np.array(["blob"] * n, dtype=object)
-    member = None
+        return uvw
+    raise InputError(f"weighting: expected 'coverage' or 'intensity', got {weighting!r}")
+
+
+def _moment_measures(blobs: Blobs, uvw, d_all, w_all) -> dict:
+    """Per-blob measurements before any ellipse fit: the centroid, the blob depth and the
+    uniform-ellipse conic and semi-major axis of the blob's second moments.
+
+    Returns
+    -------
+    dict of ndarray
+        ``uv`` (n, 2), ``conics`` (n, 3, 3), ``dep``, ``dstd``, ``nd``, ``rms`` (NaN: no fit
+        yet), ``semi`` (n,), and the flags ``confirmed``, ``fitted`` and ``source`` (n,).
+    """
+    n = blobs.n
+    m = {
+        "uv": uvw.copy(),
+        "conics": np.empty((n, 3, 3)),
+        "dep": np.full(n, np.nan),
+        "dstd": np.full(n, np.nan),
+        "nd": np.zeros(n, int),
+        "rms": np.full(n, np.nan),
+        "semi": np.empty(n),
+        "confirmed": np.ones(n, bool),
+        "fitted": np.zeros(n, bool),
+        "source": np.array(["blob"] * n, dtype=object),
+    }
     if n:
-        dep, dstd, nd = blob_depths(d_all, w_all, blobs.blob_of_pixel, n)
+        m["dep"], m["dstd"], m["nd"] = blob_depths(d_all, w_all, blobs.blob_of_pixel, n)
         A = np.linalg.inv(4.0 * blobs.cov_px2)
+        conics = m["conics"]
         conics[:, :2, :2] = A
         conics[:, :2, 2] = conics[:, 2, :2] = -np.einsum("nij,nj->ni", A, uvw)
         conics[:, 2, 2] = np.einsum("ni,nij,nj->n", uvw, A, uvw) - 1.0
-        semi = 2 * np.sqrt(np.maximum(np.linalg.eigvalsh(blobs.cov_px2)[:, 1], 0.0))
-    if ellipse_fit not in ("auto", "always", "never"):
-        raise InputError(f"ellipse_fit: expected 'auto', 'always' or 'never', got {ellipse_fit!r}")
+        m["semi"] = 2 * np.sqrt(np.maximum(np.linalg.eigvalsh(blobs.cov_px2)[:, 1], 0.0))
+    return m
+
+
+def _at_border(blobs: Blobs, shape) -> np.ndarray:
+    """Boolean (n,): the blob's box touches the image border."""
+    H, W = shape
+    bb = blobs.bbox
+    return (bb[:, 0] <= 0) | (bb[:, 1] <= 0) | (bb[:, 2] >= W - 1) | (bb[:, 3] >= H - 1)
+
+
+def _blobs_to_fit(blobs: Blobs, shape, ellipse_fit: str, expected, ellipse_min_pixels: int, fill_tol: float):
+    """Boolean (n,): the blobs that get the sub-pixel ellipse fit (see :func:`measure_candidates`)."""
+    n = blobs.n
     fit_me = blobs.n_pixels >= ellipse_min_pixels
     if ellipse_fit == "never":
         fit_me[:] = False
@@ -545,10 +463,20 @@ def measure_candidates(
         # than fill_tol: a glint or neighbour glued to a marker) or that touch the border
         lam = np.linalg.eigvalsh(blobs.cov_px2)
         fill = blobs.n_pixels / (4 * np.pi * np.sqrt(np.clip(lam[:, 0], 1e-12, None) * lam[:, 1]))
-        H, W = gray.shape
-        bb = blobs.bbox
-        at_border = (bb[:, 0] <= 0) | (bb[:, 1] <= 0) | (bb[:, 2] >= W - 1) | (bb[:, 3] >= H - 1)
-        fit_me &= (np.abs(1 - fill) > fill_tol) | at_border
+        fit_me &= (np.abs(1 - fill) > fill_tol) | _at_border(blobs, shape)
+    return fit_me
+
+
+def _fit_ellipses(m: dict, gray, blobs: Blobs, fit_me, uvw, d_all, w_all, background: float,
+                  max_fit_rms_px: float, supplement: bool) -> None:
+    """Sub-pixel ellipse fits of the blobs in ``fit_me``, updating the measurements ``m`` in place.
+
+    A good fit (RMS at most ``max_fit_rms_px``, coverage >= 0.9) gives the conic and moves the
+    centre to the mean of the centroid and the ellipse centre; otherwise the blob's elliptical
+    arcs, if found (``supplement``), give its centre, conic and depth; else it is unconfirmed.
+    """
+    starts = np.searchsorted(blobs.blob_of_pixel, np.arange(blobs.n + 1))
+    member = None
     for i in np.flatnonzero(fit_me):
         s, e = starts[i], starts[i + 1]
         if member is None:
@@ -559,26 +487,43 @@ def measure_candidates(
         level = background + 0.5 * (float(np.partition(g, k)[k]) - background)
         fit = fit_ellipse_subpixel(gray, tuple(blobs.bbox[i]), level, member)
         if fit is not None:
-            rms[i] = fit.rms_px
+            m["rms"][i] = fit.rms_px
         if fit is not None and fit.rms_px <= max_fit_rms_px and fit.coverage >= 0.9:
-            fitted[i] = True
-            uv[i] = 0.5 * (uvw[i] + fit.center_px)
-            conics[i] = fit.conic
-            semi[i] = fit.axes_px[0]
+            m["fitted"][i] = True
+            m["uv"][i] = 0.5 * (uvw[i] + fit.center_px)
+            m["conics"][i] = fit.conic
+            m["semi"][i] = fit.axes_px[0]
         else:
             # not an ellipse (a glint or a neighbour glued to it, a clipped marker):
             # look for the marker's elliptical arcs and, if found, take its centre from them
             repaired = _repair(gray, blobs.bbox[i], level, member, max_fit_rms_px) if supplement else None
             if repaired is not None:
-                uv[i], conics[i], semi[i], rms[i] = repaired.center_px, repaired.conic, repaired.axes_px[0], repaired.rms_px
+                m["uv"][i], m["conics"][i] = repaired.center_px, repaired.conic
+                m["semi"][i], m["rms"][i] = repaired.axes_px[0], repaired.rms_px
                 x = np.stack([blobs.cols[s:e], blobs.rows[s:e], np.ones(e - s)], 1)
                 inside = np.einsum("ij,jk,ik->i", x, repaired.conic, x) < 0
                 if inside.sum() >= 3:
-                    dep[i], dstd[i], nd[i] = blob_depth(d_all[s:e][inside], w_all[s:e][inside])
-                source[i] = "ellipse"
+                    m["dep"][i], m["dstd"][i], m["nd"][i] = blob_depth(d_all[s:e][inside], w_all[s:e][inside])
+                m["source"][i] = "ellipse"
             else:
-                confirmed[i] = False
+                m["confirmed"][i] = False
         member[blobs.rows[s:e], blobs.cols[s:e]] = False
+
+
+def _gate(blobs: Blobs, shape, m: dict, expected, max_penalty: float, max_box_px: int):
+    """Penalty scores and the candidates kept (paper: ``P < P_max``, ``w < W_max``, ``h < H_max``).
+
+    Also drops blobs cut by the image border without a closed ellipse or found arcs, and -
+    when there are more than ``expected`` - the blobs whose contour failed the ellipse test.
+
+    Returns
+    -------
+    penalty : ndarray, shape (n,)
+    ok : ndarray of bool, shape (n,)
+    notes : dict
+        Counts of the blobs dropped by each rule.
+    """
+    n = blobs.n
     peak_max = float(blobs.peak_gray.max()) if n else 1.0
     pen = _penalty(blobs.eccentricity, blobs.n_pixels, blobs.cov_px2, blobs.peak_gray, peak_max) if n else np.zeros(0)
     box = (blobs.bbox[:, 2:] - blobs.bbox[:, :2] + 1) if n else np.zeros((0, 2), int)
@@ -587,26 +532,16 @@ def measure_candidates(
     if n:
         # a marker cut by the image border has a biased centroid: keep a blob touching the
         # border only if its contour closed into a good ellipse or its arcs were found
-        H, W = gray.shape
-        bb = blobs.bbox
-        border = (bb[:, 0] <= 0) | (bb[:, 1] <= 0) | (bb[:, 2] >= W - 1) | (bb[:, 3] >= H - 1)
-        cut = border & ~fitted & (source != "ellipse")
+        cut = _at_border(blobs, shape) & ~m["fitted"] & (m["source"] != "ellipse")
         if cut.any():
             notes["dropped_at_border"] = int(np.sum(ok & cut))
             ok &= ~cut
+    confirmed = m["confirmed"]
     if expected is not None and int(np.sum(ok)) > expected and not confirmed.all():
         # confirm: drop blobs whose contour failed the ellipse test
         notes["dropped_unconfirmed"] = int(np.sum(ok & ~confirmed))
         ok &= confirmed
-    cands = Candidates(uv[ok], conics[ok], dep[ok], dstd[ok], nd[ok], blobs.n_pixels[ok], blobs.eccentricity[ok],
-                       semi[ok], pen[ok], rms[ok], source[ok], notes)
-    if supplement and expected is not None and cands.n < expected and len(blobs.rejected_rows):
-        extra = _supplement(blobs, gray, depth, background, cands.uv_px, max_fit_rms_px)
-        if extra is not None and extra.n:
-            cands = _concat(cands, extra)
-            cands.notes["supplemented"] = int(extra.n)
-    return cands
-
+    return pen, ok, notes
 
 def _inside_image(f: EllipseFit, shape, margin: float = 0.5) -> bool:
     """True if the whole ellipse lies inside the image (a marker cut by the border gives arcs

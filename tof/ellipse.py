@@ -9,8 +9,7 @@ Projected circle centre (Kanatani)
     plane's unit normal ``n`` in the camera frame, the plane's vanishing line is
     ``l = K^-T n`` and the image of the circle's centre is its pole, ``x_c ~ C^-1 l``
     (:func:`projected_circle_centre`). The ellipse centre, the pole of the image's line at
-    infinity, differs from it by a bias that grows as ``(r / Z)^2``; to first order
-    (:func:`predicted_centre_bias_px`)::
+    infinity, differs from it by a bias that grows as ``(r / Z)^2``; to first order::
 
         bias = f (r / Z)^2 [ n_z n_xy + m_xy (1 - n_z^2) ]
 
@@ -74,56 +73,6 @@ def conic_center(C) -> np.ndarray:
     """Centre of a central conic, shape (..., 3, 3) -> (..., 2)."""
     C = np.asarray(C, float)
     return -np.linalg.solve(C[..., :2, :2], C[..., :2, 2:3])[..., 0]
-
-
-def conic_to_ellipse(C) -> tuple[np.ndarray, np.ndarray, float]:
-    """Centre, semi-axes ``(a >= b)`` and angle of ``a`` of an ellipse conic.
-
-    Raises
-    ------
-    InputError
-        The conic is not a real ellipse.
-    """
-    C = np.asarray(C, float)
-    A = C[:2, :2]
-    c = conic_center(C)
-    s = c @ A @ c - C[2, 2]
-    lam, V = np.linalg.eigh(A / s) if s != 0 else (np.array([-1.0, -1.0]), np.eye(2))
-    if not np.all(lam > 0):
-        raise InputError("conic: not a real ellipse")
-    axes = 1 / np.sqrt(lam)  # ascending eigenvalues -> descending axes
-    v = V[:, 0]
-    return c, axes, float(np.arctan2(v[1], v[0]))
-
-
-def conic_from_moments(center_px, cov_px2) -> np.ndarray:
-    """Ellipse conic of a uniform filled ellipse with the given centroid and covariance.
-
-    A uniform ellipse of semi-axes ``a, b`` has second central moments ``a^2 / 4, b^2 / 4``
-    along its axes, so the ellipse is ``(x - c)^T (4 Sigma)^-1 (x - c) = 1``.
-
-    Parameters
-    ----------
-    center_px : array_like, shape (2,)
-    cov_px2 : array_like, shape (2, 2)
-    """
-    c = np.asarray(center_px, float)
-    A = np.linalg.inv(4.0 * np.asarray(cov_px2, float))
-    C = np.empty((3, 3))
-    C[:2, :2] = A
-    C[:2, 2] = C[2, :2] = -A @ c
-    C[2, 2] = c @ A @ c - 1.0
-    return C
-
-
-def sampson_distance(C, pts_px) -> np.ndarray:
-    """First-order geometric distance of points to a conic, shape (n, 2) -> (n,), pixels."""
-    p = np.asarray(pts_px, float)
-    x = np.concatenate([p, np.ones((p.shape[0], 1))], 1)
-    Cx = x @ np.asarray(C, float)
-    q = np.einsum("ij,ij->i", Cx, x)
-    g = 2 * np.linalg.norm(Cx[:, :2], axis=1)
-    return np.abs(q) / np.maximum(g, 1e-300)
 
 
 # ------------------------------------------------------------- circles and projection
@@ -216,22 +165,6 @@ def projected_circle_centre(C, K, normal_cam) -> np.ndarray:
 def centre_correction_px(C, K, normal_cam) -> np.ndarray:
     """Shift from the ellipse centre to the projected circle centre, shape (..., 2)."""
     return projected_circle_centre(C, K, normal_cam) - conic_center(C)
-
-
-def predicted_centre_bias_px(fx, fy, center_cam_m, normal_cam, radius_m) -> np.ndarray:
-    """First-order bias ``ellipse centre - projected circle centre`` in pixels.
-
-    ``f (r / Z)^2 [n_z n_xy + m_xy (1 - n_z^2)]`` (see the module notes); the relative error
-    of this approximation is ``O(r / Z)``.
-
-    Returns
-    -------
-    bias_px : ndarray, shape (2,)
-    """
-    c = np.asarray(center_cam_m, float)
-    n = np.asarray(normal_cam, float) / np.linalg.norm(normal_cam)
-    m = c[:2] / c[2]
-    return np.array([fx, fy]) * (float(radius_m) / c[2]) ** 2 * (n[2] * n[:2] + m * (1 - n[2] ** 2))
 
 
 def circle_poses_from_conic(C, K, radius_m) -> tuple[np.ndarray, np.ndarray]:

@@ -19,7 +19,7 @@ Stages (each a function of its own module, usable alone)::
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -371,16 +371,3 @@ def solve_frame(gray, depth_m, camera=DEFAULT_CAMERA, target=DEFAULT_PATTERN, pa
     """
     return TofPipeline(camera, target, params, **overrides).process(gray, depth_m)
 
-
-def solve_sequence(grays, depths, camera=DEFAULT_CAMERA, target=DEFAULT_PATTERN, params: PipelineParams | None = None,
-                   **overrides) -> list:
-    """Run a sequence of frame pairs through one stateful pipeline; a result per frame."""
-    if len(grays) != len(depths):
-        raise InputError(f"gray and depth sequences differ in length: {len(grays)} vs {len(depths)}")
-    pipe = TofPipeline(camera, target, params, **overrides)
-    return [pipe.process(g, d) for g, d in zip(grays, depths)]
-
-
-def params_dict(params: PipelineParams) -> dict:
-    """The parameters as a plain dict (for reports)."""
-    return asdict(params)

@@ -214,8 +214,3 @@ def refine_line_of_sight(points_target_m, los_cam, R0, t0, *, weights=None, rang
             break
     return Refinement(R, t, it, converged)
 
-
-def residuals_m(points_target_m, points_cam_m, R, t) -> np.ndarray:
-    """3-D residuals ``|q_i - (R p_i + t)|``, shape (N,)."""
-    p = np.asarray(points_target_m, float)
-    return np.linalg.norm(np.asarray(points_cam_m, float) - (p @ np.asarray(R).T + np.asarray(t)), axis=1)

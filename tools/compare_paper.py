@@ -33,7 +33,7 @@ def main(sweep_dir, phone):
         if not ok:
             print(f"| {rng:g} | - | simulated | " + " | ".join("no solution" for _ in KEYS) + " |")
             continue
-        err = np.array([r["pos_err_m"] + r["att_err_deg"] for r in ok])
+        err = np.array([r["pos_err_vec_m"] + r["att_err_vec_deg"] for r in ok])
         sim_mean, sim_std = np.mean(np.abs(err), 0), np.std(err, 0)
         for stat, sim in (("mean_error", sim_mean), ("std", sim_std)):
             print(f"| {rng:g} | {stat} | simulated | " + " | ".join(f"{v:.3g}" for v in sim) + " |")

@@ -26,6 +26,7 @@ from camera.phone.isp import ExposureSolver, auto_exposure, downscale, jpeg_roun
 from camera.phone.optics import apply_psf, core_sigma_px
 from camera.phone.params import ALL_STAGES, PhoneParams, check_stages
 from camera.phone.sensor import bloom, electrons, fixed_patterns, readout
+from camera.tonemap import gamma_u8
 
 __all__ = ["PhoneCamera", "Exposer", "Exposure", "PhoneParams", "ALL_STAGES"]
 
@@ -186,9 +187,8 @@ class Exposer:
             np.minimum(e, sp.full_well_e, out=e)
         raw, img = readout(e, sp, iso, seed, read="read" in st, adc="adc" in st, lut=self._lut)
         if img is None:
-            img = np.round(
-            np.clip((raw - sp.black_level_dn) / (sp.white_dn - sp.black_level_dn), 0, 1)
-            ** (1.0 / p.isp.gamma if ("tone" in st and p.isp.gamma > 0) else 1.0) * 255).astype(np.uint8)
+            img = gamma_u8(np.clip((raw - sp.black_level_dn) / (sp.white_dn - sp.black_level_dn), 0, 1),
+                           p.isp.gamma if "tone" in st else 0.0)
         if "downscale" in st and p.isp.output_width > 0:
             img = downscale(img, p.isp.output_width, p.isp.output_height)
         if "jpeg" in st and p.isp.jpeg_quality > 0:

@@ -17,6 +17,7 @@ import numpy as np
 from svgs.errors import InputError
 
 from camera.phone.params import ExposureParams, SensorParams
+from camera.tonemap import gamma_u8
 
 
 def metering_weights(shape, mode: str) -> np.ndarray:
@@ -134,14 +135,7 @@ def tone_lut(sensor: SensorParams, gamma: float, tone: bool) -> np.ndarray:
     """Raw DN (0..2^bits-1) -> 8-bit output, as a lookup table of uint8."""
     dn = np.arange(int(sensor.white_dn) + 1, dtype=np.float64)
     lin = np.clip((dn - sensor.black_level_dn) / (sensor.white_dn - sensor.black_level_dn), 0.0, 1.0)
-    out = lin ** (1.0 / gamma) if (tone and gamma > 0) else lin
-    return np.round(out * 255.0).astype(np.uint8)
-
-
-def to_8bit(raw_dn: np.ndarray, lut: np.ndarray) -> np.ndarray:
-    """Apply the tone LUT to integer raw DN (float32 holding integers)."""
-    idx = np.clip(raw_dn, 0, len(lut) - 1).astype(np.uint16)
-    return lut[idx]
+    return gamma_u8(lin, gamma if tone else 0.0)
 
 
 def downscale(image: np.ndarray, width: int, height: int) -> np.ndarray:

@@ -45,9 +45,12 @@ from svgs.errors import InputError, ProfileError, check_finite, check_finite_pos
 from svgs.frames import check_pose, pose_to_state, state_dict
 from tof.camera import DEFAULT_CAMERA, DEFAULT_PATTERN, load_camera, load_target
 
-from camera.amcw import C_LIGHT_M_S, RenderedTof, unambiguous_range_m
+from camera.amcw import RenderedTof, unambiguous_range_m
+from svgs.constants import PLANCK_J_S, SPEED_OF_LIGHT_M_S
 
-PLANCK_J_S = 6.62607015e-34
+from render.sampling import check_spp, to_numpy
+from render.truth import repo_relative
+
 #: Most samples traced in one pass (memory: six float32 channels and the wavefront state per lane).
 MAX_LANES_PER_PASS = 1 << 22
 #: R2 low-discrepancy sequence (Roberts 2018): 1/g, 1/g^2 with g the plastic number, as 0.32 fixed point.
@@ -165,7 +168,7 @@ class TofOptics:
 
     @property
     def photon_energy_j(self) -> float:
-        return PLANCK_J_S * C_LIGHT_M_S / self.wavelength_m
+        return PLANCK_J_S * SPEED_OF_LIGHT_M_S / self.wavelength_m
 
     @classmethod
     def from_camera(cls, camera) -> "TofOptics":
@@ -220,8 +223,14 @@ def check_target_in_view(camera, target, R, t) -> dict:
     return m
 
 
-def _pow2(n: int) -> int:
-    return 1 << max(0, (int(n) - 1).bit_length())
+def _next_2d(mi, rng):
+    """Two floats from a lane's PCG32 stream as an mi.Point2f."""
+    return mi.Point2f(rng.next_float32(), rng.next_float32())
+
+
+def _mean_channel(s):
+    """A BSDF value or weight as one number: itself (mono) or the mean of three channels."""
+    return s[0] if len(s) == 1 else (s[0] + s[1] + s[2]) / 3.0
 
 
 class TofRenderer:
@@ -271,7 +280,7 @@ class TofRenderer:
         if f is None:
             f = (self.camera.tables.get("tof") or {}).get("modulation_frequency_hz", 10.0e6)
         self.modulation_frequency_hz = check_finite_positive(f, "modulation_frequency_hz")
-        self.spp = self._check_spp(spp)
+        self.spp = check_spp(spp, "spp", base=2)
         if int(max_bounces) != max_bounces or not 1 <= max_bounces <= 4:
             raise InputError(f"max_bounces: expected an integer 1..4, got {max_bounces!r}")
         self.max_bounces = int(max_bounces)
@@ -293,16 +302,6 @@ class TofRenderer:
                                  self.optics.focus_distance_m)
         self.load_time_s = time.perf_counter() - t0
         self._photons = None
-
-    @staticmethod
-    def _check_spp(v) -> int:
-        try:
-            iv = int(v)
-        except (TypeError, ValueError):
-            raise InputError(f"spp: expected a positive integer, got {v!r}") from None
-        if iv != v or iv < 1:
-            raise InputError(f"spp: expected a positive integer, got {v!r}")
-        return _pow2(iv)
 
     # ------------------------------------------------------------------ geometry helpers
     def photons_per_radiance(self) -> np.ndarray:
@@ -366,7 +365,7 @@ class TofRenderer:
         """
         R, t = check_pose(R_cam_target, t_cam_target_m)
         seed = int(check_finite(seed, "seed"))
-        spp = self.spp if spp is None else self._check_spp(spp)
+        spp = self.spp if spp is None else check_spp(spp, "spp", base=2)
         f_mod = self.modulation_frequency_hz if modulation_frequency_hz is None else \
             check_finite_positive(modulation_frequency_hz, "modulation_frequency_hz")
         if self.options.markers:
@@ -408,7 +407,7 @@ class TofRenderer:
         truth = self.truth(R, t, truth_m, seed=seed, spp=spp, window=win, timings=timings, f_mod=f_mod)
         return RenderedTof(active_radiance=active, phasor_radiance=phasor, ambient_factor=amb,
                            photons_per_radiance=self.photons_per_radiance(), hit_fraction=hit, range_first_m=rng1,
-                           modulation_frequency_hz=f_mod, truth=truth)
+                           modulation_frequency_hz=f_mod, truth=truth, timings_s=timings)
 
     def _render_window(self, R, t, win, spp, seed, f_mod) -> dict:
         x0, y0, w, h = win
@@ -441,6 +440,67 @@ class TofRenderer:
     def _trace(self, win, spp_pass: int, pass_index: int, seed_pass: int, seed_render: int, f_mod: float) -> dict:
         """One wavefront pass over the window: per-pixel sums (numpy float64, flat)."""
         mi, dr = self._mi, self._dr
+        Float = mi.Float
+        rng, ray = self._primary_rays(win, spp_pass, pass_index, seed_pass, seed_render)
+        si = self.scene.ray_intersect(ray)
+        hit0 = si.is_valid()
+        r_first = dr.select(hit0, dr.norm(si.p - self._lens), 0.0)
+
+        k_phase = 2.0 * np.pi * f_mod / SPEED_OF_LIGHT_M_S
+        ctx = mi.BSDFContext()
+        dc = Float(0.0)
+        re = Float(0.0)
+        im = Float(0.0)
+        amb = dr.select(hit0, Float(0.0), Float(self.background_factor))
+        beta = Float(1.0)
+        opl0 = r_first  # path length from the lens to the current vertex
+        active = mi.Bool(hit0)
+        for bounce in range(self.max_bounces):
+            bsdf = si.bsdf()
+            L, dist = self._emitter_return(si, bsdf, ctx, rng, active, beta)
+            phase = k_phase * (opl0 + dist)
+            dc += L
+            re += L * dr.cos(phase)
+            im += L * dr.sin(phase)
+            # BSDF-sampled ray: ambient sky if it escapes, next vertex otherwise
+            bs, wgt = bsdf.sample(ctx, si, rng.next_float32(), _next_2d(mi, rng), active)
+            wgt = _mean_channel(wgt)
+            ray2 = si.spawn_ray(si.to_world(bs.wo))
+            ok = active & (wgt > 0.0)
+            if bounce + 1 < self.max_bounces:
+                si2 = self.scene.ray_intersect(ray2, ok)
+                escaped = ok & ~si2.is_valid()
+                amb += dr.select(escaped, beta * wgt, 0.0)
+                opl0 = opl0 + dr.select(ok & si2.is_valid(), dr.norm(si2.p - si.p), 0.0)
+                beta = beta * wgt
+                active = ok & si2.is_valid()
+                si = si2
+            else:
+                escaped = ok & ~self.scene.ray_test(ray2, ok)
+                amb += dr.select(escaped, beta * wgt, 0.0)
+        hitf = dr.select(hit0, Float(1.0), Float(0.0))
+        chans = [dc, re, im, amb, hitf, r_first]
+        dr.eval(*chans)
+        sums = [dr.block_sum(c, spp_pass) for c in chans]
+        dr.eval(*sums)
+        names = ("dc", "re", "im", "amb", "hit", "r1")
+        return {nm: to_numpy(s, np.float64) for nm, s in zip(names, sums)}
+
+    def _primary_rays(self, win, spp_pass: int, pass_index: int, seed_pass: int, seed_render: int):
+        """The pass's camera rays, ``spp_pass`` per pixel of the window (pixel-major), and
+        the lanes' random streams.
+
+        Film positions: a per-pixel R2 sequence (sample ``pass_index * spp_pass + j``) with a
+        per-pixel Cranley-Patterson shift from ``seed_render`` (the same for every pass);
+        aperture points (thin lens) and everything after from a PCG32 stream per lane seeded
+        by ``seed_pass``.
+
+        Returns
+        -------
+        rng : mi.PCG32
+        ray : mi.Ray3f
+        """
+        mi, dr = self._mi, self._dr
         x0, y0, w, h = win
         n = w * h * spp_pass
         UInt32, UInt64, Float = mi.UInt32, mi.UInt64, mi.Float
@@ -464,83 +524,40 @@ class TofRenderer:
         rng = mi.PCG32()
         a, b = mi.sample_tea_32(idx, dr.opaque(UInt32, seed_pass), 4)
         rng.seed(UInt64(a) | (UInt64(b) << 32), UInt64(idx))
-
-        def r2():
-            return mi.Point2f(rng.next_float32(), rng.next_float32())
-
         if self.pinhole:
             a_cam = mi.Vector3f(0.0)
         else:
-            a_cam = self.model.aperture_point(r2())
-        ray = self.model.ray(u, v, a_cam)
-        si = self.scene.ray_intersect(ray)
-        hit0 = si.is_valid()
-        r_first = dr.select(hit0, dr.norm(si.p - self._lens), 0.0)
+            a_cam = self.model.aperture_point(_next_2d(mi, rng))
+        return rng, self.model.ray(u, v, a_cam)
 
-        k_phase = 2.0 * np.pi * f_mod / C_LIGHT_M_S
+    def _emitter_return(self, si, bsdf, ctx, rng, active, beta):
+        """Next-event estimation from the vertex ``si`` to one point of one emitter (chosen
+        uniformly; shadow ray): the return ``L = beta f (n I(theta)) / r^2`` and the distance
+        ``r`` from the vertex to the emitter point (mi.Float each)."""
+        mi, dr = self._mi, self._dr
+        UInt32, Float = mi.UInt32, mi.Float
         ill = self.illumination
         n_e = int(ill.n_emitters)
         m_exp = ill.cos_exponent
         I0 = ill.intensity_w_sr
         r_e = 0.5 * ill.emitter_diameter_m
         ex, ey, ez = self._axes
-        ctx = mi.BSDFContext()
-
-        def scalar(s):
-            return s[0] if len(s) == 1 else (s[0] + s[1] + s[2]) / 3.0
-
-        dc = Float(0.0)
-        re = Float(0.0)
-        im = Float(0.0)
-        amb = dr.select(hit0, Float(0.0), Float(self.background_factor))
-        beta = Float(1.0)
-        opl0 = r_first  # path length from the lens to the current vertex
-        active = mi.Bool(hit0)
-        for bounce in range(self.max_bounces):
-            bsdf = si.bsdf()
-            # next-event estimation towards one emitter point
-            k = UInt32(dr.minimum(rng.next_float32() * n_e, n_e - 1))
-            cx_ = dr.gather(Float, self._em[0], k, active)
-            cy_ = dr.gather(Float, self._em[1], k, active)
-            cz_ = dr.gather(Float, self._em[2], k, active)
-            dsk = mi.warp.square_to_uniform_disk_concentric(r2()) * r_e
-            e_pt = mi.Point3f(cx_, cy_, cz_) + ex * dsk.x + ey * dsk.y
-            dvec = e_pt - si.p
-            dist2 = dr.squared_norm(dvec)
-            dist = dr.sqrt(dist2)
-            wi = dvec / dist
-            cos_e = -dr.dot(wi, ez)
-            intensity = I0 * dr.power(dr.maximum(cos_e, 0.0), m_exp)
-            f = scalar(bsdf.eval(ctx, si, si.to_local(wi), active))
-            vis = ~self.scene.ray_test(si.spawn_ray_to(e_pt), active)
-            L = dr.select(active & vis & (cos_e > 0.0), beta * f * (n_e * intensity) / dist2, 0.0)
-            phase = k_phase * (opl0 + dist)
-            dc += L
-            re += L * dr.cos(phase)
-            im += L * dr.sin(phase)
-            # BSDF-sampled ray: ambient sky if it escapes, next vertex otherwise
-            bs, wgt = bsdf.sample(ctx, si, rng.next_float32(), r2(), active)
-            wgt = scalar(wgt)
-            ray2 = si.spawn_ray(si.to_world(bs.wo))
-            ok = active & (wgt > 0.0)
-            if bounce + 1 < self.max_bounces:
-                si2 = self.scene.ray_intersect(ray2, ok)
-                escaped = ok & ~si2.is_valid()
-                amb += dr.select(escaped, beta * wgt, 0.0)
-                opl0 = opl0 + dr.select(ok & si2.is_valid(), dr.norm(si2.p - si.p), 0.0)
-                beta = beta * wgt
-                active = ok & si2.is_valid()
-                si = si2
-            else:
-                escaped = ok & ~self.scene.ray_test(ray2, ok)
-                amb += dr.select(escaped, beta * wgt, 0.0)
-        hitf = dr.select(hit0, Float(1.0), Float(0.0))
-        chans = [dc, re, im, amb, hitf, r_first]
-        dr.eval(*chans)
-        sums = [dr.block_sum(c, spp_pass) for c in chans]
-        dr.eval(*sums)
-        names = ("dc", "re", "im", "amb", "hit", "r1")
-        return {nm: np.asarray(s, dtype=np.float64) for nm, s in zip(names, sums)}
+        k = UInt32(dr.minimum(rng.next_float32() * n_e, n_e - 1))
+        cx_ = dr.gather(Float, self._em[0], k, active)
+        cy_ = dr.gather(Float, self._em[1], k, active)
+        cz_ = dr.gather(Float, self._em[2], k, active)
+        dsk = mi.warp.square_to_uniform_disk_concentric(_next_2d(mi, rng)) * r_e
+        e_pt = mi.Point3f(cx_, cy_, cz_) + ex * dsk.x + ey * dsk.y
+        dvec = e_pt - si.p
+        dist2 = dr.squared_norm(dvec)
+        dist = dr.sqrt(dist2)
+        wi = dvec / dist
+        cos_e = -dr.dot(wi, ez)
+        intensity = I0 * dr.power(dr.maximum(cos_e, 0.0), m_exp)
+        f = _mean_channel(bsdf.eval(ctx, si, si.to_local(wi), active))
+        vis = ~self.scene.ray_test(si.spawn_ray_to(e_pt), active)
+        L = dr.select(active & vis & (cos_e > 0.0), beta * f * (n_e * intensity) / dist2, 0.0)
+        return L, dist
 
     # ------------------------------------------------------------------ truth
     def truth(self, R, t, truth_m, **info) -> dict:
@@ -552,7 +569,7 @@ class TofRenderer:
         ids = [str(int(i)) for i in tgt.ids]
         return {
             "camera": cam.name,
-            "camera_source": _rel(cam.source),
+            "camera_source": repo_relative(cam.source),
             "pattern": tgt.pattern.name,
             "R_cam_target": np.asarray(R).tolist(),
             "t_cam_target_m": np.asarray(t).tolist(),
@@ -582,16 +599,6 @@ def render_tof(R_cam_target, t_cam_target_m, camera=DEFAULT_CAMERA, target=DEFAU
                spp: int = 64, **kw) -> RenderedTof:
     """One-call form of :class:`TofRenderer` (loads the scene every call)."""
     return TofRenderer(camera, target, spp=spp, **kw).render(R_cam_target, t_cam_target_m, seed=seed)
-
-
-def _rel(path) -> str:
-    """Profile path relative to the repository (never an absolute path of this machine)."""
-    from pathlib import Path
-
-    try:
-        return str(Path(path).resolve().relative_to(Path(__file__).resolve().parents[2]))
-    except (ValueError, OSError, TypeError):
-        return Path(str(path)).name if path else ""
 
 
 __all__ = ["Illumination", "TofOptics", "TofRenderer", "render_tof", "check_pose", "check_target_in_view", "marker_truth"]

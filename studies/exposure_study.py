@@ -1,0 +1,247 @@
+"""The exposure study: what would have extended a phone's range (the paper's remedies).
+
+The paper: "Possible remedies for this issue could include replacing the corner cubes with
+reflectors with a lower return brightness or increasing the spacing between the
+reflectors." At each range (nominal pose) and for each remedy, ``trials`` noise draws are
+exposed and solved:
+
+- ``baseline``: the profile as it is;
+- ``exposure=T``: a fixed exposure of T seconds at base ISO (if the phone had allowed it);
+- ``nd=OD``: a neutral-density filter of optical density OD over every reflector (the
+  return passes it twice: the spots' flux scales by 10^(-2 OD)); render once, expose many;
+- ``spacing=K``: the pattern scaled by K about its origin (a wider target; re-rendered).
+
+Scenarios and seeds
+    Trial ``i = (i_range * n_remedies + i_remedy) * trials + k`` of the ``closed-loop`` trial
+    kind (:mod:`sim.sweep_trial`) exposes with :func:`studies.seeding.trial_seed` ``(seed,
+    i)``. The render's Monte Carlo seed of a range is drawn from the design stream of the
+    range's first trial, so the remedies that do not change the scene (``baseline``,
+    ``exposure``, ``nd``) share one render per range and each ``spacing`` gets its own.
+
+Outputs in the study directory
+    ``manifest.json`` and ``results.csv`` (the resumable store), ``trials.csv`` (remedy,
+    range, trial, outcome, exposure, errors), ``summary.csv`` and ``summary.md`` (success rate
+    per range and remedy, the largest range at which >= 95 % of trials solve) and
+    ``remedies.png``.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from svgs.errors import InputError
+
+from .seeding import check_seed, design_rng, trial_seed
+
+#: The remedies run when none is given.
+DEFAULT_REMEDIES = ("baseline", "exposure=0.001", "exposure=0.0002", "nd=1", "nd=2", "spacing=1.5", "spacing=2")
+#: Success rate that counts as "works at this range".
+SUCCESS_LEVEL = 0.95
+
+
+def parse_remedy(text: str) -> tuple[str, float | None]:
+    """'baseline', 'exposure=0.001', 'nd=1', 'spacing=1.5' -> (kind, value)."""
+    if text == "baseline":
+        return ("baseline", None)
+    kind, _, val = str(text).partition("=")
+    if kind not in ("exposure", "nd", "spacing") or not val:
+        raise InputError(f"--remedy: expected baseline, exposure=SECONDS, nd=OD or spacing=FACTOR, got {text!r}")
+    try:
+        v = float(val)
+    except ValueError:
+        raise InputError(f"--remedy {text!r}: {val!r} is not a number") from None
+    if not np.isfinite(v) or v <= 0 or (kind == "exposure" and v > 60) or (kind == "spacing" and v > 10):
+        raise InputError(f"--remedy {text!r}: value out of range")
+    return (kind, v)
+
+
+def remedy_values(text: str, base_iso: float) -> dict:
+    """The ``closed-loop`` scenario values of a remedy (``exposure_s``, ``iso``, ``target_scale``,
+    ``pattern_scale``; the rest at their defaults)."""
+    kind, val = parse_remedy(text)
+    if kind == "exposure":
+        return {"exposure_s": val, "iso": base_iso}
+    if kind == "nd":
+        return {"target_scale": 10.0 ** (-2.0 * val)}
+    if kind == "spacing":
+        return {"pattern_scale": val}
+    return {}
+
+
+@dataclass(frozen=True)
+class ExposureStudyConfig:
+    """What an exposure study computes (its manifest)."""
+
+    camera: str
+    ranges_m: tuple
+    remedies: tuple = DEFAULT_REMEDIES
+    trials: int = 5
+    seed: int = 0
+    pattern: str = "svgs-3u"
+
+    def manifest(self) -> dict:
+        return {"study": "exposure-study", "trial_kind": "closed-loop", "camera": self.camera,
+                "pattern": self.pattern, "ranges_m": [float(r) for r in self.ranges_m],
+                "remedies": list(self.remedies), "trials": int(self.trials), "seed": int(self.seed)}
+
+    @property
+    def n_trials(self) -> int:
+        return len(self.ranges_m) * len(self.remedies) * self.trials
+
+
+def make_config(camera: str, ranges_m, remedies=None, *, trials: int = 5, seed: int = 0,
+                pattern: str = "svgs-3u") -> ExposureStudyConfig:
+    """A validated :class:`ExposureStudyConfig` (:class:`InputError` naming the option)."""
+    rs = [float(r) for r in ranges_m]
+    if not rs:
+        raise InputError("--ranges: no range given")
+    if len(set(rs)) != len(rs):
+        raise InputError(f"--ranges: repeated range in {rs}")
+    rem = tuple(str(r) for r in (remedies or DEFAULT_REMEDIES))
+    for r in rem:
+        parse_remedy(r)
+    if len(set(rem)) != len(rem):
+        raise InputError(f"--remedy: repeated remedy in {list(rem)}")
+    if isinstance(trials, bool) or not isinstance(trials, (int, np.integer)) or trials < 1:
+        raise InputError(f"--trials: expected a positive integer, got {trials!r}")
+    return ExposureStudyConfig(camera=str(camera), ranges_m=tuple(rs), remedies=rem, trials=int(trials),
+                               seed=check_seed(seed), pattern=str(pattern))
+
+
+def _base_iso(camera: str) -> float:
+    from svgs.profiles import Camera
+
+    cam = Camera.load(camera)
+    return float((cam.tables.get("sensor") or {}).get("base_iso", 100.0))
+
+
+def exposure_study_trials(cfg: ExposureStudyConfig) -> list:
+    """Every trial of the study (see the module docstring).
+
+    Returns
+    -------
+    list of :class:`studies.execution.Trial`
+    """
+    from sim.sweep_trial import sweep_scenario
+
+    from .execution import Trial
+
+    base_iso = _base_iso(cfg.camera)
+    n_rem = len(cfg.remedies)
+    trials = []
+    for ri, r in enumerate(cfg.ranges_m):
+        first = ri * n_rem * cfg.trials
+        render_seed = int(design_rng(cfg.seed, first).integers(2**31))
+        for mi, name in enumerate(cfg.remedies):
+            values = remedy_values(name, base_iso)
+            for k in range(cfg.trials):
+                i = first + mi * cfg.trials + k
+                scen = sweep_scenario(camera=cfg.camera, pattern=cfg.pattern, range_m=r, render_seed=render_seed,
+                                      **values, labels={"remedy": name, "trial": k})
+                trials.append(Trial(i, scen, trial_seed(cfg.seed, i)))
+    return trials
+
+
+def trial_table(rows: list[dict]) -> list[dict]:
+    """The rows of ``trials.csv``: remedy, range_m, trial, ok, reason, n_blobs, exposure_s, iso,
+    ``pos_err_norm_m`` and ``rot_err_deg`` (:mod:`sim.metrics`; empty when unsolved)."""
+    from sim.metrics import POS_ERR_NORM_M, ROT_ERR_DEG
+
+    return [{"remedy": r["remedy"], "range_m": r["range_m"], "trial": r["trial"], "ok": bool(r["ok"]),
+             "reason": r["reason"], "n_blobs": r["n_blobs"], "exposure_s": r["exposure_s_used"], "iso": r["iso_used"],
+             POS_ERR_NORM_M: r[POS_ERR_NORM_M], ROT_ERR_DEG: r[ROT_ERR_DEG]} for r in rows]
+
+
+def summarise(rows, remedies, ranges) -> list[dict]:
+    """Per remedy: the success rate at each range (key ``"<r> m"``) and ``max_range_95_m``."""
+    table = []
+    for name in remedies:
+        d = {"remedy": name}
+        best = None
+        for r in ranges:
+            rr = [x for x in rows if x["remedy"] == name and x["range_m"] == r]
+            rate = float(np.mean([x["ok"] for x in rr])) if rr else float("nan")
+            d[f"{r:g} m"] = rate
+            if rate >= SUCCESS_LEVEL and (best is None or r > best):
+                best = r
+        d["max_range_95_m"] = best
+        table.append(d)
+    return table
+
+
+def markdown_table(table, ranges) -> list[str]:
+    """``summary.md``: success rate per remedy and range, and the largest range >= 95 %."""
+    lines = ["| remedy | " + " | ".join(f"{r:g} m" for r in ranges) + " | max range (>= 95 %) |",
+             "|---|" + "---|" * len(ranges) + "---|"]
+    for d in table:
+        lines.append(f"| {d['remedy']} | " + " | ".join(f"{d[f'{r:g} m']:.2f}" for r in ranges)
+                     + f" | {d['max_range_95_m'] if d['max_range_95_m'] is not None else '-'} |")
+    return lines
+
+
+def write_outputs(out_dir, cfg: ExposureStudyConfig, rows: list[dict]) -> tuple[list[dict], list[str]]:
+    """``trials.csv``, ``summary.csv``, ``summary.md`` and ``remedies.png`` from the stored rows.
+
+    Returns
+    -------
+    (table, markdown lines)
+    """
+    from matplotlib.figure import Figure
+
+    out_dir = Path(out_dir)
+    tt = trial_table(rows)
+    ranges = list(cfg.ranges_m)
+    table = summarise(tt, cfg.remedies, ranges)
+    with open(out_dir / "trials.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(tt[0]))
+        w.writeheader()
+        w.writerows(tt)
+    with open(out_dir / "summary.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(table[0]))
+        w.writeheader()
+        w.writerows(table)
+    fig = Figure(figsize=(8, 4.5))
+    ax = fig.subplots()
+    for d in table:
+        ax.plot(ranges, [d[f"{r:g} m"] for r in ranges], "o-", label=d["remedy"])
+    ax.axhline(SUCCESS_LEVEL, color="grey", lw=0.5)
+    ax.set(xlabel="range (m)", ylabel="fraction of trials solved", title=f"{cfg.camera}: remedies", ylim=(-0.05, 1.05))
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out_dir / "remedies.png", dpi=110)
+    lines = markdown_table(table, ranges)
+    (out_dir / "summary.md").write_text("\n".join(lines) + "\n")
+    return table, lines
+
+
+def run_exposure_study(cfg: ExposureStudyConfig, out_dir, spec, *, chunk_size=None, progress: bool = True):
+    """Run (or resume) an exposure study into ``out_dir`` and write its outputs.
+
+    Returns
+    -------
+    (markdown lines, stats)
+        ``stats`` is the :class:`~studies.execution.RunStats`, None if every trial was done.
+    """
+    from sim.trials import get_trial_kind
+
+    from .execution import DEFAULT_CHUNK_SIZE, check_executor, open_executor, run_study
+    from .store import ResultStore
+
+    kind = get_trial_kind("closed-loop")
+    check_executor(spec)
+    trials = exposure_study_trials(cfg)
+    store = ResultStore(out_dir, cfg.manifest(), kind.columns(list(trials[0].scenario)))
+    with store:
+        stats = None
+        if {t.trial_id for t in trials} - store.done_ids:
+            with open_executor(spec, kind) as ex:
+                stats = run_study(kind, trials, store, ex, chunk_size=chunk_size or DEFAULT_CHUNK_SIZE,
+                                  n_workers=max(spec.n_workers, 1), progress=progress,
+                                  description=f"exposure study {cfg.camera}", spec=spec)
+        rows = store.read_rows()
+    _, lines = write_outputs(out_dir, cfg, rows)
+    return lines, stats
