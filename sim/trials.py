@@ -36,10 +36,10 @@ from svgs.errors import InputError
 from svgs.frames import STATE_KEYS
 
 #: Modules that may register more trial kinds; imported when an unknown name is asked for
-#: (a module that is not installed is skipped). The render-and-solve trial registers itself
-#: from ``sim.render_trial``, the closed-loop trial of the range sweep and exposure study from
-#: ``sim.sweep_trial``. Studies run the trials with :func:`studies.execution.run_task`.
-KIND_MODULES = ("sim.render_trial", "sim.sweep_trial")
+#: (a module that is not installed is skipped). The render-and-solve trial of the campaign,
+#: the sensitivity study, the range sweep and the exposure study registers itself from
+#: ``sim.render_trial``. Studies run the trials with :func:`studies.execution.run_task`.
+KIND_MODULES = ("sim.render_trial",)
 
 #: Columns every study row has besides the scenario and the kind's outputs.
 ID_COLUMNS = ("trial_id", "seed")
@@ -154,6 +154,7 @@ def register_trial_kind(kind: TrialKind) -> TrialKind:
 
 
 def known_trial_kinds() -> list[str]:
+    """Names of the registered trial kinds (the built-in ones of :data:`KIND_MODULES` included)."""
     _import_kind_modules()
     return sorted(_REGISTRY)
 
@@ -170,12 +171,9 @@ def _import_kind_modules() -> None:
 
 def get_trial_kind(name: str) -> TrialKind:
     """The trial kind called ``name`` (:class:`InputError` listing the known ones)."""
-    if name not in _REGISTRY:
-        _import_kind_modules()
-    try:
-        return _REGISTRY[name]
-    except KeyError:
-        raise InputError(f"--trial-kind: unknown trial kind {name!r}; known: {', '.join(sorted(_REGISTRY))}") from None
+    if name not in _REGISTRY and name not in known_trial_kinds():
+        raise InputError(f"--trial-kind: unknown trial kind {name!r}; known: {', '.join(known_trial_kinds())}")
+    return _REGISTRY[name]
 
 
 # --------------------------------------------------------------------------- geometric trial

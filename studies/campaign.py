@@ -506,22 +506,13 @@ def run_campaign(config: CampaignConfig, out_dir, spec, *, chunk_size=None, prog
     -------
     (summary, stats, report_path)
     """
-    from .execution import DEFAULT_CHUNK_SIZE, check_executor, library_versions, open_executor, run_study
-    from .store import ResultStore
+    from .execution import library_versions, run_stored_study
 
     kind = get_trial_kind(config.trial_kind)
-    check_executor(spec)
     trials = campaign_trials(config)
-    store = ResultStore(out_dir, config.manifest(), kind.columns(list(trials[0].scenario)))
-    with store:
-        pending = len(trials) - len(store.done_ids & {t.trial_id for t in trials})
-        stats = None
-        if pending:
-            with open_executor(spec, kind) as ex:
-                stats = run_study(kind, trials, store, ex, chunk_size=chunk_size or DEFAULT_CHUNK_SIZE,
-                                  n_workers=max(spec.n_workers, 1), progress=progress,
-                                  description=f"campaign {config.camera}", spec=spec)
-        table = store.read_table()
+    store, stats = run_stored_study(kind, trials, out_dir, config.manifest(), spec, chunk_size=chunk_size,
+                                    progress=progress, description=f"campaign {config.camera}")
+    table = store.read_table()
     summary = summarize(table, config)
     path = write_campaign_report(out_dir, config, table, summary, command=command, versions=library_versions(),
                                  stats=stats)

@@ -387,6 +387,51 @@ def run_study(kind: TrialKind, trials: list[Trial], store, executor: Executor, *
                     time.perf_counter() - t0, spec.describe() if spec else type(executor).__name__)
 
 
+def run_stored_study(kind: TrialKind, trials: list[Trial], out_dir, manifest: dict, spec: ExecutorSpec, *,
+                     chunk_size: int | None = None, progress: bool = True, description: str = ""):
+    """Run the trials of a study that its results store does not hold yet.
+
+    The one loop of every study (campaign, sensitivity, range sweep, exposure study): open the
+    resumable store in ``out_dir`` (a changed ``manifest`` is refused), start the executor only
+    if a trial is missing, store rows as they finish.
+
+    Parameters
+    ----------
+    kind : TrialKind
+    trials : list of Trial
+        Every trial of the study (those already stored are skipped).
+    out_dir : str or Path
+    manifest : dict
+        What the study computes (its configuration), checked against a resumed store.
+    spec : ExecutorSpec
+    chunk_size : int, optional
+        Trials per task (default :data:`DEFAULT_CHUNK_SIZE`).
+    progress : bool
+        Show a progress bar.
+    description : str
+        Label of the progress bar.
+
+    Returns
+    -------
+    store : ResultStore
+        Closed; read the rows with ``store.read_rows()`` or ``store.read_table()``.
+    stats : RunStats or None
+        None when every trial was already stored.
+    """
+    from .store import ResultStore
+
+    check_executor(spec)
+    store = ResultStore(out_dir, manifest, kind.columns(list(trials[0].scenario)))
+    stats = None
+    with store:
+        if {t.trial_id for t in trials} - store.done_ids:
+            with open_executor(spec, kind) as ex:
+                stats = run_study(kind, trials, store, ex, chunk_size=chunk_size or DEFAULT_CHUNK_SIZE,
+                                  n_workers=max(spec.n_workers, 1), progress=progress, description=description,
+                                  spec=spec)
+    return store, stats
+
+
 def library_versions() -> dict:
     """Versions of the libraries a study's numbers depend on (for reports)."""
     import importlib.metadata as md

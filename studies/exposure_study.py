@@ -12,8 +12,8 @@ exposed and solved:
 - ``spacing=K``: the pattern scaled by K about its origin (a wider target; re-rendered).
 
 Scenarios and seeds
-    Trial ``i = (i_range * n_remedies + i_remedy) * trials + k`` of the ``closed-loop`` trial
-    kind (:mod:`sim.sweep_trial`) exposes with :func:`studies.seeding.trial_seed` ``(seed,
+    Trial ``i = (i_range * n_remedies + i_remedy) * trials + k`` of the ``render`` trial
+    kind (:mod:`sim.render_trial`) exposes with :func:`studies.seeding.trial_seed` ``(seed,
     i)``. The render's Monte Carlo seed of a range is drawn from the design stream of the
     range's first trial, so the remedies that do not change the scene (``baseline``,
     ``exposure``, ``nd``) share one render per range and each ``spacing`` gets its own.
@@ -60,7 +60,7 @@ def parse_remedy(text: str) -> tuple[str, float | None]:
 
 
 def remedy_values(text: str, base_iso: float) -> dict:
-    """The ``closed-loop`` scenario values of a remedy (``exposure_s``, ``iso``, ``target_scale``,
+    """The ``render`` scenario values of a remedy (``exposure_s``, ``iso``, ``target_scale``,
     ``pattern_scale``; the rest at their defaults)."""
     kind, val = parse_remedy(text)
     if kind == "exposure":
@@ -84,7 +84,7 @@ class ExposureStudyConfig:
     pattern: str = "svgs-3u"
 
     def manifest(self) -> dict:
-        return {"study": "exposure-study", "trial_kind": "closed-loop", "camera": self.camera,
+        return {"study": "exposure-study", "trial_kind": "render", "camera": self.camera,
                 "pattern": self.pattern, "ranges_m": [float(r) for r in self.ranges_m],
                 "remedies": list(self.remedies), "trials": int(self.trials), "seed": int(self.seed)}
 
@@ -126,7 +126,7 @@ def exposure_study_trials(cfg: ExposureStudyConfig) -> list:
     -------
     list of :class:`studies.execution.Trial`
     """
-    from sim.sweep_trial import sweep_scenario
+    from sim.render_trial import render_trial_scenario
 
     from .execution import Trial
 
@@ -140,8 +140,8 @@ def exposure_study_trials(cfg: ExposureStudyConfig) -> list:
             values = remedy_values(name, base_iso)
             for k in range(cfg.trials):
                 i = first + mi * cfg.trials + k
-                scen = sweep_scenario(camera=cfg.camera, pattern=cfg.pattern, range_m=r, render_seed=render_seed,
-                                      **values, labels={"remedy": name, "trial": k})
+                scen = render_trial_scenario(camera=cfg.camera, pattern=cfg.pattern, range_m=r,
+                                             render_seed=render_seed, **values, labels={"remedy": name, "trial": k})
                 trials.append(Trial(i, scen, trial_seed(cfg.seed, i)))
     return trials
 
@@ -228,20 +228,12 @@ def run_exposure_study(cfg: ExposureStudyConfig, out_dir, spec, *, chunk_size=No
     """
     from sim.trials import get_trial_kind
 
-    from .execution import DEFAULT_CHUNK_SIZE, check_executor, open_executor, run_study
-    from .store import ResultStore
+    from .execution import run_stored_study
 
-    kind = get_trial_kind("closed-loop")
-    check_executor(spec)
+    kind = get_trial_kind("render")
     trials = exposure_study_trials(cfg)
-    store = ResultStore(out_dir, cfg.manifest(), kind.columns(list(trials[0].scenario)))
-    with store:
-        stats = None
-        if {t.trial_id for t in trials} - store.done_ids:
-            with open_executor(spec, kind) as ex:
-                stats = run_study(kind, trials, store, ex, chunk_size=chunk_size or DEFAULT_CHUNK_SIZE,
-                                  n_workers=max(spec.n_workers, 1), progress=progress,
-                                  description=f"exposure study {cfg.camera}", spec=spec)
-        rows = store.read_rows()
+    store, stats = run_stored_study(kind, trials, out_dir, cfg.manifest(), spec, chunk_size=chunk_size,
+                                    progress=progress, description=f"exposure study {cfg.camera}")
+    rows = store.read_rows()
     _, lines = write_outputs(out_dir, cfg, rows)
     return lines, stats

@@ -6,7 +6,7 @@ Scenarios (:func:`range_sweep_trials`)
     (``jitter_m`` on the target's lateral offsets, ``jitter_deg`` on roll, pitch and yaw, 1 sigma). Each pose is
     rendered once and exposed ``trials`` times (noise draws): render once, expose many. Trial
     ``i = (i_range * poses + i_pose) * trials + k``; the trials of one pose form one render
-    group of the ``closed-loop`` trial kind (:mod:`sim.sweep_trial`).
+    group of the ``render`` trial kind (:mod:`sim.render_trial`).
 
 Seeds (:mod:`studies.seeding`)
     Trial ``i`` exposes with :func:`~studies.seeding.trial_seed` ``(seed, i)``. A pose's
@@ -92,7 +92,7 @@ class RangeSweepConfig:
     def manifest(self) -> dict:
         d = asdict(self)
         d["ranges_m"] = [float(r) for r in self.ranges_m]
-        return {"study": "range-sweep", "trial_kind": "closed-loop", **d}
+        return {"study": "range-sweep", "trial_kind": "render", **d}
 
     @property
     def n_trials(self) -> int:
@@ -129,7 +129,7 @@ def make_config(camera: str, ranges_m, *, trials: int = 20, poses: int = 1, jitt
         Other :class:`RangeSweepConfig` fields (pattern, threshold, nominal pose, lab,
         samples per pixel, forced exposure).
     """
-    from sim.sweep_trial import check_threshold, sweep_scenario
+    from sim.render_trial import check_threshold, render_trial_scenario
 
     if "threshold" in scene:
         scene["threshold"] = check_threshold(scene["threshold"])
@@ -142,14 +142,16 @@ def make_config(camera: str, ranges_m, *, trials: int = 20, poses: int = 1, jitt
                            poses=_count(poses, "--poses"), jitter_deg=_nonneg(jitter_deg, "--jitter-deg"),
                            jitter_m=_nonneg(jitter_m, "--jitter-m"), seed=check_seed(seed), **scene)
     for r in rs:  # validates every scenario value now, before any work (InputError)
-        sweep_scenario(**_fixed(cfg), range_m=r)
+        render_trial_scenario(**_fixed(cfg), range_m=r)
     return cfg
 
 
 def _fixed(cfg: RangeSweepConfig) -> dict:
-    keys = ("camera", "pattern", "threshold", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg", "backdrop_distance_m",
+    from sim.render_trial import threshold_parameter
+
+    keys = ("camera", "pattern", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg", "backdrop_distance_m",
             "ambient_radiance_w_m2_sr", "spp", "roi_spp", "exposure_s", "iso")
-    return {k: getattr(cfg, k) for k in keys}
+    return {**{k: getattr(cfg, k) for k in keys}, "threshold": threshold_parameter(cfg.threshold)}
 
 
 def range_sweep_trials(cfg: RangeSweepConfig) -> list:
@@ -159,7 +161,7 @@ def range_sweep_trials(cfg: RangeSweepConfig) -> list:
     -------
     list of :class:`studies.execution.Trial`
     """
-    from sim.sweep_trial import sweep_scenario
+    from sim.render_trial import render_trial_scenario
 
     from .execution import Trial
 
@@ -177,7 +179,7 @@ def range_sweep_trials(cfg: RangeSweepConfig) -> list:
             render_seed = int(rng.integers(2**31))
             for k in range(cfg.trials):
                 i = first + k
-                scen = sweep_scenario(**pose, range_m=r, render_seed=render_seed,
+                scen = render_trial_scenario(**pose, range_m=r, render_seed=render_seed,
                                       labels={"pose_index": pk, "trial": k})
                 trials.append(Trial(i, scen, trial_seed(cfg.seed, i)))
     return trials
@@ -331,20 +333,12 @@ def run_range_sweep(cfg: RangeSweepConfig, out_dir, spec, *, chunk_size=None, pr
     """
     from sim.trials import get_trial_kind
 
-    from .execution import DEFAULT_CHUNK_SIZE, check_executor, open_executor, run_study
-    from .store import ResultStore
+    from .execution import run_stored_study
 
-    kind = get_trial_kind("closed-loop")
-    check_executor(spec)
+    kind = get_trial_kind("render")
     trials = range_sweep_trials(cfg)
-    store = ResultStore(out_dir, cfg.manifest(), kind.columns(list(trials[0].scenario)))
-    with store:
-        stats = None
-        if {t.trial_id for t in trials} - store.done_ids:
-            with open_executor(spec, kind) as ex:
-                stats = run_study(kind, trials, store, ex, chunk_size=chunk_size or DEFAULT_CHUNK_SIZE,
-                                  n_workers=max(spec.n_workers, 1), progress=progress,
-                                  description=f"range sweep {cfg.camera}", spec=spec)
-        rows = store.read_rows()
+    store, stats = run_stored_study(kind, trials, out_dir, cfg.manifest(), spec, chunk_size=chunk_size,
+                                    progress=progress, description=f"range sweep {cfg.camera}")
+    rows = store.read_rows()
     _, table = write_outputs(out_dir, cfg, rows)
     return table, stats

@@ -528,22 +528,14 @@ def run_sensitivity(config: SensitivityConfig, out_dir, spec, *, chunk_size=None
     -------
     (result, stats, report_path, n_render_groups)
     """
-    from .execution import DEFAULT_CHUNK_SIZE, check_executor, library_versions, open_executor, run_study
-    from .store import ResultStore
+    from .execution import library_versions, run_stored_study
 
     kind = get_trial_kind(config.trial_kind)
-    check_executor(spec)
     trials, layout = sensitivity_trials(config)
     n_groups = len({kind.render_key(t.scenario) for t in trials}) if kind.render_key else len(trials)
-    store = ResultStore(out_dir, config.manifest(), kind.columns(list(trials[0].scenario)))
-    with store:
-        stats = None
-        if len(store.done_ids & {t.trial_id for t in trials}) < len(trials):
-            with open_executor(spec, kind) as ex:
-                stats = run_study(kind, trials, store, ex, chunk_size=chunk_size or DEFAULT_CHUNK_SIZE,
-                                  n_workers=max(spec.n_workers, 1), progress=progress,
-                                  description=f"{config.method} {config.camera}", spec=spec)
-        table = store.read_table()
+    store, stats = run_stored_study(kind, trials, out_dir, config.manifest(), spec, chunk_size=chunk_size,
+                                    progress=progress, description=f"{config.method} {config.camera}")
+    table = store.read_table()
     result = analyze(table, config, layout)
     path = write_sensitivity_report(out_dir, config, table, result, command=command, versions=library_versions(),
                                     stats=stats, n_render_groups=n_groups)

@@ -133,12 +133,13 @@ def pose_to_state(R_cam_target, t_cam_target_m) -> np.ndarray:
     return np.concatenate([L, angles_from_rotation(M)], -1)
 
 
-def pose_from_scenario(range_m, x_m=0.0, y_m=0.0, roll_deg=0.0, pitch_deg=0.0, yaw_deg=0.0):
+def pose_from_scenario(range_m, target_x_m=0.0, target_y_m=0.0, roll_deg=0.0, pitch_deg=0.0, yaw_deg=0.0):
     """Pose from the scenario parameters used by the CLI (``svgs render --range ...``).
 
-    The target origin sits at ``(x_m, y_m, -range_m)`` in the paper's camera frame (x
-    right, y up, looking along -z), i.e. ``range_m`` is measured along the boresight and
-    ``x_m``/``y_m`` are lateral offsets of the target origin; the attitude is the paper's
+    The target origin sits at ``(target_x_m, target_y_m, -range_m)`` in the paper's camera
+    frame (x right, y up, looking along -z), i.e. ``range_m`` is measured along the boresight
+    and ``target_x_m``/``target_y_m`` are lateral offsets of the target origin (not the
+    camera position ``x_m, y_m`` of the paper's state); the attitude is the paper's
     (roll, pitch, yaw) = (phi, theta, psi) in degrees.
 
     Returns
@@ -149,12 +150,12 @@ def pose_from_scenario(range_m, x_m=0.0, y_m=0.0, roll_deg=0.0, pitch_deg=0.0, y
     rng = float(range_m)
     if not np.isfinite(rng) or rng <= 0:
         raise InputError(f"range_m: expected a positive finite range in metres, got {range_m!r}")
-    for name, v in (("x_m", x_m), ("y_m", y_m), ("roll_deg", roll_deg), ("pitch_deg", pitch_deg), ("yaw_deg", yaw_deg)):
+    for name, v in (("target_x_m", target_x_m), ("target_y_m", target_y_m), ("roll_deg", roll_deg), ("pitch_deg", pitch_deg), ("yaw_deg", yaw_deg)):
         if not np.isfinite(float(v)):
             raise InputError(f"{name}: expected a finite number, got {v!r}")
     M = rotation_from_angles(*np.deg2rad([roll_deg, pitch_deg, yaw_deg]))
     R = D_CAM_PHOTO @ M
-    t = D_CAM_PHOTO @ np.array([float(x_m), float(y_m), -rng])
+    t = D_CAM_PHOTO @ np.array([float(target_x_m), float(target_y_m), -rng])
     return R, t
 
 
@@ -234,14 +235,14 @@ def sample_envelope_scenario(rng, *, range_m=(1.0, 40.0), roll_deg=25.0, pitch_d
     Returns
     -------
     dict
-        ``range_m, x_m, y_m, roll_deg, pitch_deg, yaw_deg`` (``x_m``, ``y_m``: the target's
-        lateral offset, the arguments of :func:`pose_from_scenario`).
+        ``range_m, target_x_m, target_y_m, roll_deg, pitch_deg, yaw_deg``: the arguments of
+        :func:`pose_from_scenario`.
     """
     r = float(np.exp(rng.uniform(np.log(range_m[0]), np.log(range_m[1]))))
     return {
         "range_m": r,
-        "x_m": float(rng.uniform(-lateral_fraction, lateral_fraction) * r),
-        "y_m": float(rng.uniform(-lateral_fraction, lateral_fraction) * r),
+        "target_x_m": float(rng.uniform(-lateral_fraction, lateral_fraction) * r),
+        "target_y_m": float(rng.uniform(-lateral_fraction, lateral_fraction) * r),
         "roll_deg": float(rng.uniform(-roll_deg, roll_deg)),
         "pitch_deg": float(rng.uniform(-pitch_deg, pitch_deg)),
         "yaw_deg": float(rng.uniform(-yaw_deg, yaw_deg)),

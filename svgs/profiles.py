@@ -538,10 +538,4 @@ class Pattern:
         return self.points_m[idx[0]]
 
 
-def known_cameras() -> list[str]:
-    return _available(CAMERAS_DIR)
-
-
-def known_patterns() -> list[str]:
-    return _available(PATTERNS_DIR)
 

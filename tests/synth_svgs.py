@@ -184,7 +184,7 @@ def random_envelope_pose(rng=None, *, range_m=(1.0, 40.0), roll_deg=25.0, pitch_
     R_cam_target : ndarray, shape (3, 3)
     t_cam_target_m : ndarray, shape (3,)
     scenario : dict
-        ``range_m, x_m, y_m, roll_deg, pitch_deg, yaw_deg``.
+        ``range_m, target_x_m, target_y_m, roll_deg, pitch_deg, yaw_deg``.
     """
     sc = sample_envelope_scenario(_rng(rng), range_m=range_m, roll_deg=roll_deg, pitch_deg=pitch_deg, yaw_deg=yaw_deg,
                                   lateral_fraction=lateral_fraction)

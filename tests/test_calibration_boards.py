@@ -72,9 +72,14 @@ def test_real_acircles_reference_constraints_match_opencv_reference(real_left):
 @needs_real
 def test_real_acircles_unconstrained_rms_below_0_1_px(real_left):
     files, board, dets = real_left
-    cal = calibrate([d.object_points_m for d in dets], [d.image_points_px for d in dets], (640, 512))
+    obj, img = [d.object_points_m for d in dets], [d.image_points_px for d in dets]
+    cal = calibrate(obj, img, (640, 512))
     assert cal.rms_px < 0.1  # acceptance; measured 0.066
-    assert cal.rms_px < 0.07
+    # nested least squares on the same points: the free model contains the constrained one
+    # (fixed aspect, principal point, zero tangential), so its RMS cannot be larger than that
+    # fit's, nor than OpenCV's reference run of it (0.0937 px); replaces "measured < 0.07"
+    con = calibrate(obj, img, (640, 512), fix_aspect=True, principal_point=(320.0, 256.0), zero_tangent=True)
+    assert cal.rms_px <= con.rms_px * (1 + 1e-9) and cal.rms_px <= _reference_left()[2]
     # a free fit lands a little differently from the constrained reference, not far
     assert cal.fx == pytest.approx(522.78, rel=0.02)
     assert abs(cal.cx - 319.5) < 10 and abs(cal.cy - 255.5) < 10
@@ -164,8 +169,10 @@ def test_chessboard_recovers_known_intrinsics(chess_views):
     # what a camera rotation cannot absorb: focal-length and distortion errors (measured 0.22 px)
     err = mapping_error_px(TRUE, cal.to_camera(), align="rotation")
     assert np.sqrt(np.mean(err**2)) < 0.4
-    # the estimate agrees with the truth within a few of its own standard deviations
-    assert abs(cal.fx - TRUE.fx) < 5 * cal.std["fx"] + 0.5
+    # the estimate agrees with the truth within 4.5 of its own standard deviations (Gaussian,
+    # fixed seeds; the former extra +0.5 px allowance had no derivation)
+    assert abs(cal.fx - TRUE.fx) < 4.5 * cal.std["fx"]  # measured 2.9 sigma (0.54 px, sigma 0.19 px)
+    assert abs(cal.fy - TRUE.fy) < 4.5 * cal.std["fy"]  # 2.6 sigma
 
 
 def test_charuco_recovers_known_intrinsics_with_partial_views():

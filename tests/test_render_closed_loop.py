@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from sim.sweep_trial import scaled_pattern_file
+from sim.render_trial import scaled_pattern_file
 from studies.exposure_study import parse_remedy
 from sim.closed_loop import Scenario, expose_and_solve, pose_errors, render_scenario
 from svgs import InputError, Pattern
@@ -113,15 +113,29 @@ def test_scenario_validation():
 
 @pytest.mark.render
 def test_render_trial_kind_runs_the_full_chain_and_groups_renders():
-    """The studies' `render` trial kind: same numbers alone or in a render group."""
-    from sim.render_trial import RENDER, render_group, render_trial
+    """The studies' `render` trial kind: same numbers alone or in a render group; the knobs
+    acting after the render (ND filter, threshold, calibration errors) share the render."""
+    from sim.render_trial import (
+        RENDER,
+        RENDER_TIMING_OUTPUTS,
+        render_group,
+        render_key,
+        render_trial,
+    )
     from sim.trials import build_scenario
 
+    def numbers(row):
+        return {k: v for k, v in row.items() if k not in RENDER_TIMING_OUTPUTS}
+
     scen = build_scenario(RENDER, {"camera": "galaxy-nexus", "range_m": 12.0, "yaw_deg": 15.0})
+    nd = {**scen, "target_scale": 0.01, "threshold": -1.0, "focal_error_frac": 0.01}
+    assert render_key(nd) == render_key(scen)
     alone = render_trial(scen, 7)
-    grouped = render_group([scen, scen], [7, 8])
-    assert alone["ok"] and alone["n_blobs"] == 4
+    grouped = render_group([scen, scen, nd], [7, 8, 7])
+    assert alone["ok"] and alone["n_blobs"] == 4 and alone["message"] is None
     assert alone["exposure_s_used"] == pytest.approx(5e-4)
     assert abs(alone["err_z_m"]) < 0.5 and alone["rot_err_deg"] < 3.0
-    assert grouped[0] == alone  # a trial's numbers never depend on its companions
+    assert alone["crlb_z_m"] > 0 and alone["min_separation_px"] > 5
+    assert numbers(grouped[0]) == numbers(alone)  # a trial's numbers never depend on its companions
     assert grouped[1]["err_x_m"] != alone["err_x_m"]  # another seed, another noise draw
+    assert numbers(grouped[2]) == numbers(render_trial(nd, 7)) != numbers(alone)

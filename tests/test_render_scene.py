@@ -62,7 +62,7 @@ def test_spot_centroids_where_geometric_optics_puts_them(nexus_renderer, range_m
 
 def test_truth_record(nexus_renderer):
     r = nexus_renderer
-    R, t = pose_from_scenario(7.5, x_m=0.2, y_m=-0.1, roll_deg=4, pitch_deg=-3, yaw_deg=10)
+    R, t = pose_from_scenario(7.5, target_x_m=0.2, target_y_m=-0.1, roll_deg=4, pitch_deg=-3, yaw_deg=10)
     res = r.render(R, t, seed=1)
     tr = json.loads(json.dumps(res.truth))  # JSON-serialisable
     proj = r.camera.project_target(r.pattern.points_m, R, t)
@@ -80,7 +80,7 @@ def test_truth_record(nexus_renderer):
 def test_in_place_updates_do_not_leak_between_frames(nexus_renderer):
     r = nexus_renderer
     A = pose_from_scenario(6.0, roll_deg=2)
-    B = pose_from_scenario(15.0, yaw_deg=-5, x_m=0.3)
+    B = pose_from_scenario(15.0, yaw_deg=-5, target_x_m=0.3)
     a1 = r.render(*A, seed=4).flux
     r.render(*B, seed=4)
     a2 = r.render(*A, seed=4).flux

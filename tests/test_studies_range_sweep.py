@@ -93,7 +93,7 @@ def test_exposure_study_same_rows_inline_and_on_two_processes_and_resumes(small_
     remedies = ["baseline", "nd=1", "exposure=0.001", "spacing=1.5"]
     cfg = exposure_study.make_config(small_camera, [5.0, 12.0], remedies, trials=2, seed=3)
     trials = exposure_study.exposure_study_trials(cfg)
-    from sim.sweep_trial import render_key
+    from sim.render_trial import render_key
 
     # remedies that keep the scene share one render per range; the wider pattern renders its own
     assert len({render_key(t.scenario) for t in trials}) == 2 * 2

@@ -92,3 +92,31 @@ def test_bad_scenarios_are_input_errors():
     with pytest.raises(InputError, match="known: .*geometric"):
         get_trial_kind("no-such-kind")
     assert get_trial_kind("geometric") is GEOMETRIC
+
+
+def test_one_rendered_trial_kind_for_every_study():
+    """``render`` is the rendered kind of the campaign, sensitivity, range sweep and exposure study;
+    its defaults are the campaign's render (seed 0, pattern as it is, no ND, default spp, auto threshold)."""
+    from sim.render_trial import (
+        RENDER,
+        render_key,
+        render_trial_scenario,
+        threshold_parameter,
+    )
+    from sim.trials import KIND_MODULES, build_scenario, known_trial_kinds
+
+    assert KIND_MODULES == ("sim.render_trial",) and "closed-loop" not in known_trial_kinds()
+    assert get_trial_kind("render") is RENDER
+    s = build_scenario(RENDER, {"camera": "galaxy-nexus", "range_m": 8.0})
+    assert (s["render_seed"], s["pattern_scale"], s["target_scale"], s["spp"], s["roi_spp"], s["threshold"]) == \
+        (0.0, 1.0, 1.0, -1.0, -1.0, 0.0)
+    assert render_trial_scenario(camera="galaxy-nexus", range_m=8.0) == s
+    assert render_key({**s, "target_scale": 0.01, "threshold": -1.0, "focal_error_frac": 0.02}) == render_key(s)
+    assert render_key({**s, "pattern_scale": 1.5}) != render_key(s)
+    assert [threshold_parameter(t) for t in (None, "auto", "otsu", "12", 0)] == [0.0, 0.0, -1.0, 12.0, 0.0]
+    with pytest.raises(InputError, match="threshold"):
+        threshold_parameter("high")
+    with pytest.raises(InputError, match="render_seed: expected an integer"):
+        render_trial_scenario(camera="galaxy-nexus", render_seed=1.5)
+    with pytest.raises(InputError, match="roi_spp"):
+        render_trial_scenario(camera="galaxy-nexus", roi_spp=0)

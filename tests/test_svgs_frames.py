@@ -57,7 +57,7 @@ def test_nominal_geometry_matches_the_paper():
 
 
 def test_scenario_offsets_and_errors():
-    R, t = pose_from_scenario(10.0, x_m=0.5, y_m=0.3, yaw_deg=20)
+    R, t = pose_from_scenario(10.0, target_x_m=0.5, target_y_m=0.3, yaw_deg=20)
     # target origin at (x, y, -range) in the paper camera frame = (x, -y, range) in OpenCV
     np.testing.assert_allclose(t, [0.5, -0.3, 10.0])
     with pytest.raises(InputError, match="range_m"):

@@ -6,7 +6,8 @@ import pytest
 from svgs import Camera, Pattern
 from svgs.detect import detect_blobs
 from svgs.errors import InputError
-from svgs.identify import PAPER_ENVELOPE, Envelope, Identification, identify, pattern_gates
+from svgs.identify import (GATE_MARGIN_DEG, GATE_MARGIN_LATERAL, GATE_MARGIN_RANGE, PAPER_ENVELOPE, Envelope,
+                           Identification, identify, pattern_gates)
 from svgs.result import REASONS, Failure
 from synth_svgs import random_envelope_pose, synth_frame
 
@@ -58,9 +59,45 @@ def test_gates_derived_from_pattern():
     assert g.mean[0] == pytest.approx([0.5, 0.0], abs=0.02)
     assert g.mean[1][0] == pytest.approx(0.5, abs=0.02)
     assert g.mean[1][1] == pytest.approx(-0.0875 / 0.275, abs=0.02)
-    # baseline between 1 m / 1.25 and 40 m x 1.25 (roll/pitch tilt shortens it)
-    assert g.base_max == pytest.approx(0.275 / (1.0 / 1.25), rel=0.1)
+    # Longest image baseline (normalised units): an independent reference is the projected
+    # 1-2 baseline maximised over the envelope box at its near range (scipy, continuous).
+    # The gate must cover the real envelope (>= its supremum) and cannot exceed what the
+    # inflated envelope it samples can produce (<= that supremum); it samples all box
+    # corners, so it is at least the largest corner value.
+    env = PAPER_ENVELOPE
+    sup_real, _ = _max_baseline(env.range_m[0], env.lateral_fraction,
+                                          (env.roll_deg, env.pitch_deg, env.yaw_deg))
+    sup_infl, corner_infl = _max_baseline(env.range_m[0] / GATE_MARGIN_RANGE,
+                                          env.lateral_fraction + GATE_MARGIN_LATERAL,
+                                          np.array([env.roll_deg, env.pitch_deg, env.yaw_deg]) + GATE_MARGIN_DEG)
+    assert sup_real <= g.base_max
+    assert corner_infl * (1 - 1e-12) <= g.base_max <= sup_infl * (1 + 1e-12)
     assert g.base_min < 0.275 / (40 * 1.25)
+
+
+def _max_baseline(range_m, lateral_fraction, max_angles_deg, n_starts=6):
+    """(sup, largest corner value) of |z2 - z1| (pinhole, normalised) over the attitude and
+    lateral-offset box at ``range_m``: L-BFGS-B from the best corner and random starts."""
+    import itertools
+
+    from scipy.optimize import minimize
+
+    from svgs.frames import D_CAM_PHOTO, rotation_from_angles
+
+    P = Pattern.load("svgs-3u").points_m[:2]
+    am = np.deg2rad(max_angles_deg)
+
+    def neg_base(f):
+        R = D_CAM_PHOTO @ rotation_from_angles(*(f[2:] * am))
+        t = D_CAM_PHOTO @ np.array([f[0] * lateral_fraction * range_m, f[1] * lateral_fraction * range_m, -range_m])
+        pc = P @ R.T + t
+        return -float(np.linalg.norm(pc[1, :2] / pc[1, 2] - pc[0, :2] / pc[0, 2]))
+
+    corners = [np.array(c) for c in itertools.product([-1.0, 1.0], repeat=5)]
+    corner = max(-neg_base(c) for c in corners)
+    starts = [max(corners, key=lambda c: -neg_base(c))] + list(np.random.default_rng(0).uniform(-1, 1, (n_starts, 5)))
+    sup = max(-minimize(neg_base, x0, bounds=[(-1, 1)] * 5).fun for x0 in starts)
+    return max(sup, corner), corner
 
 
 # ---------------------------------------------------------------- points
