@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cli.solve import parse_threshold
+from svgs.detect import parse_threshold
 from svgs.errors import InputError
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".pgm", ".ppm", ".npy")

@@ -191,7 +191,7 @@ def _add_study(sub) -> None:
 
 
 def cmd_study(args) -> int:
-    from cli.studies import executor_from_args
+    from cli.studies import executor_from_args, print_run_stats
     from studies.calibration import (
         parse_number_list,
         run_calibration_study,
@@ -233,10 +233,9 @@ def cmd_study(args) -> int:
     files = write_report(res, out, command=command)
     print(summary_text(res))
     for part, st in res.run_stats.items():
-        print(f"{part}: ran {st.n_run} trial(s) in {st.elapsed_s:.1f} s ({st.executor}); "
-              f"{st.n_already_done} were already done")
+        print_run_stats(st, label=part)
     if not res.run_stats:
-        print("all trials were already done; report rebuilt from the stored results")
+        print_run_stats(None, "report")
     print(f"wrote {files['report']} and {len([k for k in files if k not in ('report', 'summary')])} CSV tables in {out}/")
     return 0
 

@@ -24,7 +24,7 @@ from svgs.errors import InputError
 
 def cmd_exposure_study(args) -> int:
     from cli.sim import _check_camera_renderable, _parse_ranges
-    from cli.studies import executor_from_args
+    from cli.studies import executor_from_args, print_run_stats
     from studies.exposure_study import make_config, run_exposure_study
 
     _check_camera_renderable(args.camera)
@@ -36,11 +36,7 @@ def cmd_exposure_study(args) -> int:
     out = Path(args.out or f"exposure-study-{Path(str(args.camera)).stem}")
     lines, stats = run_exposure_study(cfg, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress)
     print("\n".join(lines))
-    if stats is not None:
-        print(f"ran {stats.n_run} trial(s) in {stats.elapsed_s:.1f} s ({stats.executor}); "
-              f"{stats.n_already_done} were already done")
-    else:
-        print("all trials were already done; outputs rebuilt from the stored results")
+    print_run_stats(stats)
     print(f"wrote {out / 'summary.csv'}, {out / 'summary.md'}, {out / 'trials.csv'}, {out / 'remedies.png'} "
           f"(results: {out / 'results.csv'})")
     return 0

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cli.solve import json_default
 from svgs.errors import InputError
 
 #: (flag, dest, help). ``--x``/``--y`` set the target's lateral offset (Scenario.target_x_m,
@@ -53,7 +54,7 @@ def _scenario(args, range_m=None):
 
 
 def _threshold(text):
-    from cli.solve import parse_threshold
+    from svgs.detect import parse_threshold
 
     return parse_threshold(text)
 
@@ -82,18 +83,10 @@ def write_outputs(out: Path, frame, row) -> dict:
     truth = dict(frame.truth)
     truth["exposure"] = {"exposure_s": ex.exposure_s, "iso": ex.iso, "gain_dn_per_e": ex.gain_dn_per_e,
                          **{k: v for k, v in ex.info.items() if k != "stages"}, "stages": ex.info.get("stages")}
-    (out / "truth.json").write_text(json.dumps(truth, indent=1, default=_json_default))
+    (out / "truth.json").write_text(json.dumps(truth, indent=1, default=json_default))
     sol = {k: v for k, v in row.items() if not k.startswith("_")}
-    (out / "solution.json").write_text(json.dumps(sol, indent=1, default=_json_default))
+    (out / "solution.json").write_text(json.dumps(sol, indent=1, default=json_default))
     return {k: str(out / k) for k in ("flux.npy", "raw.npy", "image.png", "preview.png", "truth.json", "solution.json")}
-
-
-def _json_default(o):
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer, np.bool_)):
-        return o.item()
-    return str(o)
 
 
 def cmd_render_and_solve(args) -> int:
@@ -110,7 +103,7 @@ def cmd_render_and_solve(args) -> int:
     out["render_s"] = frame.render_s
     out["outputs"] = paths
     if args.json:
-        print(json.dumps(out, default=_json_default))
+        print(json.dumps(out, default=json_default))
     else:
         t = row["truth_state"]
         print(f"truth:    x {t['x_m']:+.4f} y {t['y_m']:+.4f} z {t['z_m']:+.4f} m   "
@@ -144,7 +137,7 @@ def _parse_ranges(text) -> list[float]:
 
 
 def cmd_range_sweep(args) -> int:
-    from cli.studies import executor_from_args
+    from cli.studies import executor_from_args, print_run_stats
     from sim.closed_loop import DEFAULT_BACKDROP_DISTANCE_M
     from studies.range_sweep import format_table, make_config, run_range_sweep
 
@@ -163,11 +156,7 @@ def cmd_range_sweep(args) -> int:
     out = Path(args.out or f"range-sweep-{Path(str(args.camera)).stem}")
     table, stats = run_range_sweep(cfg, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress)
     print("\n".join(format_table(table)))
-    if stats is not None:
-        print(f"ran {stats.n_run} trial(s) in {stats.elapsed_s:.1f} s ({stats.executor}); "
-              f"{stats.n_already_done} were already done")
-    else:
-        print("all trials were already done; outputs rebuilt from the stored results")
+    print_run_stats(stats)
     print(f"wrote {out / 'summary.csv'}, {out / 'trials.jsonl'}, {out / 'range_sweep.png'} "
           f"(results: {out / 'results.csv'})")
     return 0

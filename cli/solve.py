@@ -12,6 +12,7 @@ import sys
 import numpy as np
 
 from cli.exit_codes import EXIT_NO_SOLUTION, EXIT_OK
+from svgs.detect import parse_threshold
 from svgs.errors import InputError
 
 
@@ -35,17 +36,13 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_solve)
 
 
-def parse_threshold(text):
-    """``--threshold`` text -> None, 'auto', 'otsu' or a non-negative level (InputError otherwise)."""
-    if text is None or text in ("auto", "otsu"):
-        return text
-    try:
-        v = float(text)
-    except ValueError:
-        raise InputError(f"--threshold: expected a number, 'auto' or 'otsu', got {text!r}") from None
-    if not np.isfinite(v) or v < 0:
-        raise InputError(f"--threshold: expected a non-negative finite level, got {text!r}")
-    return v
+def json_default(o):
+    """``json.dumps`` ``default`` for numpy values: arrays as lists, scalars as numbers, else text."""
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.floating, np.integer, np.bool_)):
+        return o.item()
+    return str(o)
 
 
 def solution_json(result) -> dict:

@@ -13,6 +13,26 @@ import sys
 from svgs.errors import InputError
 
 
+def print_run_stats(stats, rebuilt: str = "outputs", label: str = "") -> None:
+    """One line on what a study run did: trials run, time, executor, trials already stored.
+
+    Parameters
+    ----------
+    stats : studies.execution.RunStats or None
+        None when every trial was already stored.
+    rebuilt : str
+        What was rebuilt from the stored results in that case ("outputs", "report").
+    label : str
+        Prefix (a study part's name).
+    """
+    pre = f"{label}: " if label else ""
+    if stats is None:
+        print(f"{pre}all trials were already done; {rebuilt} rebuilt from the stored results")
+        return
+    print(f"{pre}ran {stats.n_run} trial(s) in {stats.elapsed_s:.1f} s ({stats.trials_per_s:.0f} trials/s, "
+          f"{stats.executor}); {stats.n_already_done} were already done")
+
+
 def add_executor_options(p) -> None:
     """The executor options of every study command (``--processes``/``--workers``/``--scheduler``,
     ``--chunk-size``, ``--no-progress``); read them back with :func:`executor_from_args`."""
@@ -156,11 +176,7 @@ def cmd_campaign(args) -> int:
     summary, stats, path = run_campaign(config, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress,
                                         command=shlex.join(argv))
     print_summary(summary, config)
-    if stats is not None:
-        print(f"ran {stats.n_run} trial(s) in {stats.elapsed_s:.1f} s ({stats.trials_per_s:.0f} trials/s, "
-              f"{stats.executor}); {stats.n_already_done} were already done")
-    else:
-        print("all trials were already done; report rebuilt from the stored results")
+    print_run_stats(stats, "report")
     print(f"results: {out}/results.csv  summary: {out}/summary.csv  report: {path}")
     return 0
 

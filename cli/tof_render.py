@@ -21,6 +21,7 @@ from svgs.errors import InputError, check_finite, check_finite_positive
 from svgs.frames import STATE_KEYS
 
 from cli.exit_codes import EXIT_NO_SOLUTION, EXIT_OK
+from cli.solve import json_default
 
 #: Frames written by ``--out`` at most (gray.npy / depth.npy stacks).
 MAX_SAVED_FRAMES = 200
@@ -157,14 +158,6 @@ def run_frames(rendered, sensor, pipe, n_frames: int, seed, truth_state, keep_fr
     return rows, last, kept, np.array(states).reshape(-1, 6)
 
 
-def _json_default(o):
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer, np.bool_)):
-        return o.item()
-    return str(o)
-
-
 def write_preview(path, gray, depth_m) -> None:
     """Gray (square-root scaled) beside depth (near = bright), 8-bit PNG."""
     import cv2
@@ -224,7 +217,7 @@ def cmd_render_and_solve(args) -> int:
     if args.out:
         out["outputs"] = write_outputs(Path(args.out), rendered, kept, rows, out)
     if args.json:
-        print(json.dumps(out, default=_json_default))
+        print(json.dumps(out, default=json_default))
     else:
         s = out["truth_state"]
         print(f"truth: x {s['x_m']:+.4f} y {s['y_m']:+.4f} z {s['z_m']:+.4f} m   roll {s['roll_deg']:+.3f} "
@@ -255,8 +248,8 @@ def write_outputs(out: Path, rendered, kept, rows, summary) -> dict:
         write_preview(out / "preview.png", kept[-1].gray, kept[-1].depth_m)
         paths.update(gray=str(out / "gray.npy"), depth=str(out / "depth.npy"), preview=str(out / "preview.png"))
     rendered.save(out / "rendered.npz")
-    (out / "truth.json").write_text(json.dumps(rendered.truth, indent=1, default=_json_default))
-    (out / "solution.json").write_text(json.dumps(summary, indent=1, default=_json_default))
+    (out / "truth.json").write_text(json.dumps(rendered.truth, indent=1, default=json_default))
+    (out / "solution.json").write_text(json.dumps(summary, indent=1, default=json_default))
     with open(out / "frames.csv", "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["frame", "ok", "reason", "n_blobs", *STATE_KEYS, "residual_rms_px", "rot_err_deg"])

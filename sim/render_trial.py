@@ -96,16 +96,10 @@ RENDER_TIMING_OUTPUTS = ("expose_s", "solve_s")
 
 def check_threshold(text) -> str:
     """A threshold option: ``auto``, ``otsu`` or a positive level (as text); :class:`InputError` otherwise."""
-    t = "auto" if text is None else str(text).strip()
-    if t in ("auto", "otsu"):
-        return t
-    try:
-        v = float(t)
-    except ValueError:
-        raise InputError(f"--threshold: expected a number, 'auto' or 'otsu', got {text!r}") from None
-    if not np.isfinite(v) or v < 0:
-        raise InputError(f"--threshold: expected a non-negative finite level, got {text!r}")
-    return repr(v)
+    from svgs.detect import parse_threshold
+
+    v = parse_threshold("auto" if text is None else str(text).strip())
+    return v if isinstance(v, str) else repr(v)
 
 
 def threshold_parameter(text) -> float:

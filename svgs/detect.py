@@ -290,6 +290,35 @@ def _otsu(gray: np.ndarray) -> float:
     return float(threshold_otsu(s))
 
 
+def parse_threshold(text):
+    """A ``--threshold`` option: None, ``'auto'``, ``'otsu'`` or a non-negative level.
+
+    Parameters
+    ----------
+    text : str or None
+        ``auto``, ``otsu`` or a number (image counts).
+
+    Returns
+    -------
+    None, str or float
+        What :func:`detect_blobs` takes as ``threshold``.
+
+    Raises
+    ------
+    InputError
+        Not a number, negative or not finite.
+    """
+    if text is None or text in ("auto", "otsu"):
+        return text
+    try:
+        v = float(text)
+    except ValueError:
+        raise InputError(f"--threshold: expected a number, 'auto' or 'otsu', got {text!r}") from None
+    if not np.isfinite(v) or v < 0:
+        raise InputError(f"--threshold: expected a non-negative finite level, got {text!r}")
+    return v
+
+
 def _resolve_threshold(gray, threshold, k_sigma, peak_fraction):
     if threshold is None or (isinstance(threshold, str) and threshold == "auto"):
         return auto_threshold(gray, k_sigma=k_sigma, peak_fraction=peak_fraction)
