@@ -10,7 +10,12 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
+	@# one OpenCV wheel only (opencv-contrib-python-headless): the wheels share the cv2 folder, so
+	@# an older venv with another one is cleared of all of them before the install
+	@if $(PY) -m pip show -q opencv-python-headless opencv-python opencv-contrib-python >/dev/null 2>&1; then \
+	  $(PY) -m pip uninstall -y -q opencv-python-headless opencv-python opencv-contrib-python opencv-contrib-python-headless; fi
 	$(PY) -m pip install --quiet -e ".[render,test,dask]"
+	$(PY) -m cli.compile_kernels
 	touch $(STAMP)
 
 venv: $(STAMP)

@@ -176,10 +176,7 @@ def render_board_set(camera, board, n_views: int, *, seed: int = 0, spp: int = D
     -------
     BoardSet
     """
-    from calibration.synthetic import sample_board_poses
-
     from camera.phone import PhoneCamera
-    from sim.closed_loop import solver_camera
 
     cam = Camera.load(camera)
     try:
@@ -195,14 +192,8 @@ def render_board_set(camera, board, n_views: int, *, seed: int = 0, spp: int = D
     st = tuple(phone.params.isp.stages) if stages is None else tuple(stages)
     ss = np.random.SeedSequence(int(seed))
     s_pose, s_render, s_expose = (int(c.generate_state(1)[0]) for c in ss.spawn(3))
-    if poses is None:
-        R, t = sample_board_poses(board, cam, n, seed=s_pose, fill=fill, max_tilt_deg=max_tilt_deg,
-                                  max_roll_deg=max_roll_deg)
-    else:
-        R = np.asarray(poses[0], float).reshape(-1, 3, 3)
-        t = np.asarray(poses[1], float).reshape(-1, 3)
-        if R.shape[0] != n or t.shape[0] != n:
-            raise InputError(f"poses: expected {n} rotations and translations, got {R.shape[0]} and {t.shape[0]}")
+    R, t = _board_poses(board, cam, n, poses, seed=s_pose, fill=fill, max_tilt_deg=max_tilt_deg,
+                        max_roll_deg=max_roll_deg)
     ppm = texture_px_per_m(board, cam, R, t, texels_per_px)
     renderer = BoardRenderer(cam, board, px_per_m=ppm, spp=spp, pinhole=pinhole, **(renderer_options or {}))
     r_seeds = np.random.SeedSequence(s_render).generate_state(n, dtype=np.uint32)
@@ -210,35 +201,75 @@ def render_board_set(camera, board, n_views: int, *, seed: int = 0, spp: int = D
     images, names, views = [], [], []
     delivered = None
     for k in range(n):
-        frame = renderer.render(R[k], t[k], seed=int(r_seeds[k]))
-        t0 = time.perf_counter()
-        ex = phone.exposer(frame.flux, stages=st)
-        exposure_s, iso = manual_exposure(phone, ex, exposure_fill)
-        shot = ex.expose(seed=int(e_seeds[k]), exposure_s=exposure_s, iso=iso)
-        expose_s = time.perf_counter() - t0
-        img = shot.image
-        delivered = solver_camera(cam, img.shape)
-        name = f"view_{k:03d}.png"
+        img, delivered, view = _render_view(renderer, phone, cam, board, R[k], t[k], int(r_seeds[k]), int(e_seeds[k]),
+                                            st, exposure_fill, name=f"view_{k:03d}.png")
         images.append(img)
-        names.append(name)
-        feats = delivered.project(board.object_points() @ R[k].T + t[k])
-        views.append({
-            "image": name,
-            "R_cam_board": R[k].tolist(),
-            "t_cam_board_m": t[k].tolist(),
-            "distance_m": float(np.linalg.norm(t[k] + R[k] @ np.array([*_centre(board), 0.0]))),
-            "features_px": np.round(feats, 6).tolist(),
-            "exposure_s": float(shot.exposure_s),
-            "iso": float(shot.iso),
-            "render_seed": int(r_seeds[k]),
-            "exposure_seed": int(e_seeds[k]),
-            "saturated_fraction": float(np.mean(img >= 255)),
-            "timings_s": {**{k2: round(v, 4) for k2, v in frame.timings_s.items()}, "expose_s": round(expose_s, 4)},
-        })
+        names.append(view["image"])
+        views.append(view)
         if progress is not None:
-            progress(f"view {k + 1}/{n}: rendered in {frame.timings_s['render_s']:.1f} s, "
-                     f"exposure {shot.exposure_s * 1e3:.2f} ms ISO {shot.iso:.0f}")
-    truth = {
+            progress(f"view {k + 1}/{n}: rendered in {view['timings_s']['render_s']:.1f} s, "
+                     f"exposure {view['exposure_s'] * 1e3:.2f} ms ISO {view['iso']:.0f}")
+    truth = _set_truth(cam, delivered, board, renderer, views, seed=seed, stages=st, exposure_fill=exposure_fill)
+    out = BoardSet(images, names, delivered, board, R, t, truth)
+    if out_dir is not None:
+        out.save(out_dir)
+    return out
+
+
+
+def _board_poses(board, cam, n: int, poses, *, seed: int, fill, max_tilt_deg, max_roll_deg):
+    """The views' poses: drawn (:func:`calibration.sample_board_poses`) or given, checked.
+
+    Returns
+    -------
+    R_cam_board : ndarray, shape (n, 3, 3)
+    t_cam_board_m : ndarray, shape (n, 3)
+    """
+    from calibration.synthetic import sample_board_poses
+
+    if poses is None:
+        return sample_board_poses(board, cam, n, seed=seed, fill=fill, max_tilt_deg=max_tilt_deg,
+                                  max_roll_deg=max_roll_deg)
+    R = np.asarray(poses[0], float).reshape(-1, 3, 3)
+    t = np.asarray(poses[1], float).reshape(-1, 3)
+    if R.shape[0] != n or t.shape[0] != n:
+        raise InputError(f"poses: expected {n} rotations and translations, got {R.shape[0]} and {t.shape[0]}")
+    return R, t
+
+
+def _render_view(renderer, phone, cam, board, R_cam_board, t_cam_board_m, render_seed: int, exposure_seed: int,
+                 stages, exposure_fill: float, *, name: str):
+    """Render one view, expose it at the manual exposure; (image, delivered camera, view record)."""
+    from sim.closed_loop import solver_camera
+
+    frame = renderer.render(R_cam_board, t_cam_board_m, seed=render_seed)
+    t0 = time.perf_counter()
+    ex = phone.exposer(frame.flux, stages=stages)
+    exposure_s, iso = manual_exposure(phone, ex, exposure_fill)
+    shot = ex.expose(seed=exposure_seed, exposure_s=exposure_s, iso=iso)
+    expose_s = time.perf_counter() - t0
+    img = shot.image
+    delivered = solver_camera(cam, img.shape)
+    feats = delivered.project(board.object_points() @ R_cam_board.T + t_cam_board_m)
+    view = {
+        "image": name,
+        "R_cam_board": R_cam_board.tolist(),
+        "t_cam_board_m": t_cam_board_m.tolist(),
+        "distance_m": float(np.linalg.norm(t_cam_board_m + R_cam_board @ np.array([*_centre(board), 0.0]))),
+        "features_px": np.round(feats, 6).tolist(),
+        "exposure_s": float(shot.exposure_s),
+        "iso": float(shot.iso),
+        "render_seed": int(render_seed),
+        "exposure_seed": int(exposure_seed),
+        "saturated_fraction": float(np.mean(img >= 255)),
+        "timings_s": {**{k: round(v, 4) for k, v in frame.timings_s.items()}, "expose_s": round(expose_s, 4)},
+    }
+    return img, delivered, view
+
+
+def _set_truth(cam, delivered, board, renderer, views, *, seed: int, stages, exposure_fill: float) -> dict:
+    """The truth record of a rendered board set (``truth.json``)."""
+    return {
         "what": "rendered calibration-board set (svgs calibrate render-board)",
         "camera": delivered.name,
         "intrinsics": {"width": delivered.width, "height": delivered.height, "fx": delivered.fx, "fy": delivered.fy,
@@ -250,17 +281,12 @@ def render_board_set(camera, board, n_views: int, *, seed: int = 0, spp: int = D
         "board_extent_m": list(board.extent_m),
         "pose_convention": "p_cam = R_cam_board @ p_board + t_cam_board_m (OpenCV camera frame); board x right, y down, z = 0",
         "seed": int(seed),
-        "n_views": n,
+        "n_views": len(views),
         "render": renderer.info(),
-        "phone": {"stages": list(st), "exposure": "manual", "exposure_fill_of_full_well": float(exposure_fill)},
+        "phone": {"stages": list(stages), "exposure": "manual", "exposure_fill_of_full_well": float(exposure_fill)},
         "views": views,
         "versions": _versions(),
     }
-    out = BoardSet(images, names, delivered, board, R, t, truth)
-    if out_dir is not None:
-        out.save(out_dir)
-    return out
-
 
 def _centre(board) -> tuple[float, float]:
     x0, y0, x1, y1 = board.extent_m

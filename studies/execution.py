@@ -13,6 +13,9 @@ Dask is an optional extra (``pip install 'svgs-sim[dask]'``). Missing Dask and a
 unreachable scheduler are :class:`~svgs.errors.InputError`\\ s raised by
 :func:`check_executor`, before any work starts.
 
+Workers die with their parent: a local pool's or LocalCluster's worker processes end when the
+process that started them dies, even by SIGKILL (:func:`die_with_parent`).
+
 Results do not depend on the executor: each trial carries its own seed
 (:mod:`studies.seeding`) and trials never share random state. Trials are packed into tasks
 (chunks of ``chunk_size`` trials, trials sharing a render key kept together) to amortise the
@@ -22,13 +25,16 @@ per-task overhead; the packing does not change any trial's numbers either.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import importlib
 import logging
 import multiprocessing
 import os
 import re
+import signal
 import socket
 import sys
+import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass
@@ -43,6 +49,10 @@ SCHEDULER_TIMEOUT_S = 5.0
 DEFAULT_CHUNK_SIZE = 16
 #: Tasks in flight per worker (keeps workers busy while the main process writes rows).
 TASKS_PER_WORKER = 4
+#: Seconds between two looks at the parent pid by the fallback watchdog of :func:`die_with_parent`.
+PARENT_POLL_S = 1.0
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -211,8 +221,91 @@ def _warm(kind: TrialKind) -> None:
 
 
 def warm_up_worker(kind_ref: tuple[str, str]) -> None:
-    """Process-pool initializer: import the kind's module and warm it up."""
+    """Import the kind's module and warm it up (in each worker of a pool or a LocalCluster)."""
     _warm(_kind(kind_ref))
+
+
+#: From <linux/prctl.h>.
+_PR_SET_PDEATHSIG = 1
+
+
+def _set_pdeathsig_sigkill() -> None:
+    """``prctl(PR_SET_PDEATHSIG, SIGKILL)`` through libc; OSError (or AttributeError) if unavailable."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    prctl = libc.prctl
+    prctl.argtypes = [ctypes.c_int, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong]
+    prctl.restype = ctypes.c_int
+    if prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0) != 0:
+        err = ctypes.get_errno()
+        raise OSError(err, os.strerror(err))
+
+
+def _watch_parent(parent_pid: int) -> None:
+    while os.getppid() == parent_pid:
+        time.sleep(PARENT_POLL_S)
+    os._exit(1)
+
+
+def die_with_parent(parent_pid: int) -> str:
+    """Make this (worker) process end when its parent, ``parent_pid``, dies - SIGKILL included.
+
+    On Linux the kernel sends this process SIGKILL when its parent dies
+    (``prctl(PR_SET_PDEATHSIG)``), which also stops a worker busy in native code (a render).
+    Linux ties the signal to the parent *thread* that started the process: a pool must be
+    used from the thread that opened it (as :func:`run_stored_study` does). Where prctl is
+    unavailable (not Linux, or refused), a daemon thread polls ``os.getppid()`` every
+    :data:`PARENT_POLL_S` s and exits the process once the parent has changed; it runs only
+    between Python bytecodes, and on Windows, where ``getppid`` does not change, it never fires.
+
+    Parameters
+    ----------
+    parent_pid : int
+        The pid of the process that started this one; if it is already gone (this
+        process's parent is no longer ``parent_pid``), this process exits at once.
+
+    Returns
+    -------
+    str
+        ``"prctl"`` or ``"watchdog"``: how the parent is watched.
+    """
+    how = "watchdog"
+    if sys.platform.startswith("linux"):
+        try:
+            _set_pdeathsig_sigkill()
+            how = "prctl"
+        except (OSError, AttributeError) as exc:
+            log.debug("prctl(PR_SET_PDEATHSIG) unavailable (%s); watching the parent pid with a thread", exc)
+    else:
+        log.debug("no prctl on %s; watching the parent pid with a thread", sys.platform)
+    if os.getppid() != parent_pid:  # the parent died before prctl took effect (or before we got here)
+        os._exit(1)
+    if how == "watchdog":
+        threading.Thread(target=_watch_parent, args=(parent_pid,), name="svgs-parent-watch", daemon=True).start()
+    return how
+
+
+def _init_pool_worker(parent_pid: int, kind_ref: tuple[str, str] | None) -> None:
+    """Process-pool initializer: die with the parent, then warm the trial kind up."""
+    die_with_parent(parent_pid)
+    if kind_ref is not None:
+        warm_up_worker(kind_ref)
+
+
+def _die_with_parent_plugin(parent_pid: int):
+    """A Dask ``WorkerPlugin`` calling :func:`die_with_parent` in each worker of a LocalCluster,
+    including workers a nanny restarts later. Only for clusters whose workers are our children."""
+    from distributed.diagnostics.plugin import WorkerPlugin
+
+    class DieWithParent(WorkerPlugin):
+        name = "svgs-die-with-parent"
+
+        def __init__(self, pid: int):
+            self.pid = pid
+
+        def setup(self, worker):
+            die_with_parent(self.pid)
+
+    return DieWithParent(parent_pid)
 
 
 class InlineExecutor(Executor):
@@ -232,7 +325,9 @@ def open_executor(spec: ExecutorSpec, kind: TrialKind | None = None):
     """Start the executor of ``spec``; yields a ``concurrent.futures.Executor``.
 
     Local process pools use the ``spawn`` start method (no forked locks or threads) and warm
-    the trial kind up in every worker (e.g. load the compiled solver).
+    the trial kind up in every worker (e.g. load the compiled solver). The workers of a local
+    pool or LocalCluster die with this process (:func:`die_with_parent`); use the executor
+    from the thread that opened it.
     """
     check_executor(spec)
     if spec.mode == "inline":
@@ -241,18 +336,20 @@ def open_executor(spec: ExecutorSpec, kind: TrialKind | None = None):
         yield InlineExecutor()
         return
     if spec.mode == "process":
-        init = (warm_up_worker, (kind.ref,)) if kind is not None else (None, ())
         with ProcessPoolExecutor(max_workers=spec.n_workers, mp_context=multiprocessing.get_context("spawn"),
-                                 initializer=init[0], initargs=init[1]) as ex:
+                                 initializer=_init_pool_worker,
+                                 initargs=(os.getpid(), kind.ref if kind is not None else None)) as ex:
             yield ex
         return
     from distributed import Client, LocalCluster
 
     if spec.mode == "dask-local":
         cluster = LocalCluster(n_workers=spec.n_workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.ERROR)
+                               dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)  # no fixed port, loopback
         try:
             with Client(cluster) as client:
+                # the nannies run in this process: the worker processes are our children
+                client.register_plugin(_die_with_parent_plugin(os.getpid()))
                 if kind is not None:
                     client.run(warm_up_worker, kind.ref)
                 yield client.get_executor(pure=False)
@@ -421,7 +518,8 @@ def run_stored_study(kind: TrialKind, trials: list[Trial], out_dir, manifest: di
     from .store import ResultStore
 
     check_executor(spec)
-    store = ResultStore(out_dir, manifest, kind.columns(list(trials[0].scenario)))
+    store = ResultStore(out_dir, manifest, kind.columns(list(trials[0].scenario)),
+                        trial_ids=[t.trial_id for t in trials])
     stats = None
     with store:
         if {t.trial_id for t in trials} - store.done_ids:

@@ -2,19 +2,39 @@
 
 Layout of ``DIR``::
 
-    manifest.json    the study's parameters (what the trials are); written once, atomically
-    results.csv      one row per finished trial, in completion order, keyed by ``trial_id``
-    .lock            held (``flock``) while a run writes, so two runs cannot share DIR
+    manifest.json          the study's parameters (what the trials are); written once, atomically
+    results.csv            one row per finished trial, in completion order, keyed by ``trial_id``
+    results.rejected.csv   malformed rows set aside by :meth:`ResultStore.open` (only if there were any)
+    .lock                  held (``flock``) while a run writes, so two runs cannot share DIR
 
 Guarantees
     - Rows are appended as trials finish: each batch of rows is one ``write`` of complete
       lines followed by ``fsync``. A run killed at any instant (SIGKILL, power loss after the
       fsync) loses at most the trials whose rows were not yet written.
     - A torn last line (a write cut short) is detected on the next open (the file does not
-      end with a newline) and cut off; those trials are simply run again.
+      end with a newline) and cut off silently; those trials are simply run again.
     - A rerun skips every ``trial_id`` already present; a trial never appears twice.
     - A rerun whose parameters differ from ``manifest.json`` is refused with the list of
       differences (:class:`~svgs.errors.InputError`) before any work starts.
+    - A malformed row is never counted as a result (see below).
+
+Malformed rows
+    Every complete data row is checked on open and on read: it has one field per column,
+    its ``trial_id`` is a non-negative integer (one of the study's ids when the store is
+    given ``trial_ids``), its ``seed`` (if not empty) is an integer, numeric columns hold
+    numbers (or are empty), and no ``trial_id`` appears twice. The numeric columns are all
+    but ``text_columns`` when those are given; otherwise :meth:`ResultStore.open` takes a
+    column as numeric when most of its non-empty values are numbers (reads do not guess).
+
+    - *Set aside* (resumable): :meth:`ResultStore.open` moves malformed rows to
+      ``results.rejected.csv`` (columns ``line``, ``problem``, ``row``: the original line
+      number, what is wrong, the line's text), rewrites ``results.csv`` without them
+      (atomically) and warns on stderr with the file and line of each. Their trials are not
+      done, so they run again. Of two rows with one ``trial_id`` and different values both
+      are set aside; an exact repeat sets aside the later copy.
+    - *Refused* (:class:`~svgs.errors.InputError`, CLI exit 2): a header that is not the
+      study's columns (another study's file, or a damaged one), and any malformed row met by
+      :func:`read_rows` / :func:`read_table`, which only read and never move rows.
 
 Values are written with ``repr`` so floats round-trip exactly: a resumed study reads back
 bit-identical numbers. Empty fields are ``None``/NaN.
@@ -27,6 +47,7 @@ import io
 import json
 import math
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +56,11 @@ from svgs.errors import InputError
 
 MANIFEST = "manifest.json"
 RESULTS = "results.csv"
+#: Where :meth:`ResultStore.open` sets malformed rows aside.
+REJECTED = "results.rejected.csv"
 LOCK = ".lock"
+#: Malformed rows named one by one in a warning or error (the rest are counted).
+MAX_WARNINGS = 10
 #: Bumped when the on-disk layout changes.
 FORMAT_VERSION = 1
 
@@ -77,13 +102,133 @@ def _parse(text: str):
     if text == "":
         return None
     try:
-        return int(text)
-    except ValueError:
-        pass
-    try:
-        return float(text)
+        v = float(text)
     except ValueError:
         return text
+    if not any(c in text for c in ".eEnNiI"):  # an integer (exact: float has 53 bits)
+        try:
+            return int(text)
+        except ValueError:
+            pass
+    return v
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _describe_ids(ids) -> str:
+    ids = sorted(ids)
+    if not ids:
+        return "this study has no trials"
+    if ids == list(range(ids[0], ids[-1] + 1)):
+        return f"this study's ids are {ids[0]}..{ids[-1]}"
+    return f"not one of this study's {len(ids)} ids"
+
+
+def _check_lines(lines, columns, *, first_line: int = 2, trial_ids=None, text_columns=None, infer: bool = False):
+    """Check the data lines of a ``results.csv``; split them into good rows and malformed ones.
+
+    Parameters
+    ----------
+    lines : list of bytes
+        Complete data lines without their newline (the header excluded).
+    columns : list of str
+        The header's columns (the first is ``trial_id``).
+    first_line : int
+        File line number of ``lines[0]`` (the header is line 1).
+    trial_ids : collection of int, optional
+        The study's trial ids; a row with another id is malformed.
+    text_columns : collection of str, optional
+        Columns that may hold text; every other column must be empty or a number.
+    infer : bool
+        Without ``text_columns``, take a column as numeric when most of its non-empty
+        values are numbers (a stray word among numbers is then malformed).
+
+    Returns
+    -------
+    good : list of (int, list of str)
+        File line number and fields of each well-formed row, in file order.
+    bad : list of (int, str, bytes)
+        File line number, the problem and the raw line of each malformed row.
+    """
+    n = len(columns)
+    ids = None if trial_ids is None else {int(i) for i in trial_ids}
+    seed_col = columns.index("seed") if "seed" in columns else None
+    bad, rows = [], []
+    for k, raw in enumerate(lines):
+        line_no = first_line + k
+        if not raw.strip():
+            continue  # a blank line holds no row
+        try:
+            text = raw.decode("utf-8")
+        except UnicodeDecodeError:
+            bad.append((line_no, "not UTF-8 text", raw))
+            continue
+        try:
+            fields = next(csv.reader((text,), strict=True), [])
+        except csv.Error as exc:
+            bad.append((line_no, f"not a CSV row ({exc})", raw))
+            continue
+        if len(fields) != n:
+            bad.append((line_no, f"{len(fields)} fields where the header has {n}", raw))
+            continue
+        tid = fields[0]
+        if not tid.isascii() or not tid.isdigit():
+            bad.append((line_no, f"trial_id {tid!r} is not a non-negative integer", raw))
+            continue
+        if ids is not None and int(tid) not in ids:
+            bad.append((line_no, f"trial_id {int(tid)} is not a trial of this study ({_describe_ids(ids)})", raw))
+            continue
+        if seed_col is not None and fields[seed_col] != "" and not isinstance(_parse(fields[seed_col]), int):
+            bad.append((line_no, f"seed {fields[seed_col]!r} is not an integer", raw))
+            continue
+        rows.append((line_no, fields, raw))
+    # numeric columns must hold numbers
+    if text_columns is not None:
+        numeric = [j for j, c in enumerate(columns) if c not in set(text_columns)]
+    elif infer:
+        numeric = []
+        for j in range(1, n):
+            vals = [f[j] for _, f, _ in rows if f[j] != ""]
+            n_num = sum(_is_number(v) for v in vals)
+            if n_num > len(vals) - n_num:
+                numeric.append(j)
+    else:
+        numeric = []
+    typed = []
+    for line_no, fields, raw in rows:
+        wrong = next((j for j in numeric if fields[j] != "" and not _is_number(fields[j])), None)
+        if wrong is not None:
+            bad.append((line_no, f"{columns[wrong]} {fields[wrong]!r} is not a number", raw))
+        else:
+            typed.append((line_no, fields, raw))
+    # one row per trial_id
+    first: dict[int, tuple[int, list]] = {}
+    conflicting: set[int] = set()
+    good = []
+    for line_no, fields, raw in typed:
+        tid = int(fields[0])
+        if tid not in first:
+            first[tid] = (line_no, fields)
+            good.append((line_no, fields, raw))
+        elif first[tid][1] == fields:
+            bad.append((line_no, f"repeats the row of trial_id {tid} on line {first[tid][0]}", raw))
+        else:
+            conflicting.add(tid)
+            bad.append((line_no, f"trial_id {tid} is also on line {first[tid][0]}, with different values", raw))
+    if conflicting:
+        for line_no, fields, raw in good:
+            tid = int(fields[0])
+            if tid in conflicting:
+                bad.append((line_no, f"trial_id {tid} appears again later with different values", raw))
+        good = [g for g in good if int(g[1][0]) not in conflicting]
+    bad.sort(key=lambda b: b[0])
+    return [(line_no, fields) for line_no, fields, _ in good], bad
 
 
 def _diff(a: dict, b: dict, prefix: str = "") -> list[str]:
@@ -119,20 +264,39 @@ class ResultStore:
         (worker count, executor). JSON-serialisable.
     columns : sequence of str
         Column names; the first must be ``trial_id``.
+    trial_ids : collection of int, optional
+        The study's trial ids. When given, a stored row with another id is malformed (set
+        aside on :meth:`open`) and :meth:`append` refuses one. Otherwise any non-negative
+        integer id is accepted.
+    text_columns : collection of str, optional
+        Columns that may hold text; all others must hold numbers. When not given,
+        :meth:`open` infers the numeric columns from the stored rows (see the module
+        docstring).
 
     Raises
     ------
     InputError
         ``out_dir`` holds a study with other parameters or columns, or another run holds it.
+
+    Attributes
+    ----------
+    set_aside : list of (int, str)
+        Line number in ``results.csv`` and problem of each malformed row the last
+        :meth:`open` moved to ``results.rejected.csv``.
     """
 
-    def __init__(self, out_dir, manifest: dict, columns):
+    def __init__(self, out_dir, manifest: dict, columns, *, trial_ids=None, text_columns=None):
         self.dir = Path(out_dir)
         self.columns = list(columns)
         if not self.columns or self.columns[0] != "trial_id":
             raise ValueError("results store: the first column must be 'trial_id'")
         if len(set(self.columns)) != len(self.columns):
             raise ValueError(f"results store: duplicate column names in {self.columns}")
+        self.trial_ids = None if trial_ids is None else frozenset(int(i) for i in trial_ids)
+        self.text_columns = None if text_columns is None else frozenset(text_columns)
+        if self.text_columns is not None and {"trial_id", "seed"} & self.text_columns:
+            raise ValueError("results store: trial_id and seed are integer columns, not text columns")
+        self.set_aside: list[tuple[int, str]] = []
         self.manifest = _jsonable(dict(manifest))
         self._lock_fd = None
         self._fd = None
@@ -153,6 +317,10 @@ class ResultStore:
     @property
     def results_path(self) -> Path:
         return self.dir / RESULTS
+
+    @property
+    def rejected_path(self) -> Path:
+        return self.dir / REJECTED
 
     def _full_manifest(self) -> dict:
         return {"format_version": FORMAT_VERSION, "parameters": self.manifest, "columns": self.columns}
@@ -187,8 +355,18 @@ class ResultStore:
             _fsync_dir(self.dir)
 
     # ------------------------------------------------------------------ open / close
-    def open(self) -> "ResultStore":
-        """Take the directory lock, repair a torn tail, read the finished trial ids."""
+    def open(self) -> ResultStore:
+        """Take the directory lock, repair a torn tail, set malformed rows aside, read the finished ids.
+
+        Malformed rows are moved to ``results.rejected.csv`` with a warning on stderr naming
+        ``results.csv`` and the line (see the module docstring); they are not counted as done.
+
+        Raises
+        ------
+        InputError
+            Another run holds the directory, or the header of ``results.csv`` is not this
+            study's columns.
+        """
         import fcntl
 
         if self._fd is not None:
@@ -221,11 +399,51 @@ class ResultStore:
         if not data.startswith(header):
             first = data.split(b"\n", 1)[0].decode(errors="replace")
             self.close()
-            raise InputError(f"--out: {str(path)!r} has columns {first!r}, this study writes {header.decode().strip()!r}; "
+            raise InputError(f"--out: {str(path)!r} line 1: the header is {first!r}, but this study writes "
+                             f"{header.decode().strip()!r} (the file belongs to another study or is damaged); "
                              "choose another --out directory")
-        self._done = {int(r[0]) for r in csv.reader(io.StringIO(data[len(header):].decode())) if r}
+        lines = data[len(header):].split(b"\n")[:-1]
+        good, bad = _check_lines(lines, self.columns, trial_ids=self.trial_ids, text_columns=self.text_columns,
+                                 infer=True)
+        self.set_aside = [(line_no, problem) for line_no, problem, _ in bad]
+        if bad:
+            try:
+                self._set_aside(header, lines, bad)
+            except BaseException:
+                self.close()
+                raise
+        self._done = {int(fields[0]) for _, fields in good}
         self._fd = os.open(path, os.O_WRONLY | os.O_APPEND)
         return self
+
+    def _set_aside(self, header: bytes, lines: list, bad: list) -> None:
+        """Append the malformed rows to ``results.rejected.csv``; rewrite ``results.csv`` without them."""
+        rejected = self.rejected_path
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        if not rejected.exists() or rejected.stat().st_size == 0:
+            w.writerow(["line", "problem", "row"])
+        for line_no, problem, raw in bad:
+            w.writerow([line_no, problem, raw.decode("utf-8", errors="backslashreplace").replace("\r", "\\r")])
+        with open(rejected, "ab") as fh:  # first keep the rows, then drop them from results.csv
+            fh.write(buf.getvalue().encode())
+            fh.flush()
+            os.fsync(fh.fileno())
+        drop = {line_no - 2 for line_no, _, _ in bad}
+        tmp = self.results_path.with_suffix(".csv.tmp")
+        with open(tmp, "wb") as fh:
+            fh.write(header + b"".join(raw + b"\n" for k, raw in enumerate(lines) if k not in drop))
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, self.results_path)
+        _fsync_dir(self.dir)
+        shown = bad[:MAX_WARNINGS]
+        for line_no, problem, _ in shown:
+            _warn(f"{self.results_path} line {line_no}: {problem}; moved to {REJECTED}, not counted as a result")
+        if len(bad) > len(shown):
+            _warn(f"{self.results_path}: {len(bad) - len(shown)} more malformed rows moved to {REJECTED}")
+        _warn(f"{self.results_path}: {len(bad)} malformed row{'s' if len(bad) > 1 else ''} set aside (not counted "
+              "as results); trials without a good row run again")
 
     def close(self) -> None:
         if self._fd is not None:
@@ -271,6 +489,8 @@ class ResultStore:
             if extra:
                 raise ValueError(f"results store: row has keys not among the study's columns: {sorted(extra)}")
             tid = int(row["trial_id"])
+            if self.trial_ids is not None and tid not in self.trial_ids:
+                raise ValueError(f"results store: trial_id {tid} is not a trial of this study")
             if tid in self._done or tid in new:
                 continue
             w.writerow([_format(row.get(c)) for c in self.columns])
@@ -282,48 +502,90 @@ class ResultStore:
         return len(new)
 
     def read_rows(self) -> list[dict]:
-        """All stored rows, sorted by ``trial_id`` (a torn tail is ignored)."""
-        return read_rows(self.results_path)
+        """All stored rows, sorted by ``trial_id`` (a torn tail is ignored; see :func:`read_rows`)."""
+        return read_rows(self.results_path, self.columns, trial_ids=self.trial_ids, text_columns=self.text_columns)
 
     def read_table(self) -> dict:
         """All stored rows as columns (see :func:`read_table`)."""
-        return read_table(self.results_path, self.columns)
+        return _table(self.read_rows(), self.columns)
 
 
-def read_rows(path) -> list[dict]:
+def read_rows(path, columns=None, *, trial_ids=None, text_columns=None) -> list[dict]:
     """Rows of a ``results.csv``, sorted by ``trial_id``; values parsed as int, float or text.
+
+    Reading never changes the file: a malformed row is refused, not skipped (opening the
+    study's :class:`ResultStore`, i.e. rerunning its command, sets such rows aside).
+
+    Parameters
+    ----------
+    path : str or Path
+    columns : sequence of str, optional
+        The header the file must have (default: whatever it has; its first column must be
+        ``trial_id``).
+    trial_ids : collection of int, optional
+        The study's trial ids; a row with another id is malformed.
+    text_columns : collection of str, optional
+        Columns that may hold text; all others must hold numbers.
 
     Raises
     ------
     InputError
-        If the file is missing.
+        If the file is missing, its header is wrong, or a complete row is malformed (the
+        message names the file and line of each).
     """
     path = Path(path)
     try:
-        data = path.read_text()
+        data = path.read_bytes()
     except OSError as exc:
         raise InputError(f"results file {str(path)!r} cannot be read: {exc}") from None
-    if not data.endswith("\n"):
-        data = data[: data.rfind("\n") + 1]
-    reader = csv.reader(io.StringIO(data))
-    try:
-        header = next(reader)
-    except StopIteration:
+    lines = data.split(b"\n")[:-1]  # the part after the last newline is a torn write: ignored
+    if not lines:
         return []
-    rows = [dict(zip(header, (_parse(x) for x in r))) for r in reader if r]
+    try:
+        header = next(csv.reader((lines[0].decode("utf-8"),), strict=True), [])
+    except (UnicodeDecodeError, csv.Error):
+        header = None
+    if header is None or (columns is not None and header != list(columns)) or not header or header[0] != "trial_id":
+        want = f"{','.join(columns)!r}" if columns is not None else "one starting with 'trial_id'"
+        raise InputError(f"results file {str(path)!r} line 1: the header is "
+                         f"{lines[0].decode(errors='replace')!r}, expected {want}")
+    good, bad = _check_lines(lines[1:], header, trial_ids=trial_ids, text_columns=text_columns)
+    if bad:
+        where = "; ".join(f"line {line_no}: {problem}" for line_no, problem, _ in bad[:MAX_WARNINGS])
+        more = f" (and {len(bad) - MAX_WARNINGS} more)" if len(bad) > MAX_WARNINGS else ""
+        raise InputError(f"results file {str(path)!r} has {len(bad)} malformed row{'s' if len(bad) > 1 else ''}: "
+                         f"{where}{more}. Rerun the study's command to set them aside (into {REJECTED}; their "
+                         "trials run again), or remove those lines")
+    rows = [dict(zip(header, (_parse(x) for x in fields))) for _, fields in good]
     rows.sort(key=lambda r: r["trial_id"])
     return rows
 
 
-def read_table(path, columns=None) -> dict:
+def read_table(path, columns=None, *, trial_ids=None, text_columns=None) -> dict:
     """Columns of a ``results.csv`` sorted by ``trial_id``.
+
+    Parameters
+    ----------
+    path : str or Path
+    columns : sequence of str, optional
+        The columns returned (default: the file's); absent ones come back as NaN.
+    trial_ids, text_columns
+        As for :func:`read_rows`.
 
     Returns
     -------
     dict of str -> ndarray, shape (n_rows,)
         float64 for numeric columns (empty -> NaN), object for text columns.
+
+    Raises
+    ------
+    InputError
+        As :func:`read_rows`.
     """
-    rows = read_rows(path)
+    return _table(read_rows(path, trial_ids=trial_ids, text_columns=text_columns), columns)
+
+
+def _table(rows: list, columns=None) -> dict:
     if columns is None:
         columns = list(rows[0]) if rows else []
     out = {}
@@ -334,6 +596,10 @@ def read_table(path, columns=None) -> dict:
         else:
             out[c] = np.array(vals, dtype=object)
     return out
+
+
+def _warn(message: str) -> None:
+    print(f"warning: {message}", file=sys.stderr, flush=True)
 
 
 def _write_all(fd: int, data: bytes) -> None:

@@ -19,6 +19,28 @@ REASONS = {
 }
 
 
+class Solved:
+    """Mixin of a successful estimate: truthy, ``ok`` True, no ``reason``, and the paper's
+    state as named values from ``self.state`` (shape (6,): m and rad).
+
+    The pose results of both sensors (:class:`svgs.solver.Solution`,
+    :class:`tof.pipeline.TofSolution`) are ``Solved``; a failure is a falsy :class:`Failure`.
+    """
+
+    ok = True
+    reason = None
+
+    def __bool__(self) -> bool:
+        return True
+
+    @property
+    def state_dict(self) -> dict:
+        """The state keyed by :data:`svgs.frames.STATE_KEYS` (m and deg)."""
+        from .frames import state_dict
+
+        return state_dict(self.state)
+
+
 @dataclass
 class Failure:
     """A failed estimation: falsy, with a machine-readable ``reason`` and a ``message``.

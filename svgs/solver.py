@@ -33,9 +33,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InputError
-from .frames import D_CAM_PHOTO, STATE_KEYS, pose_to_state, rotation_from_angles, state_dict, state_to_pose
+from .frames import D_CAM_PHOTO, STATE_KEYS, pose_to_state, rotation_from_angles, state_to_pose
 from .profiles import Camera, Pattern
-from .result import Failure
+from .result import Failure, Solved
 
 #: Default convergence tolerance on the state step: metres for position, radians for angles.
 STEP_TOL = 1e-9
@@ -127,7 +127,7 @@ def posit(xy: np.ndarray, points_m: np.ndarray, n_iter: int = 10):
 
 # --------------------------------------------------------------------------- results
 @dataclass
-class Solution:
+class Solution(Solved):
     """A solved pose: truthy.
 
     Attributes
@@ -157,16 +157,6 @@ class Solution:
     iterations: int = 0
     targets_px: dict = field(default_factory=dict)
     n_blobs: int | None = None
-
-    ok = True
-    reason = None
-
-    def __bool__(self) -> bool:
-        return True
-
-    @property
-    def state_dict(self) -> dict:
-        return state_dict(self.state)
 
     @property
     def std(self) -> np.ndarray:

@@ -1,10 +1,13 @@
 """Executors: identical numbers in-process, on a local process pool and on a Dask LocalCluster;
-a campaign killed with SIGKILL resumes to the uninterrupted result; bad executor input."""
+a campaign killed with SIGKILL resumes to the uninterrupted result; the workers of a killed
+campaign die with it; bad executor input."""
 
+import os
 import signal
 import socket
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -83,6 +86,119 @@ def test_sigkill_halfway_then_rerun_completes_without_duplicates(tmp_path):
     ref = _run(config, tmp_path / "reference", ExecutorSpec("inline", 1), chunk_size=16)
     assert _numbers(rows) == _numbers(ref)
     assert (out / "report.html").exists()
+
+
+#: Runs the CLI in a child that touches the file $SVGS_TEST_MARKER once the store holds its
+#: first rows (the workers exist and are busy), then goes on with the campaign.
+_MARK_CHILD = """
+import os, sys
+from pathlib import Path
+from studies.store import ResultStore
+_append = ResultStore.append
+def append(self, rows):
+    n = _append(self, rows)
+    Path(os.environ["SVGS_TEST_MARKER"]).touch()
+    return n
+ResultStore.append = append
+from cli.main import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def _alive(procs):
+    import psutil
+
+    out = []
+    for p in procs:
+        try:
+            if p.is_running() and p.status() != psutil.STATUS_ZOMBIE:  # a zombie has ended (its reaper may be slow)
+                out.append(p)
+        except psutil.NoSuchProcess:
+            pass
+    return out
+
+
+@pytest.mark.parametrize("executor", [["--processes", "2"], ["--workers", "2"]], ids=["process-pool", "dask"])
+def test_workers_die_with_a_sigkilled_parent(tmp_path, executor):
+    """SIGKILL of a campaign mid-run: every process it started (pool or Dask workers, the
+    multiprocessing resource tracker) ends within a few seconds, none keeps computing."""
+    psutil = pytest.importorskip("psutil", reason="psutil comes with the 'dask' extra")
+    if executor[0] == "--workers":
+        pytest.importorskip("distributed", reason="the 'dask' extra is not installed")
+    marker = tmp_path / "first-rows"
+    args = ["campaign", "--camera", "galaxy-nexus", "--trials", "5000", "--ranges", "5,15", "--out",
+            str(tmp_path / "campaign"), "--trial-kind", "geometric", *executor, "--chunk-size", "4", "--no-progress"]
+    proc = subprocess.Popen([sys.executable, "-c", _MARK_CHILD, *args], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True,
+                            env={**os.environ, "SVGS_TEST_MARKER": str(marker)})
+    parent = psutil.Process(proc.pid)
+    children = []
+    try:
+        deadline = time.monotonic() + 120  # start-up on a loaded machine; not a speed test
+        while time.monotonic() < deadline and proc.poll() is None:
+            children = parent.children(recursive=True)
+            workers = [c for c in children if "spawn_main" in " ".join(c.cmdline())]
+            if marker.exists() and len(workers) >= 2:
+                break
+            time.sleep(0.1)
+        assert proc.poll() is None and marker.exists(), "the campaign ended before its workers were seen"
+        children = parent.children(recursive=True)
+        assert len(workers) >= 2, [c.cmdline() for c in children]
+        os.kill(proc.pid, signal.SIGKILL)
+        assert proc.wait(timeout=10) == -signal.SIGKILL
+        deadline = time.monotonic() + 15
+        while _alive(children) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        left = _alive(children)
+        assert not left, [(p.pid, p.cmdline()) for p in left]
+    finally:
+        for p in [parent, *children]:  # nothing of this test outlives it, pass or fail
+            try:
+                p.kill()
+            except psutil.Error:
+                pass
+        proc.wait(timeout=10)
+
+
+def _pdeathsig() -> int:
+    """The parent-death signal of the calling thread (prctl PR_GET_PDEATHSIG)."""
+    import ctypes
+
+    value = ctypes.c_int(-1)
+    assert ctypes.CDLL(None).prctl(2, ctypes.byref(value), 0, 0, 0) == 0
+    return value.value
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux only")
+def test_local_workers_ask_the_kernel_for_sigkill_when_the_parent_dies():
+    """The pool initializer and the LocalCluster's worker plugin set PR_SET_PDEATHSIG (the Dask
+    workers also have distributed's own parent watch, so the SIGKILL test cannot tell)."""
+    with open_executor(ExecutorSpec("process", 1)) as ex:
+        assert ex.submit(_pdeathsig).result() == signal.SIGKILL
+    assert _pdeathsig() == 0  # never in the parent (nor with --processes 0)
+    pytest.importorskip("distributed", reason="the 'dask' extra is not installed")
+    with open_executor(ExecutorSpec("dask-local", 1)) as ex:
+        # client.run runs in the worker's main thread, where the plugin set it
+        assert list(ex._client.run(_pdeathsig).values()) == [signal.SIGKILL]
+
+
+def test_die_with_parent_falls_back_to_a_watchdog_without_prctl(monkeypatch, caplog):
+    """No prctl (not Linux, or refused): a debug line and a watchdog thread, never a crash."""
+    import logging
+    import threading
+
+    from studies import execution
+
+    def no_prctl():
+        raise OSError(38, "Function not implemented")
+
+    monkeypatch.setattr(execution, "_set_pdeathsig_sigkill", no_prctl)
+    started = []
+    monkeypatch.setattr(threading.Thread, "start", lambda self: started.append(self.name))
+    with caplog.at_level(logging.DEBUG, logger="studies.execution"):
+        assert execution.die_with_parent(os.getppid()) == "watchdog"
+    assert started == ["svgs-parent-watch"]
+    assert "watching the parent pid" in caplog.text
 
 
 def test_tasks_keep_render_groups_together():

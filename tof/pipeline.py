@@ -24,9 +24,9 @@ from dataclasses import dataclass, field, fields, replace
 import numpy as np
 
 from svgs.errors import InputError
-from svgs.frames import pose_to_state, state_dict
+from svgs.frames import pose_to_state
 from svgs.profiles import Camera
-from svgs.result import Failure
+from svgs.result import Failure, Solved
 
 from . import active as _active
 from . import blobs as _blobs
@@ -86,7 +86,7 @@ class PipelineParams:
 
 
 @dataclass
-class TofSolution:
+class TofSolution(Solved):
     """A solved ToF pose: truthy.
 
     Attributes
@@ -124,16 +124,6 @@ class TofSolution:
     iterations: int
     timings_s: dict = field(default_factory=dict)
     candidates: object = field(default=None, repr=False)
-
-    ok = True
-    reason = None
-
-    def __bool__(self) -> bool:
-        return True
-
-    @property
-    def state_dict(self) -> dict:
-        return state_dict(self.state)
 
     def to_json(self) -> dict:
         """The JSON object of ``svgs tof solve --json`` (same keys as ``svgs solve``)."""
