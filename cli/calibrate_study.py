@@ -184,6 +184,8 @@ def _add_study(sub) -> None:
     p.add_argument("--cache", default=None, metavar="DIR",
                    help="keep the rendered board set and focal frames here, and reuse them on a rerun")
     _size_options(p)
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout (the summary goes to stderr): "
+                   "DIR/summary.json")
     from cli.studies import add_executor_options
 
     add_executor_options(p)
@@ -191,6 +193,9 @@ def _add_study(sub) -> None:
 
 
 def cmd_study(args) -> int:
+    import json
+
+    from cli.json_out import emit, run_info, text_to_stderr
     from cli.studies import executor_from_args, print_run_stats
     from studies.calibration import (
         parse_number_list,
@@ -231,12 +236,19 @@ def cmd_study(args) -> int:
     )
     command = _study_command(args)
     files = write_report(res, out, command=command)
-    print(summary_text(res))
-    for part, st in res.run_stats.items():
-        print_run_stats(st, label=part)
-    if not res.run_stats:
-        print_run_stats(None, "report")
-    print(f"wrote {files['report']} and {len([k for k in files if k not in ('report', 'summary')])} CSV tables in {out}/")
+    with text_to_stderr(args.json):
+        print(summary_text(res))
+        for part, st in res.run_stats.items():
+            print_run_stats(st, label=part)
+        if not res.run_stats:
+            print_run_stats(None, "report")
+        print(f"wrote {files['report']}, {files['summary']} and "
+              f"{len([k for k in files if k not in ('report', 'summary')])} CSV tables in {out}/")
+    # summary.json (studies.calibration.report.study_summary), extended with the files and the runs
+    summary = json.loads(Path(files["summary"]).read_text())
+    summary["outputs"] = files
+    summary["run"] = {part: run_info(st, 0) for part, st in res.run_stats.items()}
+    emit(summary, args.json, out)
     return 0
 
 

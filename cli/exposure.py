@@ -22,7 +22,33 @@ from pathlib import Path
 from svgs.errors import InputError
 
 
+def exposure_study_json(cfg, stats, out: Path) -> dict:
+    """The object of ``svgs exposure-study --json`` (:data:`cli.json_out.SCHEMAS`), from the stored rows."""
+    from cli.json_out import run_info
+    from studies.exposure_study import SUCCESS_LEVEL, summarise, trial_table
+    from studies.store import RESULTS, read_rows
+
+    tt = trial_table(read_rows(out / RESULTS))
+    remedies = []
+    for d in summarise(tt, cfg.remedies, list(cfg.ranges_m)):
+        per = []
+        for r in cfg.ranges_m:
+            rr = [x for x in tt if x["remedy"] == d["remedy"] and x["range_m"] == r]
+            fails = {}
+            for x in rr:
+                if not x["ok"]:
+                    fails[str(x["reason"])] = fails.get(str(x["reason"]), 0) + 1
+            per.append({"range_m": r, "trials": len(rr), "solved": sum(bool(x["ok"]) for x in rr),
+                        "success_rate": d[f"{r:g} m"], "failures": dict(sorted(fails.items()))})
+        remedies.append({"remedy": d["remedy"], "max_range_95_m": d["max_range_95_m"], "ranges": per})
+    outputs = {"summary_csv": out / "summary.csv", "summary_md": out / "summary.md", "trials_csv": out / "trials.csv",
+               "plot": out / "remedies.png", "results_csv": out / RESULTS, "summary_json": out / "summary.json"}
+    return {"camera": cfg.camera, "trials": cfg.trials, "ranges_m": list(cfg.ranges_m), "success_level": SUCCESS_LEVEL,
+            "remedies": remedies, "outputs": outputs, "run": run_info(stats, cfg.n_trials)}
+
+
 def cmd_exposure_study(args) -> int:
+    from cli.json_out import emit, text_to_stderr
     from cli.sim import _check_camera_renderable, _parse_ranges
     from cli.studies import executor_from_args, print_run_stats
     from studies.exposure_study import make_config, run_exposure_study
@@ -34,11 +60,13 @@ def cmd_exposure_study(args) -> int:
         raise InputError(f"--trials must be >= 1, got {args.trials}")
     cfg = make_config(args.camera, ranges, args.remedy, trials=args.trials, seed=args.seed)
     out = Path(args.out or f"exposure-study-{Path(str(args.camera)).stem}")
-    lines, stats = run_exposure_study(cfg, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress)
-    print("\n".join(lines))
-    print_run_stats(stats)
-    print(f"wrote {out / 'summary.csv'}, {out / 'summary.md'}, {out / 'trials.csv'}, {out / 'remedies.png'} "
-          f"(results: {out / 'results.csv'})")
+    with text_to_stderr(args.json):
+        lines, stats = run_exposure_study(cfg, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress)
+        print("\n".join(lines))
+        print_run_stats(stats)
+        print(f"wrote {out / 'summary.csv'}, {out / 'summary.md'}, {out / 'trials.csv'}, {out / 'remedies.png'}, "
+              f"{out / 'summary.json'} (results: {out / 'results.csv'})")
+    emit(exposure_study_json(cfg, stats, out), args.json, out)
     return 0
 
 
@@ -47,7 +75,7 @@ def register(sub) -> None:
 
     p = sub.add_parser("exposure-study", help="which remedy (exposure, ND filter, spacing) extends the range",
                        description=__doc__.split("\n\n")[1].replace("\n", " ") + " Writes summary.csv, summary.md, "
-                       "trials.csv and remedies.png; trials are stored as they finish (results.csv, manifest.json), so "
+                       "trials.csv, remedies.png and summary.json; trials are stored as they finish (results.csv, manifest.json), so "
                        "rerunning the same command resumes.")
     p.add_argument("--camera", required=True, help="camera profile (needs [optics] and [flash])")
     p.add_argument("--ranges", default="2,4,6.5,8,10,15,20,30", help="comma-separated ranges, m")
@@ -57,5 +85,7 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default=None, help="output folder (default exposure-study-CAMERA); rerun with the "
                    "same options to resume an interrupted study")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout (the table goes to stderr); "
+                   "the same object is written to summary.json")
     add_executor_options(p)
     p.set_defaults(func=cmd_exposure_study)

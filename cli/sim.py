@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cli.json_out import failures_from_text, run_info
 from cli.solve import json_default
 from svgs.errors import InputError
 
@@ -136,7 +137,26 @@ def _parse_ranges(text) -> list[float]:
     return vals
 
 
+def range_sweep_json(cfg, table, stats, out: Path) -> dict:
+    """The object of ``svgs range-sweep --json`` (:data:`cli.json_out.SCHEMAS`)."""
+    from svgs.frames import STATE_KEYS
+
+    ranges = []
+    for d in table:
+        fails = failures_from_text(d["failures"])
+        ranges.append({"range_m": d["range_m"], "trials": d["trials"], "solved": d["trials"] - sum(fails.values()),
+                       "success_rate": d["success_rate"], "failures": fails,
+                       **{k: d[k] for k in ("blobs_median", "four_blobs_rate", "merged_rate", "exposure_s", "iso")},
+                       "mean_error": {k: d[f"err_mean_{k}"] for k in STATE_KEYS},
+                       "std": {k: d[f"err_std_{k}"] for k in STATE_KEYS}})
+    outputs = {"summary_csv": out / "summary.csv", "trials_jsonl": out / "trials.jsonl", "plot": out / "range_sweep.png",
+               "results_csv": out / "results.csv", "summary_json": out / "summary.json"}
+    return {"camera": cfg.camera, "pattern": cfg.pattern, "trials_per_pose": cfg.trials, "poses": cfg.poses,
+            "ranges": ranges, "outputs": outputs, "run": run_info(stats, cfg.n_trials)}
+
+
 def cmd_range_sweep(args) -> int:
+    from cli.json_out import emit, text_to_stderr
     from cli.studies import executor_from_args, print_run_stats
     from sim.closed_loop import DEFAULT_BACKDROP_DISTANCE_M
     from studies.range_sweep import format_table, make_config, run_range_sweep
@@ -154,11 +174,13 @@ def cmd_range_sweep(args) -> int:
     cfg = make_config(args.camera, ranges, trials=args.trials, poses=args.poses, jitter_deg=args.jitter_deg,
                       jitter_m=args.jitter_m, seed=args.seed, **scene)
     out = Path(args.out or f"range-sweep-{Path(str(args.camera)).stem}")
-    table, stats = run_range_sweep(cfg, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress)
-    print("\n".join(format_table(table)))
-    print_run_stats(stats)
-    print(f"wrote {out / 'summary.csv'}, {out / 'trials.jsonl'}, {out / 'range_sweep.png'} "
-          f"(results: {out / 'results.csv'})")
+    with text_to_stderr(args.json):
+        table, stats = run_range_sweep(cfg, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress)
+        print("\n".join(format_table(table)))
+        print_run_stats(stats)
+        print(f"wrote {out / 'summary.csv'}, {out / 'trials.jsonl'}, {out / 'range_sweep.png'}, {out / 'summary.json'} "
+              f"(results: {out / 'results.csv'})")
+    emit(range_sweep_json(cfg, table, stats, out), args.json, out)
     return 0
 
 
@@ -178,7 +200,7 @@ def register(sub) -> None:
                        description="At each range, render the scenario (nominal pose, or --poses jittered poses) "
                        "and expose it --trials times (noise draws: render once, expose many); print a table of "
                        "blobs found, success rate, merged-spot failures and errors, and write summary.csv, "
-                       "trials.jsonl and range_sweep.png. Trials are stored as they finish (results.csv, "
+                       "trials.jsonl, range_sweep.png and summary.json. Trials are stored as they finish (results.csv, "
                        "manifest.json): rerunning the same command resumes; other options are refused.")
     _scene_args(p, with_range=False)
     p.add_argument("--ranges", required=True, help="comma-separated ranges in metres, e.g. 1,2,4,6.5,8,10")
@@ -188,5 +210,7 @@ def register(sub) -> None:
     p.add_argument("--jitter-m", type=float, default=0.01, help="lateral jitter of the extra poses, m (1 sigma)")
     p.add_argument("--out", default=None, help="output folder (default range-sweep-CAMERA); rerun with the same "
                    "options to resume an interrupted sweep")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout (the table goes to stderr); "
+                   "the same object is written to summary.json")
     add_executor_options(p)
     p.set_defaults(func=cmd_range_sweep)

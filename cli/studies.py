@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import shlex
 import sys
+from pathlib import Path
 
 from svgs.errors import InputError
 
@@ -76,8 +77,8 @@ def register(sub) -> None:
         help="simulate the paper's MSFC test campaign and compare with its Tables 2-5",
         description="Simulate the 2014 MSFC Flight Robotics Lab campaign for one phone: gimbal roll/pitch +/-25 deg, "
         "yaw +/-45 deg, translation stage +/-15 cm, at the paper's ranges. Writes DIR/results.csv (one row per trial, "
-        "resumable: rerun the same command to finish an interrupted run), DIR/summary.csv and a self-contained "
-        "DIR/report.html with the tables beside the paper's, histograms and the Cramer-Rao bound.",
+        "resumable: rerun the same command to finish an interrupted run), DIR/summary.csv, DIR/summary.json and a "
+        "self-contained DIR/report.html with the tables beside the paper's, histograms and the Cramer-Rao bound.",
     )
     p.add_argument("--camera", required=True, help="camera profile (htc-amaze-4g, galaxy-nexus, or a .toml path)")
     p.add_argument("--trials", type=int, default=200, metavar="N", help="trials per range (default 200)")
@@ -96,6 +97,8 @@ def register(sub) -> None:
     p.add_argument("--k1-error", type=float, default=0.0, help="solver's radial distortion k1 error")
     p.add_argument("--merge-px", type=float, default=0.0,
                    help="spots closer than this many px merge (geometric trial; 0: never)")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout (the table goes to stderr); "
+                   "the same object is written to DIR/summary.json")
     add_executor_options(p)
     p.set_defaults(func=cmd_campaign)
 
@@ -104,7 +107,7 @@ def register(sub) -> None:
         help="global sensitivity (Sobol or Morris) of pose error and success to scenario parameters",
         description="Vary parameters uniformly in LOW:HIGH and compute first-order and total Sobol' indices (or Morris "
         "mu*) with confidence intervals for the position error, attitude error and success. Writes DIR/results.csv "
-        "(resumable), DIR/indices.csv and DIR/report.html.",
+        "(resumable), DIR/indices.csv, DIR/summary.json and DIR/report.html.",
     )
     s.add_argument("--camera", required=True, help="camera profile")
     s.add_argument("--vary", action="append", default=[], metavar="PARAM=LOW:HIGH",
@@ -117,6 +120,8 @@ def register(sub) -> None:
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--trial-kind", default="geometric")
     s.add_argument("--pattern", default="svgs-3u")
+    s.add_argument("--json", action="store_true", help="print one JSON object on stdout (the rankings go to stderr); "
+                   "the same object is written to DIR/summary.json")
     add_executor_options(s)
     s.set_defaults(func=cmd_sensitivity)
 
@@ -143,12 +148,12 @@ def _pp(text):
 
 def _safe(name: str) -> str:
     import re
-    from pathlib import Path
 
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(name).stem)
 
 
 def cmd_campaign(args) -> int:
+    from cli.json_out import emit, text_to_stderr
     from studies.campaign import make_config, print_summary, run_campaign
     from studies.execution import executor_spec
 
@@ -173,15 +178,18 @@ def cmd_campaign(args) -> int:
     if args.merge_px:
         argv += ["--merge-px", repr(args.merge_px)]
     argv += executor_argv(args)
-    summary, stats, path = run_campaign(config, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress,
-                                        command=shlex.join(argv))
-    print_summary(summary, config)
-    print_run_stats(stats, "report")
-    print(f"results: {out}/results.csv  summary: {out}/summary.csv  report: {path}")
+    with text_to_stderr(args.json):
+        summary, stats, path = run_campaign(config, out, spec, chunk_size=args.chunk_size,
+                                            progress=not args.no_progress, command=shlex.join(argv))
+        print_summary(summary, config)
+        print_run_stats(stats, "report")
+        print(f"results: {out}/results.csv  summary: {out}/summary.csv, {out}/summary.json  report: {path}")
+    emit(campaign_json(config, summary, stats, out, path), args.json, out)
     return 0
 
 
 def cmd_sensitivity(args) -> int:
+    from cli.json_out import emit, text_to_stderr
     from studies.execution import executor_spec
     from studies.sensitivity import OUTPUTS, make_config, ranking, run_sensitivity
 
@@ -198,15 +206,72 @@ def cmd_sensitivity(args) -> int:
         argv += ["--fixed", v]
     argv += ["--method", args.method, "--n", str(args.n), "--out", out, "--seed", str(args.seed),
              "--trial-kind", args.trial_kind, "--pattern", args.pattern] + executor_argv(args)
-    print(f"{args.method}: {config.n_trials} trials over {len(config.varied)} parameters", file=sys.stderr)
-    result, stats, path, n_groups = run_sensitivity(config, out, spec, chunk_size=args.chunk_size,
-                                                    progress=not args.no_progress, command=shlex.join(argv))
-    label = "ST" if args.method == "sobol" else "mu*"
-    for k in OUTPUTS:
-        rk = ranking(result, config, k)
-        print(f"{k:14s} ranked by {label}: " + ", ".join(f"{n} {s:.3f}" for n, s in rk))
-    print(f"failed trials: {100 * result['failure_fraction']:.1f} %; renders needed: {n_groups} of {config.n_trials} trials")
-    if stats is not None:
-        print(f"ran {stats.n_run} trial(s) in {stats.elapsed_s:.1f} s ({stats.executor})")
-    print(f"results: {out}/results.csv  indices: {out}/indices.csv  report: {path}")
+    with text_to_stderr(args.json):
+        print(f"{args.method}: {config.n_trials} trials over {len(config.varied)} parameters", file=sys.stderr)
+        result, stats, path, n_groups = run_sensitivity(config, out, spec, chunk_size=args.chunk_size,
+                                                        progress=not args.no_progress, command=shlex.join(argv))
+        label = "ST" if args.method == "sobol" else "mu*"
+        for k in OUTPUTS:
+            rk = ranking(result, config, k)
+            print(f"{k:14s} ranked by {label}: " + ", ".join(f"{n} {s:.3f}" for n, s in rk))
+        print(f"failed trials: {100 * result['failure_fraction']:.1f} %; renders needed: {n_groups} of "
+              f"{config.n_trials} trials")
+        if stats is not None:
+            print(f"ran {stats.n_run} trial(s) in {stats.elapsed_s:.1f} s ({stats.executor})")
+        print(f"results: {out}/results.csv  indices: {out}/indices.csv, {out}/summary.json  report: {path}")
+    emit(sensitivity_json(config, result, stats, out, path, n_groups), args.json, out)
     return 0
+
+
+def _state(row: dict, prefix: str) -> dict | None:
+    """``{component: row[prefix + component]}``; None when every value is NaN (no paper row)."""
+    import numpy as np
+
+    from svgs.frames import STATE_KEYS
+
+    d = {c: row[f"{prefix}{c}"] for c in STATE_KEYS}
+    return None if all(v is None or np.isnan(v) for v in d.values()) else d
+
+
+def campaign_json(config, summary, stats, out, report) -> dict:
+    """The object of ``svgs campaign --json`` (:data:`cli.json_out.SCHEMAS`), from
+    :func:`studies.campaign.summarize` (which reads the paper's tables with :mod:`assets.papers`)."""
+    from cli.json_out import run_info
+
+    ranges = []
+    for s in summary:
+        ranges.append({"range_m": s["range_m"], "trials": s["n"], "solved": s["n_ok"], "success_rate": s["success_rate"],
+                       "failures": dict(sorted(s["reasons"].items())), "mean_abs_error": _state(s, "mean_abs_") or {},
+                       "bias": _state(s, "bias_") or {}, "std": _state(s, "std_") or {},
+                       "crlb_std": _state(s, "crlb_") or {},
+                       "paper": {"mean_error": _state(s, "paper_mean_"), "std": _state(s, "paper_std_")},
+                       "ratio": {"mean_error": _state(s, "ratio_mean_"), "std": _state(s, "ratio_std_")}})
+    out = Path(out)
+    return {"trial_kind": config.trial_kind, "camera": config.camera, "trials_per_range": config.trials_per_range,
+            "sigma_px": config.sigma_px, "calibration": config.calibration,
+            "calibration_error": dict(sorted(config.calibration_error.items())), "ranges": ranges,
+            "outputs": {"results_csv": out / "results.csv", "summary_csv": out / "summary.csv", "report": report,
+                        "summary_json": out / "summary.json"},
+            "run": run_info(stats, len(config.ranges_m) * config.trials_per_range)}
+
+
+def sensitivity_json(config, result, stats, out, report, n_groups) -> dict:
+    """The object of ``svgs sensitivity --json`` (:data:`cli.json_out.SCHEMAS`): the rows of
+    ``indices.csv`` per output, the rankings and the run."""
+    from cli.json_out import run_info
+    from studies.sensitivity import OUTPUTS, index_rows, ranking
+
+    names = [v.name for v in config.varied]
+    rows = index_rows(result, config, names)
+    out = Path(out)
+    return {"camera": config.camera, "method": config.method, "trial_kind": config.trial_kind, "n": config.n,
+            "n_trials": config.n_trials,
+            "parameters": [{"name": v.name, "low": v.low, "high": v.high, "unit": v.unit, "needs_render": v.needs_render}
+                           for v in config.varied],
+            "fixed": dict(config.fixed), "failure_fraction": result["failure_fraction"], "render_groups": n_groups,
+            "indices": {k: [{c: v for c, v in r.items() if c != "output"} for r in rows if r["output"] == k]
+                        for k in OUTPUTS},
+            "ranking": {k: [list(x) for x in ranking(result, config, k)] for k in OUTPUTS},
+            "outputs": {"results_csv": out / "results.csv", "indices_csv": out / "indices.csv", "report": report,
+                        "summary_json": out / "summary.json"},
+            "run": run_info(stats, config.n_trials)}

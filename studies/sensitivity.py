@@ -400,7 +400,7 @@ def write_sensitivity_report(out_dir, config: SensitivityConfig, table: dict, re
     out_dir = Path(out_dir)
     names = [v.name for v in config.varied]
     d = len(names)
-    rows = _index_rows(result, config, names)
+    rows = index_rows(result, config, names)
     cols = list(rows[0])
     write_csv(out_dir / "indices.csv", cols, rows)
 
@@ -432,7 +432,7 @@ def write_sensitivity_report(out_dir, config: SensitivityConfig, table: dict, re
     return rep.write(out_dir / "report.html")
 
 
-def _index_rows(result: dict, config: SensitivityConfig, names: list) -> list[dict]:
+def index_rows(result: dict, config: SensitivityConfig, names: list) -> list[dict]:
     """One row per (output, parameter): the indices and their bootstrap interval (``indices.csv``)."""
     rows = []
     for k in OUTPUTS:

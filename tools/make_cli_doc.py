@@ -11,6 +11,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from cli.json_out import SCHEMAS  # noqa: E402
 from cli.main import build_parser  # noqa: E402
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "cli.md"
@@ -43,9 +44,21 @@ def _render() -> str:
     parser.prog = "svgs"
     out = ["# Command reference", "",
            "Generated from the commands' own help by `tools/make_cli_doc.py`; do not edit by hand.", "",
-           "Exit codes everywhere: 0 done/solved, 1 no solution (the reason is printed), 2 bad input or usage.", ""]
+           "Exit codes everywhere: 0 done/solved, 1 no solution (the reason is printed), 2 bad input or usage.", "",
+           ("`--json`: every command that takes it prints exactly one JSON object on stdout (tables, status lines "
+           "and progress bars go to stderr). Its object is shown after the command's help (`cli/json_out.py`); "
+           "the study commands (range-sweep, exposure-study, campaign, sensitivity, calibrate study) write NaN as "
+           "`null` and also write the object to their folder's `summary.json`."), ""]
     for name, p in _walk(parser, "svgs"):
         out += [f"## `{name}`", "", "```", p.format_help().rstrip(), "```", ""]
+        if name in SCHEMAS:
+            out += ["JSON output (`--json`): one object on stdout"
+                    + (", also written to the output folder's `summary.json`" if "summary_json" in SCHEMAS[name]
+                       or "calibrate study" in name else "") + ":", "",
+                    "```", SCHEMAS[name].rstrip(), "```", ""]
+    missing = sorted(set(SCHEMAS) - {name for name, _ in _walk(parser, "svgs")})
+    if missing:
+        raise SystemExit(f"cli.json_out.SCHEMAS names unknown commands: {missing}")
     return "\n".join(out)
 
 

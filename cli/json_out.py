@@ -1,0 +1,199 @@
+"""``--json`` of the study commands: one JSON object on stdout, the text on stderr.
+
+With ``--json`` a study command runs under :func:`text_to_stderr` (its tables, status lines
+and progress go to stderr), then :func:`emit` prints exactly one JSON object on stdout and
+writes the same object as ``summary.json`` in the study folder. :func:`clean` turns numpy
+values into plain numbers and NaN or infinity into ``null``. :data:`SCHEMAS` documents each
+command's object (``docs/cli.md`` shows them; ``tools/make_cli_doc.py``).
+
+Light: imports only the standard library and numpy (a ``cli`` module is imported to build
+the parser).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def clean(obj):
+    """``obj`` with numpy values as Python ones, tuples as lists, NaN/inf as None (JSON-safe)."""
+    if isinstance(obj, dict):
+        return {str(k): clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [clean(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return clean(obj.tolist())
+    if isinstance(obj, (np.bool_, bool)):
+        return bool(obj)
+    if isinstance(obj, (np.integer, int)):
+        return int(obj)
+    if isinstance(obj, (np.floating, float)):
+        v = float(obj)
+        return v if math.isfinite(v) else None
+    if obj is None or isinstance(obj, str):
+        return obj
+    if isinstance(obj, Path):
+        return str(obj)
+    return str(obj)
+
+
+def dumps(obj, **kw) -> str:
+    """``json.dumps`` of :func:`clean` ``(obj)`` (strict JSON: no NaN)."""
+    return json.dumps(clean(obj), allow_nan=False, **kw)
+
+
+@contextlib.contextmanager
+def text_to_stderr(enabled: bool):
+    """While ``enabled``, what the command prints on stdout goes to stderr instead."""
+    if not enabled:
+        yield
+        return
+    with contextlib.redirect_stdout(sys.stderr):
+        yield
+
+
+def run_info(stats, n_trials: int) -> dict:
+    """The ``run`` object: ``trials_run``, ``already_done``, ``elapsed_s``, ``executor``.
+
+    ``stats`` is a :class:`studies.execution.RunStats`, or None when all ``n_trials`` were
+    already stored (then ``elapsed_s`` and ``executor`` are null)."""
+    if stats is None:
+        return {"trials_run": 0, "already_done": int(n_trials), "elapsed_s": None, "executor": None}
+    return {"trials_run": int(stats.n_run), "already_done": int(stats.n_already_done),
+            "elapsed_s": float(stats.elapsed_s), "executor": str(stats.executor)}
+
+
+def failures_from_text(text) -> dict:
+    """``{"reason": n}`` from a ``reason:n;reason:n`` cell (empty: no failure)."""
+    out = {}
+    for part in str(text or "").split(";"):
+        if part.strip():
+            k, _, n = part.rpartition(":")
+            out[k] = int(n)
+    return out
+
+
+def emit(obj: dict, enabled: bool, out_dir=None) -> dict:
+    """Write ``obj`` as ``out_dir/summary.json`` (when ``out_dir`` is given) and, when ``enabled``,
+    print it on stdout as one line of JSON. Returns the cleaned object."""
+    obj = clean(obj)
+    if out_dir is not None:
+        Path(out_dir, "summary.json").write_text(json.dumps(obj, indent=1, allow_nan=False) + "\n")
+    if enabled:
+        print(json.dumps(obj, allow_nan=False), file=sys.stdout)
+        sys.stdout.flush()
+    return obj
+
+
+_STATE = '{"x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg"}'
+_RUN = ('"run": {"trials_run": int, "already_done": int,\n'
+        '        "elapsed_s": float | null, "executor": str | null}   # null: every trial was already stored')
+
+_SOLUTION = f"""\
+{{"ok": bool, "reason": str | null,          # reason: a code of svgs.result.REASONS when unsolved
+ "state": {_STATE} | null,   # paper state (m, deg)
+ "R_cam_target": [[float x3] x3] | null, "t_cam_target_m": [float x3] | null,
+ "targets_px": {{target: [u, v]}}, "n_blobs": int, "residual_rms_px": float | null"""
+_ERRORS = ('"pos_err_vec_m": [float x3] | null, "att_err_vec_deg": [float x3] | null,\n'
+           ' "pos_err_norm_m": float | null, "rot_err_deg": float | null')
+
+#: The JSON object of each command's ``--json`` (for the study commands also DIR/summary.json), as
+#: shown in docs/cli.md after the command's help.
+SCHEMAS = {
+    "svgs solve": f"""\
+{_SOLUTION},
+ # solved: "iterations": int, "crlb_std": {{...state keys}}, "crlb_sigma_px": float
+ # unsolved: "message": str, "details": {{...}}}}""",
+    "svgs render": """\
+{"out": {"flux", "truth", "preview", "raw", "image": path},   # raw, image: unless --no-expose
+ "variant": str, "total_flux_photons_per_s": float, "targets_px": {target: [u, v]},
+ "timings_s": {stage: float}}""",
+    "svgs doctor": """\
+{"ok": bool, "usable": bool, "python": str, "platform": str, "versions": {package: str | null},
+ "llvm_candidates": [{"path", "major", "origin", "usable"}], "llvm_chosen": str | null,
+ "llvm_min_major": int, "variant": {...} , "warning": str,   # or "error": str when unusable
+ ...}                                                         # the backend's report""",
+    "svgs render-and-solve": f"""\
+{{"ok": bool, "reason": str | null, "message": str | null, "n_blobs": int,
+ "truth_state": {_STATE}, "state": {{...}} | null,
+ "exposure_s": float, "iso": float, "expose_s": float, "solve_s": float, "render_s": float,
+ "residual_rms_px": float | null,
+ {_ERRORS},
+ "outputs": {{file: path}}}}                  # with --out""",
+    "svgs calibrate focal": """\
+{"ok": true, "camera": str, "fx_px_before": float, "f_px": float, "sigma_f_px": float,
+ "sigma_f_noise_px": float, "sigma_f_range_px": float, "centroid_sigma_px": float,
+ "residual_sigma_px": float | null, "residual_rms_px": float, "dof": int,
+ "consistency_chi2": float | null, "aspect": float, "iterations": int,
+ "per_image": [{...}], "skipped": [{"image", "reason"}], "out": path | null}""",
+    "svgs calibrate board": """\
+{"ok": true, "board": {"kind", "cols", "rows", "spacing_mm", ...}, "image_size": [w, h],
+ "fx_px", "fy_px", "cx_px", "cy_px": float, "dist": {"k1", "k2", "p1", "p2", "k3"},
+ "std": {...}, "rms_px": float, "constraints": {...}, "n_views": int,
+ "per_view": [{"image", "rms_px", "n_points"}], "skipped": [{"image", "reason", "message"}],
+ "warnings": [str], "out": path | null}""",
+    "svgs calibrate render-board": """\
+{"ok": true, "out": path, "n_views": int, "board": {"kind", "cols", "rows", "spacing_mm", ...},
+ "intrinsics": {...}, "distortion": {"k1", "k2", "p1", "p2", "k3"}}""",
+    "svgs tof solve": f"""\
+{_SOLUTION},
+ "n_frames": int, ...}}                      # the other keys as 'svgs solve'""",
+    "svgs tof render-and-solve": f"""\
+{_SOLUTION}, "n_frames": int,
+ "truth_state": {_STATE}, {_ERRORS},
+ "n_solved": int, "frame_statistics": {{"mean", "std", "min", "max", "fluctuation", "mean_error", ...}},
+ "integration_time_s": float, "ambient_lux": float, "modulation_frequency_hz": float,
+ "render_s": float, "frames_s": float, "outputs": {{file: path}}}}""",
+    "svgs range-sweep": f"""\
+{{"camera": str, "pattern": str, "trials_per_pose": int, "poses": int,
+ "ranges": [{{"range_m": float, "trials": int, "solved": int, "success_rate": float,
+             "failures": {{reason: int}},        # unsolved trials by reason
+             "blobs_median": float, "four_blobs_rate": float, "merged_rate": float,
+             "exposure_s": float, "iso": float,  # medians over the trials
+             "mean_error": {_STATE},   # solved trials, estimate - truth (m, deg)
+             "std": {{...same keys}}}}],          # null where no trial solved
+ "outputs": {{"summary_csv", "trials_jsonl", "plot", "results_csv", "summary_json": path}},
+ {_RUN}}}""",
+    "svgs exposure-study": f"""\
+{{"camera": str, "trials": int, "ranges_m": [float], "success_level": float,
+ "remedies": [{{"remedy": str, "max_range_95_m": float | null,
+               "ranges": [{{"range_m": float, "trials": int, "solved": int, "success_rate": float,
+                           "failures": {{reason: int}}}}]}}],
+ "outputs": {{"summary_csv", "summary_md", "trials_csv", "plot", "results_csv", "summary_json": path}},
+ {_RUN}}}""",
+    "svgs campaign": f"""\
+{{"trial_kind": str, "camera": str, "trials_per_range": int, "sigma_px": float,
+ "calibration": "exact" | "paper", "calibration_error": {{name: float}},   # the solver's intrinsics errors
+ "ranges": [{{"range_m": float, "trials": int, "solved": int, "success_rate": float,
+             "failures": {{reason: int}},
+             "mean_abs_error": {_STATE},   # the paper's "mean error"
+             "bias": {{...}}, "std": {{...}},
+             "crlb_std": {{...}},                      # median Cramer-Rao bound of the solved trials
+             "paper": {{"mean_error": {{...}} | null, "std": {{...}} | null}},   # Tables 2-5; null: no row
+             "ratio": {{"mean_error": {{...}}, "std": {{...}}}}}}],               # simulated / paper
+ "outputs": {{"results_csv", "summary_csv", "report", "summary_json": path}},
+ {_RUN}}}""",
+    "svgs sensitivity": f"""\
+{{"camera": str, "method": "sobol" | "morris", "trial_kind": str, "n": int, "n_trials": int,
+ "parameters": [{{"name": str, "low": float, "high": float, "unit": str, "needs_render": bool}}],
+ "fixed": {{name: float}}, "failure_fraction": float, "render_groups": int,
+ "indices": {{output: [{{"parameter": str,          # output: pos_err_norm_m, rot_err_deg, success
+                       "S1", "S1_low", "S1_high", "ST", "ST_low", "ST_high": float}}]}},  # sobol
+          # morris: "mu_star", "mu_star_low", "mu_star_high", "mu", "sigma"
+ "ranking": {{output: [[parameter, ST or mu_star], ...]}},   # largest first
+ "outputs": {{"results_csv", "indices_csv", "report", "summary_json": path}},
+ {_RUN}}}""",
+    "svgs calibrate study": """\
+{"config": {...},                  # every option of the study
+ "key_numbers": {...},             # e.g. n_views_max, focal_only_err_pct
+ "board_set": {...}, "timings_s": {part: float},
+ "table4_exponents": {...}, "table4_conclusion": [str],
+ "outputs": {name: path},          # report, summary, the CSV tables
+ "run": {part: {"trials_run", "already_done", "elapsed_s", "executor"}}}   # parts run this time""",
+}
