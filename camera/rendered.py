@@ -42,3 +42,77 @@ class RenderedFrame:
     def pose(self) -> tuple[np.ndarray, np.ndarray]:
         """``(R_cam_target (3, 3), t_cam_target_m (3,))`` from the truth record."""
         return np.asarray(self.truth["R_cam_target"], float), np.asarray(self.truth["t_cam_target_m"], float)
+
+
+@dataclass(frozen=True)
+class PointFlux:
+    """Light that reaches the film at exact sub-pixel positions: the samples of the flash
+    seen through the cubes (the guided estimator's, :mod:`render.spots`), before the lens PSF.
+
+    The camera model convolves them with its PSF and integrates over pixels
+    (:meth:`camera.phone.psf.CorePSF.splat`), so their sub-pixel position survives. Their
+    sum binned into pixels is part of a render's ``flux``.
+
+    Attributes
+    ----------
+    u_px, v_px : ndarray, float64, shape (M,)
+        Film position of each sample, px (OpenCV convention: pixel centres at integers).
+    rate_ph_s : ndarray, float64, shape (M,)
+        Photons per second each sample carries into the aperture, in the camera band.
+    """
+
+    u_px: np.ndarray
+    v_px: np.ndarray
+    rate_ph_s: np.ndarray
+
+    def __post_init__(self):
+        for name in ("u_px", "v_px", "rate_ph_s"):
+            object.__setattr__(self, name, np.asarray(getattr(self, name), np.float64).ravel())
+        n = {self.u_px.size, self.v_px.size, self.rate_ph_s.size}
+        if len(n) != 1:
+            raise ValueError(f"PointFlux: u_px, v_px and rate_ph_s differ in length ({sorted(n)})")
+
+    def __len__(self) -> int:
+        return int(self.u_px.size)
+
+    @property
+    def total_ph_s(self) -> float:
+        return float(self.rate_ph_s.sum())
+
+    def scaled(self, factor: float) -> "PointFlux":
+        """The same samples with every rate times ``factor`` (a neutral-density filter)."""
+        return PointFlux(self.u_px, self.v_px, self.rate_ph_s * float(factor))
+
+    def binned(self, shape) -> np.ndarray:
+        """Sum of the rates in the pixel containing each sample (a perfect lens), float64 (H, W)."""
+        H, W = int(shape[0]), int(shape[1])
+        ui = np.floor(self.u_px + 0.5)
+        vi = np.floor(self.v_px + 0.5)
+        ok = (ui >= 0) & (ui < W) & (vi >= 0) & (vi < H)
+        idx = (vi[ok] * W + ui[ok]).astype(np.int64)
+        return np.bincount(idx, weights=self.rate_ph_s[ok], minlength=H * W).reshape(H, W)
+
+    def bilinear(self, shape) -> np.ndarray:
+        """The rates spread bilinearly over the four nearest pixel centres (keeps each sample's
+        first moment exactly), float64 (H, W): input to smooth kernels such as the glare wings."""
+        H, W = int(shape[0]), int(shape[1])
+        u0 = np.floor(self.u_px)
+        v0 = np.floor(self.v_px)
+        fu = self.u_px - u0
+        fv = self.v_px - v0
+        out = np.zeros(H * W)
+        for du, dv, w in ((0, 0, (1 - fu) * (1 - fv)), (1, 0, fu * (1 - fv)), (0, 1, (1 - fu) * fv), (1, 1, fu * fv)):
+            x = u0 + du
+            y = v0 + dv
+            ok = (x >= 0) & (x < W) & (y >= 0) & (y < H)
+            out += np.bincount((y[ok] * W + x[ok]).astype(np.int64), weights=(self.rate_ph_s * w)[ok], minlength=H * W)
+        return out.reshape(H, W)
+
+    def save(self, path) -> None:
+        """Write an ``.npz`` with ``u_px``, ``v_px``, ``rate_ph_s``."""
+        np.savez_compressed(path, u_px=self.u_px, v_px=self.v_px, rate_ph_s=self.rate_ph_s)
+
+    @classmethod
+    def load(cls, path) -> "PointFlux":
+        with np.load(path) as z:
+            return cls(z["u_px"], z["v_px"], z["rate_ph_s"])

@@ -111,7 +111,8 @@ SCHEMAS = {
  # solved: "iterations": int, "crlb_std": {{...state keys}}, "crlb_sigma_px": float
  # unsolved: "message": str, "details": {{...}}}}""",
     "svgs render": """\
-{"out": {"flux", "truth", "preview", "raw", "image": path},   # raw, image: unless --no-expose
+{"out": {"flux", "truth", "preview", "raw", "image": path,    # raw, image: unless --no-expose
+         "flux_diffuse", "points": path},                     # guided method: the film before the PSF
  "variant": str, "total_flux_photons_per_s": float, "targets_px": {target: [u, v]},
  "timings_s": {stage: float}}""",
     "svgs doctor": """\
@@ -125,6 +126,8 @@ SCHEMAS = {
  "exposure_s": float, "iso": float, "expose_s": float, "solve_s": float, "render_s": float,
  "residual_rms_px": float | null,
  {_ERRORS},
+ "crlb": {{"centroid_sigma_px": float, "per_spot_sigma_px": {{target: [su, sv]}},
+          "crlb_std": {{...state keys, m and deg}}}} | null,   # Cramer-Rao 1-sigma from the simulated sensor
  "outputs": {{file: path}}}}                  # with --out""",
     "svgs calibrate focal": """\
 {"ok": true, "camera": str, "fx_px_before": float, "f_px": float, "sigma_f_px": float,

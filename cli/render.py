@@ -43,12 +43,16 @@ def register(sub) -> None:
     p.add_argument("--body", default=None, choices=("plate", "3u", "none"), help="target body (default plate)")
     p.add_argument("--method", default="guided", choices=("guided", "path"),
                    help="'guided' (default) or 'path' (brute force, the reference; slow beyond a few metres)")
+    p.add_argument("--focus-m", dest="focus_m", type=float, default=None,
+                   help="distance the lens is focused at, m (default: the target's distance - the phone's autofocus "
+                   "locks on it; svgs render and render-and-solve form the same image)")
     p.add_argument("--full-frame", action="store_true", help="render the whole frame at --spp, no windows")
     p.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
     p.add_argument("--backdrop-m", type=float, default=None,
                    help="grey backdrop this far behind the target, m (default 3; 0 = none); added to flux.npy")
-    p.add_argument("--ambient", type=float, default=0.0,
-                   help="ambient scene radiance from room lights, W m^-2 sr^-1 in band (default 0)")
+    p.add_argument("--ambient", type=float, default=None,
+                   help="ambient scene radiance from room lights, W m^-2 sr^-1 in band (default: the lab's, "
+                   "0.03, fitted in assets/labs/fitted/msfc-frl.toml; 0: lights off)")
     p.add_argument("--exposure-s", type=float, default=None, help="exposure time of image.png (default: the phone's)")
     p.add_argument("--iso", type=float, default=None, help="ISO of image.png (default: the phone's)")
     p.add_argument("--no-expose", action="store_true", help="write only the flux (no raw.npy / image.png)")
@@ -83,7 +87,10 @@ def cmd_render(args) -> int:
     from render.api import Renderer
     from render.constants import DEFAULT_ROI_SPP, DEFAULT_ROI_SPP_PATH, DEFAULT_SPOT_SAMPLES, DEFAULT_SPP
 
-    opts = {} if args.body is None else {"body": args.body}
+    if args.focus_m is not None and not (np.isfinite(args.focus_m) and args.focus_m > 0):
+        raise InputError(f"--focus-m: expected a positive distance in metres, got {args.focus_m}")
+    focus = float(np.linalg.norm(t)) if args.focus_m is None else float(args.focus_m)  # autofocus, as render-and-solve
+    opts = {"focus_distance_m": focus} if args.body is None else {"body": args.body, "focus_distance_m": focus}
     spp = DEFAULT_SPP if args.spp is None else args.spp
     roi_spp = args.roi_spp if args.roi_spp is not None else (DEFAULT_ROI_SPP if args.method == "guided" else DEFAULT_ROI_SPP_PATH)
     r = Renderer(camera, pattern, reflector=args.reflector, scene_options=opts, spp=spp, roi_spp=roi_spp,
@@ -97,16 +104,20 @@ def cmd_render(args) -> int:
     back = DEFAULT_BACKDROP_DISTANCE_M if args.backdrop_m is None else (None if args.backdrop_m == 0 else args.backdrop_m)
     scen = Scenario(camera=args.camera, pattern=args.pattern, range_m=args.range_m,
                     target_x_m=args.target_x_m, target_y_m=args.target_y_m, roll_deg=args.roll, pitch_deg=args.pitch,
-                    yaw_deg=args.yaw, backdrop_distance_m=back, ambient_radiance_w_m2_sr=args.ambient)
+                    yaw_deg=args.yaw, backdrop_distance_m=back, ambient_radiance_w_m2_sr=_ambient(args))
     lab, lab_info = lab_flux(camera, scen)
     res.flux = res.flux + lab
+    if res.flux_diffuse is not None:
+        res.flux_diffuse = res.flux_diffuse + lab
     res.truth["lab"] = lab_info
+    res.truth["focus_distance_m"] = focus
     if not args.no_expose:
         import cv2
 
         from camera.phone import PhoneCamera
 
-        ex = PhoneCamera(camera).expose(res.flux, seed=args.seed, exposure_s=args.exposure_s, iso=args.iso)
+        flux, points = res.film()
+        ex = PhoneCamera(camera).expose(flux, points=points, seed=args.seed, exposure_s=args.exposure_s, iso=args.iso)
         res.truth["exposure"] = {"exposure_s": ex.exposure_s, "iso": ex.iso, "gain_dn_per_e": ex.gain_dn_per_e,
                                  **{k: v for k, v in ex.info.items()}}
     paths = res.save(args.out)
@@ -193,3 +204,12 @@ def cmd_doctor(args) -> int:
     else:
         print(f"usable      NO - {rep['error']}")
     return 0 if rep["ok"] else 1
+
+
+def _ambient(args) -> float:
+    """``--ambient``, or the lab's fitted ambient radiance (W m^-2 sr^-1) when not given."""
+    if args.ambient is None:
+        from sim.closed_loop import DEFAULT_AMBIENT_RADIANCE_W_M2_SR
+
+        return DEFAULT_AMBIENT_RADIANCE_W_M2_SR
+    return args.ambient

@@ -35,8 +35,12 @@ def _scene_args(p, with_range=True):
     p.add_argument("--roi-spp", type=int, default=None, help="samples per pixel in the spot windows (default: the renderer's)")
     p.add_argument("--backdrop-m", type=float, default=None,
                    help="distance of a grey backdrop behind the target (m; default 3; 0 = none)")
-    p.add_argument("--ambient", type=float, default=0.0,
-                   help="ambient scene radiance from room lights, W m^-2 sr^-1 in band (default 0: lights off)")
+    p.add_argument("--ambient", type=float, default=None,
+                   help="ambient scene radiance from room lights, W m^-2 sr^-1 in band (default: the lab's, "
+                   "0.03, fitted in assets/labs/fitted/msfc-frl.toml; 0: lights off)")
+    p.add_argument("--focus-m", dest="focus_m", type=float, default=None,
+                   help="distance the lens is focused at, m (default: the target's distance - the phone's autofocus "
+                   "locks on it; svgs render and render-and-solve form the same image)")
     p.add_argument("--threshold", default=None, help="detector threshold: a level, 'auto' or 'otsu' (default auto)")
     p.add_argument("--exposure-s", type=float, default=None, help="override the phone's exposure time (s)")
     p.add_argument("--iso", type=float, default=None, help="override the phone's ISO")
@@ -50,7 +54,8 @@ def _scenario(args, range_m=None):
     return Scenario(
         camera=args.camera, pattern=args.pattern, range_m=args.range_m if range_m is None else range_m,
         target_x_m=args.target_x_m, target_y_m=args.target_y_m, roll_deg=args.roll_deg, pitch_deg=args.pitch_deg, yaw_deg=args.yaw_deg,
-        backdrop_distance_m=back, ambient_radiance_w_m2_sr=args.ambient, spp=args.spp, roi_spp=args.roi_spp,
+        backdrop_distance_m=back, ambient_radiance_w_m2_sr=_ambient(args), spp=args.spp, roi_spp=args.roi_spp,
+        focus_distance_m=getattr(args, "focus_m", None),
     )
 
 
@@ -98,9 +103,14 @@ def cmd_render_and_solve(args) -> int:
     thr = _threshold(args.threshold)
     print(f"rendering {scen.camera} at {scen.range_m:g} m ...", file=sys.stderr)
     frame = render_scenario(scen, seed=args.seed)
-    row = expose_and_solve(frame, frame.exposer(), seed=args.seed, threshold=thr, exposure_s=args.exposure_s, iso=args.iso)
+    exposer = frame.exposer()
+    row = expose_and_solve(frame, exposer, seed=args.seed, threshold=thr, exposure_s=args.exposure_s, iso=args.iso)
+    from sim.crlb import frame_crlb
+
+    crlb = frame_crlb(frame, exposer, row)
     paths = write_outputs(Path(args.out), frame, row) if args.out else {}
     out = {k: v for k, v in row.items() if not k.startswith("_")}
+    out["crlb"] = crlb
     out["render_s"] = frame.render_s
     out["outputs"] = paths
     if args.json:
@@ -111,12 +121,7 @@ def cmd_render_and_solve(args) -> int:
               f"roll {t['roll_deg']:+.3f} pitch {t['pitch_deg']:+.3f} yaw {t['yaw_deg']:+.3f} deg")
         print(f"exposure: {row['exposure_s'] * 1e3:.3f} ms at ISO {row['iso']:.0f}; blobs found: {row['n_blobs']}")
         if row["ok"]:
-            s = row["state"]
-            print(f"solution: x {s['x_m']:+.4f} y {s['y_m']:+.4f} z {s['z_m']:+.4f} m   "
-                  f"roll {s['roll_deg']:+.3f} pitch {s['pitch_deg']:+.3f} yaw {s['yaw_deg']:+.3f} deg")
-            pe, ae = row["pos_err_vec_m"], row["att_err_vec_deg"]
-            print(f"errors:   pos_err_vec_m [{pe[0]:+.4f}, {pe[1]:+.4f}, {pe[2]:+.4f}]   "
-                  f"att_err_vec_deg [{ae[0]:+.3f}, {ae[1]:+.3f}, {ae[2]:+.3f}]   residual {row['residual_rms_px']:.3f} px")
+            print_state_table(row, crlb)
         else:
             print(f"NO SOLUTION ({row['reason']}): {row['message']}")
         for k, v in paths.items():
@@ -168,7 +173,7 @@ def cmd_range_sweep(args) -> int:
              "target_y_m": args.target_y_m, "roll_deg": args.roll_deg, "pitch_deg": args.pitch_deg,
              "yaw_deg": args.yaw_deg,
              "backdrop_distance_m": DEFAULT_BACKDROP_DISTANCE_M if args.backdrop_m is None else args.backdrop_m,
-             "ambient_radiance_w_m2_sr": args.ambient, "spp": -1 if args.spp is None else args.spp,
+             "ambient_radiance_w_m2_sr": _ambient(args), "spp": -1 if args.spp is None else args.spp,
              "roi_spp": -1 if args.roi_spp is None else args.roi_spp,
              "exposure_s": args.exposure_s or 0.0, "iso": args.iso or 0.0}
     cfg = make_config(args.camera, ranges, trials=args.trials, poses=args.poses, jitter_deg=args.jitter_deg,
@@ -214,3 +219,35 @@ def register(sub) -> None:
                    "the same object is written to summary.json")
     add_executor_options(p)
     p.set_defaults(func=cmd_range_sweep)
+
+
+def _ambient(args) -> float:
+    """``--ambient``, or the lab's fitted ambient radiance (W m^-2 sr^-1) when not given."""
+    if args.ambient is None:
+        from sim.closed_loop import DEFAULT_AMBIENT_RADIANCE_W_M2_SR
+
+        return DEFAULT_AMBIENT_RADIANCE_W_M2_SR
+    return args.ambient
+
+
+def print_state_table(row, crlb) -> None:
+    """Truth, solution, error and the Cramer-Rao 1-sigma of each state component: an error
+    many sigmas wide is bias, one within a sigma or two is noise."""
+    from svgs.frames import STATE_KEYS
+
+    t, s = row["truth_state"], row["state"]
+    err = list(row["pos_err_vec_m"]) + list(row["att_err_vec_deg"])
+    bound = (crlb or {}).get("crlb_std")
+    print(f"{'':10s} {'truth':>10s} {'solved':>10s} {'error':>10s} {'CRLB 1-sigma':>13s} {'error/CRLB':>10s}")
+    for k, e in zip(STATE_KEYS, err):
+        b = bound[k] if bound else None
+        fmt = "{:+10.4f}" if k.endswith("_m") else "{:+10.3f}"
+        bs = ("{:13.4f}" if k.endswith("_m") else "{:13.3f}").format(b) if b is not None else f"{'-':>13s}"
+        ratio = f"{e / b:+10.1f}" if b else f"{'-':>10s}"
+        print(f"{k:10s} {fmt.format(t[k])} {fmt.format(s[k])} {fmt.format(e)} {bs} {ratio}")
+    if crlb and crlb.get("centroid_sigma_px") is not None:
+        print(f"residual {row['residual_rms_px']:.3f} px; CRLB from the simulated sensor: centroid sigma "
+              f"{crlb['centroid_sigma_px']:.4f} px RMS over the spots (shot, read and 8-bit quantisation noise at "
+              f"this exposure; saturated pixels carry no information)")
+    else:
+        print(f"residual {row['residual_rms_px']:.3f} px")

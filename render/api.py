@@ -29,7 +29,7 @@ from svgs.errors import InputError, check_finite
 from svgs.frames import check_pose
 from svgs.profiles import Camera, Pattern
 
-from camera.rendered import RenderedFrame
+from camera.rendered import PointFlux, RenderedFrame
 
 from .constants import DEFAULT_ROI_SIZE_PX, DEFAULT_ROI_SPP, DEFAULT_ROI_SPP_PATH, DEFAULT_SPOT_SAMPLES, DEFAULT_SPP
 from .geometry import Reflector, SceneOptions
@@ -51,9 +51,17 @@ class RenderResult(RenderedFrame):
     ----------
     flux : ndarray of float32, shape (H, W)
         Photons per second reaching each pixel, in the camera band (noise-free
-        expectation, up to Monte Carlo error).
+        expectation, up to Monte Carlo error), before the lens PSF: everything binned into
+        the pixel where it meets the film.
     radiance : ndarray of float32, shape (H, W)
         Mean radiance over each pixel and the aperture, W m^-2 sr^-1 in band.
+    flux_diffuse : ndarray of float32, shape (H, W), optional
+        The part of ``flux`` rendered per pixel (diffuse light; with method "path",
+        everything).
+    points : camera.rendered.PointFlux, optional
+        The rest of ``flux`` (the flash through the cubes, guided method) as samples at exact
+        film positions, photons/s each: the camera applies its PSF to them before pixel
+        integration (:meth:`film`).
     truth : dict
         Pose, projections, every physical parameter used (JSON-serialisable; keyword-only).
     timings_s : dict
@@ -62,18 +70,34 @@ class RenderResult(RenderedFrame):
 
     flux: np.ndarray
     radiance: np.ndarray
+    flux_diffuse: np.ndarray | None = None
+    points: PointFlux | None = None
+
+    def film(self) -> tuple[np.ndarray, PointFlux | None]:
+        """What the camera model takes: ``(flux already integrated over pixels (H, W), point
+        samples or None)``; the two parts are disjoint and ``flux`` is their pixel sum."""
+        if self.points is None or self.flux_diffuse is None:
+            return self.flux, None
+        return self.flux_diffuse, self.points
 
     def save(self, out_dir) -> dict:
-        """Write ``flux.npy``, ``truth.json`` and ``preview.png`` into ``out_dir``."""
+        """Write ``flux.npy``, ``truth.json`` and ``preview.png`` into ``out_dir`` (and, for the
+        guided method, ``flux_diffuse.npy`` and ``points.npz``: the film before the lens PSF)."""
         from pathlib import Path
 
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         np.save(out / "flux.npy", self.flux.astype(np.float32))
+        if self.points is not None and self.flux_diffuse is not None:
+            np.save(out / "flux_diffuse.npy", self.flux_diffuse.astype(np.float32))
+            self.points.save(out / "points.npz")
         with open(out / "truth.json", "w") as fh:
             json.dump(self.truth, fh, indent=2)
         write_preview(out / "preview.png", self.flux)
-        return {"flux": str(out / "flux.npy"), "truth": str(out / "truth.json"), "preview": str(out / "preview.png")}
+        paths = {"flux": str(out / "flux.npy"), "truth": str(out / "truth.json"), "preview": str(out / "preview.png")}
+        if self.points is not None and self.flux_diffuse is not None:
+            paths.update({"flux_diffuse": str(out / "flux_diffuse.npy"), "points": str(out / "points.npz")})
+        return paths
 
 
 def write_preview(path, flux: np.ndarray) -> None:
@@ -244,10 +268,10 @@ class Renderer:
         counts = np.where(act, self.spot_samples, 0)
         R_wc, p_wc = R.T, -R.T @ t
         leds_w = self.flash.led_offsets_m @ R_wc.T + p_wc
-        img = self.spots.render(src, rad, counts, leds_w, R_wc @ np.array([0.0, 0.0, 1.0]), seed)
+        img, samples = self.spots.render(src, rad, counts, leds_w, R_wc @ np.array([0.0, 0.0, 1.0]), seed)
         info = [{"label": lab, "source_cam_m": s_.tolist(), "radius_px": float(r_), "samples": int(c)}
                 for lab, s_, r_, c in zip(labels, src, rad, counts) if c > 0]
-        return img, info
+        return img, info, samples
 
     def _radiance(self, sensor, spp, seed):
         """Mean radiance image of one sensor, float64, shape (h, w)."""
@@ -393,17 +417,25 @@ class Renderer:
             rad = self._background(R, t, spp, seed, timings)
             rois = self._render_windows(rad, spots, roi_spp, seed + 0x9E3779B1, timings)
         strategies = []
+        points = None
+        factor = self.flux_factor()
+        flux_diffuse = None
         if self.spots is not None:
             t0 = time.perf_counter()
-            spot_img, strategies = self._spot_image(R, t, seed + 0x5BD1E995)
+            spot_img, strategies, (su, sv, sval) = self._spot_image(R, t, seed + 0x5BD1E995)
+            flux_diffuse = (rad * factor).astype(np.float32)
             rad = rad + spot_img
+            ui = np.floor(su + 0.5).astype(np.int64)
+            vi = np.floor(sv + 0.5).astype(np.int64)
+            points = PointFlux(su, sv, sval * factor[vi, ui])
             timings["spots_s"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        flux = (rad * self.flux_factor()).astype(np.float32)
+        flux = (rad * factor).astype(np.float32)
         timings["convert_s"] = time.perf_counter() - t0
         truth = self.truth(R, t, targets_px, visible, spots, seed=seed, spp=spp, roi_spp=roi_spp,
                            full_frame=full_frame, rois=rois, timings=timings, strategies=strategies)
-        return RenderResult(flux=flux, truth=truth, radiance=rad.astype(np.float32), timings_s=timings)
+        return RenderResult(flux=flux, truth=truth, radiance=rad.astype(np.float32), timings_s=timings,
+                            flux_diffuse=flux_diffuse, points=points)
 
     # ------------------------------------------------------------------ truth
     def truth(self, R, t, targets_px, visible, spots, **render_info) -> dict:

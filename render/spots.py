@@ -94,14 +94,20 @@ class SpotEstimator:
 
         Returns
         -------
-        ndarray, shape (H, W), float64
-            Mean radiance per pixel (W m^-2 sr^-1).
+        img : ndarray, shape (H, W), float64
+            Mean radiance per pixel (W m^-2 sr^-1): the samples binned into the pixels that
+            contain them.
+        samples : tuple of ndarray, each shape (M,)
+            ``(u_px, v_px, radiance)`` of every scoring sample inside the frame: its film
+            position and what it adds to its pixel's mean radiance (``img`` is their sum per
+            pixel). The camera model convolves these with the lens PSF before pixel
+            integration, so their sub-pixel position survives.
         """
         counts = np.asarray(counts, np.int64)
         total = int(counts.sum())
         img = np.zeros((self.H, self.W))
         if total == 0:
-            return img
+            return img, (np.zeros(0), np.zeros(0), np.zeros(0))
         if not self.jit:
             return self._render_scalar(sources_cam, radii_px, counts, led_centres_world, led_normal_world, seed)
         strat, sx, sy, sz, rr, dens = self._upload_strategies(sources_cam, radii_px, counts)
@@ -231,9 +237,9 @@ class SpotEstimator:
             (ray, mi.Float(1.0), mi.Float(0.0), mi.Bool(True), mi.UInt32(0), rng), cond, body)
         return result
 
-    def _splat(self, u, v, result, denom) -> np.ndarray:
+    def _splat(self, u, v, result, denom):
         """Each lane's ``result / denom`` added to the pixel containing ``(u, v)``: the
-        radiance image, float64 (H, W)."""
+        radiance image, float64 (H, W), and the scoring samples ``(u, v, value)``."""
         mi, dr = self.mi, self.dr
         val = result / denom
         ui = mi.Int32(dr.floor(u + 0.5))
@@ -241,12 +247,13 @@ class SpotEstimator:
         ok = (ui >= 0) & (ui < self.W) & (vi >= 0) & (vi < self.H) & (result > 0) & (denom > 0)
         idx = dr.select(ok, mi.UInt32(vi) * self.W + mi.UInt32(ui), 0)
         val = dr.select(ok, val, 0.0)
-        dr.eval(idx, val)
+        dr.eval(idx, val, u, v)
         idx_np = to_numpy(idx, np.int64)
         val_np = to_numpy(val, np.float64)
         nz = val_np > 0
         acc = np.bincount(idx_np[nz], weights=val_np[nz], minlength=self.W * self.H)
-        return acc.reshape(self.H, self.W)
+        samples = (to_numpy(u, np.float64)[nz], to_numpy(v, np.float64)[nz], val_np[nz])
+        return acc.reshape(self.H, self.W), samples
 
     def _render_scalar(self, sources_cam, radii_px, counts, led_centres_world, led_normal_world, seed):
         """Same estimator, one sample at a time (scalar variants; slow)."""
@@ -258,6 +265,7 @@ class SpotEstimator:
         leds = np.asarray(led_centres_world, float)
         ln = np.asarray(led_normal_world, float)
         img = np.zeros((self.H, self.W))
+        su, sv, sval = [], [], []
         model = self.model
         ctx = mi.BSDFContext()
 
@@ -283,9 +291,12 @@ class SpotEstimator:
                 score = self._scalar_trace(ray, rng, leds, ln, ctx)
                 if score is not None:
                     ui, vi = int(np.floor(u + 0.5)), int(np.floor(v + 0.5))
-                    if 0 <= ui < self.W and 0 <= vi < self.H and den > 0:
+                    if 0 <= ui < self.W and 0 <= vi < self.H and den > 0 and score > 0:
                         img[vi, ui] += score / den
-        return img
+                        su.append(u)
+                        sv.append(v)
+                        sval.append(score / den)
+        return img, (np.asarray(su, float), np.asarray(sv, float), np.asarray(sval, float))
 
     def _scalar_trace(self, ray, rng, leds, ln, ctx):
         """One scalar ray through delta bounces: ``beta L0 cos^(m-1)`` if it meets an LED disk

@@ -28,11 +28,15 @@ from sim.metrics import no_pose_errors, pose_errors
 from svgs.frames import pose_from_scenario, pose_to_state, state_dict
 from svgs.profiles import Camera, Pattern
 
-#: Default lab: a matt grey backdrop 3 m behind the target, room lights off (the paper's
-#: flash-only tests). ASSUMPTION: the paper does not describe the lab background.
-DEFAULT_BACKDROP_DISTANCE_M = 3.0
-DEFAULT_BACKDROP_REFLECTANCE = 0.2
-DEFAULT_AMBIENT_RADIANCE_W_M2_SR = 0.0
+from sim.lab import load_lab
+
+#: Default lab (:mod:`sim.lab`, ``assets/labs/msfc-frl.toml``): a matt grey backdrop 3 m
+#: behind the target (ASSUMPTION) and a dimly lit room, its ambient radiance fitted to the
+#: Amaze 4G's merging range (``assets/labs/fitted/msfc-frl.toml``).
+_LAB = load_lab()
+DEFAULT_BACKDROP_DISTANCE_M = _LAB["backdrop_distance_m"]
+DEFAULT_BACKDROP_REFLECTANCE = _LAB["backdrop_reflectance"]
+DEFAULT_AMBIENT_RADIANCE_W_M2_SR = _LAB["ambient_radiance_w_m2_sr"]
 
 
 @dataclass(frozen=True)
@@ -127,12 +131,18 @@ class Frame:
     scenario : Scenario
     flux : ndarray, float32, shape (H, W)
         Photons per second per pixel (target render + backdrop + ambient).
+        Everything binned where it meets the film, before the lens PSF.
     lab : ndarray, float32, shape (H, W)
         The backdrop + ambient part of ``flux`` (so ``flux - lab`` is the target alone).
     truth : dict
         The renderer's truth record plus the lab's parameters.
     render_s : float
         Wall time of the render.
+    target_diffuse : ndarray, float32, shape (H, W), optional
+        The target's light rendered per pixel (its diffuse part); with ``points``, what the
+        camera takes instead of ``flux - lab``.
+    points : camera.rendered.PointFlux, optional
+        The target's retro spots as samples at exact film positions (photons/s each).
     """
 
     scenario: Scenario
@@ -140,6 +150,8 @@ class Frame:
     truth: dict
     render_s: float = 0.0
     lab: np.ndarray | None = None
+    target_diffuse: np.ndarray | None = None
+    points: object = None
     _phone: object = field(default=None, repr=False)
 
     @property
@@ -161,11 +173,17 @@ class Frame:
         passes; the target body's own diffuse light is ~1e-7 of the spots')."""
         from camera.phone import ALL_STAGES, Exposer
 
+        stages = ALL_STAGES if stages is None else stages
+        seed = int((self.truth.get("render") or {}).get("seed", 0) or 0)
+        lab = self.lab if self.lab is not None else np.float32(0.0)
+        if self.points is not None and self.target_diffuse is not None:
+            flux = (lab + self.target_diffuse * np.float32(target_scale)).astype(np.float32)
+            pts = self.points if target_scale == 1.0 else self.points.scaled(target_scale)
+            return Exposer(self.phone(), flux, points=pts, stages=stages, optics_seed=seed)
         flux = self.flux
         if target_scale != 1.0:
-            lab = self.lab if self.lab is not None else 0.0
             flux = (lab + (self.flux - lab) * np.float32(target_scale)).astype(np.float32)
-        return Exposer(self.phone(), flux, stages=ALL_STAGES if stages is None else stages)
+        return Exposer(self.phone(), flux, stages=stages, optics_seed=seed)
 
 
 def lab_flux(camera: Camera, scenario: Scenario) -> tuple[np.ndarray, dict]:
@@ -219,7 +237,7 @@ def render_scenario(scenario: Scenario, *, seed: int = 0) -> Frame:
     truth["lab"] = info
     truth["scenario"] = scenario.to_json()
     truth["focus_distance_m"] = focus
-    return Frame(scenario, res.flux + lab, truth, dt, lab)
+    return Frame(scenario, res.flux + lab, truth, dt, lab, target_diffuse=res.flux_diffuse, points=res.points)
 
 
 def solver_camera(camera: Camera, image_shape) -> Camera:

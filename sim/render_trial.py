@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.closed_loop import DEFAULT_AMBIENT_RADIANCE_W_M2_SR, DEFAULT_BACKDROP_DISTANCE_M
 from sim.metrics import (
     ATT_ERR_VEC_DEG,
     ERR_KEYS,
@@ -57,10 +58,12 @@ THRESHOLD_AUTO, THRESHOLD_OTSU = 0.0, -1.0
 
 RENDER_PARAMETERS = {
     **{k: GEOMETRIC_PARAMETERS[k] for k in _POSE},
-    "backdrop_distance_m": Parameter("backdrop_distance_m", "m", "grey backdrop behind the target (0: none)", 3.0, True,
+    "backdrop_distance_m": Parameter("backdrop_distance_m", "m", "grey backdrop behind the target (0: none)",
+                                     DEFAULT_BACKDROP_DISTANCE_M, True,
                                      lower=0.0),
     "ambient_radiance_w_m2_sr": Parameter("ambient_radiance_w_m2_sr", "W m^-2 sr^-1",
-                                          "uniform ambient scene radiance from room lights, in band", 0.0, True, lower=0.0),
+                                          "uniform ambient scene radiance from room lights, in band (default: the lab's, sim.lab)",
+                                          DEFAULT_AMBIENT_RADIANCE_W_M2_SR, True, lower=0.0),
     "spp": Parameter("spp", "1", "samples per pixel of the full frame (-1: the renderer's default)", -1.0, True,
                      lower=-1.0),
     "roi_spp": Parameter("roi_spp", "1", "samples per pixel in the spot windows (-1: the renderer's default)", -1.0,

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.closed_loop import DEFAULT_AMBIENT_RADIANCE_W_M2_SR, DEFAULT_BACKDROP_DISTANCE_M
 from svgs.errors import InputError
 from svgs.frames import STATE_KEYS
 
@@ -82,8 +83,8 @@ class RangeSweepConfig:
     roll_deg: float = 0.0
     pitch_deg: float = 0.0
     yaw_deg: float = 0.0
-    backdrop_distance_m: float = 3.0
-    ambient_radiance_w_m2_sr: float = 0.0
+    backdrop_distance_m: float = DEFAULT_BACKDROP_DISTANCE_M
+    ambient_radiance_w_m2_sr: float = DEFAULT_AMBIENT_RADIANCE_W_M2_SR
     spp: int = -1
     roi_spp: int = -1
     exposure_s: float = 0.0

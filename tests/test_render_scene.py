@@ -186,7 +186,7 @@ def test_cli_render_and_bad_input(tmp_path, capsys):
 
     out = tmp_path / "r10"
     rc = main(["render", "--camera", "galaxy-nexus", "--range", "10", "--roll", "2", "--yaw", "-3",
-               "--spp", "4", "--roi-spp", "16", "--seed", "1", "--out", str(out)])
+               "--spp", "4", "--roi-spp", "16", "--seed", "1", "--ambient", "0", "--out", str(out)])
     assert rc == 0
     flux = np.load(out / "flux.npy")
     assert flux.dtype == np.float32 and flux.shape == (1944, 2592)

@@ -122,7 +122,7 @@ def _overlays():
 
 def test_every_fitted_overlay_belongs_to_a_shipped_profile():
     names = [p.stem for p in _overlays()]
-    assert {"galaxy-nexus", "htc-amaze-4g"} <= set(names)  # the two phones carry the fitted glare
+    assert {"galaxy-nexus"} <= set(names)  # the Nexus carries its fitted exposure
     assert set(names) <= {p.stem for p in CAMERAS_DIR.glob("*.toml")}
 
 

@@ -1,6 +1,8 @@
 """The phone camera model: photon flux -> the image a phone would deliver.
 
-Flux (photons/s/px, from :mod:`render`) -> optics PSF (core + glare + ghosts) -> exposure
+Flux (photons/s/px, from :mod:`render`; the retro spots as sub-pixel point samples) -> optics
+PSF (Airy + aberration core, glare wings, ghosts; :mod:`camera.phone.optics`), integrated over
+each pixel -> exposure
 (auto or manual) -> sensor in electrons (shot, dark, DSNU/PRNU, blooming) -> readout (read
 noise, gain, black level, ADC) = **raw** (DN) -> ISP (tone curve, 8 bits, downscale, JPEG) =
 **image** (uint8). No Mitsuba here: it runs on any flux image.
@@ -23,7 +25,7 @@ import numpy as np
 from svgs.errors import InputError
 
 from camera.phone.isp import ExposureSolver, auto_exposure, downscale, jpeg_roundtrip, metering_weights, tone_lut
-from camera.phone.optics import apply_psf, core_sigma_px
+from camera.phone.optics import apply_psf, core_psf
 from camera.phone.params import ALL_STAGES, PhoneParams, check_stages
 from camera.phone.sensor import bloom, electrons, fixed_patterns, readout
 from camera.tonemap import gamma_u8
@@ -85,11 +87,31 @@ class PhoneCamera:
             self._fpn = fixed_patterns(self.params.sensor, self.shape)
         return self._fpn
 
-    def optics(self, flux_ph_s: np.ndarray) -> np.ndarray:
-        """Apply the lens PSF to a flux image (photons/s/px). Returns float32 (H, W)."""
+    def core_psf(self):
+        """The lens' core PSF (:class:`camera.phone.psf.CorePSF`): Airy (x) aberration."""
         p = self.params
-        s = core_sigma_px(p.f_number, p.band_nm, p.sensor.pixel_pitch_m, p.glare.aberration_sigma_px)
-        return apply_psf(flux_ph_s, p.glare, s, (self.camera.cx, self.camera.cy))
+        return core_psf(p.f_number, p.band_nm, p.sensor.pixel_pitch_m, p.glare.aberration_sigma_px)
+
+    def optics(self, flux_ph_s: np.ndarray, points=None, *, seed: int = 0) -> np.ndarray:
+        """The optical image: the lens PSF applied to a flux image (photons/s/px, already
+        integrated over pixels) and to point samples at sub-pixel positions
+        (:class:`camera.rendered.PointFlux`), integrated over pixels. ``seed`` seeds the
+        Monte Carlo convolution of the points. Returns float32 (H, W)."""
+        return apply_psf(flux_ph_s, self.params.glare, self.core_psf(), (self.camera.cx, self.camera.cy),
+                         points=points, rng=np.random.default_rng(seed))
+
+    def check_points(self, points):
+        """Validate point samples (None passes)."""
+        if points is None:
+            return None
+        from camera.rendered import PointFlux
+
+        if not isinstance(points, PointFlux):
+            raise InputError(f"points: expected a camera.rendered.PointFlux, got {type(points).__name__}")
+        if len(points) and not (np.all(np.isfinite(points.u_px)) and np.all(np.isfinite(points.v_px))
+                                and np.all(np.isfinite(points.rate_ph_s)) and points.rate_ph_s.min() >= 0):
+            raise InputError("points: expected finite positions and finite, non-negative photons per second")
+        return points
 
     def check_flux(self, flux_ph_s) -> np.ndarray:
         f = np.asarray(flux_ph_s)
@@ -99,13 +121,14 @@ class PhoneCamera:
             raise InputError("flux: expected finite, non-negative photons per second per pixel")
         return f.astype(np.float32, copy=False)
 
-    def exposer(self, flux_ph_s, *, stages=ALL_STAGES) -> "Exposer":
-        return Exposer(self, flux_ph_s, stages=stages)
+    def exposer(self, flux_ph_s, *, points=None, stages=ALL_STAGES, optics_seed: int = 0) -> "Exposer":
+        return Exposer(self, flux_ph_s, points=points, stages=stages, optics_seed=optics_seed)
 
-    def expose(self, flux_ph_s, *, seed: int = 0, exposure_s=None, iso=None, stages=ALL_STAGES, keep_electrons=False):
+    def expose(self, flux_ph_s, *, points=None, seed: int = 0, exposure_s=None, iso=None, stages=ALL_STAGES,
+               keep_electrons=False):
         """One exposure of a flux image (convenience for ``exposer(flux).expose(...)``)."""
-        return self.exposer(flux_ph_s, stages=stages).expose(seed=seed, exposure_s=exposure_s, iso=iso,
-                                                              keep_electrons=keep_electrons)
+        return self.exposer(flux_ph_s, points=points, stages=stages, optics_seed=seed).expose(
+            seed=seed, exposure_s=exposure_s, iso=iso, keep_electrons=keep_electrons)
 
 
 class Exposer:
@@ -115,16 +138,25 @@ class Exposer:
     ----------
     phone : PhoneCamera
     flux_ph_s : ndarray, shape (H, W)
-        Noise-free photon flux, photons per second per pixel (before the lens PSF).
+        Noise-free photon flux, photons per second per pixel (before the lens PSF), of the
+        light already integrated over pixels (the diffuse part of a render).
+    points : camera.rendered.PointFlux, optional
+        Light at exact sub-pixel film positions (a render's retro spots), not in ``flux_ph_s``.
     stages : sequence of str
         Pipeline stages that are on (see the module docstring).
+    optics_seed : int
+        Seed of the Monte Carlo convolution of the points with the PSF.
     """
 
-    def __init__(self, phone: PhoneCamera, flux_ph_s, *, stages=ALL_STAGES):
+    def __init__(self, phone: PhoneCamera, flux_ph_s, *, points=None, stages=ALL_STAGES, optics_seed: int = 0):
         self.phone = phone
         self.stages = check_stages(stages)
         f = phone.check_flux(flux_ph_s)
-        self.flux_optics = phone.optics(f) if "glare" in self.stages else f.copy()
+        pts = phone.check_points(points)
+        if "glare" in self.stages:
+            self.flux_optics = phone.optics(f, pts, seed=optics_seed)
+        else:  # a perfect lens: each point counts in its own pixel
+            self.flux_optics = f.copy() if pts is None else (f + pts.binned(f.shape)).astype(np.float32)
         self._solver = None
         p = phone.params
         self._lut = tone_lut(p.sensor, p.isp.gamma, "tone" in self.stages)

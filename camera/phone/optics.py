@@ -1,19 +1,24 @@
 """Lens point-spread function: diffraction + aberration core, power-law glare wings, ghosts.
 
-PSF = (1 - eta) * core + eta * wings (+ ghosts, which take their share from the core):
+PSF = (1 - eta - sum ghosts) * core + eta * wings (+ ghosts):
 
-- **core**: a Gaussian of variance ``sigma_airy^2 + sigma_ab^2`` px^2, with
-  ``sigma_airy = 0.42 lambda N / pitch`` (the Gaussian that best fits the Airy disk of an
-  f/N lens) at the band's mean wavelength, and ``sigma_ab`` the lens' aberration blur;
+- **core** (:class:`camera.phone.psf.CorePSF`): the Airy pattern of the f/N aperture at the
+  band's middle wavelength convolved with the aberration Gaussian ``sigma_ab``. Point samples
+  (:class:`camera.rendered.PointFlux`, the retro spots) go through it by Monte Carlo
+  convolution and exact pixel-area integration; pixel images (the diffuse light) by the
+  pixel-integrated kernel. Light that reaches the film as a pixel image and as points is never
+  blurred twice: each part takes one path.
 - **wings** (veiling glare, ISO 9358): ``w(r) ~ (1 + (r / r_c)^2)^(-alpha / 2)`` out to
   ``wing_radius_px``, normalised to unit sum; share ``eta = veiling_fraction``;
 - **ghosts**: images of the scene scaled by ``scale`` about the principal point (negative:
   mirrored through it), blurred, each with a share ``fraction``.
 
-Scaling to full-resolution frames: the core is a separable blur at full resolution; the
-wings are smooth, so they are convolved by FFT on a grid binned by ``s`` (chosen so that
-grid has at most ~0.5 Mpx) and spread back by bilinear interpolation. Energy is conserved
-except what the wings carry off the frame.
+The wings are smooth, so they are convolved by FFT on a grid binned by ``s`` (chosen so that
+grid has at most ~0.5 Mpx). The binning and the spreading back are a pair of linear
+(tent) interpolations, and points enter bilinearly: each keeps a spot's first moment exactly,
+so the wings broaden a spot but never move its centroid (before, a sum-pool and a bilinear
+spread moved it by up to ``s / 2`` times the wing share). Energy is conserved except what
+leaves the frame.
 """
 
 from __future__ import annotations
@@ -25,16 +30,25 @@ import numpy as np
 from scipy.signal import fftconvolve
 
 from camera.phone.params import GlareParams
+from camera.phone.psf import CorePSF
 
 #: Coarse grid size for the wing convolution, pixels.
 WING_GRID_PX = 1 << 19
 
 
 def core_sigma_px(f_number: float, band_nm, pitch_m: float, aberration_sigma_px: float) -> float:
-    """Standard deviation (px) of the Gaussian core of the PSF."""
+    """Standard deviation (px) of the Gaussian that best fits the PSF core (0.42 lambda N for
+    the Airy disk at the band's middle, in quadrature with the aberration): for summaries and
+    the Cramer-Rao bound; the image itself is formed with the Airy pattern (:func:`core_psf`)."""
     lam_m = 0.5 * (band_nm[0] + band_nm[1]) * 1e-9
     s_airy = 0.42 * lam_m * f_number / pitch_m
     return math.sqrt(s_airy**2 + aberration_sigma_px**2)
+
+
+def core_psf(f_number: float, band_nm, pitch_m: float, aberration_sigma_px: float, wavelength_nm=None) -> CorePSF:
+    """The core PSF: Airy at ``wavelength_nm`` (default: the band's middle) (x) aberration."""
+    lam = 0.5 * (band_nm[0] + band_nm[1]) if wavelength_nm is None else float(wavelength_nm)
+    return CorePSF.from_optics(f_number, lam, pitch_m, aberration_sigma_px)
 
 
 def wing_kernel(glare: GlareParams, step_px: int) -> np.ndarray:
@@ -47,17 +61,62 @@ def wing_kernel(glare: GlareParams, step_px: int) -> np.ndarray:
     return (k / k.sum()).astype(np.float64)
 
 
-def apply_psf(flux: np.ndarray, glare: GlareParams, sigma_core_px: float, principal_point=None) -> np.ndarray:
-    """Convolve a flux image (any linear unit per pixel) with the lens PSF.
+def tent_matrix(n: int, s: int):
+    """Linear (tent) interpolation weights between ``n`` fine samples and ``ceil(n / s)``
+    coarse ones centred at ``k s + (s - 1) / 2``: sparse, shape (n_coarse, n).
+
+    Each fine sample's weights sum to 1 and reproduce its position (first moment) exactly;
+    at the two ends the weight that would fall outside goes to the end cell.
+    """
+    from scipy.sparse import csr_matrix
+
+    nc = -(-n // s)
+    x = np.arange(n, dtype=float)
+    t = (x - (s - 1) / 2.0) / s
+    k0 = np.floor(t)
+    f = t - k0
+    k0 = k0.astype(int)
+    rows = np.concatenate([np.clip(k0, 0, nc - 1), np.clip(k0 + 1, 0, nc - 1)])
+    cols = np.concatenate([np.arange(n), np.arange(n)])
+    data = np.concatenate([1.0 - f, f])
+    return csr_matrix((data, (rows, cols)), shape=(nc, n))
+
+
+def wings(image, glare: GlareParams) -> np.ndarray:
+    """The wing PSF applied to a pixel image (unit-sum kernel; multiply by the share), float64.
+
+    Coarse grid: tent binning, FFT convolution, tent spreading back (first moments kept)."""
+    f = np.asarray(image, np.float64)
+    H, W = f.shape
+    s = max(1, int(math.ceil(math.sqrt(H * W / WING_GRID_PX))))
+    if s == 1:
+        return fftconvolve(f, wing_kernel(glare, 1), mode="same")
+    Ay, Ax = tent_matrix(H, s), tent_matrix(W, s)
+    coarse = (Ax @ (Ay @ f).T).T  # (Hc, Wc)
+    wc = fftconvolve(coarse, wing_kernel(glare, s), mode="same")
+    fine = (Ax.T @ (Ay.T @ wc).T).T / float(s * s)
+    return fine
+
+
+def apply_psf(flux: np.ndarray, glare: GlareParams, core, principal_point=None, *, points=None,
+              rng: np.random.Generator | None = None) -> np.ndarray:
+    """The optical image: a flux image (and point samples) through the lens PSF, integrated
+    over pixels.
 
     Parameters
     ----------
     flux : ndarray, shape (H, W)
+        Light already integrated over pixels (any linear unit per pixel; the diffuse part).
     glare : GlareParams
-    sigma_core_px : float
-        From :func:`core_sigma_px`.
+    core : CorePSF or float
+        The core PSF (:func:`core_psf`); a float is a Gaussian core of that sigma (px), kept
+        for comparisons with the earlier model.
     principal_point : (cx, cy), optional
         Centre of the ghost images (default: image centre).
+    points : camera.rendered.PointFlux, optional
+        Light at exact sub-pixel film positions (the same unit per sample).
+    rng : numpy.random.Generator, optional
+        Draws of the Monte Carlo convolution of the points (default: seed 0).
 
     Returns
     -------
@@ -68,28 +127,30 @@ def apply_psf(flux: np.ndarray, glare: GlareParams, sigma_core_px: float, princi
     eta = glare.veiling_fraction
     ghost_share = sum(g[0] for g in glare.ghosts)
     core_share = 1.0 - eta - ghost_share
-    if sigma_core_px > 0:
-        out = cv2.GaussianBlur(f, (0, 0), sigmaX=sigma_core_px, sigmaY=sigma_core_px, borderType=cv2.BORDER_CONSTANT)
-    else:
-        out = f.copy()
+    has_points = points is not None and len(points) > 0
+    if isinstance(core, CorePSF):
+        out = core.convolve(f).astype(np.float64)
+        if has_points:
+            rng = np.random.default_rng(0) if rng is None else rng
+            out += core.splat(points.u_px, points.v_px, points.rate_ph_s, (H, W), rng)
+    else:  # a Gaussian core of sigma ``core`` px, on pixels
+        sig = float(core)
+        g = f + points.binned((H, W)).astype(np.float32) if has_points else f
+        out = (cv2.GaussianBlur(g, (0, 0), sigmaX=sig, sigmaY=sig, borderType=cv2.BORDER_CONSTANT)
+               if sig > 0 else g.copy()).astype(np.float64)
     out *= core_share
-    if eta > 0:
-        s = max(1, int(math.ceil(math.sqrt(H * W / WING_GRID_PX))))
-        Hc, Wc = -(-H // s), -(-W // s)
-        pad = np.zeros((Hc * s, Wc * s), np.float32)
-        pad[:H, :W] = f
-        coarse = pad.reshape(Hc, s, Wc, s).sum(axis=(1, 3), dtype=np.float64)  # sum-pool: energy kept
-        wc = fftconvolve(coarse, wing_kernel(glare, s), mode="same")
-        # spread each coarse pixel's energy back over its s x s fine pixels, smoothly
-        fine = cv2.resize(wc.astype(np.float32), (Wc * s, Hc * s), interpolation=cv2.INTER_LINEAR) / (s * s)
-        out += eta * fine[:H, :W]
-    if glare.ghosts:
-        cx, cy = principal_point if principal_point is not None else ((W - 1) / 2.0, (H - 1) / 2.0)
-        for frac, scale, blur in glare.ghosts:
-            A = np.array([[scale, 0.0, cx * (1 - scale)], [0.0, scale, cy * (1 - scale)]], np.float32)
-            g = cv2.warpAffine(f, A, (W, H), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-            g /= scale * scale  # warpAffine samples: keep the energy
-            if blur > 0:
-                g = cv2.GaussianBlur(g, (0, 0), sigmaX=blur, sigmaY=blur, borderType=cv2.BORDER_CONSTANT)
-            out += frac * g
-    return out
+    if eta > 0 or glare.ghosts:
+        whole = f.astype(np.float64) + (points.bilinear((H, W)) if has_points else 0.0)
+        if eta > 0:
+            out += eta * wings(whole, glare)
+        if glare.ghosts:
+            cx, cy = principal_point if principal_point is not None else ((W - 1) / 2.0, (H - 1) / 2.0)
+            w32 = whole.astype(np.float32)
+            for frac, scale, blur in glare.ghosts:
+                A = np.array([[scale, 0.0, cx * (1 - scale)], [0.0, scale, cy * (1 - scale)]], np.float32)
+                g = cv2.warpAffine(w32, A, (W, H), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+                g /= scale * scale  # warpAffine samples: keep the energy
+                if blur > 0:
+                    g = cv2.GaussianBlur(g, (0, 0), sigmaX=blur, sigmaY=blur, borderType=cv2.BORDER_CONSTANT)
+                out += frac * g
+    return out.astype(np.float32)

@@ -1,0 +1,318 @@
+"""The lens' core PSF: the Airy pattern of the f/N aperture convolved with the aberration blur.
+
+Image formation in the physical order: film irradiance at sub-pixel resolution -> lens PSF ->
+integration over each pixel's area -> sensor. Two kinds of input reach the lens:
+
+- **points** (:class:`camera.rendered.PointFlux`): the flash seen through the cubes, as the
+  guided estimator's samples, each at its exact film position. :meth:`CorePSF.splat` displaces
+  every sample's film point by draws from the PSF (a Monte Carlo convolution, exact in
+  expectation, Airy tail included) and counts it in the pixel that contains it: pixel ``i``
+  spans ``[i - 1/2, i + 1/2)`` (OpenCV's pixel-centre convention), so the pixel-area
+  integration is exact and nothing of the sub-pixel position is lost to the grid.
+- **pixel images** (the diffuse light, already integrated over each pixel by the renderer's box
+  filter): :meth:`CorePSF.convolve` convolves them with the pixel-integrated PSF sampled at
+  integer offsets (:meth:`CorePSF.pixel_kernel`). For content that varies slowly over a pixel
+  this is the same integral; at a sharp edge it adds one pixel of box smoothing, symmetric, so
+  an edge's position is kept (``tests/test_camera_psf.py``).
+
+The PSF (film coordinates in pixels)::
+
+    PSF = Airy(lambda N / pitch) (x) Gaussian(aberration_sigma_px)
+    Airy: I(r) ~ [2 J1(x) / x]^2,  x = pi r / (lambda N / pitch)
+    encircled energy EE(x) = 1 - J0(x)^2 - J1(x)^2 (Born & Wolf, Principles of Optics, 8.5)
+
+A monochromatic Airy pattern at ``wavelength_nm`` (the middle of the band unless a colour
+channel says otherwise, see :mod:`camera.phone.cfa`). The Gaussian stands for the lens'
+aberrations; defocus is not here: the renderer's thin lens traces it.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Encircled-energy table of the Airy pattern: x = pi r / (lambda N) from 0 to this value.
+AIRY_TABLE_X_MAX = 400.0
+AIRY_TABLE_STEP = 0.002
+#: Draws displaced further than this are dropped (they leave any frame), px.
+MAX_DISPLACEMENT_PX = 4000.0
+#: Monte Carlo convolution: at least this many PSF draws per frame (several per sample when a
+#: frame has few samples), so that the draws add a negligible noise to the spots.
+MIN_DRAWS = 1 << 20
+#: At most this many draws per sample.
+MAX_DRAWS_PER_SAMPLE = 64
+#: The Airy pattern inside this radius is drawn (Monte Carlo); outside it, where draws would
+#: be sparse specks, it is a deterministic kernel on the points' bilinear pixel image, px.
+AIRY_DRAWN_RADIUS_PX = 6.0
+#: Half-size of that outer kernel, px; it carries the whole Airy energy beyond the drawn
+#: radius (the share beyond this half-size, ~0.3 % at f/2.4 and 1.4 um, is folded into it).
+AIRY_OUTER_RADIUS_PX = 64
+#: Half-size of the pixel kernel used on pixel images (the diffuse light), px. The Airy
+#: tail beyond it (2.4 % of the energy at f/2.4 and 1.4 um) is folded back by normalisation.
+PIXEL_KERNEL_RADIUS_PX = 8
+
+
+@functools.lru_cache(maxsize=4)
+def _airy_ee_table():
+    from scipy.special import j0, j1
+
+    x = np.arange(0.0, AIRY_TABLE_X_MAX + AIRY_TABLE_STEP / 2, AIRY_TABLE_STEP)
+    ee = 1.0 - j0(x) ** 2 - j1(x) ** 2
+    ee[0] = 0.0
+    ee = np.maximum.accumulate(ee)  # monotone for the inverse (flat only at the dark rings)
+    return x, ee
+
+
+def airy_encircled_energy(r_px, lam_over_d_px: float) -> np.ndarray:
+    """Fraction of the Airy pattern's energy within radius ``r_px`` (px)."""
+    from scipy.special import j0, j1
+
+    x = np.pi * np.asarray(r_px, float) / lam_over_d_px
+    return 1.0 - j0(x) ** 2 - j1(x) ** 2
+
+
+#: Inverse encircled energy tabulated at this many uniform steps of EE in [0, INVERSE_EE_MAX].
+INVERSE_EE_STEPS = 1 << 16
+INVERSE_EE_MAX = 0.998
+
+
+@functools.lru_cache(maxsize=1)
+def _inverse_ee_table():
+    x_t, ee_t = _airy_ee_table()
+    u = np.linspace(0.0, INVERSE_EE_MAX, INVERSE_EE_STEPS + 1)
+    return np.interp(u, ee_t, x_t)
+
+
+def sample_airy_radius_px(u, lam_over_d_px: float) -> np.ndarray:
+    """Radii (px) of Airy-distributed points from uniform numbers ``u`` in [0, 1).
+
+    Inverts the encircled energy ``EE(x) = 1 - J0^2 - J1^2`` by a table at uniform steps of EE
+    (linear interpolation, O(1) per draw) up to EE = 0.998; beyond it the asymptote
+    ``1 - EE(x) = 2 / (pi x)`` (x > 318, where it holds to 0.3 %).
+    """
+    inv = _inverse_ee_table()
+    u = np.asarray(u, float)
+    t = np.minimum(u, INVERSE_EE_MAX) * (INVERSE_EE_STEPS / INVERSE_EE_MAX)
+    i = np.minimum(t.astype(np.int64), INVERSE_EE_STEPS - 1)
+    f = t - i
+    x = inv[i] * (1.0 - f) + inv[i + 1] * f
+    tail = u > INVERSE_EE_MAX
+    if np.any(tail):
+        x[tail] = 2.0 / (np.pi * np.maximum(1.0 - u[tail], 1e-300))
+    return x * lam_over_d_px / np.pi
+
+
+@dataclass(frozen=True)
+class CorePSF:
+    """Airy pattern (x) aberration Gaussian, in pixels.
+
+    Attributes
+    ----------
+    lam_over_d_px : float
+        ``lambda N / pitch``: wavelength times f-number over the pixel pitch, px (the Airy
+        pattern's first dark ring is at 1.22 of it).
+    aberration_sigma_px : float
+        Standard deviation of the aberration Gaussian, px.
+    """
+
+    lam_over_d_px: float
+    aberration_sigma_px: float
+
+    @classmethod
+    def from_optics(cls, f_number: float, wavelength_nm: float, pixel_pitch_m: float,
+                    aberration_sigma_px: float) -> "CorePSF":
+        """The PSF of an f/N lens at one wavelength on pixels of a given pitch."""
+        return cls(float(wavelength_nm) * 1e-9 * float(f_number) / float(pixel_pitch_m), float(aberration_sigma_px))
+
+    @property
+    def sigma_equivalent_px(self) -> float:
+        """Standard deviation of the Gaussian that best fits the core (0.42 lambda N for the
+        Airy disk, in quadrature with the aberration), px: for summaries and the CRLB."""
+        return math.hypot(0.42 * self.lam_over_d_px, self.aberration_sigma_px)
+
+    # ------------------------------------------------------------------ points
+    @property
+    def drawn_energy(self) -> float:
+        """Share of the Airy pattern's energy inside :data:`AIRY_DRAWN_RADIUS_PX`."""
+        return float(airy_encircled_energy(AIRY_DRAWN_RADIUS_PX, self.lam_over_d_px))
+
+    def sample_offsets_px(self, n: int, rng: np.random.Generator, *, inner: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """``n`` displacements (dx, dy) px drawn from the PSF (``inner``: from its Airy part
+        inside :data:`AIRY_DRAWN_RADIUS_PX` only, renormalised)."""
+        u = rng.random(n)
+        if inner:
+            u *= self.drawn_energy
+        r = sample_airy_radius_px(u, self.lam_over_d_px)
+        phi = rng.random(n) * (2.0 * np.pi)
+        dx = r * np.cos(phi)
+        dy = r * np.sin(phi)
+        if self.aberration_sigma_px > 0:
+            dx += rng.normal(0.0, self.aberration_sigma_px, n)
+            dy += rng.normal(0.0, self.aberration_sigma_px, n)
+        return dx, dy
+
+    def splat(self, u_px, v_px, weight, shape, rng: np.random.Generator, *, min_draws: int = MIN_DRAWS) -> np.ndarray:
+        """Monte Carlo convolution of point samples with the PSF, integrated over pixels.
+
+        Parameters
+        ----------
+        u_px, v_px : ndarray, shape (M,)
+            Film positions of the samples, px (pixel centres at integers).
+        weight : ndarray, shape (M,)
+            What each sample carries (photons/s, say).
+        shape : (H, W)
+        rng : numpy.random.Generator
+        min_draws : int
+            At least this many PSF draws in all (``ceil(min_draws / M)`` per sample, at most
+            :data:`MAX_DRAWS_PER_SAMPLE`).
+
+        Returns
+        -------
+        ndarray, float64, shape (H, W)
+            Sum of the weights landing in each pixel (what leaves the frame is lost).
+
+        Notes
+        -----
+        The Airy pattern inside :data:`AIRY_DRAWN_RADIUS_PX` (about 97 % of its energy) and the
+        aberration Gaussian are drawn; the Airy tail beyond it is added deterministically
+        (:meth:`outer_kernel` on the points spread bilinearly over pixel centres, which keeps
+        their first moment), so the faint tail is smooth rather than a sprinkle of draws.
+        """
+        H, W = int(shape[0]), int(shape[1])
+        u = np.asarray(u_px, float).ravel()
+        v = np.asarray(v_px, float).ravel()
+        w = np.asarray(weight, float).ravel()
+        out = np.zeros(H * W)
+        M = u.size
+        if M == 0:
+            return out.reshape(H, W)
+        e_in = self.drawn_energy
+        self._add_outer(out.reshape(H, W), u, v, w * (1.0 - e_in))
+        w = w * e_in
+        k = int(min(MAX_DRAWS_PER_SAMPLE, max(1, math.ceil(min_draws / M))))
+        # draw in chunks to bound memory
+        chunk = max(1, (1 << 21) // k)
+        for s in range(0, M, chunk):
+            uu, vv, ww = u[s:s + chunk], v[s:s + chunk], w[s:s + chunk]
+            n = uu.size * k
+            dx, dy = self.sample_offsets_px(n, rng, inner=True)
+            x = np.repeat(uu, k) + dx
+            y = np.repeat(vv, k) + dy
+            xi = np.floor(x + 0.5).astype(np.int64)
+            yi = np.floor(y + 0.5).astype(np.int64)
+            ok = (xi >= 0) & (xi < W) & (yi >= 0) & (yi < H)
+            xi, yi = xi[ok], yi[ok]
+            if xi.size == 0:
+                continue
+            # accumulate over the bounding box only (most frames: a few small spots)
+            x0, x1, y0, y1 = int(xi.min()), int(xi.max()) + 1, int(yi.min()), int(yi.max()) + 1
+            bw = x1 - x0
+            box = np.bincount((yi - y0) * bw + (xi - x0), weights=np.repeat(ww / k, k)[ok],
+                              minlength=(y1 - y0) * bw)
+            out2 = out.reshape(H, W)
+            out2[y0:y1, x0:x1] += box.reshape(y1 - y0, bw)
+        return out.reshape(H, W)
+
+    def outer_kernel(self) -> np.ndarray:
+        """The Airy pattern beyond :data:`AIRY_DRAWN_RADIUS_PX`, convolved with the aberration
+        Gaussian and integrated over a pixel, at integer offsets; unit sum.
+        Shape (2 R + 1, 2 R + 1), R = :data:`AIRY_OUTER_RADIUS_PX`."""
+        return _outer_kernel(self.lam_over_d_px, self.aberration_sigma_px).copy()
+
+    def _add_outer(self, out, u, v, w) -> None:
+        """Add the outer Airy tail of points ``(u, v)`` carrying ``w`` into ``out`` (H, W)."""
+        from scipy.signal import fftconvolve
+
+        H, W = out.shape
+        R = AIRY_OUTER_RADIUS_PX
+        u0 = np.floor(u)
+        v0 = np.floor(v)
+        ok = (u0 >= -R) & (u0 < W + R) & (v0 >= -R) & (v0 < H + R)
+        if not np.any(ok):
+            return
+        u, v, w, u0, v0 = u[ok], v[ok], w[ok], u0[ok], v0[ok]
+        x0, y0 = int(u0.min()), int(v0.min())
+        bw, bh = int(u0.max()) - x0 + 2, int(v0.max()) - y0 + 2
+        fu, fv = u - u0, v - v0
+        ix, iy = (u0 - x0).astype(np.int64), (v0 - y0).astype(np.int64)
+        box = np.zeros(bh * bw)
+        for dx, dy, ww in ((0, 0, (1 - fu) * (1 - fv)), (1, 0, fu * (1 - fv)), (0, 1, (1 - fu) * fv), (1, 1, fu * fv)):
+            box += np.bincount((iy + dy) * bw + ix + dx, weights=w * ww, minlength=bh * bw)
+        conv = fftconvolve(box.reshape(bh, bw), self.outer_kernel(), mode="full")  # origin at (x0 - R, y0 - R)
+        X0, Y0 = x0 - R, y0 - R
+        ys, xs = max(0, Y0), max(0, X0)
+        ye, xe = min(H, Y0 + conv.shape[0]), min(W, X0 + conv.shape[1])
+        if ye > ys and xe > xs:
+            out[ys:ye, xs:xe] += conv[ys - Y0:ye - Y0, xs - X0:xe - X0]
+
+    # ------------------------------------------------------------------ pixel images
+    def pixel_kernel(self, radius_px: int = PIXEL_KERNEL_RADIUS_PX, *, normalise: bool = True) -> np.ndarray:
+        """The PSF integrated over a pixel, at integer offsets: the energy a point at the centre
+        of pixel (0, 0) puts into pixel (i, j).
+
+        Computed in the frequency domain, exactly up to the periodic wrap of a 128 px grid:
+        ``OTF_Airy(nu) exp(-2 pi^2 sigma^2 nu^2) sinc(nu_x) sinc(nu_y)`` (the Airy OTF of a
+        circular pupil, cut off at ``1 / (lambda N)``).
+
+        Returns
+        -------
+        ndarray, float64, shape (2 radius_px + 1, 2 radius_px + 1)
+            Sums to 1 when ``normalise`` (the tail beyond ``radius_px`` folded back), else to
+            the energy inside.
+        """
+        return _pixel_kernel(self.lam_over_d_px, self.aberration_sigma_px, int(radius_px), bool(normalise)).copy()
+
+    def convolve(self, image, radius_px: int = PIXEL_KERNEL_RADIUS_PX) -> np.ndarray:
+        """Convolve a pixel image (already integrated over pixels) with :meth:`pixel_kernel`.
+        float32 (H, W); zero outside the frame."""
+        import cv2
+
+        k = self.pixel_kernel(radius_px).astype(np.float32)
+        f = np.ascontiguousarray(image, np.float32)
+        return cv2.filter2D(f, -1, k, borderType=cv2.BORDER_CONSTANT)
+
+
+@functools.lru_cache(maxsize=16)
+def _pixel_kernel(lam_over_d_px: float, sigma_px: float, radius: int, normalise: bool) -> np.ndarray:
+    L, q = 128, 4  # period (px) and oversampling of the frequency grid
+    n = L * q
+    nu = np.fft.fftfreq(n, d=1.0 / q)  # cycles per pixel
+    nx, ny = np.meshgrid(nu, nu)
+    rho = np.hypot(nx, ny)
+    s = np.clip(rho * lam_over_d_px, 0.0, 1.0)
+    otf = (2.0 / np.pi) * (np.arccos(s) - s * np.sqrt(1.0 - s * s))
+    otf *= np.exp(-2.0 * np.pi**2 * sigma_px**2 * rho**2) * np.sinc(nx) * np.sinc(ny)
+    f = np.real(np.fft.ifft2(otf)) * q * q  # the pixel-integrated PSF at 1/q px spacing
+    f = np.fft.fftshift(f)[::q, ::q]  # integer offsets; centre at L/2
+    c = L // 2
+    k = f[c - radius:c + radius + 1, c - radius:c + radius + 1]
+    k = np.maximum(k, 0.0)
+    return k / k.sum() if normalise else k
+
+
+@functools.lru_cache(maxsize=16)
+def _outer_kernel(lam_over_d_px: float, sigma_px: float) -> np.ndarray:
+    from scipy.ndimage import convolve1d, gaussian_filter
+    from scipy.special import j1
+
+    R, q = AIRY_OUTER_RADIUS_PX, 8
+    n = (2 * (R + 3)) * q + 1  # fine grid, odd, centred on the pixel centre
+    c = n // 2
+    y, x = (np.mgrid[:n, :n] - c) / q
+    r = np.hypot(x, y)
+    z = np.pi * np.maximum(r, 1e-12) / lam_over_d_px
+    psf = (np.pi / (4.0 * lam_over_d_px**2)) * (2.0 * j1(z) / z) ** 2 / (q * q)  # energy per fine cell
+    psf[r < AIRY_DRAWN_RADIUS_PX] = 0.0
+    if sigma_px > 0:
+        psf = gaussian_filter(psf, sigma_px * q, mode="constant", truncate=5.0)
+    box = np.ones(q + 1)
+    box[0] = box[-1] = 0.5  # a centred pixel-wide box on an even number of fine cells
+    for axis in (0, 1):  # integrate over a pixel's area
+        psf = convolve1d(psf, box, axis=axis, mode="constant")
+    k = psf[c % q::q, c % q::q]
+    m = k.shape[0] // 2
+    k = k[m - R:m + R + 1, m - R:m + R + 1]
+    return k / k.sum()

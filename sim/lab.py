@@ -1,0 +1,56 @@
+"""The test lab around the target: backdrop and room light, from ``assets/labs/<name>.toml``.
+
+The lab's values are priors (ASSUMPTIONS: the paper does not describe the room); a fitted
+overlay ``assets/labs/fitted/<name>.toml`` (the same format as the camera overlays, see
+:func:`svgs.profiles.read_fitted_overlay`) sets the ones fitted to a result of the paper.
+
+>>> from sim.lab import load_lab
+>>> load_lab()["ambient_radiance_w_m2_sr"]   # the fitted value
+0.03
+>>> load_lab(fitted=False)["ambient_radiance_w_m2_sr"]
+0.0
+"""
+
+from __future__ import annotations
+
+import functools
+import tomllib
+from pathlib import Path
+
+from svgs.errors import ProfileError
+from svgs.profiles import apply_fitted, fitted_overlay_path, read_fitted_overlay
+
+from assets import ASSETS_DIR
+
+#: The lab of the SVGS paper's tests.
+DEFAULT_LAB = "msfc-frl"
+LAB_KEYS = ("backdrop_distance_m", "backdrop_reflectance", "ambient_radiance_w_m2_sr")
+
+
+@functools.lru_cache(maxsize=8)
+def _load(name: str, fitted: bool) -> tuple:
+    path = Path(name) if name.endswith(".toml") else ASSETS_DIR / "labs" / f"{name}.toml"
+    if not path.is_file():
+        known = sorted(p.stem for p in (ASSETS_DIR / "labs").glob("*.toml"))
+        raise ProfileError(f"lab {name!r}: no such lab file (known: {', '.join(known)})")
+    with open(path, "rb") as fh:
+        data = tomllib.load(fh)
+    overlay = fitted_overlay_path(path) if fitted else None
+    if overlay is not None:
+        data = apply_fitted(data, read_fitted_overlay(overlay, data), overlay.name)
+    lab = data.get("lab") or {}
+    missing = [k for k in LAB_KEYS if k not in lab]
+    if missing:
+        raise ProfileError(f"lab file {str(path)!r}: [lab] lacks {', '.join(missing)}")
+    out = {k: float(lab[k]) for k in LAB_KEYS}
+    return tuple(out.items()), tuple((data.get("fitted") or {}).keys())
+
+
+def load_lab(name: str = DEFAULT_LAB, *, fitted: bool = True) -> dict:
+    """The lab's values: ``backdrop_distance_m``, ``backdrop_reflectance``,
+    ``ambient_radiance_w_m2_sr`` (W m^-2 sr^-1 in the camera band), with ``fitted``: the keys
+    the overlay set."""
+    items, fitted_keys = _load(str(name), bool(fitted))
+    out = dict(items)
+    out["fitted"] = list(fitted_keys)
+    return out
