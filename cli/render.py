@@ -52,7 +52,7 @@ def register(sub) -> None:
                    help="grey backdrop this far behind the target, m (default 3; 0 = none); added to flux.npy")
     p.add_argument("--ambient", type=float, default=None,
                    help="ambient scene radiance from room lights, W m^-2 sr^-1 in band (default: the lab's, "
-                   "0.03, fitted in assets/labs/fitted/msfc-frl.toml; 0: lights off)")
+                   "0.028, fitted in assets/labs/fitted/msfc-frl.toml; 0: lights off)")
     p.add_argument("--exposure-s", type=float, default=None, help="exposure time of image.png (default: the phone's)")
     p.add_argument("--iso", type=float, default=None, help="ISO of image.png (default: the phone's)")
     p.add_argument("--no-expose", action="store_true", help="write only the flux (no raw.npy / image.png)")

@@ -37,7 +37,7 @@ def _scene_args(p, with_range=True):
                    help="distance of a grey backdrop behind the target (m; default 3; 0 = none)")
     p.add_argument("--ambient", type=float, default=None,
                    help="ambient scene radiance from room lights, W m^-2 sr^-1 in band (default: the lab's, "
-                   "0.03, fitted in assets/labs/fitted/msfc-frl.toml; 0: lights off)")
+                   "0.028, fitted in assets/labs/fitted/msfc-frl.toml; 0: lights off)")
     p.add_argument("--focus-m", dest="focus_m", type=float, default=None,
                    help="distance the lens is focused at, m (default: the target's distance - the phone's autofocus "
                    "locks on it; svgs render and render-and-solve form the same image)")

@@ -83,7 +83,7 @@ def centroid_crlb_px(frame, exposer, exposure, spots_px, *, window_half_px: int 
     seed = int((frame.truth.get("render") or {}).get("seed", 0) or 0)
     d = []
     for dx, dy in ((SHIFT_PX, 0.0), (-SHIFT_PX, 0.0), (0.0, SHIFT_PX), (0.0, -SHIFT_PX)):
-        d.append(phone.optics(diffuse, _shifted(pts, dx, dy), seed=seed).astype(np.float64))
+        d.append(phone.optics(diffuse, _shifted(pts, dx, dy), seed=seed, cfa=exposer.cfa).astype(np.float64))
     k = sp.qe * t  # photons/s -> electrons
     dmu_dx = k * (d[0] - d[1]) / (2 * SHIFT_PX)
     dmu_dy = k * (d[2] - d[3]) / (2 * SHIFT_PX)

@@ -6,7 +6,7 @@ overlay ``assets/labs/fitted/<name>.toml`` (the same format as the camera overla
 
 >>> from sim.lab import load_lab
 >>> load_lab()["ambient_radiance_w_m2_sr"]   # the fitted value
-0.03
+0.028
 >>> load_lab(fitted=False)["ambient_radiance_w_m2_sr"]
 0.0
 """

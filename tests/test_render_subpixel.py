@@ -55,7 +55,7 @@ def sweep():
             d = (k / STEPS) * t0[2] / r.camera.fx  # moves a point at the target's depth by k/8 px
             t = t0 + np.array([d, d, 0.0])
             res = r.render(R, t, seed=100 + k)
-            img = phone.optics(np.zeros(phone.shape, np.float32), res.points, seed=k).astype(np.float64)
+            img = phone.optics(np.zeros(phone.shape, np.float32), res.points, seed=k, cfa=False).astype(np.float64)
             shift = r.camera.fx * d / z[:, 2]  # per spot, px (both axes)
             frames.append((img, shift, res.truth["targets_px"]))
         out[range_m] = (frames, phone.core_psf(), [str(i) for i in r.pattern.ids])

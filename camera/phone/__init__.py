@@ -25,7 +25,8 @@ import numpy as np
 from svgs.errors import InputError
 
 from camera.phone.isp import ExposureSolver, auto_exposure, downscale, jpeg_roundtrip, metering_weights, tone_lut
-from camera.phone.optics import apply_psf, core_psf
+from camera.phone.cfa import channel_map, luminance, response_map
+from camera.phone.optics import apply_psf, core_image, core_psf, core_share, glare_image
 from camera.phone.params import ALL_STAGES, PhoneParams, check_stages
 from camera.phone.sensor import bloom, electrons, fixed_patterns, readout
 from camera.tonemap import gamma_u8
@@ -92,13 +93,39 @@ class PhoneCamera:
         p = self.params
         return core_psf(p.f_number, p.band_nm, p.sensor.pixel_pitch_m, p.glare.aberration_sigma_px)
 
-    def optics(self, flux_ph_s: np.ndarray, points=None, *, seed: int = 0) -> np.ndarray:
+    def optics(self, flux_ph_s: np.ndarray, points=None, *, seed: int = 0, cfa: bool | None = None) -> np.ndarray:
         """The optical image: the lens PSF applied to a flux image (photons/s/px, already
         integrated over pixels) and to point samples at sub-pixel positions
         (:class:`camera.rendered.PointFlux`), integrated over pixels. ``seed`` seeds the
-        Monte Carlo convolution of the points. Returns float32 (H, W)."""
-        return apply_psf(flux_ph_s, self.params.glare, self.core_psf(), (self.camera.cx, self.camera.cy),
-                         points=points, rng=np.random.default_rng(seed))
+        Monte Carlo convolution of the points.
+
+        With the colour filter array (``cfa``: default, the profile's ``[cfa]``), each pixel
+        gets its channel's image (Airy pattern at the channel's wavelength) times its
+        channel's response: the mosaic the pixels see. Returns float32 (H, W)."""
+        p = self.params
+        pp = (self.camera.cx, self.camera.cy)
+        use_cfa = p.cfa.enabled if cfa is None else (bool(cfa) and p.cfa.enabled)
+        if not use_cfa:
+            return apply_psf(flux_ph_s, p.glare, self.core_psf(), pp, points=points, rng=np.random.default_rng(seed))
+        chan = channel_map(p.cfa.pattern, self.shape)
+        out = np.zeros(self.shape)
+        seeds = np.random.SeedSequence(int(seed)).spawn(3)
+        for c in range(3):
+            core = core_psf(p.f_number, p.band_nm, p.sensor.pixel_pitch_m, p.glare.aberration_sigma_px,
+                            wavelength_nm=p.cfa.wavelength_nm[c])
+            img = core_image(flux_ph_s, core, points, np.random.default_rng(seeds[c]))
+            m = chan == c
+            out[m] = img[m]
+        out *= core_share(p.glare)
+        g = glare_image(flux_ph_s, p.glare, pp, points)
+        if g is not None:
+            out += g
+        out *= response_map(p.cfa, self.shape)
+        return out.astype(np.float32)
+
+    def uses_cfa(self, stages) -> bool:
+        """Whether exposures with these stages go through the colour filter array."""
+        return self.params.cfa.enabled and "cfa" in stages
 
     def check_points(self, points):
         """Validate point samples (None passes)."""
@@ -153,10 +180,13 @@ class Exposer:
         self.stages = check_stages(stages)
         f = phone.check_flux(flux_ph_s)
         pts = phone.check_points(points)
+        self.cfa = phone.uses_cfa(self.stages)
         if "glare" in self.stages:
-            self.flux_optics = phone.optics(f, pts, seed=optics_seed)
+            self.flux_optics = phone.optics(f, pts, seed=optics_seed, cfa=self.cfa)
         else:  # a perfect lens: each point counts in its own pixel
             self.flux_optics = f.copy() if pts is None else (f + pts.binned(f.shape)).astype(np.float32)
+            if self.cfa:
+                self.flux_optics *= response_map(phone.params.cfa, f.shape)
         self._solver = None
         p = phone.params
         self._lut = tone_lut(p.sensor, p.isp.gamma, "tone" in self.stages)
@@ -217,7 +247,12 @@ class Exposer:
             info["bloom"] = bloom(e, sp.full_well_e, sp.anti_blooming_drain, sp.bloom_direction)
         else:
             np.minimum(e, sp.full_well_e, out=e)
-        raw, img = readout(e, sp, iso, seed, read="read" in st, adc="adc" in st, lut=self._lut)
+        raw, img = readout(e, sp, iso, seed, read="read" in st, adc="adc" in st, lut=None if self.cfa else self._lut)
+        if self.cfa:  # white balance, demosaic, luminance; then the tone curve
+            lum = luminance(raw, p.cfa, sp.black_level_dn, sp.white_dn)
+            idx = np.rint(lum * np.float32(sp.white_dn - sp.black_level_dn) + np.float32(sp.black_level_dn))
+            img = (self._lut[idx.astype(np.intp)] if "adc" in st
+                   else gamma_u8(lum, p.isp.gamma if "tone" in st else 0.0))
         if img is None:
             img = gamma_u8(np.clip((raw - sp.black_level_dn) / (sp.white_dn - sp.black_level_dn), 0, 1),
                            p.isp.gamma if "tone" in st else 0.0)

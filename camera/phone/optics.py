@@ -98,6 +98,56 @@ def wings(image, glare: GlareParams) -> np.ndarray:
     return fine
 
 
+def core_image(flux, core, points=None, rng: np.random.Generator | None = None) -> np.ndarray:
+    """The core PSF applied to a pixel image and to point samples, integrated over pixels
+    (unit share; float64 (H, W)). ``core``: a :class:`CorePSF`, or a float (a Gaussian core of
+    that sigma, px, on the pixel image and the points binned: the earlier order, for
+    comparisons)."""
+    f = np.ascontiguousarray(flux, np.float32)
+    H, W = f.shape
+    has_points = points is not None and len(points) > 0
+    if isinstance(core, CorePSF):
+        out = core.convolve(f).astype(np.float64)
+        if has_points:
+            rng = np.random.default_rng(0) if rng is None else rng
+            out += core.splat(points.u_px, points.v_px, points.rate_ph_s, (H, W), rng)
+        return out
+    sig = float(core)
+    g = f + points.binned((H, W)).astype(np.float32) if has_points else f
+    return (cv2.GaussianBlur(g, (0, 0), sigmaX=sig, sigmaY=sig, borderType=cv2.BORDER_CONSTANT)
+            if sig > 0 else g.copy()).astype(np.float64)
+
+
+def glare_image(flux, glare: GlareParams, principal_point=None, points=None) -> np.ndarray | None:
+    """The glare wings and ghosts of a pixel image and point samples, with their shares
+    (float64 (H, W)); None when the lens has neither."""
+    eta = glare.veiling_fraction
+    if eta <= 0 and not glare.ghosts:
+        return None
+    f = np.asarray(flux, np.float64)
+    H, W = f.shape
+    whole = f + (points.bilinear((H, W)) if points is not None and len(points) > 0 else 0.0)
+    out = np.zeros((H, W))
+    if eta > 0:
+        out += eta * wings(whole, glare)
+    if glare.ghosts:
+        cx, cy = principal_point if principal_point is not None else ((W - 1) / 2.0, (H - 1) / 2.0)
+        w32 = whole.astype(np.float32)
+        for frac, scale, blur in glare.ghosts:
+            A = np.array([[scale, 0.0, cx * (1 - scale)], [0.0, scale, cy * (1 - scale)]], np.float32)
+            g = cv2.warpAffine(w32, A, (W, H), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+            g /= scale * scale  # warpAffine samples: keep the energy
+            if blur > 0:
+                g = cv2.GaussianBlur(g, (0, 0), sigmaX=blur, sigmaY=blur, borderType=cv2.BORDER_CONSTANT)
+            out += frac * g
+    return out
+
+
+def core_share(glare: GlareParams) -> float:
+    """Share of the light in the PSF's core (the rest is in the wings and ghosts)."""
+    return 1.0 - glare.veiling_fraction - sum(g[0] for g in glare.ghosts)
+
+
 def apply_psf(flux: np.ndarray, glare: GlareParams, core, principal_point=None, *, points=None,
               rng: np.random.Generator | None = None) -> np.ndarray:
     """The optical image: a flux image (and point samples) through the lens PSF, integrated
@@ -122,35 +172,8 @@ def apply_psf(flux: np.ndarray, glare: GlareParams, core, principal_point=None, 
     -------
     ndarray, float32, shape (H, W)
     """
-    f = np.ascontiguousarray(flux, np.float32)
-    H, W = f.shape
-    eta = glare.veiling_fraction
-    ghost_share = sum(g[0] for g in glare.ghosts)
-    core_share = 1.0 - eta - ghost_share
-    has_points = points is not None and len(points) > 0
-    if isinstance(core, CorePSF):
-        out = core.convolve(f).astype(np.float64)
-        if has_points:
-            rng = np.random.default_rng(0) if rng is None else rng
-            out += core.splat(points.u_px, points.v_px, points.rate_ph_s, (H, W), rng)
-    else:  # a Gaussian core of sigma ``core`` px, on pixels
-        sig = float(core)
-        g = f + points.binned((H, W)).astype(np.float32) if has_points else f
-        out = (cv2.GaussianBlur(g, (0, 0), sigmaX=sig, sigmaY=sig, borderType=cv2.BORDER_CONSTANT)
-               if sig > 0 else g.copy()).astype(np.float64)
-    out *= core_share
-    if eta > 0 or glare.ghosts:
-        whole = f.astype(np.float64) + (points.bilinear((H, W)) if has_points else 0.0)
-        if eta > 0:
-            out += eta * wings(whole, glare)
-        if glare.ghosts:
-            cx, cy = principal_point if principal_point is not None else ((W - 1) / 2.0, (H - 1) / 2.0)
-            w32 = whole.astype(np.float32)
-            for frac, scale, blur in glare.ghosts:
-                A = np.array([[scale, 0.0, cx * (1 - scale)], [0.0, scale, cy * (1 - scale)]], np.float32)
-                g = cv2.warpAffine(w32, A, (W, H), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-                g /= scale * scale  # warpAffine samples: keep the energy
-                if blur > 0:
-                    g = cv2.GaussianBlur(g, (0, 0), sigmaX=blur, sigmaY=blur, borderType=cv2.BORDER_CONSTANT)
-                out += frac * g
+    out = core_share(glare) * core_image(flux, core, points, rng)
+    g = glare_image(flux, glare, principal_point, points)
+    if g is not None:
+        out += g
     return out.astype(np.float32)

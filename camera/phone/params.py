@@ -37,12 +37,18 @@ Tables (all optional; a missing key takes the documented default, marked ASSUMPT
     exposure_s = 0.01             # used when mode = "manual"
     iso = 100.0                   # used when mode = "manual"
 
+    [cfa]                         # colour filter array; absent or pattern = "none": mono
+    pattern = "RGGB"              # Bayer layout of the top-left 2 x 2 pixels
+    response = [0.5, 1.0, 0.6]    # R, G, B electrons per photon of the flash, relative to qe (G = 1)
+    wavelength_nm = [600, 535, 460]  # each channel's mean wavelength (the PSF's Airy pattern)
+    demosaic = "bilinear"         # OpenCV: "bilinear", "edge_aware" or "vng"
+
     [isp]
     gamma = 2.2                   # tone curve: out = in^(1/gamma) (0 = linear)
     output_width = 0              # 0 = full resolution; else downscale (INTER_AREA) to this size
     output_height = 0
     jpeg_quality = 0              # 0 = no JPEG round trip; else 1-100
-    stages = ["glare", "shot", "dark", "fpn", "read", "bloom", "adc", "tone", "downscale", "jpeg"]
+    stages = ["glare", "cfa", "shot", "dark", "fpn", "read", "bloom", "adc", "tone", "downscale", "jpeg"]
 
 Every value is validated where it enters; a bad one raises :class:`svgs.errors.InputError`
 naming ``table.key``.
@@ -56,7 +62,9 @@ import numpy as np
 
 from svgs.errors import InputError
 
-ALL_STAGES = ("glare", "shot", "dark", "fpn", "read", "bloom", "adc", "tone", "downscale", "jpeg")
+ALL_STAGES = ("glare", "cfa", "shot", "dark", "fpn", "read", "bloom", "adc", "tone", "downscale", "jpeg")
+#: Bayer layouts (the colours of the top-left 2 x 2 block, row by row).
+CFA_PATTERNS = ("none", "RGGB", "BGGR", "GRBG", "GBRG")
 METERING = ("mean", "center_weighted", "spot")
 
 
@@ -219,6 +227,48 @@ class ExposureParams:
 
 
 @dataclass(frozen=True)
+class CfaParams:
+    """The colour filter array over the pixels (``pattern = "none"``: a mono sensor).
+
+    ``response`` is, per channel (R, G, B), the photoelectrons a pixel of that colour
+    collects from the flash's white light relative to the mono model's ``qe`` (which is the
+    green pixel's: G = 1); the ISP's white balance divides by it, so a white scene gives equal
+    R, G, B and the luminance the mono model gives, and a saturated one stays white. ``wavelength_nm`` is each channel's mean wavelength: the PSF's Airy pattern
+    is drawn at it.
+    """
+
+    pattern: str = "none"
+    response: tuple = (0.5, 1.0, 0.6)
+    wavelength_nm: tuple = (600.0, 535.0, 460.0)
+    demosaic: str = "bilinear"
+
+    @property
+    def enabled(self) -> bool:
+        return self.pattern != "none"
+
+    @classmethod
+    def from_table(cls, t: dict | None) -> "CfaParams":
+        t = dict(t or {})
+        _unknown("cfa", t, cls)
+        kw = {}
+        if "pattern" in t:
+            if t["pattern"] not in CFA_PATTERNS:
+                raise InputError(f"[cfa] pattern: expected one of {CFA_PATTERNS}, got {t['pattern']!r}")
+            kw["pattern"] = t["pattern"]
+        for k, lo, hi in (("response", 0.0, 1.0), ("wavelength_nm", 300.0, 1100.0)):
+            if k in t:
+                v = t[k]
+                if not isinstance(v, (list, tuple)) or len(v) != 3:
+                    raise InputError(f"[cfa] {k}: expected [R, G, B], got {v!r}")
+                kw[k] = tuple(_num("cfa", f"{k}[{i}]", x, lo=lo, hi=hi, lo_open=True) for i, x in enumerate(v))
+        if "demosaic" in t:
+            if t["demosaic"] not in ("bilinear", "edge_aware", "vng"):
+                raise InputError(f"[cfa] demosaic: expected 'bilinear', 'edge_aware' or 'vng', got {t['demosaic']!r}")
+            kw["demosaic"] = t["demosaic"]
+        return cls(**kw)
+
+
+@dataclass(frozen=True)
 class IspParams:
     gamma: float = 2.2
     output_width: int = 0
@@ -267,6 +317,7 @@ class PhoneParams:
     glare: GlareParams = field(default_factory=GlareParams)
     exposure: ExposureParams = field(default_factory=ExposureParams)
     isp: IspParams = field(default_factory=IspParams)
+    cfa: CfaParams = field(default_factory=CfaParams)
     f_number: float = 2.4
     band_nm: tuple = (400.0, 700.0)
 
@@ -282,6 +333,7 @@ class PhoneParams:
             glare=GlareParams.from_table(tabs.get("glare")),
             exposure=ExposureParams.from_table(tabs.get("exposure")),
             isp=IspParams.from_table(tabs.get("isp")),
+            cfa=CfaParams.from_table(tabs.get("cfa")),
             f_number=f_number,
             band_nm=band,
         )

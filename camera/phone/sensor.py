@@ -296,7 +296,9 @@ def readout(e, params: SensorParams, iso: float, seed: int, *, read=True, adc=Tr
     """
     out = np.empty(e.shape, np.float32)
     want8 = bool(adc) and lut is not None
-    out8 = np.empty(e.shape if want8 else (1, 1), np.uint8)
+    # the kernel writes the 8-bit image whenever it quantises (no bounds checks in numba):
+    # it gets a full-size one then, with a one-entry LUT when no tone LUT is given
+    out8 = np.empty(e.shape if adc else (1, 1), np.uint8)
     lut_arr = np.ascontiguousarray(lut if lut is not None else np.zeros(1, np.uint8), np.uint8)
     _readout_kernel(np.ascontiguousarray(e, np.float32), float(params.read_noise_e), float(params.gain_dn_per_e(iso)),
                     float(params.black_level_dn), float(params.white_dn), _key(seed, 3),

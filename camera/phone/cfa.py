@@ -1,0 +1,81 @@
+"""The colour filter array: a Bayer mosaic over the pixels, and the ISP's demosaic to luminance.
+
+The phones' sensors are colour sensors: each pixel sits under a red, green or blue filter
+(a Bayer mosaic, :data:`camera.phone.params.CFA_PATTERNS`). A retro spot one or two pixels
+wide is sampled by that mosaic, and the ISP's demosaic interpolates the missing colours from
+the neighbours before the app thresholds the luminance, so both move the spot's centroid
+(``docs/pixel-phase.md``).
+
+Model (ASSUMPTIONS, documented in each profile's ``[sources]``):
+
+- each channel collects ``response[c]`` times the mono model's photoelectrons from the flash's
+  white light (``[cfa] response``, R, G, B), its optical image drawn with the Airy pattern at
+  the channel's mean wavelength (``[cfa] wavelength_nm``);
+- the ISP removes the black level, white-balances (divides each channel by its response, so
+  white light gives equal R, G, B), demosaics with OpenCV (``cv2.demosaicing``: bilinear,
+  edge-aware or VNG) and takes the luminance ``Y = 0.299 R + 0.587 G + 0.114 B`` (ITU-R
+  BT.601, OpenCV's ``COLOR_BGR2GRAY``), which the tone curve then encodes to 8 bits.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from camera.phone.params import CfaParams
+
+#: OpenCV's code for each layout (OpenCV names a Bayer pattern by the second row's colours).
+_CV_CODES = {"RGGB": "BG", "BGGR": "RG", "GRBG": "GB", "GBRG": "GR"}
+_COLOURS = {"R": 0, "G": 1, "B": 2}
+#: Luminance weights (R, G, B), ITU-R BT.601.
+LUMA = (0.299, 0.587, 0.114)
+
+
+def channel_map(pattern: str, shape) -> np.ndarray:
+    """Colour index (0 R, 1 G, 2 B) of every pixel, uint8 (H, W)."""
+    H, W = int(shape[0]), int(shape[1])
+    block = np.array([[_COLOURS[pattern[0]], _COLOURS[pattern[1]]], [_COLOURS[pattern[2]], _COLOURS[pattern[3]]]],
+                     np.uint8)
+    return np.tile(block, (-(-H // 2), -(-W // 2)))[:H, :W]
+
+
+def response_map(cfa: CfaParams, shape) -> np.ndarray:
+    """Each pixel's channel response (relative to the mono qe), float32 (H, W)."""
+    return np.asarray(cfa.response, np.float32)[channel_map(cfa.pattern, shape)]
+
+
+def demosaic_code(cfa: CfaParams) -> int:
+    """The ``cv2.cvtColor`` code that demosaics this layout to BGR with the chosen method."""
+    suffix = {"bilinear": "", "edge_aware": "_EA", "vng": "_VNG"}[cfa.demosaic]
+    return getattr(cv2, f"COLOR_Bayer{_CV_CODES[cfa.pattern]}2BGR{suffix}")
+
+
+def luminance(raw_dn: np.ndarray, cfa: CfaParams, black_dn: float, white_dn: float) -> np.ndarray:
+    """The ISP from the raw mosaic to linear luminance.
+
+    Parameters
+    ----------
+    raw_dn : ndarray, shape (H, W)
+        ADC output (DN) of the mosaic.
+    cfa : CfaParams
+    black_dn, white_dn : float
+
+    Returns
+    -------
+    ndarray, float32, shape (H, W)
+        Luminance as a fraction of white, in [0, 1] (a channel that white balance lifts above
+        white is clipped there, as an ISP does).
+    """
+    raw = np.clip(np.rint(raw_dn), 0, 65535).astype(np.uint16)
+    if cfa.demosaic == "vng":  # OpenCV's VNG takes 8-bit input only: keep the top bits
+        shift = max(0, int(np.ceil(np.log2(white_dn + 1))) - 8)
+        bgr = cv2.cvtColor((raw >> shift).astype(np.uint8), demosaic_code(cfa)).astype(np.float32) * (1 << shift)
+    else:
+        bgr = cv2.cvtColor(raw, demosaic_code(cfa)).astype(np.float32)
+    span = float(white_dn - black_dn)
+    out = np.zeros(raw.shape, np.float32)
+    for c_bgr, c in ((2, 0), (1, 1), (0, 2)):  # BGR planes -> R, G, B
+        ch = (bgr[..., c_bgr] - black_dn) / (span * cfa.response[c])
+        np.clip(ch, 0.0, 1.0, out=ch)
+        out += np.float32(LUMA[c]) * ch
+    return out
