@@ -131,3 +131,48 @@ def test_tent_matrix_reproduces_positions():
     c = np.arange(A.shape[0]) * 4 + 1.5
     inner = slice(2, 33)  # away from the two ends, where the outer weight is folded in
     assert np.allclose((A * c[:, None]).sum(0)[inner], np.arange(37)[inner])
+
+
+def test_centroid_crlb_matches_the_fisher_information_of_galsims_image():
+    """sim.crlb's centroid bound of an unsaturated spot against the Fisher information of
+    GalSim's image of the same PSF with the same pixel noise (shot, read, quantisation):
+    ``I = sum (d mu / dx)^2 / var``, the derivative by finite differences of GalSim images."""
+    from types import SimpleNamespace
+
+    from camera.phone import Exposer
+    from sim.crlb import centroid_crlb_px
+
+    phone = _core_only_phone("galaxy-nexus")
+    sp, isp = phone.params.sensor, phone.params.isp
+    psf = phone.core_psf()
+    gs = _galsim_psf(psf)
+    H, W = phone.shape
+    u, v = W // 2 + 0.3, H // 2 - 0.2
+    t_s = 1e-3
+    rate = 0.5 * sp.full_well_e / (sp.qe * t_s * 0.3)  # peak near half of full well
+    pts = PointFlux(np.full(N_SAMPLES, u), np.full(N_SAMPLES, v), np.full(N_SAMPLES, rate / N_SAMPLES))
+    ex = Exposer(phone, np.zeros(phone.shape, np.float32), points=pts, stages=("glare", "shot", "read", "adc", "tone"),
+                 optics_seed=1)
+    exposure = ex.expose(seed=0, exposure_s=t_s, iso=sp.base_iso)
+    frame = SimpleNamespace(points=pts, truth={"render": {"seed": 1}})
+    ours = centroid_crlb_px(frame, ex, exposure, np.array([[u, v]]))[0]
+    # the reference
+    n, h = 49, 0.05
+    cu, cv = int(round(u)), int(round(v))
+
+    def img(dx, dy):
+        return gs.drawImage(nx=n, ny=n, scale=1.0, offset=(u - cu + dx, v - cv + dy)).array.astype(np.float64)
+
+    k = sp.qe * t_s * rate
+    mu = k * img(0, 0) + sp.dark_current_e_s * t_s
+    gain = sp.gain_dn_per_e(sp.base_iso)
+    white_e = (sp.white_dn - sp.black_level_dn) / gain
+    lin = np.clip(mu / white_e, 1e-6, 1.0)
+    q = white_e * isp.gamma / 255.0 * lin ** (1.0 - 1.0 / isp.gamma)
+    var = mu + sp.read_noise_e**2 + (q**2 + (1.0 / gain) ** 2) / 12.0
+    dx = k * (img(h, 0) - img(-h, 0)) / (2 * h)
+    dy = k * (img(0, h) - img(0, -h)) / (2 * h)
+    ref = np.array([1 / np.sqrt(np.sum(dx**2 / var)), 1 / np.sqrt(np.sum(dy**2 / var))])
+    assert ours == pytest.approx(ref, rel=0.05), (ours, ref)
+    # and the shot-noise scale: about sigma_PSF / sqrt(N) for N photo-electrons
+    assert 0.5 < ref[0] / (psf.sigma_equivalent_px / np.sqrt(k)) < 2.0

@@ -222,3 +222,42 @@ def test_impossible_exposure_and_bad_flux():
         Exposer(phone, np.zeros((10, 10)))
     with pytest.raises(InputError, match="non-negative"):
         Exposer(phone, np.full(phone.shape, -1.0))
+
+
+# ------------------------------------------------------------------ colour filter array
+def test_bayer_layouts_demosaic_to_their_colours():
+    """A mosaic sampled from a constant (R, G, B) scene in each layout comes back as that
+    colour through OpenCV's demosaic code chosen for the layout."""
+    import cv2
+
+    from camera.phone.cfa import channel_map, demosaic_code
+    from camera.phone.params import CfaParams
+
+    rgb = np.array([900, 500, 100], np.uint16)
+    for pattern in ("RGGB", "BGGR", "GRBG", "GBRG"):
+        cfa = CfaParams(pattern=pattern)
+        mosaic = rgb[channel_map(pattern, (8, 10))]
+        bgr = cv2.cvtColor(mosaic, demosaic_code(cfa))
+        assert bgr[4, 4].tolist() == [100, 500, 900], pattern
+
+
+def test_cfa_keeps_white_light_and_saturation_as_the_mono_sensor_sees_them():
+    """White balance for the flash: a uniform scene gives the mono model's luminance (to one
+    8-bit code), and a saturated one stays white."""
+    cam = small_camera()
+    phone = PhoneCamera(cam)
+    sp = phone.params.sensor
+    mono = ("adc", "tone")
+    colour = ("cfa", "adc", "tone")
+    import dataclasses
+
+    from camera.phone.params import CfaParams
+
+    phone_c = PhoneCamera(cam, dataclasses.replace(phone.params, cfa=CfaParams(pattern="RGGB")))
+    for level in (0.05, 0.3, 0.7):
+        flux = np.full(phone.shape, level * sp.full_well_e / (sp.qe * 0.01), np.float32)
+        a = Exposer(phone_c, flux, stages=mono).expose(exposure_s=0.01, iso=sp.base_iso).image.astype(int)
+        b = Exposer(phone_c, flux, stages=colour).expose(exposure_s=0.01, iso=sp.base_iso).image.astype(int)
+        assert np.abs(a - b).max() <= 1, level
+    hot = np.full(phone.shape, 50 * sp.full_well_e / (sp.qe * 0.01), np.float32)
+    assert Exposer(phone_c, hot, stages=colour).expose(exposure_s=0.01, iso=sp.base_iso).image.min() == 255

@@ -139,3 +139,40 @@ def test_render_trial_kind_runs_the_full_chain_and_groups_renders():
     assert numbers(grouped[0]) == numbers(alone)  # a trial's numbers never depend on its companions
     assert grouped[1]["err_x_m"] != alone["err_x_m"]  # another seed, another noise draw
     assert numbers(grouped[2]) == numbers(render_trial(nd, 7)) != numbers(alone)
+
+
+@pytest.mark.render
+def test_demo_pose_within_table4_and_no_estimator_beats_the_crlb():
+    """The demo pose (issue 11 acceptance): over 20 noise draws of one render, each component's
+    mean error lies within the paper's Table 4 mean error at 10 m, and the scatter of the
+    solutions is not smaller than the Cramer-Rao bound computed from the simulated sensor
+    (the bound is a bound: a centroid estimator cannot beat it)."""
+    from sim.crlb import frame_crlb
+    from svgs.frames import STATE_KEYS
+
+    scen = Scenario(camera="galaxy-nexus", range_m=10, target_x_m=0.3, target_y_m=-0.2, roll_deg=5, pitch_deg=-3,
+                    yaw_deg=10)
+    frame = render_scenario(scen, seed=1)
+    ex = frame.exposer()
+    rows = [expose_and_solve(frame, ex, seed=1000 + k) for k in range(20)]
+    assert all(r["ok"] for r in rows)
+    err = np.array([np.r_[r["pos_err_vec_m"], r["att_err_vec_deg"]] for r in rows])
+    table4_10m = np.array([0.10, 0.16, 0.13, 0.7, 1.0, 1.8])  # Becker et al. 2014, Table 4, mean error at 10 m
+    assert np.all(np.abs(err.mean(0)) < table4_10m), err.mean(0)
+    crlb = frame_crlb(frame, ex, rows[0])
+    bound = np.array([crlb["crlb_std"][k] for k in STATE_KEYS])
+    # a 20-sample standard deviation is within 0.7 of the true one with 95 % probability
+    assert np.all(err.std(0, ddof=1) > 0.7 * bound), (err.std(0, ddof=1), bound)
+    assert 0.0005 < crlb["centroid_sigma_px"] < 0.05
+
+
+@pytest.mark.render
+def test_render_and_solve_prints_the_crlb_beside_each_component(capsys):
+    rc = main(["render-and-solve", "--camera", "galaxy-nexus", "--range", "10", "--roll", "2", "--json"])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert set(out["crlb"]["crlb_std"]) == {"x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg"}
+    assert all(v > 0 for v in out["crlb"]["crlb_std"].values())
+    rc = main(["render-and-solve", "--camera", "galaxy-nexus", "--range", "10", "--roll", "2"])
+    text = capsys.readouterr().out
+    assert "CRLB 1-sigma" in text and "error/CRLB" in text

@@ -249,3 +249,19 @@ def test_distractors_make_blobs_where_expected():
     lamp_px = r.camera.project(np.array(lamp["position_m"]) @ R.T + t)
     ring = res.flux[int(round(lamp_px[1])) - 1:int(round(lamp_px[1])) + 2, int(round(lamp_px[0])) - 1:int(round(lamp_px[0])) + 2]
     assert ring.mean() > 100 * np.median(res.flux[res.flux > 0])
+
+
+def test_render_and_render_and_solve_form_the_same_image(tmp_path):
+    """One scene for one set of arguments: both commands focus on the target (autofocus) and
+    add the same lab, so the same arguments give the same flux."""
+    from cli.main import main
+
+    args = ["--camera", "galaxy-nexus", "--range", "10", "--roll", "2", "--yaw", "-3", "--seed", "4"]
+    assert main(["render", *args, "--no-expose", "--out", str(tmp_path / "a")]) == 0
+    assert main(["render-and-solve", *args, "--out", str(tmp_path / "b")]) == 0
+    a = np.load(tmp_path / "a" / "flux.npy")
+    b = np.load(tmp_path / "b" / "flux.npy")
+    assert np.array_equal(a, b)
+    ta = json.loads((tmp_path / "a" / "truth.json").read_text())
+    tb = json.loads((tmp_path / "b" / "truth.json").read_text())
+    assert ta["focus_distance_m"] == pytest.approx(tb["focus_distance_m"]) == pytest.approx(np.linalg.norm(ta["t_cam_target_m"]))

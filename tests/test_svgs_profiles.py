@@ -226,3 +226,24 @@ def test_bad_overlays_name_the_entry(tmp_path, body, match):
     with pytest.raises(ProfileError, match=match):
         Camera.load(path)
     Camera.load(path, fitted=False)  # the unfitted profile never reads the overlay
+
+
+def test_lab_overlay_is_a_physical_fit():
+    """The lab's fitted ambient light (assets/labs/fitted/msfc-frl.toml) says what it was
+    fitted to, lies in its plausible range with its prior, and loads both ways."""
+    import tomllib
+
+    from assets import ASSETS_DIR
+    from sim.lab import load_lab
+
+    base = tomllib.loads((ASSETS_DIR / "labs" / "msfc-frl.toml").read_text())
+    over = tomllib.loads((ASSETS_DIR / "labs" / "fitted" / "msfc-frl.toml").read_text())
+    for f in over["fit"]:
+        assert set(f) == {"key", "value", "fitted_to", "range", "range_source"}
+        assert "2014" in f["fitted_to"] and "Tables 2-3" in f["fitted_to"]
+        lo, hi = f["range"]
+        table, name = f["key"].split(".")
+        assert lo <= f["value"] <= hi and lo <= base[table][name] <= hi
+        assert "PRIOR" in base["sources"]["ambient"] and "fitted/" in base["sources"]["ambient"]
+    assert load_lab()["ambient_radiance_w_m2_sr"] == over["fit"][0]["value"]
+    assert load_lab(fitted=False)["ambient_radiance_w_m2_sr"] == base["lab"]["ambient_radiance_w_m2_sr"]

@@ -66,18 +66,20 @@ def curves(name: str) -> dict:
     out = {k: [] for k in ("galsim", "mono", "colour", "svgs_mono", "svgs_colour")}
     for k, ph in enumerate(PHASES):
         x, y = u0 + ph, v0 + Y_PHASE
-        g = gs.drawImage(nx=2 * HALF + 1, ny=2 * HALF + 1, scale=1.0, offset=(ph, Y_PHASE)).array
-        out["galsim"].append(_centroid(np.pad(g, 10), HALF + 10, HALF + 10)[0] - HALF - 10 - ph)
+        cu = int(np.floor(x + 0.5))  # the window is centred on the spot's pixel, as a detector's
+        cv = int(np.floor(y + 0.5))
+        g = gs.drawImage(nx=41, ny=41, scale=1.0, offset=(ph, Y_PHASE)).array
+        out["galsim"].append(_centroid(g, 20 + cu - u0, 20 + cv - v0)[0] - 20 - ph)
         # a point bright enough to reach ~80 % of white in the brightest pixel (after the PSF)
         rate = 0.8 * sp.full_well_e / (sp.qe * t_s * 0.35)
         pts = PointFlux(np.full(N_SAMPLES, x), np.full(N_SAMPLES, y), np.full(N_SAMPLES, rate / N_SAMPLES))
         mono = phone.optics(np.zeros(phone.shape, np.float32), pts, seed=k, cfa=False)
-        out["mono"].append(_centroid(mono, u0, v0)[0] - x)
+        out["mono"].append(_centroid(mono, cu, cv)[0] - x)
         col = phone.optics(np.zeros(phone.shape, np.float32), pts, seed=k, cfa=True)
         gain = sp.gain_dn_per_e(iso)
         raw = np.clip(np.rint(col * sp.qe * t_s * gain + sp.black_level_dn), 0, sp.white_dn)
         lum = luminance(raw, phone.params.cfa, sp.black_level_dn, sp.white_dn)
-        out["colour"].append(_centroid(lum, u0, v0)[0] - x)
+        out["colour"].append(_centroid(lum, cu, cv)[0] - x)
         for key, stages in (("svgs_mono", ("glare", "adc", "tone")), ("svgs_colour", ("glare", "cfa", "adc", "tone"))):
             ex = Exposer(phone, np.zeros(phone.shape, np.float32), points=pts, stages=stages, optics_seed=k)
             img = ex.expose(seed=0, exposure_s=t_s, iso=iso).image

@@ -25,7 +25,7 @@ import numpy as np
 from svgs.errors import InputError
 
 from camera.phone.isp import ExposureSolver, auto_exposure, downscale, jpeg_roundtrip, metering_weights, tone_lut
-from camera.phone.cfa import channel_map, luminance, response_map
+from camera.phone.cfa import channel_map, luminance, response_map, tone_image
 from camera.phone.optics import apply_psf, core_image, core_psf, core_share, glare_image
 from camera.phone.params import ALL_STAGES, PhoneParams, check_stages
 from camera.phone.sensor import bloom, electrons, fixed_patterns, readout
@@ -249,10 +249,10 @@ class Exposer:
             np.minimum(e, sp.full_well_e, out=e)
         raw, img = readout(e, sp, iso, seed, read="read" in st, adc="adc" in st, lut=None if self.cfa else self._lut)
         if self.cfa:  # white balance, demosaic, luminance; then the tone curve
-            lum = luminance(raw, p.cfa, sp.black_level_dn, sp.white_dn)
-            idx = np.rint(lum * np.float32(sp.white_dn - sp.black_level_dn) + np.float32(sp.black_level_dn))
-            img = (self._lut[idx.astype(np.intp)] if "adc" in st
-                   else gamma_u8(lum, p.isp.gamma if "tone" in st else 0.0))
+            if "adc" in st:
+                img = tone_image(raw, p.cfa, sp.black_level_dn, sp.white_dn, self._lut)
+            else:
+                img = gamma_u8(luminance(raw, p.cfa, sp.black_level_dn, sp.white_dn), p.isp.gamma if "tone" in st else 0.0)
         if img is None:
             img = gamma_u8(np.clip((raw - sp.black_level_dn) / (sp.white_dn - sp.black_level_dn), 0, 1),
                            p.isp.gamma if "tone" in st else 0.0)

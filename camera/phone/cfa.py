@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+from numba import njit, prange
 
 from camera.phone.params import CfaParams
 
@@ -79,3 +80,46 @@ def luminance(raw_dn: np.ndarray, cfa: CfaParams, black_dn: float, white_dn: flo
         np.clip(ch, 0.0, 1.0, out=ch)
         out += np.float32(LUMA[c]) * ch
     return out
+
+
+@njit(parallel=True, cache=True)
+def _luma_tone_kernel(bgr, plane_luts, lut, out8):
+    """Per pixel: the three planes' white-balanced, clipped, luminance-weighted values from
+    their tables (in DN of luminance), summed, then the tone LUT."""
+    H, W = out8.shape
+    nl = lut.shape[0]
+    npl = plane_luts.shape[1]
+    for r in prange(H):
+        for c in range(W):
+            y = 0.0
+            for k in range(3):
+                v = bgr[r, c, k]
+                y += plane_luts[k, v if v < npl else npl - 1]
+            i = int(y + 0.5)
+            out8[r, c] = lut[i if i < nl else nl - 1]
+
+
+def tone_image(raw_dn: np.ndarray, cfa: CfaParams, black_dn: float, white_dn: float, lut: np.ndarray) -> np.ndarray:
+    """The ISP from the raw mosaic to the 8-bit image in one pass after OpenCV's demosaic:
+    :func:`luminance` followed by the tone LUT (indexed by DN, as the mono path's).
+
+    Returns
+    -------
+    ndarray, uint8, shape (H, W)
+    """
+    raw = raw_dn.astype(np.uint16)  # the ADC's output: whole DN in [0, white]
+    if cfa.demosaic == "vng":
+        shift = max(0, int(np.ceil(np.log2(white_dn + 1))) - 8)
+        bgr = cv2.cvtColor((raw >> shift).astype(np.uint8), demosaic_code(cfa)).astype(np.float32) * (1 << shift)
+    else:
+        bgr = cv2.cvtColor(raw, demosaic_code(cfa))
+    span = float(white_dn - black_dn)
+    dn = np.arange(int(white_dn) + 1, dtype=np.float64)
+    planes = np.empty((3, dn.size))
+    for k, c in enumerate((2, 1, 0)):  # BGR planes -> R, G, B response and weight
+        planes[k] = LUMA[c] * np.clip((dn - black_dn) / (span * cfa.response[c]), 0.0, 1.0) * span
+    planes[0] += black_dn  # the sum is then a DN index into the tone LUT
+    out8 = np.empty(raw.shape, np.uint8)
+    bgr16 = bgr if bgr.dtype == np.uint16 else np.clip(np.rint(bgr), 0, 65535).astype(np.uint16)
+    _luma_tone_kernel(bgr16, planes, np.ascontiguousarray(lut, np.uint8), out8)
+    return out8

@@ -61,6 +61,10 @@ def _normal(key, counter):
     return np.sqrt(-2.0 * np.log(u1)) * np.cos(6.283185307179586 * u2)
 
 
+#: 1 / k for the Poisson inversion (k < 201).
+_INV_K = np.concatenate([[0.0], 1.0 / np.arange(1, 201, dtype=np.float64)])
+
+
 @njit(cache=True, inline="always")
 def _poisson(lam, key, counter):
     """Poisson(lam): exact inversion below POISSON_GAUSS_LAMBDA, else the normal
@@ -76,7 +80,7 @@ def _poisson(lam, key, counter):
         k = 0
         while u > F and k < 200:
             k += 1
-            p *= lam / k
+            p *= lam * _INV_K[k]  # 1 / k from a table: a multiply, not a division
             F += p
         return float(k)
     x = np.floor(lam + np.sqrt(lam) * _normal(key, counter) + 0.5)
