@@ -1,19 +1,20 @@
 """The phone camera model: photon flux -> the image a phone would deliver.
 
-Flux (photons/s/px, from :mod:`render`; the retro spots as sub-pixel point samples) -> optics
+Flux (photons/s/px, from :mod:`render`; the retro spots as sub-pixel point samples) -> lens
 PSF (Airy + aberration core, glare wings, ghosts; :mod:`camera.phone.optics`), integrated over
-each pixel -> exposure
-(auto or manual) -> sensor in electrons (shot, dark, DSNU/PRNU, blooming) -> readout (read
-noise, gain, black level, ADC) = **raw** (DN) -> ISP (tone curve, 8 bits, downscale, JPEG) =
-**image** (uint8). No Mitsuba here: it runs on any flux image.
+each pixel -> Bayer mosaic (:mod:`camera.phone.cfa`) -> exposure (auto or manual) -> sensor
+in electrons (shot, dark, DSNU/PRNU, blooming) -> readout (read noise, gain, black level,
+ADC) = **raw** (DN) -> ISP (white balance, demosaic to luminance, tone curve, 8 bits,
+downscale, JPEG) = **image** (uint8). No Mitsuba here: it runs on any flux image.
 
 Render once, expose many: :class:`Exposer` holds one noise-free flux, applies the optics and
 meters the scene once, and then makes as many exposures (noise draws, exposure or gain
 changes) as asked, each from its own seed.
 
-Stages (``stages=``): ``glare`` (optics PSF; off: a perfect lens), ``shot``, ``dark``,
-``fpn`` (DSNU and PRNU), ``read``, ``bloom`` (off: plain full-well clipping), ``adc``
-(quantise and clip; off: float DN), ``tone`` (off: linear 8-bit), ``downscale``, ``jpeg``.
+Stages (``stages=``): ``glare`` (optics PSF; off: a perfect lens), ``cfa`` (the profile's
+colour filter array; off, or ``[cfa] pattern = "none"``: mono), ``shot``, ``dark``, ``fpn``
+(DSNU and PRNU), ``read``, ``bloom`` (off: plain full-well clipping), ``adc`` (quantise and
+clip; off: float DN), ``tone`` (off: linear 8-bit), ``downscale``, ``jpeg``.
 """
 
 from __future__ import annotations
