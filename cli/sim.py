@@ -56,6 +56,7 @@ def _scenario(args, range_m=None):
         target_x_m=args.target_x_m, target_y_m=args.target_y_m, roll_deg=args.roll_deg, pitch_deg=args.pitch_deg, yaw_deg=args.yaw_deg,
         backdrop_distance_m=back, ambient_radiance_w_m2_sr=_ambient(args), spp=args.spp, roi_spp=args.roi_spp,
         focus_distance_m=getattr(args, "focus_m", None),
+        **({"mount": args.mount, "stage_m": args.stage_m} if hasattr(args, "mount") else {}),
     )
 
 
@@ -197,6 +198,14 @@ def register(sub) -> None:
                        "phone camera model, run the SVGS detector and solver on the delivered image, and print "
                        "truth, solution and errors (pos_err_vec_m, att_err_vec_deg). Exit 0 solved, 1 no solution, 2 bad input.")
     _scene_args(p)
+    p.add_argument("--mount", choices=("target", "stand"), default="target",
+                   help="what --roll/--pitch/--yaw turn: 'target' (default: the target's attitude in front of the "
+                   "camera) or 'stand' (the paper's test stand: the target fixed, the phone turned by the gimbal "
+                   "about its pivot; --range is the rail position, no --x/--y). Known limit: the identification's pose "
+                   "envelope still bounds the target's offset from the boresight at 0.30 of the range, so gimbal "
+                   "angles beyond about 15 deg off axis end in no_consistent_set (issue 14, item 7)")
+    p.add_argument("--stage-m", dest="stage_m", type=float, default=0.0,
+                   help="the stand's translation stage along the rail, m (+/-0.15 on the paper's stand; --mount stand)")
     p.add_argument("--out", default=None, help="write flux.npy, raw.npy, image.png, preview.png, truth.json, solution.json here")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_render_and_solve)

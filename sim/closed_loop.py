@@ -68,6 +68,13 @@ class Scenario:
     spp, roi_spp : int or None
         Samples per pixel of the full frame and of the spot windows (None: the renderer's
         defaults).
+    mount : {"target", "stand"}
+        What the angles turn. ``"target"`` (default): the target's attitude in front of the
+        camera (:func:`svgs.frames.pose_from_scenario`). ``"stand"``: the paper's test stand -
+        the target fixed, the phone turned by the gimbal about its pivot, ``range_m`` the
+        pivot's rail position (:class:`sim.stand.TestStand`); lateral offsets must then be 0.
+    stage_m : float
+        The stand's translation stage along the rail, m (``mount="stand"`` only).
     """
 
     camera: str = "galaxy-nexus"
@@ -84,8 +91,19 @@ class Scenario:
     focus_distance_m: float | None = None
     spp: int | None = None
     roi_spp: int | None = None
+    mount: str = "target"
+    stage_m: float = 0.0
 
     def __post_init__(self):
+        if self.mount not in ("target", "stand"):
+            raise InputError(f"mount: expected 'target' or 'stand', got {self.mount!r}")
+        if self.mount == "stand" and (self.target_x_m != 0 or self.target_y_m != 0):
+            raise InputError("target_x_m/target_y_m: the test stand has no lateral stage; with mount='stand' "
+                             "the phone is turned by the gimbal and moved along the rail only (stage_m)")
+        if self.mount == "target" and self.stage_m != 0:
+            raise InputError("stage_m: only the test stand (mount='stand') has a translation stage")
+        if not np.isfinite(float(self.stage_m)) or abs(float(self.stage_m)) > 1.0:
+            raise InputError(f"stage_m: expected a finite stage position within +/-1 m, got {self.stage_m!r}")
         for k in ("range_m", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg", "backdrop_reflectance",
                   "ambient_radiance_w_m2_sr"):
             v = getattr(self, k)
@@ -110,6 +128,11 @@ class Scenario:
 
     def pose(self):
         """(R_cam_target, t_cam_target_m) of this scenario."""
+        if self.mount == "stand":
+            from sim.stand import TestStand
+
+            return TestStand().pose(self.range_m, stage_m=self.stage_m, roll_deg=self.roll_deg,
+                                    pitch_deg=self.pitch_deg, yaw_deg=self.yaw_deg)
         return pose_from_scenario(self.range_m, self.target_x_m, self.target_y_m, self.roll_deg, self.pitch_deg,
                                   self.yaw_deg)
 

@@ -98,3 +98,36 @@ def test_bad_stand_input_is_refused(nexus, pattern):
     with pytest.raises(InputError, match="keep the target in view"):
         sample_in_view(np.random.default_rng(0), nexus, pattern, 10.0, 5,
                        limits_deg={"roll_deg": 0.0, "pitch_deg": 0.0, "yaw_deg": 89.0}, max_draws=5)
+
+
+def test_scenario_on_the_stand_turns_the_phone():
+    from sim.closed_loop import Scenario
+
+    s = Scenario(range_m=10.0, pitch_deg=8.0, yaw_deg=10.0, roll_deg=10.0, mount="stand", stage_m=0.05)
+    R, t = s.pose()
+    R2, t2 = TestStand().pose(10.0, stage_m=0.05, roll_deg=10.0, pitch_deg=8.0, yaw_deg=10.0)
+    assert np.allclose(R, R2) and np.allclose(t, t2)
+    with pytest.raises(InputError, match="no lateral stage"):
+        Scenario(range_m=10.0, target_x_m=0.2, mount="stand")
+    with pytest.raises(InputError, match="only the test stand"):
+        Scenario(range_m=10.0, stage_m=0.1)
+    with pytest.raises(InputError, match="mount"):
+        Scenario(range_m=10.0, mount="tripod")
+
+
+@pytest.mark.render
+def test_render_and_solve_on_the_stand(capsys):
+    """The phone turned on the gimbal (the cubes keep facing the rail, so they keep returning
+    light) is solved, and the truth is the stand's."""
+    import json
+
+    from cli.main import main
+
+    rc = main(["render-and-solve", "--camera", "galaxy-nexus", "--range", "10", "--mount", "stand", "--pitch", "8",
+               "--yaw", "10", "--roll", "10", "--json"])
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert rc == 0 and out["ok"] and out["n_blobs"] == 4
+    truth = TestStand().state(10.0, roll_deg=10.0, pitch_deg=8.0, yaw_deg=10.0)
+    assert out["truth_state"]["z_m"] == pytest.approx(truth[2])
+    assert np.abs(out["pos_err_vec_m"]).max() < 0.1 and np.abs(out["att_err_vec_deg"]).max() < 1.0
+    assert main(["render-and-solve", "--camera", "galaxy-nexus", "--range", "10", "--mount", "stand", "--x", "0.2"]) == 2
