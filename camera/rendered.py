@@ -44,6 +44,28 @@ class RenderedFrame:
         return np.asarray(self.truth["R_cam_target"], float), np.asarray(self.truth["t_cam_target_m"], float)
 
 
+def bilinear_splat(u_px, v_px, weight, x0: int, y0: int, width: int, height: int) -> np.ndarray:
+    """Weights at sub-pixel positions spread bilinearly over their four nearest pixel centres,
+    on the box of pixels ``[x0, x0 + width) x [y0, y0 + height)`` (what falls outside is
+    dropped). Each sample's first moment is kept exactly.
+
+    Returns
+    -------
+    ndarray, float64, shape (height, width)
+    """
+    u0 = np.floor(u_px)
+    v0 = np.floor(v_px)
+    fu = u_px - u0
+    fv = v_px - v0
+    out = np.zeros(height * width)
+    for du, dv, w in ((0, 0, (1 - fu) * (1 - fv)), (1, 0, fu * (1 - fv)), (0, 1, (1 - fu) * fv), (1, 1, fu * fv)):
+        x = u0 + du - x0
+        y = v0 + dv - y0
+        ok = (x >= 0) & (x < width) & (y >= 0) & (y < height)
+        out += np.bincount((y[ok] * width + x[ok]).astype(np.int64), weights=(weight * w)[ok], minlength=height * width)
+    return out.reshape(height, width)
+
+
 @dataclass(frozen=True)
 class PointFlux:
     """Light that reaches the film at exact sub-pixel positions: the samples of the flash
@@ -95,18 +117,7 @@ class PointFlux:
     def bilinear(self, shape) -> np.ndarray:
         """The rates spread bilinearly over the four nearest pixel centres (keeps each sample's
         first moment exactly), float64 (H, W): input to smooth kernels such as the glare wings."""
-        H, W = int(shape[0]), int(shape[1])
-        u0 = np.floor(self.u_px)
-        v0 = np.floor(self.v_px)
-        fu = self.u_px - u0
-        fv = self.v_px - v0
-        out = np.zeros(H * W)
-        for du, dv, w in ((0, 0, (1 - fu) * (1 - fv)), (1, 0, fu * (1 - fv)), (0, 1, (1 - fu) * fv), (1, 1, fu * fv)):
-            x = u0 + du
-            y = v0 + dv
-            ok = (x >= 0) & (x < W) & (y >= 0) & (y < H)
-            out += np.bincount((y[ok] * W + x[ok]).astype(np.int64), weights=(self.rate_ph_s * w)[ok], minlength=H * W)
-        return out.reshape(H, W)
+        return bilinear_splat(self.u_px, self.v_px, self.rate_ph_s, 0, 0, int(shape[1]), int(shape[0]))
 
     def save(self, path) -> None:
         """Write an ``.npz`` with ``u_px``, ``v_px``, ``rate_ph_s``."""

@@ -17,6 +17,8 @@ from svgs.errors import InputError
 
 def register(sub) -> None:
     """Add the ``render`` and ``doctor`` sub-commands to an argparse subparsers object."""
+    from cli.sim import add_ambient_arg, add_focus_arg
+
     p = sub.add_parser(
         "render",
         help="ray-trace the target under the phone's flash: photon flux, preview and truth",
@@ -43,16 +45,12 @@ def register(sub) -> None:
     p.add_argument("--body", default=None, choices=("plate", "3u", "none"), help="target body (default plate)")
     p.add_argument("--method", default="guided", choices=("guided", "path"),
                    help="'guided' (default) or 'path' (brute force, the reference; slow beyond a few metres)")
-    p.add_argument("--focus-m", dest="focus_m", type=float, default=None,
-                   help="distance the lens is focused at, m (default: the target's distance - the phone's autofocus "
-                   "locks on it; svgs render and render-and-solve form the same image)")
+    add_focus_arg(p)
     p.add_argument("--full-frame", action="store_true", help="render the whole frame at --spp, no windows")
     p.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
     p.add_argument("--backdrop-m", type=float, default=None,
                    help="grey backdrop this far behind the target, m (default 3; 0 = none); added to flux.npy")
-    p.add_argument("--ambient", type=float, default=None,
-                   help="ambient scene radiance from room lights, W m^-2 sr^-1 in band (default: the lab's, "
-                   "0.028, fitted in assets/labs/fitted/msfc-frl.toml; 0: lights off)")
+    add_ambient_arg(p)
     p.add_argument("--exposure-s", type=float, default=None, help="exposure time of image.png (default: the phone's)")
     p.add_argument("--iso", type=float, default=None, help="ISO of image.png (default: the phone's)")
     p.add_argument("--no-expose", action="store_true", help="write only the flux (no raw.npy / image.png)")
@@ -99,12 +97,13 @@ def cmd_render(args) -> int:
         print(f"svgs render: note: {r.variant.notice}", file=sys.stderr)
     res = r.render(R, t, seed=args.seed, full_frame=args.full_frame)
     res.truth["command"] = {k: v for k, v in vars(args).items() if k != "func"}
+    from cli.sim import resolve_ambient
     from sim.closed_loop import DEFAULT_BACKDROP_DISTANCE_M, Scenario, lab_flux
 
     back = DEFAULT_BACKDROP_DISTANCE_M if args.backdrop_m is None else (None if args.backdrop_m == 0 else args.backdrop_m)
     scen = Scenario(camera=args.camera, pattern=args.pattern, range_m=args.range_m,
                     target_x_m=args.target_x_m, target_y_m=args.target_y_m, roll_deg=args.roll, pitch_deg=args.pitch,
-                    yaw_deg=args.yaw, backdrop_distance_m=back, ambient_radiance_w_m2_sr=_ambient(args))
+                    yaw_deg=args.yaw, backdrop_distance_m=back, ambient_radiance_w_m2_sr=resolve_ambient(args))
     lab, lab_info = lab_flux(camera, scen)
     res.flux = res.flux + lab
     if res.flux_diffuse is not None:
@@ -205,11 +204,3 @@ def cmd_doctor(args) -> int:
         print(f"usable      NO - {rep['error']}")
     return 0 if rep["ok"] else 1
 
-
-def _ambient(args) -> float:
-    """``--ambient``, or the lab's fitted ambient radiance (W m^-2 sr^-1) when not given."""
-    if args.ambient is None:
-        from sim.closed_loop import DEFAULT_AMBIENT_RADIANCE_W_M2_SR
-
-        return DEFAULT_AMBIENT_RADIANCE_W_M2_SR
-    return args.ambient

@@ -24,6 +24,20 @@ POSE_ARGS = (("--x", "target_x_m", "lateral offset of the target origin from the
              ("--yaw", "yaw_deg", "yaw (deg)"))
 
 
+def add_focus_arg(p) -> None:
+    """``--focus-m``, shared by ``svgs render`` and ``render-and-solve`` (one focus rule)."""
+    p.add_argument("--focus-m", dest="focus_m", type=float, default=None,
+                   help="distance the lens is focused at, m (default: the target's distance - the phone's autofocus "
+                   "locks on it; svgs render and render-and-solve form the same image)")
+
+
+def add_ambient_arg(p) -> None:
+    """``--ambient``, shared by the commands that render the lab (default: the lab's light)."""
+    p.add_argument("--ambient", type=float, default=None,
+                   help="ambient scene radiance from room lights, W m^-2 sr^-1 in band (default: the lab's, "
+                   "0.028, fitted in assets/labs/fitted/msfc-frl.toml; 0: lights off)")
+
+
 def _scene_args(p, with_range=True):
     p.add_argument("--camera", required=True, help="camera profile name or .toml path (needs [optics] and [flash])")
     p.add_argument("--pattern", default="svgs-3u", help="target pattern (default svgs-3u)")
@@ -35,12 +49,8 @@ def _scene_args(p, with_range=True):
     p.add_argument("--roi-spp", type=int, default=None, help="samples per pixel in the spot windows (default: the renderer's)")
     p.add_argument("--backdrop-m", type=float, default=None,
                    help="distance of a grey backdrop behind the target (m; default 3; 0 = none)")
-    p.add_argument("--ambient", type=float, default=None,
-                   help="ambient scene radiance from room lights, W m^-2 sr^-1 in band (default: the lab's, "
-                   "0.028, fitted in assets/labs/fitted/msfc-frl.toml; 0: lights off)")
-    p.add_argument("--focus-m", dest="focus_m", type=float, default=None,
-                   help="distance the lens is focused at, m (default: the target's distance - the phone's autofocus "
-                   "locks on it; svgs render and render-and-solve form the same image)")
+    add_ambient_arg(p)
+    add_focus_arg(p)
     p.add_argument("--threshold", default=None, help="detector threshold: a level, 'auto' or 'otsu' (default auto)")
     p.add_argument("--exposure-s", type=float, default=None, help="override the phone's exposure time (s)")
     p.add_argument("--iso", type=float, default=None, help="override the phone's ISO")
@@ -54,7 +64,7 @@ def _scenario(args, range_m=None):
     return Scenario(
         camera=args.camera, pattern=args.pattern, range_m=args.range_m if range_m is None else range_m,
         target_x_m=args.target_x_m, target_y_m=args.target_y_m, roll_deg=args.roll_deg, pitch_deg=args.pitch_deg, yaw_deg=args.yaw_deg,
-        backdrop_distance_m=back, ambient_radiance_w_m2_sr=_ambient(args), spp=args.spp, roi_spp=args.roi_spp,
+        backdrop_distance_m=back, ambient_radiance_w_m2_sr=resolve_ambient(args), spp=args.spp, roi_spp=args.roi_spp,
         focus_distance_m=getattr(args, "focus_m", None),
         **({"mount": args.mount, "stage_m": args.stage_m} if hasattr(args, "mount") else {}),
     )
@@ -174,7 +184,7 @@ def cmd_range_sweep(args) -> int:
              "target_y_m": args.target_y_m, "roll_deg": args.roll_deg, "pitch_deg": args.pitch_deg,
              "yaw_deg": args.yaw_deg,
              "backdrop_distance_m": DEFAULT_BACKDROP_DISTANCE_M if args.backdrop_m is None else args.backdrop_m,
-             "ambient_radiance_w_m2_sr": _ambient(args), "spp": -1 if args.spp is None else args.spp,
+             "ambient_radiance_w_m2_sr": resolve_ambient(args), "spp": -1 if args.spp is None else args.spp,
              "roi_spp": -1 if args.roi_spp is None else args.roi_spp,
              "exposure_s": args.exposure_s or 0.0, "iso": args.iso or 0.0}
     cfg = make_config(args.camera, ranges, trials=args.trials, poses=args.poses, jitter_deg=args.jitter_deg,
@@ -230,7 +240,7 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_range_sweep)
 
 
-def _ambient(args) -> float:
+def resolve_ambient(args) -> float:
     """``--ambient``, or the lab's fitted ambient radiance (W m^-2 sr^-1) when not given."""
     if args.ambient is None:
         from sim.closed_loop import DEFAULT_AMBIENT_RADIANCE_W_M2_SR

@@ -197,7 +197,7 @@ class Frame:
         from camera.phone import ALL_STAGES, Exposer
 
         stages = ALL_STAGES if stages is None else stages
-        seed = int((self.truth.get("render") or {}).get("seed", 0) or 0)
+        seed = render_seed(self.truth)
         lab = self.lab if self.lab is not None else np.float32(0.0)
         if self.points is not None and self.target_diffuse is not None:
             flux = (lab + self.target_diffuse * np.float32(target_scale)).astype(np.float32)
@@ -207,6 +207,12 @@ class Frame:
         if target_scale != 1.0:
             flux = (lab + (self.flux - lab) * np.float32(target_scale)).astype(np.float32)
         return Exposer(self.phone(), flux, stages=stages, optics_seed=seed)
+
+
+def render_seed(truth: dict) -> int:
+    """The render's sampler seed from a truth record (0 when it has none): it also seeds the
+    Monte Carlo convolution of the frame's points with the PSF."""
+    return int((truth.get("render") or {}).get("seed", 0) or 0)
 
 
 def lab_flux(camera: Camera, scenario: Scenario) -> tuple[np.ndarray, dict]:

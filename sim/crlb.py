@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from sim.closed_loop import render_seed
 from svgs.frames import STATE_KEYS
 
 #: Half-width of the window around a spot over which its Fisher information is summed, px.
@@ -80,7 +81,7 @@ def centroid_crlb_px(frame, exposer, exposure, spots_px, *, window_half_px: int 
     if pts is None or len(pts) == 0:
         return out
     diffuse = np.zeros(phone.shape, np.float32)
-    seed = int((frame.truth.get("render") or {}).get("seed", 0) or 0)
+    seed = render_seed(frame.truth)
     d = []
     for dx, dy in ((SHIFT_PX, 0.0), (-SHIFT_PX, 0.0), (0.0, SHIFT_PX), (0.0, -SHIFT_PX)):
         d.append(phone.optics(diffuse, _shifted(pts, dx, dy), seed=seed, cfa=exposer.cfa).astype(np.float64))

@@ -93,8 +93,9 @@ def _residuals(frames, psf, ids, h):
         dv, du = np.unravel_index(np.argmax(sub), sub.shape)
         start.append(_window_centroid(img0, (u - 3 + du, v - 3 + dv), h)[0])
     start = np.array(start)
-    meas = np.array([[_window_centroid(img, start[j] + s[j], h)[0] for j in range(len(ids))] for img, s, _ in frames])
-    flux = np.array([[_window_centroid(img, start[j] + s[j], h)[1] for j in range(len(ids))] for img, s, _ in frames])
+    windows = [[_window_centroid(img, start[j] + s[j], h) for j in range(len(ids))] for img, s, _ in frames]
+    meas = np.array([[c for c, _ in row] for row in windows])
+    flux = np.array([[f for _, f in row] for row in windows])
     shifts = np.array([s for _, s, _ in frames])  # (STEPS, N)
     base = (meas - shifts[..., None]).mean(0)  # first estimate of each spot's start
     for _ in range(2):

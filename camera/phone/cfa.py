@@ -51,6 +51,15 @@ def demosaic_code(cfa: CfaParams) -> int:
     return getattr(cv2, f"COLOR_Bayer{_CV_CODES[cfa.pattern]}2BGR{suffix}")
 
 
+def _demosaic(raw: np.ndarray, cfa: CfaParams, white_dn: float) -> np.ndarray:
+    """OpenCV's demosaic of a uint16 mosaic to BGR (uint16; float32 for VNG, which takes 8-bit
+    input only: the top bits go through it and are scaled back)."""
+    if cfa.demosaic == "vng":
+        shift = max(0, int(np.ceil(np.log2(white_dn + 1))) - 8)
+        return cv2.cvtColor((raw >> shift).astype(np.uint8), demosaic_code(cfa)).astype(np.float32) * (1 << shift)
+    return cv2.cvtColor(raw, demosaic_code(cfa))
+
+
 def luminance(raw_dn: np.ndarray, cfa: CfaParams, black_dn: float, white_dn: float) -> np.ndarray:
     """The ISP from the raw mosaic to linear luminance.
 
@@ -68,11 +77,7 @@ def luminance(raw_dn: np.ndarray, cfa: CfaParams, black_dn: float, white_dn: flo
         white is clipped there, as an ISP does).
     """
     raw = np.clip(np.rint(raw_dn), 0, 65535).astype(np.uint16)
-    if cfa.demosaic == "vng":  # OpenCV's VNG takes 8-bit input only: keep the top bits
-        shift = max(0, int(np.ceil(np.log2(white_dn + 1))) - 8)
-        bgr = cv2.cvtColor((raw >> shift).astype(np.uint8), demosaic_code(cfa)).astype(np.float32) * (1 << shift)
-    else:
-        bgr = cv2.cvtColor(raw, demosaic_code(cfa)).astype(np.float32)
+    bgr = _demosaic(raw, cfa, white_dn).astype(np.float32)
     span = float(white_dn - black_dn)
     out = np.zeros(raw.shape, np.float32)
     for c_bgr, c in ((2, 0), (1, 1), (0, 2)):  # BGR planes -> R, G, B
@@ -108,11 +113,7 @@ def tone_image(raw_dn: np.ndarray, cfa: CfaParams, black_dn: float, white_dn: fl
     ndarray, uint8, shape (H, W)
     """
     raw = raw_dn.astype(np.uint16)  # the ADC's output: whole DN in [0, white]
-    if cfa.demosaic == "vng":
-        shift = max(0, int(np.ceil(np.log2(white_dn + 1))) - 8)
-        bgr = cv2.cvtColor((raw >> shift).astype(np.uint8), demosaic_code(cfa)).astype(np.float32) * (1 << shift)
-    else:
-        bgr = cv2.cvtColor(raw, demosaic_code(cfa))
+    bgr = _demosaic(raw, cfa, white_dn)
     span = float(white_dn - black_dn)
     dn = np.arange(int(white_dn) + 1, dtype=np.float64)
     planes = np.empty((3, dn.size))

@@ -40,9 +40,7 @@ def core_sigma_px(f_number: float, band_nm, pitch_m: float, aberration_sigma_px:
     """Standard deviation (px) of the Gaussian that best fits the PSF core (0.42 lambda N for
     the Airy disk at the band's middle, in quadrature with the aberration): for summaries and
     the Cramer-Rao bound; the image itself is formed with the Airy pattern (:func:`core_psf`)."""
-    lam_m = 0.5 * (band_nm[0] + band_nm[1]) * 1e-9
-    s_airy = 0.42 * lam_m * f_number / pitch_m
-    return math.sqrt(s_airy**2 + aberration_sigma_px**2)
+    return core_psf(f_number, band_nm, pitch_m, aberration_sigma_px).sigma_equivalent_px
 
 
 def core_psf(f_number: float, band_nm, pitch_m: float, aberration_sigma_px: float, wavelength_nm=None) -> CorePSF:
@@ -107,7 +105,8 @@ def core_image(flux, core, points=None, rng: np.random.Generator | None = None) 
     H, W = f.shape
     has_points = points is not None and len(points) > 0
     if isinstance(core, CorePSF):
-        out = core.convolve(f).astype(np.float64)
+        # the convolution of an empty image is empty (point-only images: the CRLB, the tests)
+        out = core.convolve(f).astype(np.float64) if f.any() else np.zeros((H, W))
         if has_points:
             rng = np.random.default_rng(0) if rng is None else rng
             out += core.splat(points.u_px, points.v_px, points.rate_ph_s, (H, W), rng)

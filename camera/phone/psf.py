@@ -34,11 +34,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from camera.rendered import bilinear_splat
+
 #: Encircled-energy table of the Airy pattern: x = pi r / (lambda N) from 0 to this value.
 AIRY_TABLE_X_MAX = 400.0
 AIRY_TABLE_STEP = 0.002
-#: Draws displaced further than this are dropped (they leave any frame), px.
-MAX_DISPLACEMENT_PX = 4000.0
 #: Monte Carlo convolution: at least this many PSF draws per frame (several per sample when a
 #: frame has few samples), so that the draws add a negligible noise to the spots.
 MIN_DRAWS = 1 << 20
@@ -236,12 +236,8 @@ class CorePSF:
         u, v, w, u0, v0 = u[ok], v[ok], w[ok], u0[ok], v0[ok]
         x0, y0 = int(u0.min()), int(v0.min())
         bw, bh = int(u0.max()) - x0 + 2, int(v0.max()) - y0 + 2
-        fu, fv = u - u0, v - v0
-        ix, iy = (u0 - x0).astype(np.int64), (v0 - y0).astype(np.int64)
-        box = np.zeros(bh * bw)
-        for dx, dy, ww in ((0, 0, (1 - fu) * (1 - fv)), (1, 0, fu * (1 - fv)), (0, 1, (1 - fu) * fv), (1, 1, fu * fv)):
-            box += np.bincount((iy + dy) * bw + ix + dx, weights=w * ww, minlength=bh * bw)
-        conv = fftconvolve(box.reshape(bh, bw), self.outer_kernel(), mode="full")  # origin at (x0 - R, y0 - R)
+        box = bilinear_splat(u, v, w, x0, y0, bw, bh)
+        conv = fftconvolve(box, self.outer_kernel(), mode="full")  # origin at (x0 - R, y0 - R)
         X0, Y0 = x0 - R, y0 - R
         ys, xs = max(0, Y0), max(0, X0)
         ye, xe = min(H, Y0 + conv.shape[0]), min(W, X0 + conv.shape[1])
