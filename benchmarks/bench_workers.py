@@ -30,7 +30,8 @@ from sim.trials import GEOMETRIC  # noqa: E402
 
 
 def _study(trials_per_range: int, seed: int):
-    cfg = make_config("galaxy-nexus", trials_per_range=trials_per_range, seed=seed, calibration="paper")
+    cfg = make_config("galaxy-nexus", trials_per_range=trials_per_range, seed=seed, calibration="paper",
+                      trial_kind="geometric")
     return cfg, campaign_trials(cfg)
 
 

@@ -171,8 +171,14 @@ SCHEMAS = {
  "outputs": {{"summary_csv", "summary_md", "trials_csv", "plot", "results_csv", "summary_json": path}},
  {_RUN}}}""",
     "svgs campaign": f"""\
-{{"trial_kind": str, "camera": str, "trials_per_range": int, "sigma_px": float,
- "calibration": "exact" | "paper", "calibration_error": {{name: float}},   # the solver's intrinsics errors
+{{"trial_kind": "render" | "geometric", "camera": str, "trials_per_range": int,
+ "exposures_per_render": int, "stand_settings_per_range": int,
+ "sigma_px": float | null,                                  # geometric trials only
+ "calibration": "exact" | "paper", "calibration_error": {{name: float}},   # the solver's, relative to the true lens
+ "true_lens": {{"lens_pp_u_px", "lens_pp_v_px", "lens_k1": float}},         # rendered, paper practice; else {{}}
+ "focal_calibration": {{"f_px", "f_sigma_px", "f_true_px", "focal_error_frac": float,
+                       "ranges_used_m", "ranges_measured_m": [float], "frames": [...]}} | null,
+ "misalignment_deg": [roll, pitch, yaw], "budget": bool,
  "ranges": [{{"range_m": float, "trials": int, "solved": int, "success_rate": float,
              "failures": {{reason: int}},
              "mean_abs_error": {_STATE},   # the paper's "mean error"
@@ -186,11 +192,19 @@ SCHEMAS = {
 {{"camera": str, "method": "sobol" | "morris", "trial_kind": str, "n": int, "n_trials": int,
  "parameters": [{{"name": str, "low": float, "high": float, "unit": str, "needs_render": bool}}],
  "fixed": {{name: float}}, "failure_fraction": float, "render_groups": int,
- "indices": {{output: [{{"parameter": str,          # output: pos_err_norm_m, rot_err_deg, success
+ "indices": {{output: [{{"parameter": str,          # output: pos_err_norm_m, rot_err_deg, success (+ merge_margin_dn: render)
                        "S1", "S1_low", "S1_high", "ST", "ST_low", "ST_high": float}}]}},  # sobol
           # morris: "mu_star", "mu_star_low", "mu_star_high", "mu", "sigma"
  "ranking": {{output: [[parameter, ST or mu_star], ...]}},   # largest first
  "outputs": {{"results_csv", "indices_csv", "report", "summary_json": path}},
+ {_RUN}}}""",
+    "svgs merge-range": f"""\
+{{"camera": str, "ranges_m": [float], "exposures": int,
+ "nominal": {{"merge_range_m": float, "bound": "inside" | "below" | "above"}},   # below/above: beyond the grid
+ "cases": [{{"case": str, "parameter": str, "value": float | null, "merge_range_m": float, "bound": str,
+            "margin_dn": [float], "solved": [float]}}],      # per range of the grid
+ "effects": [{{"parameter", "low", "high", "merge_range_low_m", "merge_range_high_m", "nominal_m", "span_m"}}],
+ "outputs": {{"results_csv", "merge_ranges_csv", "report", "summary_json": path}},
  {_RUN}}}""",
     "svgs calibrate study": """\
 {"config": {...},                  # every option of the study

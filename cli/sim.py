@@ -211,9 +211,8 @@ def register(sub) -> None:
     p.add_argument("--mount", choices=("target", "stand"), default="target",
                    help="what --roll/--pitch/--yaw turn: 'target' (default: the target's attitude in front of the "
                    "camera) or 'stand' (the paper's test stand: the target fixed, the phone turned by the gimbal "
-                   "about its pivot; --range is the rail position, no --x/--y). Known limit: the identification's pose "
-                   "envelope still bounds the target's offset from the boresight at 0.30 of the range, so gimbal "
-                   "angles beyond about 15 deg off axis end in no_consistent_set (issue 14, item 7)")
+                   "about its pivot - roll and pitch tilt it about its horizontal and vertical axes, yaw turns it about "
+                   "the line of sight, as the paper names the attitude; --range is the rail position, no --x/--y)")
     p.add_argument("--stage-m", dest="stage_m", type=float, default=0.0,
                    help="the stand's translation stage along the rail, m (+/-0.15 on the paper's stand; --mount stand)")
     p.add_argument("--out", default=None, help="write flux.npy, raw.npy, image.png, preview.png, truth.json, solution.json here")

@@ -75,23 +75,38 @@ def register(sub) -> None:
     p = sub.add_parser(
         "campaign",
         help="simulate the paper's MSFC test campaign and compare with its Tables 2-5",
-        description="Simulate the 2014 MSFC Flight Robotics Lab campaign for one phone: gimbal roll/pitch +/-25 deg, "
-        "yaw +/-45 deg, translation stage +/-15 cm, at the paper's ranges. Writes DIR/results.csv (one row per trial, "
+        description="Simulate the 2014 MSFC Flight Robotics Lab campaign for one phone through the rendered chain "
+        "(Mitsuba render, phone camera model, SVGS detector and solver): the phone on the test stand's gimbal (roll and "
+        "pitch +/-25 deg, yaw +/-45 deg about the line of sight, attitudes kept when the phone sees the target), the "
+        "translation stage +/-15 cm, at the paper's ranges, each setting rendered once and exposed several times; the "
+        "paper's calibration practice (a focal length estimated from rendered frames at range-finder ranges, the "
+        "principal point assumed at the image centre, no distortion). Writes DIR/results.csv (one row per trial, "
         "resumable: rerun the same command to finish an interrupted run), DIR/summary.csv, DIR/summary.json and a "
-        "self-contained DIR/report.html with the tables beside the paper's, histograms and the Cramer-Rao bound.",
+        "self-contained DIR/report.html with Tables 2-5 beside the paper's, the Cramer-Rao bound, histograms, sample "
+        "images and, with --budget, the error budget.",
     )
     p.add_argument("--camera", required=True, help="camera profile (htc-amaze-4g, galaxy-nexus, or a .toml path)")
     p.add_argument("--trials", type=int, default=200, metavar="N", help="trials per range (default 200)")
+    p.add_argument("--exposures-per-render", type=int, default=4, metavar="K",
+                   help="exposures (noise draws) of each rendered stand setting (default 4): trials/K settings per range")
     p.add_argument("--ranges", default=None, metavar="R1,R2,...",
                    help="test ranges in m (default: the paper's for the phone)")
     p.add_argument("--out", default=None, metavar="DIR", help="study directory (default runs/campaign-CAMERA)")
     p.add_argument("--seed", type=int, default=0, help="study seed (default 0)")
-    p.add_argument("--trial-kind", default="geometric", help="trial kind (default geometric)")
-    p.add_argument("--sigma-px", type=float, default=0.1, help="centroid noise, px per axis (default 0.1)")
+    p.add_argument("--trial-kind", choices=("render", "geometric"), default="render",
+                   help="render (default): the rendered chain; geometric: the pattern projected with --sigma-px of "
+                   "Gaussian centroid noise (fast)")
+    p.add_argument("--sigma-px", type=float, default=0.1, help="centroid noise of the geometric trial, px per axis "
+                   "(default 0.1)")
     p.add_argument("--pattern", default="svgs-3u", help="target pattern (default svgs-3u)")
-    p.add_argument("--calibration", choices=("exact", "paper"), default="exact",
-                   help="calibration the solver uses: exact, or the paper's practice (one rough calibration drawn "
-                   "per campaign; see docs/studies.md)")
+    p.add_argument("--calibration", choices=("exact", "paper"), default="paper",
+                   help="calibration the solver uses: the paper's practice (default; one per campaign, see "
+                   "docs/studies.md) or exact (the solver knows the lens, unless the error options below say otherwise)")
+    p.add_argument("--misalignment-deg", default=None, metavar="R,P,Y",
+                   help="the phone's roll, pitch, yaw in its holder on the stand, deg (default: the lab's, "
+                   "assets/labs/msfc-frl.toml: 0,0,2 for the Galaxy Nexus, fitted to Table 4's yaw; 0,0,0 otherwise)")
+    p.add_argument("--budget", action="store_true",
+                   help="also run the error budget: the campaign with one error source removed at a time (render trials)")
     p.add_argument("--focal-error-frac", type=float, default=0.0, help="solver's focal-length error, fraction")
     p.add_argument("--pp-error-px", default="0,0", metavar="DU,DV", help="solver's principal-point error, px")
     p.add_argument("--k1-error", type=float, default=0.0, help="solver's radial distortion k1 error")
@@ -125,6 +140,30 @@ def register(sub) -> None:
     add_executor_options(s)
     s.set_defaults(func=cmd_sensitivity)
 
+    m = sub.add_parser(
+        "merge-range",
+        help="which physical parameters move the range at which the spots merge, and by how much",
+        description="The rendered chain at a grid of ranges, the phone facing the target on the stand: the merge "
+        "margin (the detector's threshold minus the darkest level between the closest spots) and the range where it "
+        "crosses zero, for the phone as profiled and with each physical parameter (glare veiling fraction and "
+        "exponent, exposure compensation, LED offset, cube spacing, f-number) at the low and the high end of its "
+        "range. Writes DIR/results.csv (resumable), DIR/merge_ranges.csv, DIR/summary.json and DIR/report.html "
+        "(a tornado chart and the margin curves).",
+    )
+    m.add_argument("--camera", required=True, help="camera profile (e.g. htc-amaze-4g)")
+    m.add_argument("--ranges", default=None, metavar="R1,R2,...",
+                   help="increasing ranges of the grid, m (default 3,4,5,5.5,6,6.5,7,7.5,8,9,10,12)")
+    m.add_argument("--vary", action="append", default=[], metavar="NAME[=LOW:HIGH]",
+                   help="a physical parameter and its range (default: all, each over its documented range; see "
+                   "docs/studies.md)")
+    m.add_argument("--exposures", type=int, default=2, metavar="K", help="exposures per render (default 2)")
+    m.add_argument("--out", default=None, metavar="DIR", help="study directory (default runs/merge-range-CAMERA)")
+    m.add_argument("--seed", type=int, default=0)
+    m.add_argument("--pattern", default="svgs-3u")
+    m.add_argument("--json", action="store_true", help="print one JSON object on stdout; also DIR/summary.json")
+    add_executor_options(m)
+    m.set_defaults(func=cmd_merge_range)
+
 
 def _ranges(text):
     if text is None:
@@ -135,6 +174,16 @@ def _ranges(text):
         raise InputError(f"--ranges: expected comma-separated numbers in m, got {text!r}") from None
     if not vals:
         raise InputError(f"--ranges: no ranges in {text!r}")
+    return vals
+
+
+def _triple(text, flag):
+    try:
+        vals = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        raise InputError(f"{flag}: expected three comma-separated numbers in deg, got {text!r}") from None
+    if len(vals) != 3:
+        raise InputError(f"{flag}: expected three comma-separated numbers in deg (roll, pitch, yaw), got {text!r}")
     return vals
 
 
@@ -162,16 +211,23 @@ def cmd_campaign(args) -> int:
     err = {"focal_error_frac": args.focal_error_frac, "pp_error_u_px": du, "pp_error_v_px": dv, "k1_error": args.k1_error}
     if args.calibration == "exact":
         err = {k: v for k, v in err.items() if v != 0}
+    mis = None if args.misalignment_deg is None else _triple(args.misalignment_deg, "--misalignment-deg")
     config = make_config(args.camera, ranges_m=_ranges(args.ranges), trials_per_range=args.trials, seed=args.seed,
                          sigma_px=args.sigma_px, trial_kind=args.trial_kind, pattern=args.pattern,
-                         calibration=args.calibration, calibration_error=err, merge_px=args.merge_px)
+                         calibration=args.calibration, calibration_error=err, merge_px=args.merge_px,
+                         exposures_per_render=args.exposures_per_render, misalignment_deg=mis, budget=args.budget)
     if args.chunk_size is not None and args.chunk_size < 1:
         raise InputError(f"--chunk-size: expected a positive integer, got {args.chunk_size}")
     out = args.out or f"runs/campaign-{_safe(args.camera)}"
     argv = ["svgs", "campaign", "--camera", args.camera, "--trials", str(args.trials),
+            "--exposures-per-render", str(args.exposures_per_render),
             "--ranges", ",".join(f"{r:g}" for r in config.ranges_m), "--out", out, "--seed", str(args.seed),
-            "--trial-kind", args.trial_kind, "--sigma-px", repr(args.sigma_px), "--pattern", args.pattern,
-            "--calibration", args.calibration]
+            "--trial-kind", args.trial_kind, "--pattern", args.pattern, "--calibration", args.calibration,
+            "--misalignment-deg", ",".join(f"{x:g}" for x in config.misalignment_deg)]
+    if args.trial_kind == "geometric":
+        argv += ["--sigma-px", repr(args.sigma_px)]
+    if args.budget:
+        argv += ["--budget"]
     if args.calibration == "exact":
         argv += ["--focal-error-frac", repr(args.focal_error_frac), "--pp-error-px", f"{du!r},{dv!r}",
                  "--k1-error", repr(args.k1_error)]
@@ -179,8 +235,8 @@ def cmd_campaign(args) -> int:
         argv += ["--merge-px", repr(args.merge_px)]
     argv += executor_argv(args)
     with text_to_stderr(args.json):
-        summary, stats, path = run_campaign(config, out, spec, chunk_size=args.chunk_size,
-                                            progress=not args.no_progress, command=shlex.join(argv))
+        summary, stats, path, config = run_campaign(config, out, spec, chunk_size=args.chunk_size,
+                                                    progress=not args.no_progress, command=shlex.join(argv))
         print_summary(summary, config)
         print_run_stats(stats, "report")
         print(f"results: {out}/results.csv  summary: {out}/summary.csv, {out}/summary.json  report: {path}")
@@ -188,10 +244,46 @@ def cmd_campaign(args) -> int:
     return 0
 
 
+def cmd_merge_range(args) -> int:
+    from cli.json_out import emit, run_info, text_to_stderr
+    from studies.merge_range import _fmt, make_config, run_merge_range
+
+    spec = executor_from_args(args)
+    config = make_config(args.camera, ranges_m=_ranges(args.ranges), vary=args.vary or None, exposures=args.exposures,
+                         seed=args.seed, pattern=args.pattern)
+    out = Path(args.out or f"runs/merge-range-{_safe(args.camera)}")
+    argv = ["svgs", "merge-range", "--camera", args.camera, "--ranges", ",".join(f"{r:g}" for r in config.ranges_m)]
+    for p in config.parameters:
+        lo, hi = config.bounds[p]
+        argv += ["--vary", f"{p}={lo:g}:{hi:g}"]
+    argv += ["--exposures", str(config.exposures), "--out", str(out), "--seed", str(config.seed),
+             "--pattern", config.pattern] + executor_argv(args)
+    with text_to_stderr(args.json):
+        cases, eff, stats, path = run_merge_range(config, out, spec, chunk_size=args.chunk_size,
+                                                  progress=not args.no_progress, command=shlex.join(argv))
+        nom = cases[0]
+        print(f"{config.camera}: the spots merge at {_fmt(nom['merge_range_m'], nom['bound'])} m as profiled")
+        for e in eff:
+            print(f"  {e['parameter']:26s} {e['low']:g} -> {e['high']:g}: {_fmt(e['merge_range_low_m'], e['bound_low'])}"
+                  f" -> {_fmt(e['merge_range_high_m'], e['bound_high'])} m (span {e['span_m']:.2f} m)")
+        print_run_stats(stats, "report")
+        print(f"results: {out}/results.csv  merge ranges: {out}/merge_ranges.csv  report: {path}")
+    obj = {"camera": config.camera, "ranges_m": list(config.ranges_m), "exposures": config.exposures,
+           "nominal": {"merge_range_m": nom["merge_range_m"], "bound": nom["bound"]},
+           "cases": [{k: c[k] for k in ("case", "parameter", "value", "merge_range_m", "bound", "margin_dn", "solved")}
+                     for c in cases],
+           "effects": eff,
+           "outputs": {"results_csv": out / "results.csv", "merge_ranges_csv": out / "merge_ranges.csv",
+                       "report": path, "summary_json": out / "summary.json"},
+           "run": run_info(stats, len(cases) * len(config.ranges_m) * config.exposures)}
+    emit(obj, args.json, out)
+    return 0
+
+
 def cmd_sensitivity(args) -> int:
     from cli.json_out import emit, text_to_stderr
     from studies.execution import executor_spec
-    from studies.sensitivity import OUTPUTS, make_config, ranking, run_sensitivity
+    from studies.sensitivity import analysed_outputs, make_config, ranking, run_sensitivity
 
     spec = executor_spec(args.processes, args.workers, args.scheduler)
     config = make_config(args.camera, args.vary, fixed=args.fixed, method=args.method, n=args.n, seed=args.seed,
@@ -211,7 +303,7 @@ def cmd_sensitivity(args) -> int:
         result, stats, path, n_groups = run_sensitivity(config, out, spec, chunk_size=args.chunk_size,
                                                         progress=not args.no_progress, command=shlex.join(argv))
         label = "ST" if args.method == "sobol" else "mu*"
-        for k in OUTPUTS:
+        for k in analysed_outputs(config):
             rk = ranking(result, config, k)
             print(f"{k:14s} ranked by {label}: " + ", ".join(f"{n} {s:.3f}" for n, s in rk))
         print(f"failed trials: {100 * result['failure_fraction']:.1f} %; renders needed: {n_groups} of "
@@ -248,8 +340,11 @@ def campaign_json(config, summary, stats, out, report) -> dict:
                        "ratio": {"mean_error": _state(s, "ratio_mean_"), "std": _state(s, "ratio_std_")}})
     out = Path(out)
     return {"trial_kind": config.trial_kind, "camera": config.camera, "trials_per_range": config.trials_per_range,
-            "sigma_px": config.sigma_px, "calibration": config.calibration,
-            "calibration_error": dict(sorted(config.calibration_error.items())), "ranges": ranges,
+            "exposures_per_render": config.exposures_per_render, "stand_settings_per_range": config.poses_per_range,
+            "sigma_px": config.sigma_px if config.trial_kind == "geometric" else None, "calibration": config.calibration,
+            "calibration_error": dict(sorted(config.calibration_error.items())),
+            "true_lens": dict(sorted(config.lens.items())), "focal_calibration": config.calibration_info or None,
+            "misalignment_deg": list(config.misalignment_deg), "budget": bool(config.budget), "ranges": ranges,
             "outputs": {"results_csv": out / "results.csv", "summary_csv": out / "summary.csv", "report": report,
                         "summary_json": out / "summary.json"},
             "run": run_info(stats, len(config.ranges_m) * config.trials_per_range)}
@@ -259,7 +354,7 @@ def sensitivity_json(config, result, stats, out, report, n_groups) -> dict:
     """The object of ``svgs sensitivity --json`` (:data:`cli.json_out.SCHEMAS`): the rows of
     ``indices.csv`` per output, the rankings and the run."""
     from cli.json_out import run_info
-    from studies.sensitivity import OUTPUTS, index_rows, ranking
+    from studies.sensitivity import analysed_outputs, index_rows, ranking
 
     names = [v.name for v in config.varied]
     rows = index_rows(result, config, names)
@@ -270,8 +365,8 @@ def sensitivity_json(config, result, stats, out, report, n_groups) -> dict:
                            for v in config.varied],
             "fixed": dict(config.fixed), "failure_fraction": result["failure_fraction"], "render_groups": n_groups,
             "indices": {k: [{c: v for c, v in r.items() if c != "output"} for r in rows if r["output"] == k]
-                        for k in OUTPUTS},
-            "ranking": {k: [list(x) for x in ranking(result, config, k)] for k in OUTPUTS},
+                        for k in analysed_outputs(config)},
+            "ranking": {k: [list(x) for x in ranking(result, config, k)] for k in analysed_outputs(config)},
             "outputs": {"results_csv": out / "results.csv", "indices_csv": out / "indices.csv", "report": report,
                         "summary_json": out / "summary.json"},
             "run": run_info(stats, config.n_trials)}

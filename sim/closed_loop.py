@@ -75,6 +75,18 @@ class Scenario:
         pivot's rail position (:class:`sim.stand.TestStand`); lateral offsets must then be 0.
     stage_m : float
         The stand's translation stage along the rail, m (``mount="stand"`` only).
+    misalignment_deg : tuple of float
+        The phone's (roll, pitch, yaw) in its holder, deg (``mount="stand"`` only; see
+        :class:`sim.stand.TestStand`). The image is made at the actual pose; the truth the
+        lab knew is the commanded one (:meth:`commanded_pose`).
+    lens_pp_offset_px : tuple of float
+        The true lens' principal point minus the profile's ``(cx, cy)``, px: the image is
+        rendered through :meth:`camera_profile`, the profile's camera with this offset.
+    lens_k1 : float
+        Radial distortion k1 added to the profile's for the true lens.
+    camera_overrides : tuple of (table, key, value)
+        Profile values replaced for this scenario (e.g. ``(("optics", "f_number", 2.8),)``):
+        the renderer and the camera model both read them (:meth:`camera_profile`).
     """
 
     camera: str = "galaxy-nexus"
@@ -93,8 +105,26 @@ class Scenario:
     roi_spp: int | None = None
     mount: str = "target"
     stage_m: float = 0.0
+    misalignment_deg: tuple = (0.0, 0.0, 0.0)
+    lens_pp_offset_px: tuple = (0.0, 0.0)
+    lens_k1: float = 0.0
+    camera_overrides: tuple = ()
 
     def __post_init__(self):
+        object.__setattr__(self, "camera_overrides", tuple(tuple(x) for x in self.camera_overrides))
+        for ov in self.camera_overrides:
+            if len(ov) != 3 or not all(isinstance(x, str) for x in ov[:2]):
+                raise InputError(f"camera_overrides: expected (table, key, value) entries, got {ov!r}")
+        object.__setattr__(self, "misalignment_deg", tuple(float(x) for x in self.misalignment_deg))
+        object.__setattr__(self, "lens_pp_offset_px", tuple(float(x) for x in self.lens_pp_offset_px))
+        if len(self.misalignment_deg) != 3 or len(self.lens_pp_offset_px) != 2:
+            raise InputError("misalignment_deg: expected (roll, pitch, yaw); lens_pp_offset_px: expected (du, dv)")
+        if self.mount == "target" and any(self.misalignment_deg):
+            raise InputError("misalignment_deg: only the test stand (mount='stand') holds the phone in a holder")
+        if not (np.all(np.isfinite(self.lens_pp_offset_px)) and max(map(abs, self.lens_pp_offset_px)) <= 200
+                and np.isfinite(self.lens_k1) and abs(self.lens_k1) <= 1):
+            raise InputError(f"lens_pp_offset_px/lens_k1: expected offsets within +/-200 px and |k1| <= 1, got "
+                             f"{self.lens_pp_offset_px!r}, {self.lens_k1!r}")
         if self.mount not in ("target", "stand"):
             raise InputError(f"mount: expected 'target' or 'stand', got {self.mount!r}")
         if self.mount == "stand" and (self.target_x_m != 0 or self.target_y_m != 0):
@@ -127,14 +157,36 @@ class Scenario:
             raise InputError(f"spp/roi_spp: expected spp >= 0 and roi_spp >= 1, got {self.spp}, {self.roi_spp}")
 
     def pose(self):
-        """(R_cam_target, t_cam_target_m) of this scenario."""
+        """(R_cam_target, t_cam_target_m) of this scenario: the actual pose (misalignment included)."""
+        return self._pose(self.misalignment_deg)
+
+    def commanded_pose(self):
+        """(R_cam_target, t_cam_target_m) the lab knew: the stand's setting without the phone's
+        misalignment in its holder (equal to :meth:`pose` when there is none)."""
+        return self._pose((0.0, 0.0, 0.0))
+
+    def _pose(self, misalignment_deg):
         if self.mount == "stand":
             from sim.stand import TestStand
 
-            return TestStand().pose(self.range_m, stage_m=self.stage_m, roll_deg=self.roll_deg,
-                                    pitch_deg=self.pitch_deg, yaw_deg=self.yaw_deg)
+            return TestStand(misalignment_deg=tuple(misalignment_deg)).pose(
+                self.range_m, stage_m=self.stage_m, roll_deg=self.roll_deg, pitch_deg=self.pitch_deg,
+                yaw_deg=self.yaw_deg)
         return pose_from_scenario(self.range_m, self.target_x_m, self.target_y_m, self.roll_deg, self.pitch_deg,
                                   self.yaw_deg)
+
+    def camera_profile(self) -> Camera:
+        """The true lens: the profile's camera with :attr:`lens_pp_offset_px` and :attr:`lens_k1`."""
+        cam = Camera.load(self.camera)
+        if self.camera_overrides:
+            tables = {k: (dict(v) if isinstance(v, dict) else v) for k, v in cam.tables.items()}
+            for table, key, value in self.camera_overrides:
+                tables.setdefault(table, {})[key] = value
+            cam = cam.replace(tables=tables)
+        du, dv = self.lens_pp_offset_px
+        if du == 0 and dv == 0 and self.lens_k1 == 0:
+            return cam
+        return cam.replace(cx=cam.cx + du, cy=cam.cy + dv, dist=cam.dist + np.array([self.lens_k1, 0.0, 0.0, 0.0, 0.0]))
 
     def replace(self, **kw) -> "Scenario":
         d = asdict(self)
@@ -179,34 +231,56 @@ class Frame:
 
     @property
     def camera(self) -> Camera:
-        return Camera.load(self.scenario.camera)
+        """The true camera the frame was rendered through (:meth:`Scenario.camera_profile`)."""
+        return self.scenario.camera_profile()
 
-    def phone(self):
+    def phone(self, *, glare: bool = True, veiling_fraction: float | None = None, wing_exponent: float | None = None):
+        """The phone camera model; ``glare=False``: the same phone with a glare-free lens (no
+        veiling wings, no ghosts; the diffraction and aberration core kept);
+        ``veiling_fraction``, ``wing_exponent``: the glare's, instead of the profile's."""
+        import dataclasses
+
         from camera.phone import PhoneCamera
 
         if self._phone is None:
-            self._phone = PhoneCamera(self.camera)
-        return self._phone
+            self._phone = {}
+        key = (glare, veiling_fraction, wing_exponent)
+        if key not in self._phone:
+            ph = PhoneCamera(self.camera)
+            g = ph.params.glare
+            if veiling_fraction is not None:
+                g = dataclasses.replace(g, veiling_fraction=float(veiling_fraction))
+            if wing_exponent is not None:
+                g = dataclasses.replace(g, wing_exponent=float(wing_exponent))
+            if not glare:
+                g = dataclasses.replace(g, veiling_fraction=0.0, ghosts=())
+            if g != ph.params.glare:
+                ph = PhoneCamera(self.camera, params=dataclasses.replace(ph.params, glare=g))
+            self._phone[key] = ph
+        return self._phone[key]
 
-    def exposer(self, stages=None, *, target_scale: float = 1.0):
+    def exposer(self, stages=None, *, target_scale: float = 1.0, glare: bool = True,
+                veiling_fraction: float | None = None, wing_exponent: float | None = None):
         """The phone's exposer for this flux (optics and metering done once).
 
         ``target_scale`` multiplies the target's flux (not the lab's): a neutral-density
         filter of transmission T over every reflector is ``target_scale = T**2`` (two
-        passes; the target body's own diffuse light is ~1e-7 of the spots')."""
+        passes; the target body's own diffuse light is ~1e-7 of the spots'). ``glare=False``:
+        a glare-free lens; ``veiling_fraction``, ``wing_exponent``: other glare (:meth:`phone`)."""
         from camera.phone import ALL_STAGES, Exposer
 
         stages = ALL_STAGES if stages is None else stages
+        phone = self.phone(glare=glare, veiling_fraction=veiling_fraction, wing_exponent=wing_exponent)
         seed = render_seed(self.truth)
         lab = self.lab if self.lab is not None else np.float32(0.0)
         if self.points is not None and self.target_diffuse is not None:
             flux = (lab + self.target_diffuse * np.float32(target_scale)).astype(np.float32)
             pts = self.points if target_scale == 1.0 else self.points.scaled(target_scale)
-            return Exposer(self.phone(), flux, points=pts, stages=stages, optics_seed=seed)
+            return Exposer(phone, flux, points=pts, stages=stages, optics_seed=seed)
         flux = self.flux
         if target_scale != 1.0:
             flux = (lab + (self.flux - lab) * np.float32(target_scale)).astype(np.float32)
-        return Exposer(self.phone(), flux, stages=stages, optics_seed=seed)
+        return Exposer(phone, flux, stages=stages, optics_seed=seed)
 
 
 def render_seed(truth: dict) -> int:
@@ -253,7 +327,7 @@ def render_scenario(scenario: Scenario, *, seed: int = 0) -> Frame:
     """Render a scenario: Mitsuba for the target, analytic lab light around it."""
     from render import render_flux
 
-    camera = Camera.load(scenario.camera)
+    camera = scenario.camera_profile()
     pattern = Pattern.load(scenario.pattern)
     R, t = scenario.pose()
     t0 = time.perf_counter()
@@ -276,7 +350,7 @@ def solver_camera(camera: Camera, image_shape) -> Camera:
 
 
 def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposure_s=None, iso=None,
-                     solver_camera_profile: Camera | None = None) -> dict:
+                     solver_camera_profile: Camera | None = None, stages=None, truth: str = "commanded") -> dict:
     """One exposure of a rendered frame through the SVGS chain.
 
     Parameters
@@ -292,6 +366,12 @@ def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposu
         Override the phone's exposure.
     solver_camera_profile : Camera, optional
         The geometry the solver believes (a calibration with errors); default: the truth.
+    stages : sequence of str, optional
+        This exposure's stages (:meth:`camera.phone.Exposer.expose`); default the exposer's.
+    truth : {"commanded", "actual"}
+        The pose the errors are taken against: the one the lab knew
+        (:meth:`Scenario.commanded_pose`, default) or the actual one (the phone's
+        misalignment in its holder included).
 
     Returns
     -------
@@ -303,15 +383,29 @@ def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposu
         ``exposure_s``, ``iso``, ``expose_s``, ``solve_s``; and ``_exposure`` / ``_solution``
         (objects, for callers that write images).
     """
+    if truth not in ("commanded", "actual"):
+        raise InputError(f"truth: expected 'commanded' or 'actual', got {truth!r}")
+    t0 = time.perf_counter()
+    ex = exposer.expose(seed=seed, exposure_s=exposure_s, iso=iso, stages=stages)
+    t1 = time.perf_counter()
+    row = solve_exposure(frame, ex, threshold=threshold, solver_camera_profile=solver_camera_profile, truth=truth)
+    row["expose_s"] = t1 - t0
+    return row
+
+
+def solve_exposure(frame: Frame, ex, *, threshold=None, solver_camera_profile: Camera | None = None,
+                   truth: str = "commanded") -> dict:
+    """The SVGS chain on one exposure (:meth:`camera.phone.Exposer.expose`) of a frame: the row
+    of :func:`expose_and_solve` (``expose_s`` 0)."""
     from svgs.pipeline import solve_image
 
-    t0 = time.perf_counter()
-    ex = exposer.expose(seed=seed, exposure_s=exposure_s, iso=iso)
+    if truth not in ("commanded", "actual"):
+        raise InputError(f"truth: expected 'commanded' or 'actual', got {truth!r}")
     t1 = time.perf_counter()
     cam = solver_camera(solver_camera_profile or frame.camera, ex.image.shape)
     sol = solve_image(ex.image, cam, frame.scenario.pattern, threshold=threshold)
     t2 = time.perf_counter()
-    R, t = frame.scenario.pose()
+    R, t = frame.scenario.commanded_pose() if truth == "commanded" else frame.scenario.pose()
     truth_state = pose_to_state(R, t)
     row = {
         "ok": bool(sol),
@@ -321,7 +415,7 @@ def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposu
         "truth_state": state_dict(truth_state),
         "exposure_s": ex.exposure_s,
         "iso": ex.iso,
-        "expose_s": t1 - t0,
+        "expose_s": 0.0,
         "solve_s": t2 - t1,
         "_exposure": ex,
         "_solution": sol,

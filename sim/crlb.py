@@ -40,6 +40,48 @@ def _shifted(points, dx, dy):
     return PointFlux(points.u_px + dx, points.v_px + dy, points.rate_ph_s)
 
 
+#: Margin around a window over which the point samples are convolved, px (the Airy tail beyond
+#: reaches the window at ~1e-4 of the peak).
+PAD_PX = 16
+#: PSF draws per shifted image and colour channel, over all the spots (shared among them by their
+#: samples): the bound's Monte Carlo error is about 0.5 % (tests/test_camera_psf.py checks it
+#: against GalSim's image to 5 %).
+CRLB_DRAWS = 1 << 17
+
+
+def _window_core_image(phone, cfa: bool, points, dx: float, dy: float, box, seed: int,
+                       draws: int = CRLB_DRAWS) -> np.ndarray:
+    """The optical image's core (the lens' Airy (x) aberration PSF, with the CFA's channels and
+    responses when ``cfa``) of the points shifted by ``(dx, dy)``, over one window
+    ``box = (y0, y1, x0, x1)`` of the frame: photons/s per pixel, float64.
+
+    The glare wings and ghosts (a few per cent of the light spread over hundreds of pixels) are
+    left out: their derivative inside a spot's window is negligible beside the core's. The same
+    ``seed`` for every shift (common random numbers) makes differences of these images exact
+    derivatives, not Monte Carlo noise."""
+    from camera.phone.cfa import response_map
+    from camera.phone.optics import core_image, core_share
+
+    from camera.rendered import PointFlux
+
+    y0, y1, x0, x1 = box
+    X0, Y0 = x0 - PAD_PX, y0 - PAD_PX
+    h, w = (y1 - y0) + 2 * PAD_PX, (x1 - x0) + 2 * PAD_PX
+    m = ((points.u_px >= X0 - 0.5) & (points.u_px < X0 + w - 0.5) & (points.v_px >= Y0 - 0.5)
+         & (points.v_px < Y0 + h - 0.5))
+    local = PointFlux(points.u_px[m] + dx - X0, points.v_px[m] + dy - Y0, points.rate_ph_s[m])
+    p = phone.params
+    n_draws = max(1, int(round(draws * m.sum() / max(len(points), 1))))
+    zeros = np.zeros((h, w), np.float32)
+    if not cfa:
+        out = core_image(zeros, phone.core_psf(), local, np.random.default_rng(seed), min_draws=n_draws)
+    else:
+        out = phone.core_mosaic(zeros, local, seed=seed, origin=(X0, Y0), min_draws=n_draws)
+        out *= response_map(p.cfa, (h + 2, w + 2))[(Y0 % 2):(Y0 % 2) + h, (X0 % 2):(X0 % 2) + w]
+    out *= core_share(p.glare)
+    return out[PAD_PX:PAD_PX + (y1 - y0), PAD_PX:PAD_PX + (x1 - x0)]
+
+
 def centroid_crlb_px(frame, exposer, exposure, spots_px, *, window_half_px: int = WINDOW_HALF_PX) -> np.ndarray:
     """Per-spot Cramer-Rao bound of the centroid, px (1 sigma per axis).
 
@@ -68,26 +110,22 @@ def centroid_crlb_px(frame, exposer, exposure, spots_px, *, window_half_px: int 
     gain = sp.gain_dn_per_e(exposure.iso)
     white_e = (sp.white_dn - sp.black_level_dn) / gain
     full = min(sp.full_well_e, white_e)
-    base = exposer.flux_optics.astype(np.float64)
-    mu = sp.qe * base * t + sp.dark_current_e_s * t
-    # 8-bit output step in electrons (tone curve out = lin^(1/gamma)), and the ADC step
-    lin = np.clip(mu / white_e, 1e-6, 1.0)
     g = p.isp.gamma if p.isp.gamma > 0 else 1.0
-    q_out = white_e * g / 255.0 * lin ** (1.0 - 1.0 / g)
-    var = mu + sp.read_noise_e**2 + (q_out**2 + (1.0 / gain) ** 2) / 12.0
-    info_ok = mu < 0.98 * full
+
+    def noise(sl):
+        """Mean charge, variance and the unsaturated mask of a window."""
+        mu = sp.qe * exposer.flux_optics[sl].astype(np.float64) * t + sp.dark_current_e_s * t
+        # 8-bit output step in electrons (tone curve out = lin^(1/gamma)), and the ADC step
+        lin = np.clip(mu / white_e, 1e-6, 1.0)
+        q_out = white_e * g / 255.0 * lin ** (1.0 - 1.0 / g)
+        return mu, mu + sp.read_noise_e**2 + (q_out**2 + (1.0 / gain) ** 2) / 12.0, mu < 0.98 * full
+
     out = np.full((len(spots_px), 2), np.inf)
     pts = frame.points
     if pts is None or len(pts) == 0:
         return out
-    diffuse = np.zeros(phone.shape, np.float32)
     seed = render_seed(frame.truth)
-    d = []
-    for dx, dy in ((SHIFT_PX, 0.0), (-SHIFT_PX, 0.0), (0.0, SHIFT_PX), (0.0, -SHIFT_PX)):
-        d.append(phone.optics(diffuse, _shifted(pts, dx, dy), seed=seed, cfa=exposer.cfa).astype(np.float64))
     k = sp.qe * t  # photons/s -> electrons
-    dmu_dx = k * (d[0] - d[1]) / (2 * SHIFT_PX)
-    dmu_dy = k * (d[2] - d[3]) / (2 * SHIFT_PX)
     w = int(window_half_px)
     for j, (u, v) in enumerate(np.asarray(spots_px, float)):
         if not (np.isfinite(u) and np.isfinite(v)):
@@ -97,9 +135,13 @@ def centroid_crlb_px(frame, exposer, exposure, spots_px, *, window_half_px: int 
         if x1 <= x0 or y1 <= y0:
             continue
         sl = (slice(y0, y1), slice(x0, x1))
-        ok = info_ok[sl]
-        ix = float(np.sum((dmu_dx[sl] ** 2 / var[sl])[ok]))
-        iy = float(np.sum((dmu_dy[sl] ** 2 / var[sl])[ok]))
+        d = [_window_core_image(phone, exposer.cfa, pts, dx, dy, (y0, y1, x0, x1), seed)
+             for dx, dy in ((SHIFT_PX, 0.0), (-SHIFT_PX, 0.0), (0.0, SHIFT_PX), (0.0, -SHIFT_PX))]
+        dmu_dx = k * (d[0] - d[1]) / (2 * SHIFT_PX)
+        dmu_dy = k * (d[2] - d[3]) / (2 * SHIFT_PX)
+        _, var_w, ok = noise(sl)
+        ix = float(np.sum((dmu_dx**2 / var_w)[ok]))
+        iy = float(np.sum((dmu_dy**2 / var_w)[ok]))
         out[j] = (1.0 / np.sqrt(ix) if ix > 0 else np.inf, 1.0 / np.sqrt(iy) if iy > 0 else np.inf)
     return out
 

@@ -43,13 +43,24 @@ def _load(name: str, fitted: bool) -> tuple:
     if missing:
         raise ProfileError(f"lab file {str(path)!r}: [lab] lacks {', '.join(missing)}")
     out = {k: float(lab[k]) for k in LAB_KEYS}
+    for k, v in (data.get("stand") or {}).items():
+        out[f"stand.{k}"] = float(v)
     return tuple(out.items()), tuple((data.get("fitted") or {}).keys())
+
+
+def stand_misalignment_deg(camera_name: str, name: str = DEFAULT_LAB, *, fitted: bool = True) -> tuple:
+    """The phone's (roll, pitch, yaw) in the stand's holder, deg, from the lab's ``[stand]``
+    table (``<phone>_misalignment_yaw_deg``, the phone's name with ``-`` as ``_``); (0, 0, 0)
+    for a phone the lab does not list."""
+    lab = load_lab(name, fitted=fitted)
+    key = f"stand.{str(camera_name).replace('-', '_')}_misalignment_yaw_deg"
+    return (0.0, 0.0, float(lab.get(key, 0.0)))
 
 
 def load_lab(name: str = DEFAULT_LAB, *, fitted: bool = True) -> dict:
     """The lab's values: ``backdrop_distance_m``, ``backdrop_reflectance``,
-    ``ambient_radiance_w_m2_sr`` (W m^-2 sr^-1 in the camera band), with ``fitted``: the keys
-    the overlay set."""
+    ``ambient_radiance_w_m2_sr`` (W m^-2 sr^-1 in the camera band), the ``[stand]`` table's as
+    ``stand.<name>``, with ``fitted``: the keys the overlay set."""
     items, fitted_keys = _load(str(name), bool(fitted))
     out = dict(items)
     out["fitted"] = list(fitted_keys)

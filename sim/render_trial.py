@@ -20,7 +20,12 @@ Scenario keys
     Text: ``camera``, ``pattern`` (name or path). Numbers: :data:`RENDER_PARAMETERS` (the
     defaults are a render with seed 0 of the pattern as it is, no ND filter, the renderer's
     samples per pixel, the phone's auto-exposure, the automatic threshold and the exact
-    calibration). Studies add labels (``nominal_range_m``, ``pose_index``, ``trial``,
+    calibration). With ``stand = 1`` the angles turn the phone on the test stand
+    (:mod:`sim.stand`); ``lens_*`` make the true lens differ from the profile (the solver's
+    ``*_error`` are relative to it); ``sensor_noise``, ``glare``, ``quantise`` switch error
+    sources off and ``truth_actual`` takes the errors against the actual pose (the campaign's
+    error budget); ``f_number``, ``led_offset_scale``, ``glare_*``, ``exposure_compensation_ev``
+    are the physics a sensitivity study varies. Studies add labels (``nominal_range_m``, ``pose_index``, ``trial``,
     ``remedy``...) carried into the rows unchanged.
 """
 
@@ -42,6 +47,7 @@ from sim.metrics import (
 )
 from sim.trials import (
     GEOMETRIC_PARAMETERS,
+    POSE_KEYS,
     Parameter,
     TrialKind,
     build_scenario,
@@ -51,7 +57,9 @@ from sim.trials import (
 from svgs.errors import InputError
 from svgs.frames import STATE_KEYS
 
-_POSE = ("range_m", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg")
+_POSE = POSE_KEYS
+#: The true lens' departures from the profile (the image is rendered through it).
+_LENS = ("lens_pp_u_px", "lens_pp_v_px", "lens_k1")
 
 #: ``threshold`` values that are not levels (the parameter is numeric, so a sensitivity study can vary it).
 THRESHOLD_AUTO, THRESHOLD_OTSU = 0.0, -1.0
@@ -81,7 +89,40 @@ RENDER_PARAMETERS = {
     "threshold": Parameter("threshold", "DN", "detector threshold in 8-bit counts (0: automatic, -1: Otsu's)", 0.0,
                            False, lower=-1.0, upper=255.0),
     **{k: GEOMETRIC_PARAMETERS[k] for k in ("focal_error_frac", "pp_error_u_px", "pp_error_v_px", "k1_error")},
+    # the true lens (the solver's calibration errors above are relative to it)
+    "lens_pp_u_px": Parameter("lens_pp_u_px", "px", "the true lens' principal point cx minus the profile's (the image "
+                              "is rendered through the true lens)", 0.0, True, lower=-200.0, upper=200.0),
+    "lens_pp_v_px": Parameter("lens_pp_v_px", "px", "the true lens' principal point cy minus the profile's", 0.0, True,
+                              lower=-200.0, upper=200.0),
+    "lens_k1": Parameter("lens_k1", "1", "radial distortion k1 of the true lens added to the profile's", 0.0, True,
+                         lower=-1.0, upper=1.0),
+    # error sources switched off one at a time (the campaign's error budget); they act after the render
+    "sensor_noise": Parameter("sensor_noise", "1", "1: the sensor's noise (shot, dark, fixed pattern, read); 0: none",
+                              1.0, False, lower=0.0, upper=1.0),
+    "glare": Parameter("glare", "1", "1: the lens' glare (veiling wings, ghosts); 0: a glare-free lens with the same "
+                       "diffraction and aberration core", 1.0, False, lower=0.0, upper=1.0),
+    "quantise": Parameter("quantise", "1", "1: the delivered image in 8 bits and JPEG; 0: a float image (same tone "
+                          "curve), no JPEG", 1.0, False, lower=0.0, upper=1.0),
+    "truth_actual": GEOMETRIC_PARAMETERS["truth_actual"],
+    # the physics a sensitivity study varies (-1: the profile's value)
+    "f_number": Parameter("f_number", "1", "the lens' f-number, for the render (aperture) and the PSF (-1: the "
+                          "profile's)", -1.0, True, lower=-1.0, upper=16.0),
+    "led_offset_scale": Parameter("led_offset_scale", "1", "every flash LED's offset from the lens scaled by this "
+                                  "factor (the retro spots' parallax and the return's angle)", 1.0, True, lower=0.0,
+                                  upper=5.0, lower_open=True),
+    "glare_veiling_fraction": Parameter("glare_veiling_fraction", "1", "share of the light in the lens' glare wings "
+                                        "(-1: the profile's)", -1.0, False, lower=-1.0, upper=0.5),
+    "glare_wing_exponent": Parameter("glare_wing_exponent", "1", "the glare wings fall as r^-exponent (-1: the "
+                                     "profile's)", -1.0, False, lower=-1.0, upper=10.0),
+    "exposure_compensation_ev": Parameter("exposure_compensation_ev", "EV", "the exposure time the phone chooses "
+                                          "(or is forced to) times 2^EV, the gain kept", 0.0, False, lower=-4.0,
+                                          upper=4.0),
 }
+
+#: Post-render switches that must be 0 or 1.
+_SWITCHES = ("stand", "sensor_noise", "glare", "quantise", "truth_actual")
+#: Render-affecting physics, in the render key after the lens.
+_PHYSICS = ("f_number", "led_offset_scale")
 
 RENDER_OUTPUTS = (
     "ok", "reason", "message", "n_blobs",
@@ -90,11 +131,50 @@ RENDER_OUTPUTS = (
     *ERR_KEYS, POS_ERR_NORM_M, ROT_ERR_DEG,
     "residual_rms_px", "min_separation_px",
     *(f"crlb_{k}" for k in STATE_KEYS),
+    "merge_margin_dn",
+    "centroid_err_rms_px", *(f"cen_{a}_px_{k}" for k in range(4) for a in ("du", "dv")), "crlb_centroid_px",
+    *(f"crlb_sensor_{k}" for k in STATE_KEYS),
     "exposure_s_used", "iso_used", "expose_s", "solve_s",
 )
 
 #: Outputs that are timings (they differ from run to run; every other output is reproducible).
 RENDER_TIMING_OUTPUTS = ("expose_s", "solve_s")
+
+
+def merge_margin_dn(image: np.ndarray, targets_px: np.ndarray, threshold: float, step_px: float = 0.25) -> float:
+    """How far the spots are from merging at the detector's threshold, image counts.
+
+    For every pair of targets the darkest level of the image along the segment between their
+    true positions (bilinear, ``step_px`` apart) is their saddle; ``threshold - saddle`` is the
+    pair's margin: positive, the two spots are separate blobs at that threshold; negative, the
+    binary image joins them (along that line). Returns the smallest margin over the pairs.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W)
+        The delivered image (8-bit or float counts).
+    targets_px : ndarray, shape (N, 2)
+        True target positions in that image, px.
+    threshold : float
+        The detector's binarisation level, counts.
+    """
+    import cv2
+
+    g = np.asarray(image, np.float32)
+    if g.ndim == 3:
+        g = g.mean(axis=2)
+    out = np.inf
+    n = len(targets_px)
+    for a in range(n):
+        for b in range(a + 1, n):
+            p, q = np.asarray(targets_px[a], float), np.asarray(targets_px[b], float)
+            m = max(2, int(np.ceil(np.linalg.norm(q - p) / step_px)))
+            s = np.linspace(0.0, 1.0, m + 1)[1:-1]
+            xy = p[None] + s[:, None] * (q - p)[None]
+            vals = cv2.remap(g, xy[:, 0].astype(np.float32).reshape(1, -1), xy[:, 1].astype(np.float32).reshape(1, -1),
+                             cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+            out = min(out, float(threshold - vals.min()))
+    return float(out)
 
 
 def check_threshold(text) -> str:
@@ -176,48 +256,148 @@ def render_trial_scenario(labels: dict | None = None, **values) -> dict:
         :class:`InputError`.
     """
     scen = build_scenario(RENDER, values, labels)
+    for k in _SWITCHES:
+        if scen[k] not in (0.0, 1.0):
+            raise InputError(f"{k}: expected 0 or 1, got {scen[k]!r}")
     for k in ("spp", "roi_spp", "render_seed"):
         if scen[k] != int(scen[k]):
             raise InputError(f"{k}: expected an integer, got {scen[k]!r}")
     if scen["roi_spp"] == 0:
         raise InputError("roi_spp: expected >= 1 (or -1: the renderer's default), got 0")
+    if scen["f_number"] != -1 and scen["f_number"] < 1.0:
+        raise InputError(f"f_number: expected -1 (the profile's) or an f-number >= 1, got {scen['f_number']:g}")
+    if scen["glare_wing_exponent"] != -1 and scen["glare_wing_exponent"] <= 1.0:
+        raise InputError(f"glare_wing_exponent: expected -1 (the profile's) or > 1, got {scen['glare_wing_exponent']:g}")
+    if scen["glare_veiling_fraction"] != -1 and scen["glare_veiling_fraction"] < 0:
+        raise InputError(f"glare_veiling_fraction: expected -1 (the profile's) or 0..0.5, got "
+                         f"{scen['glare_veiling_fraction']:g}")
     return scen
 
 
 def render_key(scenario: dict):
     """What decides the rendered flux (see the module docstring)."""
-    return tuple(scenario[k] for k in ("camera", "pattern", "pattern_scale", *_POSE, "backdrop_distance_m",
-                                       "ambient_radiance_w_m2_sr", "spp", "roi_spp", "render_seed"))
+    return tuple(scenario[k] for k in ("camera", "pattern", "pattern_scale", *_POSE, *_LENS, *_PHYSICS,
+                                       "backdrop_distance_m", "ambient_radiance_w_m2_sr", "spp", "roi_spp",
+                                       "render_seed"))
+
+
+def camera_overrides(camera: str, f_number: float, led_offset_scale: float) -> tuple:
+    """The profile values a scenario replaces (:attr:`sim.closed_loop.Scenario.camera_overrides`)."""
+    out = []
+    if f_number != -1:
+        out.append(("optics", "f_number", float(f_number)))
+    if led_offset_scale != 1.0:
+        from svgs.profiles import Camera
+
+        leds = (Camera.load(camera).tables.get("flash") or {}).get("led_offsets_m") or []
+        out.append(("flash", "led_offsets_m", [[float(x) * led_offset_scale for x in led] for led in leds]))
+    return tuple((t, k, tuple(map(tuple, v)) if isinstance(v, list) else v) for t, k, v in out)
 
 
 @functools.lru_cache(maxsize=2)
 def _frame(key):
     from sim.closed_loop import Scenario, render_scenario
+    from sim.trials import scenario_pose_kwargs
 
-    camera, pattern, scale, rng, x, y, roll, pitch, yaw, back, amb, spp, roi_spp, seed = key
-    scen = Scenario(camera=camera, pattern=_scaled_pattern(pattern, float(scale)), range_m=rng, target_x_m=x, target_y_m=y,
-                    roll_deg=roll, pitch_deg=pitch, yaw_deg=yaw, backdrop_distance_m=back if back > 0 else None,
+    camera, pattern, scale = key[:3]
+    pose = dict(zip(_POSE, key[3:3 + len(_POSE)]))
+    du, dv, k1, f_number, led_scale, back, amb, spp, roi_spp, seed = key[3 + len(_POSE):]
+    scen = Scenario(camera=camera, pattern=_scaled_pattern(pattern, float(scale)), **scenario_pose_kwargs(pose),
+                    lens_pp_offset_px=(du, dv), lens_k1=k1,
+                    camera_overrides=camera_overrides(camera, f_number, led_scale),
+                    backdrop_distance_m=back if back > 0 else None,
                     ambient_radiance_w_m2_sr=amb, spp=None if spp < 0 else int(spp),
                     roi_spp=None if roi_spp < 0 else int(roi_spp))
     return render_scenario(scen, seed=int(seed)), {}
 
 
-def _exposer(frame, exposers: dict, target_scale: float):
-    if target_scale not in exposers:
-        exposers[target_scale] = frame.exposer(target_scale=target_scale)
-    return exposers[target_scale]
+def _glare_key(scenario: dict) -> tuple:
+    """What decides the exposer of a trial (after the render): ND filter and the lens' glare."""
+    v, e = scenario["glare_veiling_fraction"], scenario["glare_wing_exponent"]
+    return (float(scenario["target_scale"]), bool(scenario["glare"]), None if v == -1 else float(v),
+            None if e == -1 else float(e))
+
+
+def _exposer(frame, cache: dict, key: tuple):
+    k = ("exposer", *key)
+    if k not in cache:
+        ts, glare, veil, expo = key
+        cache[k] = frame.exposer(target_scale=ts, glare=glare, veiling_fraction=veil, wing_exponent=expo)
+    return cache[k]
+
+
+def _stages(scenario: dict) -> tuple:
+    """The exposure's stages: every stage, less the sensor noise or the 8-bit/JPEG output when switched off."""
+    from camera.phone import ALL_STAGES, NOISE_STAGES
+
+    off = set()
+    if not scenario["sensor_noise"]:
+        off |= set(NOISE_STAGES)
+    if not scenario["quantise"]:
+        off |= {"u8", "jpeg"}
+    return tuple(s for s in ALL_STAGES if s not in off)
+
+
+def _sensor_crlb(frame, exposer, row, cache: dict, key) -> dict | None:
+    """:func:`sim.crlb.frame_crlb` of a solved row, once per exposer and exposure setting."""
+    from sim.crlb import frame_crlb
+
+    if not row["ok"]:
+        return None
+    k = ("crlb", *key, row["exposure_s"], row["iso"])
+    if k not in cache:
+        cache[k] = frame_crlb(frame, exposer, row)
+    return cache[k]
+
+
+#: Exposures kept per render group, so that variants judged differently (the solver's
+#: calibration, the truth) reuse the same image instead of exposing it again.
+_EXPOSURE_CACHE = 12
+
+
+def _exposure(exposer, cache: dict, key, scenario: dict, seed: int):
+    """The exposure of ``(exposer, seed, stages, setting)``, made once per render group."""
+    import time
+
+    from collections import OrderedDict
+
+    store = cache.setdefault("exposures", OrderedDict())
+    ev = scenario["exposure_compensation_ev"]
+    k = (key, int(seed), _stages(scenario), scenario["exposure_s"], scenario["iso"], ev)
+    if k in store:
+        store.move_to_end(k)
+        return store[k], 0.0
+    t0 = time.perf_counter()
+    t_s, iso = scenario["exposure_s"] or None, scenario["iso"] or None
+    if ev != 0:  # exposure compensation: the time the phone would choose, times 2^EV
+        t_s, iso, _ = exposer.settings(t_s, iso)
+        t_s *= 2.0 ** ev
+    ex = exposer.expose(seed=int(seed), exposure_s=t_s, iso=iso, stages=_stages(scenario))
+    dt = time.perf_counter() - t0
+    store[k] = ex
+    while len(store) > _EXPOSURE_CACHE:
+        store.popitem(last=False)
+    return ex, dt
+
+
+def _is_baseline(scenario: dict) -> bool:
+    """Every error-budget switch at its default (the sensor bound is computed for these only)."""
+    return all(scenario[k] == RENDER_PARAMETERS[k].default for k in ("sensor_noise", "glare", "quantise"))
 
 
 def _solve_one(scenario: dict, seed: int, frame, exposers: dict) -> dict:
-    from sim.closed_loop import expose_and_solve
+    from sim.closed_loop import solve_exposure, solver_camera
     from sim.metrics import state_m_deg
     from svgs.profiles import Pattern
 
-    cam = frame.camera
-    row = expose_and_solve(frame, _exposer(frame, exposers, float(scenario["target_scale"])), seed=int(seed),
-                           threshold=_threshold(scenario["threshold"]),
-                           exposure_s=scenario["exposure_s"] or None, iso=scenario["iso"] or None,
-                           solver_camera_profile=camera_with_calibration_errors(cam, scenario))
+    cam = frame.camera  # the true lens
+    gkey = _glare_key(scenario)
+    exposer = _exposer(frame, exposers, gkey)
+    ex, expose_s = _exposure(exposer, exposers, gkey, scenario, seed)
+    row = solve_exposure(frame, ex, threshold=_threshold(scenario["threshold"]),
+                         solver_camera_profile=camera_with_calibration_errors(cam, scenario),
+                         truth="actual" if scenario["truth_actual"] else "commanded")
+    row["expose_s"] = expose_s
     out = {k: None for k in RENDER_OUTPUTS}
     out.update({k: row[k] for k in ("ok", "reason", "message", "n_blobs", "residual_rms_px", "expose_s", "solve_s",
                                     POS_ERR_NORM_M, ROT_ERR_DEG)})
@@ -225,16 +405,34 @@ def _solve_one(scenario: dict, seed: int, frame, exposers: dict) -> dict:
     out["exposure_s_used"], out["iso_used"] = float(row["exposure_s"]), float(row["iso"])
     out.update({f"true_{k}": v for k, v in row["truth_state"].items()})
     R, t = frame.scenario.pose()
-    uv = cam.project_target(Pattern.load(frame.scenario.pattern).points_m, R, t)
+    pat = Pattern.load(frame.scenario.pattern)
+    uv = cam.project_target(pat.points_m, R, t)
     d = np.linalg.norm(uv[:, None] - uv[None], axis=-1) + np.eye(len(uv)) * 1e12
     out["min_separation_px"] = float(d.min())
+    sol = row["_solution"]
+    level = sol.threshold_used if sol else sol.details.get("threshold_used")
+    if level is not None:
+        img = ex.image
+        out["merge_margin_dn"] = merge_margin_dn(img, solver_camera(cam, img.shape).project_target(pat.points_m, R, t),
+                                                 float(level))
     if row["state"] is not None:
-        sol = row["_solution"]
         out.update({f"est_{k}": v for k, v in row["state"].items()})
         out.update(dict(zip(ERR_KEYS, [*row[POS_ERR_VEC_M], *row[ATT_ERR_VEC_DEG]])))
         # Cramer-Rao 1-sigma for the solver's default centroid noise (0.1 px)
         crlb = state_m_deg(np.sqrt(np.diag(sol.covariance)))
         out.update({f"crlb_{k}": float(v) for k, v in zip(STATE_KEYS, crlb)})
+        # the centroids' error: identified centroids against the targets' true projections
+        # (the true lens, the actual pose), in the delivered image's pixels
+        uv_img = solver_camera(cam, row["_exposure"].image.shape).project_target(pat.points_m, R, t)
+        found = np.array([sol.targets_px[i] for i in pat.ids], float)
+        out["centroid_err_rms_px"] = float(np.sqrt(np.mean((found - uv_img) ** 2)))
+        for k, (du, dv) in enumerate((found - uv_img)[:4]):
+            out[f"cen_du_px_{k}"], out[f"cen_dv_px_{k}"] = float(du), float(dv)
+        # the bound from the simulated sensor at this exposure (sim.crlb)
+        cr = _sensor_crlb(frame, exposer, row, exposers, gkey) if _is_baseline(scenario) else None
+        if cr is not None and cr.get("crlb_std") is not None:
+            out["crlb_centroid_px"] = cr["centroid_sigma_px"]
+            out.update({f"crlb_sensor_{k}": float(cr["crlb_std"][k]) for k in STATE_KEYS})
     if out["message"] is not None:
         out["message"] = " ".join(str(out["message"]).split())  # one line (a CSV field)
     return out
@@ -257,9 +455,14 @@ def render_trial(scenario: dict, seed: int) -> dict:
         ``est_*`` (m, deg; the camera's perspective centre in the target frame and the paper's
         attitude) and the errors of :mod:`sim.metrics` (``err_*``, ``pos_err_norm_m``,
         ``rot_err_deg``; None when unsolved); ``residual_rms_px``; ``min_separation_px``
-        (closest pair of true image points); ``crlb_*`` (Cramer-Rao 1-sigma for 0.1 px
-        centroid noise, at the estimate); ``exposure_s_used``, ``iso_used``; ``expose_s``,
-        ``solve_s`` (wall times).
+        (closest pair of true image points); ``merge_margin_dn`` (the detector's threshold minus
+        the darkest level between the targets, image counts: negative, the spots join;
+        :func:`merge_margin_dn`); ``crlb_*`` (Cramer-Rao 1-sigma for 0.1 px centroid noise, at
+        the estimate); ``cen_du_px_k``, ``cen_dv_px_k``, ``centroid_err_rms_px`` (the identified
+        centroids of the first four targets minus their true projections, px, in the delivered
+        image); ``crlb_centroid_px``, ``crlb_sensor_*`` (the simulated sensor's centroid and pose
+        bounds, :mod:`sim.crlb`; with every error source on only); ``exposure_s_used``,
+        ``iso_used``; ``expose_s``, ``solve_s`` (wall times).
     """
     frame, exposers = _frame(render_key(scenario))
     return _solve_one(scenario, seed, frame, exposers)

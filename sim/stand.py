@@ -15,29 +15,38 @@ The chain, target (world) frame first (ASSUMPTIONS marked; each is a parameter o
    camera facing the target, the pattern's own attitude zero: :func:`pose_from_scenario` at
    zero angles). The cart puts the gimbal's pivot at ``range_m`` plus the stage's
    ``stage_m`` (positive: away from the target) along it.
-2. **Gimbal**, outer to inner (ASSUMPTION, ``axis_order``): yaw about the camera's vertical
-   axis, then pitch about its horizontal axis, then roll about its boresight - the usual
-   yaw-over-pitch-over-roll build of a pan-tilt-roll head. Angles in degrees, positive by
-   the right-hand rule about the OpenCV camera axes (x right, y down, z boresight): ``yaw``
-   about +y (positive turns the boresight to the camera's right), ``pitch`` about +x
-   (positive turns it up), ``roll`` about +z.
+2. **Gimbal**, named as the paper names the relative attitude (its roll, pitch, yaw = phi,
+   theta, psi; :mod:`svgs.frames`): ``roll`` turns the camera about its horizontal axis,
+   ``pitch`` about its vertical axis, ``yaw`` about its boresight - the right-hand rule about
+   the OpenCV camera axes +x (right), -y (up) and -z, signs chosen so that each gimbal angle
+   alone is the same angle of the truth state. Why the paper's yaw is the rotation about the
+   line of sight (ASSUMPTION, argued from the paper's own numbers): its yaw error has by far
+   the smallest scatter at every range (Nexus 0.04-0.26 deg against roll 0.39-1.5 and pitch
+   0.24-0.72, Table 5), which is what a camera gives for the in-plane rotation of a pattern and
+   not for the out-of-plane tilts; and the +/-45 deg it gives the yaw axis would put the target
+   outside a +/-28 deg field of view if yaw turned the boresight, yet the paper reports solutions
+   over the whole envelope. The order of the axes, outer to inner (ASSUMPTION,
+   ``axis_order``): pitch (a pan about the vertical), then roll (a tilt), then yaw about the
+   boresight - the usual build of a pan-tilt-roll head.
 3. **Pivot to perspective centre** (ASSUMPTION, ``pivot_to_camera_m``): the camera's
    perspective centre relative to the pivot in the camera frame, default 3 cm in front of it
    along the boresight (a phone clamped to a gimbal plate, the lens ahead of the axes).
 4. **Installation misalignment** (``misalignment_deg``, default 0): the phone's rotation in
-   its holder (yaw, pitch, roll, same axes), innermost. The paper's near-constant 2 deg yaw
-   error at every range (Tables 4-5) looks like one; it is an error of the truth, not of the
-   sensor, so it is off unless asked for.
+   its holder (roll, pitch, yaw about the same axes), innermost. The paper's near-constant
+   2 deg yaw error at every range for the Galaxy Nexus (Table 4, with a yaw scatter of only
+   0.04-0.26 deg, Table 5) looks like one: a phone clamped 2 deg rotated about its lens axis.
+   It is an error of the truth, not of the sensor: the image is made at the actual pose and
+   the lab's truth is the commanded one.
 
 Truth states come out of the chain in the paper's convention (:func:`svgs.frames.pose_to_state`).
 
-The field of view cuts the gimbal's envelope: +/-45 deg of yaw exceeds the Galaxy Nexus'
-+/-27.9 deg horizontal half-field (the Amaze's +/-31.8 deg), and +/-25 deg of pitch its
-+/-21.6 deg vertical one (the Amaze's +/-24.9 deg), so a phone turned that far no longer sees
-the target. :func:`sample_in_view` draws the gimbal uniformly over its envelope
-and keeps the draws in which every target projects inside the image with a margin
-(rejection): the attitudes the paper could have recorded solutions for. Its ``info`` says
-what fraction was kept and the yaw span that remains.
+The field of view cuts the gimbal's envelope: +/-25 deg of roll (the tilt about the
+horizontal axis) exceeds the Galaxy Nexus' +/-21.6 deg vertical half-field (the Amaze's
++/-24.9 deg) and +/-25 deg of pitch comes close to its +/-27.9 deg horizontal one, so a phone
+turned that far no longer sees the whole target. :func:`sample_in_view` draws the gimbal
+uniformly over its envelope and keeps the draws in which every target projects inside the
+image with a margin (rejection): the attitudes the paper could have recorded solutions for.
+Its ``info`` says what fraction was kept and the roll span that remains.
 """
 
 from __future__ import annotations
@@ -52,19 +61,21 @@ from svgs.frames import pose_from_scenario, pose_to_state
 #: The paper's Sensor Mount envelope (Becker, Howard & Rakoczy 2014, "SVGS testing").
 GIMBAL_LIMITS_DEG = {"roll_deg": 25.0, "pitch_deg": 25.0, "yaw_deg": 45.0}
 STAGE_LIMIT_M = 0.15
-AXIS_ORDERS = ("yaw-pitch-roll", "roll-pitch-yaw")
+AXIS_ORDERS = ("pitch-roll-yaw", "roll-pitch-yaw")
 
 
 def _axis_rotation(axis: str, angle_deg: float) -> np.ndarray:
-    """Rotation (camera frame, active) about a camera axis by the stand's sign convention."""
+    """Rotation (camera frame, active) about a camera axis by the stand's sign convention:
+    ``roll`` about +x, ``pitch`` about -y (up), ``yaw`` about -z, so that each angle alone is
+    the same angle of the paper's truth state."""
     a = np.deg2rad(float(angle_deg))
     c, s = np.cos(a), np.sin(a)
-    if axis == "yaw":  # about +y (y points down): positive turns the boresight right (+x)
-        return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-    if axis == "pitch":  # about +x: positive turns the boresight up (towards -y)
+    if axis == "roll":  # about +x: positive turns the boresight up (towards -y)
         return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-    if axis == "roll":  # about +z (the boresight)
-        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    if axis == "pitch":  # about -y (up): positive turns the boresight to the camera's left (-x)
+        return np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])
+    if axis == "yaw":  # about -z: the image turns about the boresight
+        return np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
     raise ValueError(axis)
 
 
@@ -78,15 +89,15 @@ class TestStand:
         The camera's perspective centre relative to the gimbal pivot, camera frame (OpenCV
         axes), m.
     axis_order : str
-        ``"yaw-pitch-roll"`` (outer to inner, default) or ``"roll-pitch-yaw"``.
+        ``"pitch-roll-yaw"`` (outer to inner, default) or ``"roll-pitch-yaw"``.
     misalignment_deg : tuple of float
-        The phone's (yaw, pitch, roll) in its holder, deg.
+        The phone's (roll, pitch, yaw) in its holder, deg (the gimbal's axes).
     """
 
     __test__ = False  # not a pytest class, whatever its name
 
     pivot_to_camera_m: tuple = (0.0, 0.0, 0.03)
-    axis_order: str = "yaw-pitch-roll"
+    axis_order: str = "pitch-roll-yaw"
     misalignment_deg: tuple = (0.0, 0.0, 0.0)
 
     def __post_init__(self):
@@ -97,7 +108,7 @@ class TestStand:
             raise InputError(f"axis_order: expected one of {AXIS_ORDERS}, got {self.axis_order!r}")
         m = np.asarray(self.misalignment_deg, float)
         if m.shape != (3,) or not np.all(np.isfinite(m)) or np.any(np.abs(m) > 10.0):
-            raise InputError(f"misalignment_deg: expected (yaw, pitch, roll) within +/-10 deg, got {self.misalignment_deg!r}")
+            raise InputError(f"misalignment_deg: expected (roll, pitch, yaw) within +/-10 deg, got {self.misalignment_deg!r}")
 
     def to_json(self) -> dict:
         d = asdict(self)
@@ -110,8 +121,8 @@ class TestStand:
         R = np.eye(3)
         for n in names:  # outer first: R = R_outer @ R_middle @ R_inner
             R = R @ _axis_rotation(n, g[n])
-        my, mp, mr = self.misalignment_deg
-        return R @ _axis_rotation("yaw", my) @ _axis_rotation("pitch", mp) @ _axis_rotation("roll", mr)
+        mr, mp, my = self.misalignment_deg
+        return R @ _axis_rotation("pitch", mp) @ _axis_rotation("roll", mr) @ _axis_rotation("yaw", my)
 
     def pose(self, range_m: float, *, stage_m: float = 0.0, roll_deg: float = 0.0, pitch_deg: float = 0.0,
              yaw_deg: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
@@ -192,7 +203,8 @@ def sample_in_view(rng: np.random.Generator, camera, pattern, range_m: float, n:
     settings : list of dict
         ``stage_m``, ``roll_deg``, ``pitch_deg``, ``yaw_deg`` of each kept draw.
     info : dict
-        ``draws``, ``kept``, ``kept_fraction``, ``yaw_span_deg`` (min, max of the kept yaws),
+        ``draws``, ``kept``, ``kept_fraction``, ``roll_span_deg`` and ``pitch_span_deg`` (min, max
+        of the kept angles),
         the limits used.
     """
     stand = stand or TestStand()
@@ -213,7 +225,7 @@ def sample_in_view(rng: np.random.Generator, camera, pattern, range_m: float, n:
         R, t = stand.pose(range_m, **s)
         if targets_in_view(camera, pattern, R, t, margin_frac):
             out.append(s)
-    yaws = [s["yaw_deg"] for s in out]
+    span = {f"{k}_span_deg": [min(s[f"{k}_deg"] for s in out), max(s[f"{k}_deg"] for s in out)] for k in ("roll", "pitch")}
     return out, {"draws": draws, "kept": len(out), "kept_fraction": len(out) / draws,
-                 "yaw_span_deg": [min(yaws), max(yaws)], "limits_deg": lim, "stage_limit_m": stage_limit_m,
+                 **span, "limits_deg": lim, "stage_limit_m": stage_limit_m,
                  "margin_frac": margin_frac}

@@ -199,8 +199,50 @@ GEOMETRIC_PARAMETERS = {
                   0.0, False, lower=-1.0, upper=1.0),
         Parameter("merge_px", "px", "spots closer than this in the image merge into one (0: never)", 0.0, True,
                   lower=0.0),
+        # the paper's test stand (sim.stand): the gimbal turns the phone, the target stays still
+        Parameter("stand", "1", "1: the angles turn the phone on the test stand's gimbal about its pivot, range_m is "
+                  "the rail position (sim.stand.TestStand); 0: they turn the target in front of the camera", 0.0, True,
+                  lower=0.0, upper=1.0),
+        Parameter("stage_m", "m", "the stand's translation stage along the rail, positive away from the target "
+                  "(stand = 1 only)", 0.0, True, lower=-1.0, upper=1.0),
+        Parameter("misalign_yaw_deg", "deg", "the phone's yaw in its holder on the stand (stand = 1 only)", 0.0, True,
+                  lower=-10.0, upper=10.0),
+        Parameter("misalign_pitch_deg", "deg", "the phone's pitch in its holder on the stand (stand = 1 only)", 0.0,
+                  True, lower=-10.0, upper=10.0),
+        Parameter("misalign_roll_deg", "deg", "the phone's roll in its holder on the stand (stand = 1 only)", 0.0, True,
+                  lower=-10.0, upper=10.0),
+        Parameter("truth_actual", "1", "0: errors against the pose the lab commanded (the stand's setting); 1: against "
+                  "the actual pose (the phone's misalignment in its holder included)", 0.0, False, lower=0.0,
+                  upper=1.0),
     )
 }
+
+#: Scenario keys of the pose (the geometric kind's render key; the render kind adds its own).
+POSE_KEYS = ("range_m", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg", "stand", "stage_m",
+             "misalign_yaw_deg", "misalign_pitch_deg", "misalign_roll_deg")
+
+
+def scenario_pose_kwargs(scenario: Mapping) -> dict:
+    """The :class:`sim.closed_loop.Scenario` pose fields of a trial scenario."""
+    flag = scenario.get("stand", 0.0)
+    if flag not in (0.0, 1.0):
+        raise InputError(f"stand: expected 0 (target turned) or 1 (phone on the stand's gimbal), got {flag!r}")
+    kw = {k: float(scenario[k]) for k in ("range_m", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg")}
+    kw["mount"] = "stand" if flag == 1.0 else "target"
+    kw["stage_m"] = float(scenario.get("stage_m", 0.0))
+    kw["misalignment_deg"] = tuple(float(scenario.get(f"misalign_{a}_deg", 0.0)) for a in ("roll", "pitch", "yaw"))
+    return kw
+
+
+def scenario_poses(scenario: Mapping):
+    """``(R, t)`` actual and ``(R, t)`` of the truth the errors are taken against
+    (``truth_actual``), of a trial scenario (:class:`sim.closed_loop.Scenario`'s poses)."""
+    from sim.closed_loop import Scenario
+
+    sc = Scenario(camera=str(scenario["camera"]), **scenario_pose_kwargs(scenario))
+    actual = sc.pose()
+    truth = actual if scenario.get("truth_actual", 0.0) else sc.commanded_pose()
+    return actual, truth
 
 GEOMETRIC_OUTPUTS = (
     "ok", "reason",
@@ -274,6 +316,10 @@ def build_scenario(kind: TrialKind, values: dict, labels: dict | None = None) ->
                          f"known: {', '.join(kind.parameters)}")
     for name, p in kind.parameters.items():
         out[name] = p.check(values.get(name, p.default))
+    if "stand" in out:  # the pose fields together (stand and lateral offsets, misalignment without a stand)
+        from sim.closed_loop import Scenario
+
+        Scenario(camera=out["camera"], **scenario_pose_kwargs(out))
     for k, v in (labels or {}).items():
         if k in out:
             raise InputError(f"scenario label {k!r} clashes with a parameter")
@@ -296,15 +342,14 @@ def _geometric_render(scenario: dict):
         All points in front of the camera.
     state_true : ndarray, shape (6,)
     """
-    from svgs.frames import pose_from_scenario, pose_to_state
+    from svgs.frames import pose_to_state
 
     cam, pat = _camera(scenario["camera"]), _pattern(scenario["pattern"])
-    R, t = pose_from_scenario(scenario["range_m"], scenario["target_x_m"], scenario["target_y_m"],
-                              scenario["roll_deg"], scenario["pitch_deg"], scenario["yaw_deg"])
+    (R, t), (R_truth, t_truth) = scenario_poses(scenario)
     p_cam = pat.points_m @ R.T + t
     depth_ok = bool(np.all(p_cam[:, 2] > 0))
     uv = cam.project(p_cam)
-    return uv, depth_ok, pose_to_state(R, t)
+    return uv, depth_ok, pose_to_state(R_truth, t_truth)
 
 
 def _geometric_expose_solve(scenario: dict, seed: int, rendered) -> dict:
@@ -390,10 +435,8 @@ def geometric_group(scenarios: list, seeds: list) -> list[dict]:
 
 
 def geometric_render_key(scenario: dict):
-    """What decides the geometric "render": camera, pattern, pose."""
-    return (scenario["camera"], scenario["pattern"], scenario["range_m"], scenario["target_x_m"],
-            scenario["target_y_m"],
-            scenario["roll_deg"], scenario["pitch_deg"], scenario["yaw_deg"])
+    """What decides the geometric "render": camera, pattern, pose (and the truth it is judged by)."""
+    return (scenario["camera"], scenario["pattern"], *(scenario[k] for k in POSE_KEYS), scenario["truth_actual"])
 
 
 def geometric_warm_up() -> None:

@@ -40,6 +40,15 @@ from sim.metrics import POS_ERR_NORM_M, ROT_ERR_DEG, SCALAR_ERROR_KEYS
 from sim.trials import TrialKind, build_scenario, get_trial_kind
 
 OUTPUTS = (POS_ERR_NORM_M, ROT_ERR_DEG, "success")
+#: Outputs analysed when the trial kind has them: the rendered kind's ``merge_margin_dn`` (the
+#: detector's threshold minus the darkest level between the closest spots: negative, merged).
+OPTIONAL_OUTPUTS = ("merge_margin_dn",)
+
+
+def analysed_outputs(config) -> tuple:
+    """:data:`OUTPUTS` plus the :data:`OPTIONAL_OUTPUTS` the study's trial kind records."""
+    kind = get_trial_kind(config.trial_kind)
+    return OUTPUTS + tuple(k for k in OPTIONAL_OUTPUTS if k in kind.outputs)
 MORRIS_LEVELS = 4
 CONFIDENCE = 0.95
 N_BOOTSTRAP = 499
@@ -291,6 +300,12 @@ def output_values(table: dict) -> dict:
         worst = np.nanmax(v[ok]) if np.any(ok) else 1.0
         v[~ok | ~np.isfinite(v)] = worst
         out[k] = v
+    for k in OPTIONAL_OUTPUTS:  # recorded for failed trials too (a merged frame has a margin)
+        if k in table:
+            v = np.array(table[k], float)
+            fin = np.isfinite(v)
+            v[~fin] = np.nanmin(v[fin]) if fin.any() else 0.0
+            out[k] = v
     out["failure_fraction"] = float(1.0 - ok.mean()) if ok.size else float("nan")
     return out
 
@@ -373,10 +388,10 @@ def analyze_morris(y: np.ndarray, config: SensitivityConfig, layout: dict) -> di
 
 
 def analyze(table: dict, config: SensitivityConfig, layout: dict) -> dict:
-    """Indices for every output of :data:`OUTPUTS`, plus the ranking by total effect."""
+    """Indices for every output of :func:`analysed_outputs`, plus the ranking by total effect."""
     vals = output_values(table)
     res = {"failure_fraction": vals["failure_fraction"], "outputs": {}}
-    for k in OUTPUTS:
+    for k in analysed_outputs(config):
         y = vals[k]
         res["outputs"][k] = analyze_sobol(y, config) if config.method == "sobol" else analyze_morris(y, config, layout)
     return res
@@ -421,7 +436,7 @@ def write_sensitivity_report(out_dir, config: SensitivityConfig, table: dict, re
         rep.table(["fixed parameter", "value"], sorted(config.fixed.items()), digits=4)
     _report_ranking(rep, result, config)
     rep.heading("Indices")
-    for k in OUTPUTS:
+    for k in analysed_outputs(config):
         sub = [r for r in rows if r["output"] == k]
         rep.table(cols[1:], [[r[c] for c in cols[1:]] for r in sub],
                   caption=f"{k}: indices with {int(100 * CONFIDENCE)} % bootstrap intervals")
@@ -435,7 +450,7 @@ def write_sensitivity_report(out_dir, config: SensitivityConfig, table: dict, re
 def index_rows(result: dict, config: SensitivityConfig, names: list) -> list[dict]:
     """One row per (output, parameter): the indices and their bootstrap interval (``indices.csv``)."""
     rows = []
-    for k in OUTPUTS:
+    for k in analysed_outputs(config):
         r = result["outputs"][k]
         for i, nm in enumerate(names):
             if config.method == "sobol":
@@ -451,7 +466,7 @@ def index_rows(result: dict, config: SensitivityConfig, names: list) -> list[dic
 def _report_ranking(rep, result: dict, config: SensitivityConfig) -> None:
     """The report's "Ranking" section: parameters by total index or mu*, and how to read them."""
     rep.heading("Ranking")
-    for k in OUTPUTS:
+    for k in analysed_outputs(config):
         rk = ranking(result, config, k)
         label = "total index ST" if config.method == "sobol" else "mu*"
         rep.paragraph(f"{k} by {label}: " + ", ".join(f"{nm} ({s:.3g})" for nm, s in rk))
@@ -463,7 +478,7 @@ def _report_ranking(rep, result: dict, config: SensitivityConfig) -> None:
             "value in its range without changing the output's spread: it is not worth controlling in a design. "
             "Indices are relative to the ranges given: widen a range and its parameter's share grows. Small negative "
             "S1 values are estimator noise around zero.", "note")
-        for k in OUTPUTS:
+        for k in analysed_outputs(config):
             if not result["outputs"][k]["variance"] > 0:
                 rep.paragraph(f"{k} did not vary over the design (e.g. every trial solved): its indices are zero.",
                               "note")

@@ -96,7 +96,8 @@ def solve_image(
     Returns
     -------
     Solution or Failure
-        The failure's ``details`` hold ``n_blobs``; a solution's ``n_blobs`` likewise.
+        The failure's ``details`` hold ``n_blobs`` and ``threshold_used`` (the detector's level);
+        a solution's ``n_blobs`` and ``threshold_used`` likewise.
     """
     from .detect import detect_blobs
     from .identify import identify
@@ -112,14 +113,17 @@ def solve_image(
     ident = identify(blobs, camera, pattern, **{"sigma_px": sigma_px, **(identify_options or {})})
     if not ident:
         ident.details.setdefault("n_blobs", len(blobs))
+        ident.details.setdefault("threshold_used", float(blobs.threshold_used))
         return ident
     sol = ident.solution  # identification verified the set with the solver already
     if sol is None or not sol or getattr(sol, "sigma_px", None) != sigma_px:
         sol = solve_centroids(ident.points_px, camera, pattern, sigma_px=sigma_px)
     if not sol:
         sol.details["n_blobs"] = len(blobs)
+        sol.details["threshold_used"] = float(blobs.threshold_used)
         return sol
     sol.n_blobs = len(blobs)
+    sol.threshold_used = float(blobs.threshold_used)
     return sol
 
 

@@ -146,6 +146,10 @@ class Solution(Solved):
     iterations : int
     targets_px : dict
         Target id -> measured ``[u, v]``, when known.
+    n_blobs : int or None
+        Blobs the detector found (:func:`svgs.pipeline.solve_image`).
+    threshold_used : float or None
+        The detector's binarisation level, image counts (:func:`svgs.pipeline.solve_image`).
     """
 
     state: np.ndarray
@@ -157,6 +161,7 @@ class Solution(Solved):
     iterations: int = 0
     targets_px: dict = field(default_factory=dict)
     n_blobs: int | None = None
+    threshold_used: float | None = None
 
     @property
     def std(self) -> np.ndarray:

@@ -73,8 +73,8 @@ def test_every_schema_is_in_the_cli_doc():
 
 def test_campaign_json(tmp_path, capsys):
     out = tmp_path / "campaign"
-    obj, err = _run(["campaign", "--camera", "galaxy-nexus", "--trials", "6", "--ranges", "5,7", "--out", str(out),
-                     "--processes", "0", "--no-progress", "--json"], capsys)
+    obj, err = _run(["campaign", "--camera", "galaxy-nexus", "--trial-kind", "geometric", "--trials", "6", "--ranges",
+                     "5,7", "--out", str(out), "--processes", "0", "--no-progress", "--json"], capsys)
     assert "X std  /paper" in err  # the table went to stderr
     assert {"trial_kind", "camera", "ranges", "outputs", "run"} <= set(obj)
     assert obj["trial_kind"] == "geometric" and obj["camera"] == "galaxy-nexus"
@@ -91,8 +91,8 @@ def test_campaign_json(tmp_path, capsys):
     assert at7["crlb_std"]["x_m"] == pytest.approx(float(rows[(7.0, "x_m", "crlb_std")]["simulated"]))
     _same_as_summary_json(obj, out)
     # a rerun runs nothing and says so
-    again, _ = _run(["campaign", "--camera", "galaxy-nexus", "--trials", "6", "--ranges", "5,7", "--out", str(out),
-                     "--processes", "0", "--no-progress", "--json"], capsys)
+    again, _ = _run(["campaign", "--camera", "galaxy-nexus", "--trial-kind", "geometric", "--trials", "6", "--ranges",
+                     "5,7", "--out", str(out), "--processes", "0", "--no-progress", "--json"], capsys)
     assert again["run"] == {"trials_run": 0, "already_done": 12, "elapsed_s": None, "executor": None}
     assert again["ranges"] == obj["ranges"]
 

@@ -261,3 +261,29 @@ def test_cfa_keeps_white_light_and_saturation_as_the_mono_sensor_sees_them():
         assert np.abs(a - b).max() <= 1, level
     hot = np.full(phone.shape, 50 * sp.full_well_e / (sp.qe * 0.01), np.float32)
     assert Exposer(phone_c, hot, stages=colour).expose(exposure_s=0.01, iso=sp.base_iso).image.min() == 255
+
+
+@pytest.mark.parametrize("cfa", [False, True], ids=["mono", "bayer"])
+def test_the_float_output_is_the_8_bit_image_before_rounding(cfa):
+    """Stage ``u8`` off: the same tone curve as a float32 image on the 0-255 scale, so the 8-bit
+    image is that float image rounded: within half a code for the mono sensor; within one with the
+    Bayer mosaic, whose 8-bit path also rounds the luminance to a whole DN before its tone LUT;
+    no JPEG (it needs 8 bits)."""
+    tables = {"isp": {"jpeg_quality": 90}}
+    if cfa:
+        tables["cfa"] = {"pattern": "RGGB"}
+    phone = PhoneCamera(small_camera(**tables))
+    rng = np.random.default_rng(4)
+    flux = rng.uniform(0, 3e5, phone.shape).astype(np.float32)
+    ex = Exposer(phone, flux)
+    no_jpeg = tuple(s for s in ex.stages if s != "jpeg")
+    a = ex.expose(seed=2, exposure_s=0.01, iso=100, stages=no_jpeg)
+    f = ex.expose(seed=2, exposure_s=0.01, iso=100, stages=tuple(s for s in ex.stages if s != "u8"))
+    assert a.image.dtype == np.uint8 and f.image.dtype == np.float32
+    np.testing.assert_array_equal(a.raw_dn, f.raw_dn)  # the same noise draw
+    d = np.abs(f.image - a.image.astype(np.float32))
+    assert d.max() <= 1.0 and 50 < f.image.mean() < 250
+    assert np.mean(d <= 0.5 + 1e-3) > (0.8 if cfa else 0.999) and d.mean() < 0.3
+    # a stage list that changes the optics is refused: the exposer's optical image is made
+    with pytest.raises(InputError, match="optics stages"):
+        ex.expose(seed=2, stages=tuple(s for s in ex.stages if s != "glare"))

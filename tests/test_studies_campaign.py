@@ -30,29 +30,58 @@ def test_paper_tables_come_from_assets():
 
 
 def test_campaign_design_follows_the_sensor_mount_envelope():
+    """The phone on the stand: settings drawn over the gimbal's envelope, kept in view, each
+    rendered once and exposed exposures_per_render times; the target's range is the rail's."""
+    from sim.stand import TestStand, targets_in_view
+    from svgs import Camera, Pattern
+
     cfg = make_config("htc-amaze-4g", trials_per_range=200, seed=1)
+    assert cfg.trial_kind == "render" and cfg.calibration == "paper" and cfg.poses_per_range == 50
     trials = campaign_trials(cfg)
     assert len(trials) == 5 * 200 and [t.trial_id for t in trials] == list(range(1000))
-    s = {k: np.array([t.scenario[k] for t in trials]) for k in ("roll_deg", "pitch_deg", "yaw_deg", "range_m",
-                                                                 "nominal_range_m")}
-    assert np.abs(s["roll_deg"]).max() <= 25 and np.abs(s["roll_deg"]).max() > 24
-    assert np.abs(s["yaw_deg"]).max() <= 45 and np.abs(s["yaw_deg"]).max() > 44
-    stage = s["range_m"] - s["nominal_range_m"]
-    assert np.abs(stage).max() <= 0.15 and np.abs(stage).max() > 0.14
+    s = {k: np.array([t.scenario[k] for t in trials]) for k in ("roll_deg", "pitch_deg", "yaw_deg", "range_m", "stage_m",
+                                                                 "nominal_range_m", "pose_index", "stand")}
+    assert np.all(s["stand"] == 1) and np.all(s["range_m"] == s["nominal_range_m"])
+    assert np.abs(s["roll_deg"]).max() <= 25 and np.abs(s["pitch_deg"]).max() <= 25
+    assert np.abs(s["yaw_deg"]).max() <= 45 and np.abs(s["yaw_deg"]).max() > 43  # about the line of sight: in view
+    assert np.abs(s["stage_m"]).max() <= 0.15 and np.abs(s["stage_m"]).max() > 0.14
     assert sorted(set(s["nominal_range_m"])) == [1.0, 2.0, 3.0, 4.0, 6.5]
-    # the design of trial i does not depend on how many trials there are
+    # four exposures of each setting, with their own seeds
+    first = trials[:4]
+    assert len({(t.scenario["roll_deg"], t.scenario["yaw_deg"]) for t in first}) == 1 and len({t.seed for t in first}) == 4
+    assert trials[4].scenario["roll_deg"] != trials[0].scenario["roll_deg"]
+    cam, pat = Camera.load("htc-amaze-4g"), Pattern.load("svgs-3u")
+    stand = TestStand()
+    assert all(targets_in_view(cam, pat, *stand.pose(t.scenario["range_m"], stage_m=t.scenario["stage_m"],
+                                                      roll_deg=t.scenario["roll_deg"], pitch_deg=t.scenario["pitch_deg"],
+                                                      yaw_deg=t.scenario["yaw_deg"])) for t in trials[::4])
+    # the design of trial i does not depend on how many trials or ranges there are
     small = campaign_trials(make_config("htc-amaze-4g", trials_per_range=200, seed=1, ranges_m=(1.0,)))
     assert [t.scenario for t in small] == [t.scenario for t in trials[:200]]
 
 
 def test_paper_calibration_is_drawn_once_per_campaign():
-    a = make_config("galaxy-nexus", calibration="paper", seed=4)
-    b = make_config("galaxy-nexus", calibration="paper", seed=4)
+    a = make_config("galaxy-nexus", calibration="paper", seed=4, trial_kind="geometric")
+    b = make_config("galaxy-nexus", calibration="paper", seed=4, trial_kind="geometric")
     assert a.calibration_error == b.calibration_error and a.calibration_error["focal_error_frac"] != 0
-    trials = campaign_trials(make_config("galaxy-nexus", calibration="paper", seed=4, trials_per_range=3))
+    trials = campaign_trials(make_config("galaxy-nexus", calibration="paper", seed=4, trials_per_range=3,
+                                         trial_kind="geometric"))
     assert {t.scenario["focal_error_frac"] for t in trials} == {a.calibration_error["focal_error_frac"]}
     with pytest.raises(InputError, match="draws the calibration error itself"):
         make_config("galaxy-nexus", calibration="paper", calibration_error={"focal_error_frac": 0.01})
+    # rendered: the true lens has the drawn principal-point offset and distortion; the solver
+    # assumes the image centre and none (its errors are the opposite of the lens')
+    r = make_config("galaxy-nexus", seed=4)
+    assert r.lens["lens_pp_u_px"] != 0 and r.calibration_error["pp_error_u_px"] == -r.lens["lens_pp_u_px"]
+    assert r.calibration_error["k1_error"] == -r.lens["lens_k1"]
+    t = campaign_trials(make_config("galaxy-nexus", seed=4, trials_per_range=2, ranges_m=(10.0,)))[0].scenario
+    assert t["lens_k1"] == r.lens["lens_k1"] and t["k1_error"] == -r.lens["lens_k1"]
+    with pytest.raises(InputError, match="--budget"):
+        make_config("galaxy-nexus", trial_kind="geometric", budget=True)
+    with pytest.raises(InputError, match="misalignment"):
+        make_config("galaxy-nexus", misalignment_deg=(0.0, 0.0, 20.0))
+    with pytest.raises(InputError, match="--exposures-per-render"):
+        make_config("galaxy-nexus", exposures_per_render=0)
 
 
 def test_other_cameras_need_ranges(tmp_path):
@@ -90,8 +119,8 @@ def campaign_report(tmp_path_factory):
 
     buf = io.StringIO()
     with redirect_stdout(buf):
-        code = main(["campaign", "--camera", "galaxy-nexus", "--trials", "30", "--out", str(out), "--processes", "0",
-                     "--no-progress", "--calibration", "paper"])
+        code = main(["campaign", "--camera", "galaxy-nexus", "--trial-kind", "geometric", "--trials", "30", "--out",
+                     str(out), "--processes", "0", "--no-progress", "--calibration", "paper"])
     assert code == 0
     return out, buf.getvalue()
 

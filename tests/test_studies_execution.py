@@ -17,6 +17,7 @@ from studies.store import ResultStore, read_rows
 from sim.trials import GEOMETRIC, TrialKind, register_trial_kind
 from cli.main import main
 from svgs.errors import InputError
+from study_helpers import sigkill_after_rows
 
 
 def _numbers(rows):
@@ -35,7 +36,7 @@ def _run(config, out_dir, spec, chunk_size=4):
 def test_identical_numbers_inline_process_pool_and_dask(tmp_path):
     pytest.importorskip("distributed", reason="the 'dask' extra is not installed")
     config = make_config("galaxy-nexus", ranges_m=(5.0, 20.0), trials_per_range=12, seed=11, sigma_px=0.2,
-                         calibration="paper")
+                         calibration="paper", trial_kind="geometric")
     ref = _run(config, tmp_path / "inline", ExecutorSpec("inline", 1), chunk_size=5)
     assert len(ref) == 24 and all(r["ok"] == 1 for r in ref)
     pool = _run(config, tmp_path / "pool", ExecutorSpec("process", 2), chunk_size=3)
@@ -48,25 +49,14 @@ def test_identical_numbers_inline_process_pool_and_dask(tmp_path):
 #: KILL_AT-th row: the kill lands mid-campaign at a known point, with no polling and no
 #: timing window (the earlier version polled the CSV and raced the run).
 KILL_AT = 100
-_KILL_CHILD = f"""
-import os, signal, sys
-from studies.store import ResultStore
-_append = ResultStore.append
-def append(self, rows):
-    n = _append(self, rows)
-    if len(self.done_ids) >= {KILL_AT}:
-        os.kill(os.getpid(), signal.SIGKILL)
-    return n
-ResultStore.append = append
-from cli.main import main
-sys.exit(main(sys.argv[1:]))
-"""
+_KILL_CHILD = sigkill_after_rows(KILL_AT, "from cli.main import main\nsys.exit(main(sys.argv[1:]))")
 
 
 def test_sigkill_halfway_then_rerun_completes_without_duplicates(tmp_path):
     out = tmp_path / "campaign"
-    args = ["campaign", "--camera", "galaxy-nexus", "--trials", "150", "--ranges", "5,15", "--out", str(out),
-            "--processes", "0", "--chunk-size", "1", "--no-progress", "--seed", "5"]
+    args = ["campaign", "--camera", "galaxy-nexus", "--trial-kind", "geometric", "--calibration", "exact", "--trials",
+            "150", "--ranges", "5,15", "--out", str(out), "--processes", "0", "--chunk-size", "1", "--no-progress",
+            "--seed", "5"]
     proc = subprocess.run([sys.executable, "-c", _KILL_CHILD, *args], stdout=subprocess.DEVNULL,
                           stderr=subprocess.PIPE, start_new_session=True)
     results = out / "results.csv"
@@ -82,7 +72,8 @@ def test_sigkill_halfway_then_rerun_completes_without_duplicates(tmp_path):
     raw_lines = results.read_text().splitlines()
     assert len(raw_lines) == 301  # header + one line per trial, nothing twice in the file either
 
-    config = make_config("galaxy-nexus", ranges_m=(5.0, 15.0), trials_per_range=150, seed=5)
+    config = make_config("galaxy-nexus", ranges_m=(5.0, 15.0), trials_per_range=150, seed=5, trial_kind="geometric",
+                         calibration="exact")
     ref = _run(config, tmp_path / "reference", ExecutorSpec("inline", 1), chunk_size=16)
     assert _numbers(rows) == _numbers(ref)
     assert (out / "report.html").exists()
@@ -293,7 +284,7 @@ def test_unreachable_scheduler_is_exit_2_before_any_work(tmp_path, capsys, monke
     monkeypatch.setattr(distributed, "Client", no_client)
     out = tmp_path / "never"
     code = main(["campaign", "--camera", "galaxy-nexus", "--trials", "5", "--out", str(out),
-                 "--scheduler", f"tcp://127.0.0.1:{_closed_port()}", "--no-progress"])
+                 "--scheduler", f"tcp://127.0.0.1:{_closed_port()}", "--no-progress"])  # the rendered default
     err = capsys.readouterr().err
     assert code == 2 and "cannot reach a Dask scheduler" in err and "Traceback" not in err
     # "before any work": nothing was written (no timed check: speed is for the benchmarks)

@@ -361,3 +361,28 @@ def test_camera_with_distortion(pattern):
         d = rng.uniform([0, 0], [cam.width - 1, cam.height - 1], (6, 2))
         res = identify(np.concatenate([uv, d]), cam, pattern)
         assert res and np.array_equal(res.blob_index, [0, 1, 2, 3])
+
+
+@pytest.mark.parametrize("camera, ranges", [("galaxy-nexus", (5.0, 30.0)), ("htc-amaze-4g", (1.0, 6.5))])
+def test_every_stand_attitude_in_view_is_identified_among_distractors(camera, ranges):
+    """The paper's stand turns the phone (roll/pitch +/-25 deg, yaw +/-45 deg about the line of
+    sight): the target can sit anywhere in the field of view. Every setting that keeps it in
+    view is identified, with the right labels, beside four distractor spots far from it."""
+    from sim.stand import TestStand, sample_in_view
+
+    cam, pat = Camera.load(camera), Pattern.load("svgs-3u")
+    stand = TestStand()
+    rng = np.random.default_rng(7)
+    for r in ranges:
+        settings, _ = sample_in_view(np.random.default_rng(int(r * 10)), cam, pat, r, 40)
+        for s in settings:
+            uv = cam.project_target(pat.points_m, *stand.pose(r, **s)) + 0.1 * rng.standard_normal((4, 2))
+            span = np.ptp(uv, axis=0).max()
+            far = []
+            while len(far) < 4:  # distractors at least two pattern spans from every target
+                p = rng.uniform([0, 0], [cam.width - 1, cam.height - 1])
+                if np.min(np.linalg.norm(uv - p, axis=1)) > 2 * span:
+                    far.append(p)
+            res = identify(np.vstack([uv, far]), cam, pat)
+            assert res, (r, s, res.reason)
+            assert np.allclose(res.points_px, uv), (r, s)

@@ -14,7 +14,10 @@ changes) as asked, each from its own seed.
 Stages (``stages=``): ``glare`` (optics PSF; off: a perfect lens), ``cfa`` (the profile's
 colour filter array; off, or ``[cfa] pattern = "none"``: mono), ``shot``, ``dark``, ``fpn``
 (DSNU and PRNU), ``read``, ``bloom`` (off: plain full-well clipping), ``adc`` (quantise and
-clip; off: float DN), ``tone`` (off: linear 8-bit), ``downscale``, ``jpeg``.
+clip; off: float DN), ``tone`` (off: linear), ``u8`` (the delivered image in 8 bits; off: a
+float32 image on the same 0-255 scale, and no JPEG), ``downscale``, ``jpeg``. The optics
+stages (``glare``, ``cfa``) are fixed per :class:`Exposer`; the others may change per
+exposure (:meth:`Exposer.expose`'s ``stages``).
 """
 
 from __future__ import annotations
@@ -28,11 +31,11 @@ from svgs.errors import InputError
 from camera.phone.isp import ExposureSolver, auto_exposure, downscale, jpeg_roundtrip, metering_weights, tone_lut
 from camera.phone.cfa import channel_map, luminance, response_map, tone_image
 from camera.phone.optics import apply_psf, core_image, core_psf, core_share, glare_image
-from camera.phone.params import ALL_STAGES, PhoneParams, check_stages
+from camera.phone.params import ALL_STAGES, NOISE_STAGES, OPTICS_STAGES, PhoneParams, check_stages
 from camera.phone.sensor import bloom, electrons, fixed_patterns, readout
 from camera.tonemap import gamma_u8
 
-__all__ = ["PhoneCamera", "Exposer", "Exposure", "PhoneParams", "ALL_STAGES"]
+__all__ = ["PhoneCamera", "Exposer", "Exposure", "PhoneParams", "ALL_STAGES", "NOISE_STAGES", "OPTICS_STAGES"]
 
 
 @dataclass
@@ -108,21 +111,37 @@ class PhoneCamera:
         use_cfa = p.cfa.enabled if cfa is None else (bool(cfa) and p.cfa.enabled)
         if not use_cfa:
             return apply_psf(flux_ph_s, p.glare, self.core_psf(), pp, points=points, rng=np.random.default_rng(seed))
-        chan = channel_map(p.cfa.pattern, self.shape)
-        out = np.zeros(self.shape)
-        seeds = np.random.SeedSequence(int(seed)).spawn(3)
-        for c in range(3):
-            core = core_psf(p.f_number, p.band_nm, p.sensor.pixel_pitch_m, p.glare.aberration_sigma_px,
-                            wavelength_nm=p.cfa.wavelength_nm[c])
-            img = core_image(flux_ph_s, core, points, np.random.default_rng(seeds[c]))
-            m = chan == c
-            out[m] = img[m]
+        out = self.core_mosaic(flux_ph_s, points, seed=seed)
         out *= core_share(p.glare)
         g = glare_image(flux_ph_s, p.glare, pp, points)
         if g is not None:
             out += g
         out *= response_map(p.cfa, self.shape)
         return out.astype(np.float32)
+
+    def core_mosaic(self, flux_ph_s: np.ndarray, points=None, *, seed: int = 0, origin=(0, 0),
+                    min_draws: int | None = None) -> np.ndarray:
+        """The lens' core PSF through the colour filter array: each pixel gets its channel's
+        image (the Airy pattern at the channel's wavelength (x) the aberration Gaussian) of the
+        flux and the points, unit share, before the channel responses (float64, the flux's shape).
+
+        ``origin``: the frame pixel ``(x0, y0)`` of the flux's top-left pixel, when it is a
+        window of the frame (the mosaic's phase); ``min_draws``: the points' PSF draws per
+        channel (:func:`camera.phone.optics.core_image`). ``seed`` seeds the three channels'
+        Monte Carlo convolutions."""
+        p = self.params
+        H, W = np.shape(flux_ph_s)
+        x0, y0 = int(origin[0]) % 2, int(origin[1]) % 2
+        chan = channel_map(p.cfa.pattern, (H + 2, W + 2))[y0:y0 + H, x0:x0 + W]  # the mosaic repeats every 2 px
+        out = np.zeros((H, W))
+        seeds = np.random.SeedSequence(int(seed)).spawn(3)
+        for c in range(3):
+            core = core_psf(p.f_number, p.band_nm, p.sensor.pixel_pitch_m, p.glare.aberration_sigma_px,
+                            wavelength_nm=p.cfa.wavelength_nm[c])
+            img = core_image(flux_ph_s, core, points, np.random.default_rng(seeds[c]), min_draws=min_draws)
+            m = chan == c
+            out[m] = img[m]
+        return out
 
     def uses_cfa(self, stages) -> bool:
         """Whether exposures with these stages go through the colour filter array."""
@@ -222,7 +241,7 @@ class Exposer:
             raise InputError(f"exposure_s: impossible exposure of {exposure_s} s for a phone camera (> 60 s)")
         return float(exposure_s), float(iso), info
 
-    def expose(self, *, seed: int = 0, exposure_s=None, iso=None, keep_electrons=False) -> Exposure:
+    def expose(self, *, seed: int = 0, exposure_s=None, iso=None, keep_electrons=False, stages=None) -> Exposure:
         """One exposure with its own noise draw.
 
         Parameters
@@ -233,6 +252,9 @@ class Exposer:
             Override the profile's exposure (manual or auto).
         keep_electrons : bool
             Keep the charge image (after blooming) in the result.
+        stages : sequence of str, optional
+            The stages of this exposure (default the exposer's); the optics stages
+            (``glare``, ``cfa``) must be the exposer's, since its optical image is made.
 
         Returns
         -------
@@ -241,6 +263,11 @@ class Exposer:
         p = self.phone.params
         sp = p.sensor
         st = self.stages
+        if stages is not None:
+            st = check_stages(stages)
+            if tuple(s for s in OPTICS_STAGES if s in st) != tuple(s for s in OPTICS_STAGES if s in self.stages):
+                raise InputError(f"stages: the optics stages ({', '.join(OPTICS_STAGES)}) are fixed by the exposer "
+                                 f"({', '.join(s for s in OPTICS_STAGES if s in self.stages) or 'none'})")
         t, iso, info = self.settings(exposure_s, iso)
         prnu, dsnu = self.phone.fixed_patterns()
         e = electrons(self.flux_optics, sp, t, prnu, dsnu, seed, shot="shot" in st, dark="dark" in st, fpn="fpn" in st)
@@ -254,12 +281,17 @@ class Exposer:
                 img = tone_image(raw, p.cfa, sp.black_level_dn, sp.white_dn, self._lut)
             else:
                 img = gamma_u8(luminance(raw, p.cfa, sp.black_level_dn, sp.white_dn), p.isp.gamma if "tone" in st else 0.0)
-        if img is None:
+        if "u8" not in st:  # the same tone curve, not quantised: float32 on the 0-255 scale
+            lin = (luminance(raw, p.cfa, sp.black_level_dn, sp.white_dn) if self.cfa
+                   else np.clip((raw - sp.black_level_dn) / (sp.white_dn - sp.black_level_dn), 0, 1))
+            g = p.isp.gamma if "tone" in st else 0.0
+            img = (255.0 * (np.asarray(lin, np.float64) ** (1.0 / g) if g > 0 else lin)).astype(np.float32)
+        elif img is None:
             img = gamma_u8(np.clip((raw - sp.black_level_dn) / (sp.white_dn - sp.black_level_dn), 0, 1),
                            p.isp.gamma if "tone" in st else 0.0)
         if "downscale" in st and p.isp.output_width > 0:
             img = downscale(img, p.isp.output_width, p.isp.output_height)
-        if "jpeg" in st and p.isp.jpeg_quality > 0:
+        if "jpeg" in st and "u8" in st and p.isp.jpeg_quality > 0:
             img = jpeg_roundtrip(img, p.isp.jpeg_quality)
         info.update({"seed": int(seed), "stages": list(st)})
         return Exposure(raw, img, t, iso, sp.gain_dn_per_e(iso), info, e if keep_electrons else None)

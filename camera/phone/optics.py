@@ -96,11 +96,12 @@ def wings(image, glare: GlareParams) -> np.ndarray:
     return fine
 
 
-def core_image(flux, core, points=None, rng: np.random.Generator | None = None) -> np.ndarray:
+def core_image(flux, core, points=None, rng: np.random.Generator | None = None, *,
+               min_draws: int | None = None) -> np.ndarray:
     """The core PSF applied to a pixel image and to point samples, integrated over pixels
     (unit share; float64 (H, W)). ``core``: a :class:`CorePSF`, or a float (a Gaussian core of
     that sigma, px, on the pixel image and the points binned: the earlier order, for
-    comparisons)."""
+    comparisons). ``min_draws``: the points' PSF draws in all (default :meth:`CorePSF.splat`'s)."""
     f = np.ascontiguousarray(flux, np.float32)
     H, W = f.shape
     has_points = points is not None and len(points) > 0
@@ -109,7 +110,8 @@ def core_image(flux, core, points=None, rng: np.random.Generator | None = None) 
         out = core.convolve(f).astype(np.float64) if f.any() else np.zeros((H, W))
         if has_points:
             rng = np.random.default_rng(0) if rng is None else rng
-            out += core.splat(points.u_px, points.v_px, points.rate_ph_s, (H, W), rng)
+            kw = {} if min_draws is None else {"min_draws": int(min_draws)}
+            out += core.splat(points.u_px, points.v_px, points.rate_ph_s, (H, W), rng, **kw)
         return out
     sig = float(core)
     g = f + points.binned((H, W)).astype(np.float32) if has_points else f

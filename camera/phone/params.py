@@ -62,7 +62,11 @@ import numpy as np
 
 from svgs.errors import InputError
 
-ALL_STAGES = ("glare", "cfa", "shot", "dark", "fpn", "read", "bloom", "adc", "tone", "downscale", "jpeg")
+ALL_STAGES = ("glare", "cfa", "shot", "dark", "fpn", "read", "bloom", "adc", "tone", "u8", "downscale", "jpeg")
+#: Stages that act on the optical image before the exposure (fixed per :class:`camera.phone.Exposer`).
+OPTICS_STAGES = ("glare", "cfa")
+#: The sensor's noise sources (off together: a noise-free sensor).
+NOISE_STAGES = ("shot", "dark", "fpn", "read")
 #: Bayer layouts (the colours of the top-left 2 x 2 block, row by row).
 CFA_PATTERNS = ("none", "RGGB", "BGGR", "GRBG", "GBRG")
 METERING = ("mean", "center_weighted", "spot")
