@@ -338,15 +338,17 @@ def _stages(scenario: dict) -> tuple:
     return tuple(s for s in ALL_STAGES if s not in off)
 
 
-def _sensor_crlb(frame, exposer, row, cache: dict, key) -> dict | None:
-    """:func:`sim.crlb.frame_crlb` of a solved row, once per exposer and exposure setting."""
-    from sim.crlb import frame_crlb
+def _sensor_centroid_sigma(frame, exposer, row, cache: dict, key, spots_px) -> float | None:
+    """The simulated sensor's centroid bound (RMS over the spots, px; :func:`sim.crlb.centroid_crlb_px`)
+    at the targets' true positions, once per exposer and exposure setting: it depends on the
+    render and the exposure, not on the noise draw (so not on which trial of a group asks first).
+    None when a spot carries no information."""
+    from sim.crlb import centroid_crlb_px
 
-    if not row["ok"]:
-        return None
     k = ("crlb", *key, row["exposure_s"], row["iso"])
     if k not in cache:
-        cache[k] = frame_crlb(frame, exposer, row)
+        sig = centroid_crlb_px(frame, exposer, row["_exposure"], spots_px)
+        cache[k] = float(np.sqrt(np.mean(sig**2))) if np.all(np.isfinite(sig)) else None
     return cache[k]
 
 
@@ -429,10 +431,13 @@ def _solve_one(scenario: dict, seed: int, frame, exposers: dict) -> dict:
         for k, (du, dv) in enumerate((found - uv_img)[:4]):
             out[f"cen_du_px_{k}"], out[f"cen_dv_px_{k}"] = float(du), float(dv)
         # the bound from the simulated sensor at this exposure (sim.crlb)
-        cr = _sensor_crlb(frame, exposer, row, exposers, gkey) if _is_baseline(scenario) else None
-        if cr is not None and cr.get("crlb_std") is not None:
-            out["crlb_centroid_px"] = cr["centroid_sigma_px"]
-            out.update({f"crlb_sensor_{k}": float(cr["crlb_std"][k]) for k in STATE_KEYS})
+        rms = (_sensor_centroid_sigma(frame, exposer, row, exposers, gkey, uv) if _is_baseline(scenario) and
+               frame.points is not None else None)
+        if rms is not None:
+            from sim.crlb import pose_crlb
+
+            out["crlb_centroid_px"] = rms
+            out.update({f"crlb_sensor_{k}": float(v) for k, v in pose_crlb(sol, rms).items()})
     if out["message"] is not None:
         out["message"] = " ".join(str(out["message"]).split())  # one line (a CSV field)
     return out
@@ -460,8 +465,9 @@ def render_trial(scenario: dict, seed: int) -> dict:
         :func:`merge_margin_dn`); ``crlb_*`` (Cramer-Rao 1-sigma for 0.1 px centroid noise, at
         the estimate); ``cen_du_px_k``, ``cen_dv_px_k``, ``centroid_err_rms_px`` (the identified
         centroids of the first four targets minus their true projections, px, in the delivered
-        image); ``crlb_centroid_px``, ``crlb_sensor_*`` (the simulated sensor's centroid and pose
-        bounds, :mod:`sim.crlb`; with every error source on only); ``exposure_s_used``,
+        image); ``crlb_centroid_px``, ``crlb_sensor_*`` (the simulated sensor's centroid bound at
+        the targets' true positions and the pose bound at this trial's solution, :mod:`sim.crlb`;
+        with every error source on only); ``exposure_s_used``,
         ``iso_used``; ``expose_s``, ``solve_s`` (wall times).
     """
     frame, exposers = _frame(render_key(scenario))

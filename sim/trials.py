@@ -436,7 +436,8 @@ def geometric_group(scenarios: list, seeds: list) -> list[dict]:
 
 def geometric_render_key(scenario: dict):
     """What decides the geometric "render": camera, pattern, pose (and the truth it is judged by)."""
-    return (scenario["camera"], scenario["pattern"], *(scenario[k] for k in POSE_KEYS), scenario["truth_actual"])
+    return (scenario["camera"], scenario["pattern"],
+            *(scenario.get(k, GEOMETRIC_PARAMETERS[k].default) for k in (*POSE_KEYS, "truth_actual")))
 
 
 def geometric_warm_up() -> None:
