@@ -617,7 +617,7 @@ def sample_image_figure(config: CampaignConfig, trials: list, table: dict):
     target, with the true target projections (circles) and the solved targets (crosses)."""
     from matplotlib.figure import Figure
 
-    from sim.closed_loop import Scenario, render_scenario, solve_exposure, solver_camera
+    from sim.closed_loop import solve_exposure, solver_camera
     from sim.render_trial import _frame, render_key
     from sim.trials import camera_with_calibration_errors
     from svgs.profiles import Pattern
