@@ -1,35 +1,37 @@
-"""AMCW pixel model of the ToF camera: rendered radiance -> four taps -> amplitude, depth, gray.
+"""AMCW pixel model of the ToF camera: rendered radiance -> four DCS -> amplitude, depth, gray.
 
 numpy only (no Mitsuba): a frame is drawn from a :class:`RenderedTof` (the noise-free
 per-pixel means the renderer produced once) in milliseconds, so a stability run renders once
 and draws many noisy frames.
 
-Model (``shared/notes/physics.md`` section 6)
----------------------------------------------
-Four sequential correlation samples (DCS, the EPC660 scheme), each integrating for ``T`` (the
-chip's integration-time setting; a depth frame takes four of them). Per pixel and tap::
+Model: the EPC660's differential 2-tap pixel (its datasheet V2.20, sections 9.1-9.5)
+------------------------------------------------------------------------------------
+A depth frame is four sequential **DCS** (differential correlation samples) at 0, 90, 180 and
+270 deg, each integrating for ``T`` (the chip's integration-time setting). In one DCS the
+photogate splits the pixel's charge between two taps A and B in antiphase::
 
-    k     = photons_per_radiance * QE * transmittance * T          electrons per (W m^-2 sr^-1)
-    S     = k * L_active           (DC of the modulated return, electrons per tap)
-    P     = k * <L e^{i 2 pi f opl / c}>   (its phasor: mixed / flying pixels and multipath
-                                            are the per-pixel phasor sums the renderer made)
-    Amb   = k * L_amb,  L_amb = ambient_factor * ambient_lux * ambient_w_m2_per_lux / pi
-    D     = dark_current * T
-    mu_k  = S + Amb + D + c_d Re(P e^{-i k pi / 2}),   k = 0..3
+    k     = photons_per_radiance * QE * transmittance * T      electrons per (W m^-2 sr^-1)
+    N     = k * (L_active + L_amb) + dark_current * T          total charge of the DCS (both taps)
+    P     = k * <L e^{i 2 pi f opl / c}>                       the return's phasor (mixed / flying
+                                                               pixels and multipath are phasor sums)
+    m_k   = c_d Re(P e^{-i k pi / 2})                          c_d: demodulation contrast
+    A_k ~ Poisson((N + m_k) / 2),  B_k ~ Poisson((N - m_k) / 2),  DCS_k = A_k - B_k (+ two reads' noise)
 
-(``c_d`` the demodulation contrast). The charge of each tap is Poisson(mu_k); background
-suppression (SBI) then removes the fraction ``ambient_suppression`` of the ambient *charge*
-(not its shot noise), the well clips at ``full_well_e``, read noise (Gaussian) is added and
-a ``adc_bits`` ADC quantises with the gain ``(2^bits - 1) / full_well_e`` DN/e-. From the
-taps ``m0..m3`` (DN)::
+so the DC (ambient, dark, the return's own mean) cancels in the mean and stays in the noise.
+A 12-bit ADC converts ``DCS_k`` with ``gain_e_per_lsb`` into -2047..2047 LSB (clipping sets
+the SAT flag; so does a total charge beyond the ``full_well_e`` of the storage node after
+background suppression). From the DCS (datasheet eqs. 2 and 5)::
 
-    phi = atan2(m1 - m3, m0 - m2) mod 2 pi      depth = c phi / (4 pi f)   (wraps at c / 2f)
-    amplitude = sqrt((m0 - m2)^2 + (m1 - m3)^2) / 2                       (the gray image)
+    A_TOF = sqrt((DCS2 - DCS0)^2 + (DCS3 - DCS1)^2) / 2                   amplitude (LSB)
+    D     = c / (4 pi f) [pi + atan2(DCS3 - DCS1, DCS2 - DCS0)]          distance (wraps at c / 2f)
 
-and the shot-noise phase error is ``sqrt(B + sigma_read^2) / (sqrt(2) A)`` (B the DC per tap,
-A the tap amplitude ``c_d |P|``, in electrons; :func:`phase_noise_rad`). Pixels below
-``min_amplitude_dn`` or with a saturated tap get NaN depth. ``mode="passive"`` is the gray
-mode: illumination off, no suppression, gray = the mean of the taps (ambient image).
+Gain from the datasheet's TOF sensitivity ``S_TOF`` (irradiance per LSB of amplitude at the
+reference integration time ``t_ref``): an irradiance ``E`` on the pixel gives
+``A_TOF = E T / (S_TOF t_ref)`` LSB, i.e. ``gain_e_per_lsb = c_d QE a_pix S_TOF t_ref / (h nu)``.
+The phase noise of one depth frame is ``sqrt(N / 2 + sigma_r^2) / (c_d |P|)``
+(:func:`phase_noise_rad`). Pixels below ``min_amplitude_dn`` or with SAT get NaN depth.
+``mode="passive"`` is the gray mode: illumination off, single-ended read-out of the ambient
+charge with the grayscale sensitivity.
 """
 
 from __future__ import annotations
@@ -131,18 +133,22 @@ def phasor_depth_m(phasor, modulation_frequency_hz: float) -> np.ndarray:
     return np.where(np.abs(p) > 0, d, np.nan)
 
 
-def phase_noise_rad(dc_per_tap_e, amplitude_per_tap_e, read_noise_e=0.0):
-    """Shot + read noise phase error ``sqrt(B + sigma_r^2) / (sqrt(2) A)`` (radians).
+def phase_noise_rad(total_charge_e, modulated_e, read_noise_e=0.0):
+    """Shot + read noise phase error of one 4-DCS depth frame, radians.
+
+    ``sqrt(N / 2 + sigma_r^2) / M``: each DCS difference ``DCS_k - DCS_{k+2}`` has the
+    variance ``2 N + 4 sigma_r^2`` and the mean ``2 M``.
 
     Parameters
     ----------
-    dc_per_tap_e : array_like
-        Mean charge per tap ``B`` (signal, ambient and dark), electrons.
-    amplitude_per_tap_e : array_like
-        Modulated amplitude per tap ``A = c_d |P|``, electrons.
+    total_charge_e : array_like
+        Charge ``N`` of one DCS exposure (both taps: signal, ambient, dark), electrons.
+    modulated_e : array_like
+        ``M = c_d |P|``, electrons.
     read_noise_e : float
+        Per tap read, electrons.
     """
-    return np.sqrt(np.asarray(dc_per_tap_e, float) + float(read_noise_e) ** 2) / (np.sqrt(2.0) * np.asarray(amplitude_per_tap_e, float))
+    return np.sqrt(0.5 * np.asarray(total_charge_e, float) + float(read_noise_e) ** 2) / np.asarray(modulated_e, float)
 
 
 @dataclass
@@ -152,16 +158,18 @@ class TofFrame:
     Attributes
     ----------
     gray : ndarray of float32, shape (H, W)
-        Active mode: amplitude (DN); passive mode: mean of the taps (DN).
+        Active mode: amplitude (LSB); passive mode: the gray-mode output (LSB).
     depth_m : ndarray of float32, shape (H, W)
         Radial phase depth (wrapped at ``c / 2f``); NaN where invalid (and everywhere in
         passive mode).
     amplitude_dn : ndarray of float32, shape (H, W)
     intensity_dn : ndarray of float32, shape (H, W)
-        Mean of the four taps.
+        Charge in the storage node per DCS in gray-mode LSB (active mode, noise-free: what
+        fills the well); the gray output in passive mode.
     saturated : ndarray of bool, shape (H, W)
-        A tap's well or ADC clipped.
+        A DCS clipped at the ADC range or the storage node overflowed (the chip's SAT flag).
     taps_dn : ndarray of float32, shape (4, H, W)
+        The four DCS values, LSB (zeros in passive mode).
     integration_time_s : float
     mode : str
     """
@@ -178,7 +186,7 @@ class TofFrame:
 
 @dataclass(frozen=True)
 class TofSensor:
-    """The AMCW pixel and read-out (see the module notes for the model).
+    """The EPC660 pixel and read-out (see the module notes for the model).
 
     Attributes
     ----------
@@ -188,41 +196,59 @@ class TofSensor:
         ``c_d`` in (0, 1].
     quantum_efficiency, transmittance : float
         At 850 nm; transmittance of lens + band-pass filter.
-    read_noise_e, full_well_e, dark_current_e_per_s : float
+    read_noise_e : float
+        Per tap read, electrons (a DCS difference has sqrt(2) of it).
+    full_well_e : float
+        Charge the storage node holds per DCS (signal + ambient after suppression), electrons.
+    dark_current_e_per_s : float
     adc_bits : int
+        DCS values span ``-(2^(bits-1) - 1) .. 2^(bits-1) - 1`` LSB; the gray image ``0 .. 2^(bits-1) - 1``.
+    tof_sensitivity_w_m2_per_lsb : float
+        Irradiance on the pixel per LSB of amplitude at ``sensitivity_reference_time_s``.
+    gray_sensitivity_w_m2_per_lsb : float
+        The same for the gray (passive) mode's output.
+    sensitivity_reference_time_s : float
+    pixel_pitch_m : float
+    wavelength_m : float
     ambient_suppression : float
-        Fraction of the ambient charge removed by background suppression (active mode).
+        Fraction of the ambient charge the background suppression removes from the storage node
+        (it cancels in the DCS differences anyway; this only sets when the node fills).
     ambient_lux : float
         Ambient illuminance (the paper: 1000 lux normal, 10000 lux high).
     ambient_w_m2_per_lux : float
         In-band (850 nm filter) irradiance per lux of the ambient light.
     integration_time_s : float or None
-        Per tap (DCS); None: automatic (:meth:`auto_integration_time`).
+        Per DCS; None: automatic (:meth:`auto_integration_time`).
     integration_time_min_s, integration_time_max_s : float
         Limits of the automatic integration time.
     auto_exposure_target : float
-        Automatic integration time puts the brightest pixel's peak tap at this fraction of
-        the full well.
+        The automatic integration time puts the brightest pixel's amplitude at this fraction
+        of the DCS range.
     min_amplitude_dn : float
-        Depth is invalid (NaN) below this amplitude.
+        Depth is invalid (NaN) below this amplitude (LSB).
     """
 
     modulation_frequency_hz: float = 10.0e6
-    demodulation_contrast: float = 0.6
-    quantum_efficiency: float = 0.25
+    demodulation_contrast: float = 0.39
+    quantum_efficiency: float = 0.8
     transmittance: float = 0.9
     read_noise_e: float = 30.0
-    full_well_e: float = 1.0e5
+    full_well_e: float = 8.0e6
     dark_current_e_per_s: float = 1000.0
     adc_bits: int = 12
+    tof_sensitivity_w_m2_per_lsb: float = 6.0e-4
+    gray_sensitivity_w_m2_per_lsb: float = 2.5e-4
+    sensitivity_reference_time_s: float = 1.0e-4
+    pixel_pitch_m: float = 20e-6
+    wavelength_m: float = 850e-9
     ambient_suppression: float = 0.9
     ambient_lux: float = 1000.0
     ambient_w_m2_per_lux: float = 4.1e-4
     integration_time_s: float | None = None
-    integration_time_min_s: float = 1.0e-5
+    integration_time_min_s: float = 1.67e-7
     integration_time_max_s: float = 2.0e-3
     auto_exposure_target: float = 0.5
-    min_amplitude_dn: float = 3.0
+    min_amplitude_dn: float = 25.0
 
     def __post_init__(self):
         for f in fields(self):
@@ -236,8 +262,8 @@ class TofSensor:
                   "auto_exposure_target"):
             if getattr(self, k) > 1:
                 raise InputError(f"tof sensor {k}: expected a fraction in [0, 1], got {getattr(self, k)!r}")
-        if int(self.adc_bits) != self.adc_bits or not 1 <= self.adc_bits <= 24:
-            raise InputError(f"tof sensor adc_bits: expected an integer 1..24, got {self.adc_bits!r}")
+        if int(self.adc_bits) != self.adc_bits or not 2 <= self.adc_bits <= 24:
+            raise InputError(f"tof sensor adc_bits: expected an integer 2..24, got {self.adc_bits!r}")
         if self.integration_time_min_s > self.integration_time_max_s:
             raise InputError("tof sensor: integration_time_min_s exceeds integration_time_max_s")
 
@@ -246,13 +272,9 @@ class TofSensor:
     def from_camera(cls, camera, **overrides) -> "TofSensor":
         """Parameters from a camera profile's ``[tof]``, ``[noise]`` and ``[optics]`` tables.
 
-        Keys read: ``tof.modulation_frequency_hz, demodulation_contrast, adc_bits,
-        integration_time_s`` (a number, or ``"auto"``), ``integration_time_min_s``,
-        ``integration_time_max_s``, ``auto_exposure_target``, ``min_amplitude_dn``;
-        ``noise.quantum_efficiency, read_noise_e, full_well_e, dark_current_e_per_s,
-        ambient_lux, ambient_w_m2_per_lux, ambient_suppression``; ``optics.transmittance``.
-        Missing keys keep the class defaults. ``overrides`` replace fields (None values are
-        ignored, except ``integration_time_s=None`` is "auto" only when given as ``"auto"``).
+        Every field name found in ``[tof]`` or ``[noise]`` is read (``integration_time_s`` may
+        be ``"auto"``); ``optics.transmittance``. Missing keys keep the class defaults.
+        ``overrides`` replace fields (None values are ignored; ``integration_time_s="auto"``).
         """
         t = dict(camera.tables.get("tof") or {})
         n = dict(camera.tables.get("noise") or {})
@@ -282,12 +304,41 @@ class TofSensor:
         return replace(self, **kw)
 
     def to_json(self) -> dict:
-        return asdict(self)
+        d = asdict(self)
+        d.update(gain_e_per_lsb=self.gain_e_per_lsb, gray_gain_e_per_lsb=self.gray_gain_e_per_lsb,
+                 dcs_max_lsb=self.dcs_max_lsb)
+        return d
 
     # ------------------------------------------------------------------ radiometry
     @property
+    def photon_energy_j(self) -> float:
+        from svgs.constants import PLANCK_J_S
+
+        return PLANCK_J_S * SPEED_OF_LIGHT_M_S / self.wavelength_m
+
+    def _electrons_per_lsb_irradiance(self, sensitivity_w_m2_per_lsb) -> float:
+        """Electrons collected at the reference time from the irradiance of one LSB."""
+        return (self.quantum_efficiency * sensitivity_w_m2_per_lsb * self.pixel_pitch_m ** 2
+                * self.sensitivity_reference_time_s / self.photon_energy_j)
+
+    @property
+    def gain_e_per_lsb(self) -> float:
+        """Electrons of a DCS difference per LSB: ``c_d QE a_pix S_TOF t_ref / (h nu)``."""
+        return self.demodulation_contrast * self._electrons_per_lsb_irradiance(self.tof_sensitivity_w_m2_per_lsb)
+
+    @property
+    def gray_gain_e_per_lsb(self) -> float:
+        """Electrons per LSB of the gray mode: ``QE a_pix S_gray t_ref / (h nu)``."""
+        return self._electrons_per_lsb_irradiance(self.gray_sensitivity_w_m2_per_lsb)
+
+    @property
     def gain_dn_per_e(self) -> float:
-        return (2 ** int(self.adc_bits) - 1) / self.full_well_e
+        """LSB per electron of a DCS difference (``1 / gain_e_per_lsb``)."""
+        return 1.0 / self.gain_e_per_lsb
+
+    @property
+    def dcs_max_lsb(self) -> int:
+        return 2 ** (int(self.adc_bits) - 1) - 1
 
     @property
     def ambient_radiance_w_m2_sr(self) -> float:
@@ -300,12 +351,12 @@ class TofSensor:
                              f"modulates at {self.modulation_frequency_hz:g} Hz; render again with that frequency")
 
     def electrons(self, rendered: RenderedTof, integration_time_s: float, mode: str = "active") -> dict:
-        """Expected charges of one tap's integration (electrons, shape (H, W) each).
+        """Expected charges of one DCS exposure (electrons, both taps, shape (H, W) each).
 
         Returns
         -------
         dict
-            ``signal`` (S), ``phasor`` (P, complex), ``ambient`` (Amb), ``dark`` (D, scalar).
+            ``signal`` (the return's mean), ``phasor`` (P, complex), ``ambient``, ``dark`` (scalar).
         """
         T = check_finite_positive(integration_time_s, "integration_time_s")
         k = rendered.photons_per_radiance * self.quantum_efficiency * self.transmittance * T
@@ -314,25 +365,28 @@ class TofSensor:
                 "ambient": rendered.ambient_factor * self.ambient_radiance_w_m2_sr * k,
                 "dark": self.dark_current_e_per_s * T}
 
-    def tap_means_e(self, rendered: RenderedTof, integration_time_s: float, mode: str = "active") -> np.ndarray:
-        """Expected tap charges ``mu_k`` (before suppression), shape (4, H, W), electrons."""
-        e = self.electrons(rendered, integration_time_s, mode)
-        dc = e["signal"] + e["ambient"] + e["dark"]
-        cd = self.demodulation_contrast if mode == "active" else 0.0
-        return np.stack([dc + cd * np.real(e["phasor"] * np.exp(-0.5j * np.pi * k)) for k in range(4)])
+    def dcs_means_e(self, rendered: RenderedTof, integration_time_s: float) -> np.ndarray:
+        """Expected DCS differences ``c_d Re(P e^{-i k pi / 2})``, shape (4, H, W), electrons."""
+        P = self.electrons(rendered, integration_time_s)["phasor"]
+        return np.stack([self.demodulation_contrast * np.real(P * np.exp(-0.5j * np.pi * k)) for k in range(4)])
+
+    def expected_amplitude_lsb(self, rendered: RenderedTof, integration_time_s: float) -> np.ndarray:
+        """Noise-free amplitude ``c_d |P| / gain`` (LSB), shape (H, W)."""
+        P = self.electrons(rendered, integration_time_s)["phasor"]
+        return self.demodulation_contrast * np.abs(P) / self.gain_e_per_lsb
 
     def auto_integration_time(self, rendered: RenderedTof, mode: str = "active") -> float:
-        """Integration time putting the brightest peak tap (after suppression) at
-        ``auto_exposure_target`` of the full well, within the limits."""
+        """Integration time putting the brightest pixel's amplitude (active) or gray value
+        (passive) at ``auto_exposure_target`` of the range, within the limits."""
         self._check(rendered)
         e = self.electrons(rendered, 1.0, mode)
-        s = self.ambient_suppression if mode == "active" else 0.0
-        cd = self.demodulation_contrast if mode == "active" else 0.0
-        peak = e["signal"] + (1 - s) * e["ambient"] + e["dark"] + cd * np.abs(e["phasor"])
-        top = float(np.max(peak)) if peak.size else 0.0
+        if mode == "active":
+            top = float(np.max(self.demodulation_contrast * np.abs(e["phasor"]))) / self.gain_e_per_lsb
+        else:
+            top = float(np.max(e["ambient"] + e["dark"])) / self.gray_gain_e_per_lsb
         if top <= 0:
             return float(self.integration_time_max_s)
-        return float(np.clip(self.auto_exposure_target * self.full_well_e / top,
+        return float(np.clip(self.auto_exposure_target * self.dcs_max_lsb / top,
                              self.integration_time_min_s, self.integration_time_max_s))
 
     # ------------------------------------------------------------------ frames
@@ -350,7 +404,7 @@ class TofSensor:
         mode : {"active", "passive"}
             Depth mode (illumination on) or gray mode (illumination off).
         noise : bool
-            False: the expected taps (no shot/read noise, no quantisation).
+            False: the expected values (no shot/read noise, no quantisation).
 
         Returns
         -------
@@ -361,41 +415,51 @@ class TofSensor:
         self._check(rendered)
         T = integration_time_s if integration_time_s is not None else self.integration_time_s
         T = self.auto_integration_time(rendered, mode) if T is None else check_finite_positive(T, "integration_time_s")
-        mu = self.tap_means_e(rendered, T, mode)
-        amb = self.electrons(rendered, T, mode)["ambient"]
-        s = self.ambient_suppression if mode == "active" else 0.0
+        e = self.electrons(rendered, T, mode)
+        N = e["signal"] + e["ambient"] + e["dark"]
+        stored = e["signal"] + (1.0 - self.ambient_suppression) * e["ambient"] + e["dark"]
+        top = self.dcs_max_lsb
+        f32 = np.float32
         if noise:
             rng = np.random.default_rng(rng)
-            q = rng.poisson(np.maximum(mu, 0.0)).astype(np.float64)
+        if mode == "passive":
+            q = rng.poisson(np.maximum(N, 0.0)).astype(np.float64) if noise else N.copy()
+            if noise and self.read_noise_e > 0:
+                q += rng.normal(0.0, self.read_noise_e, q.shape)
+            g = q / self.gray_gain_e_per_lsb
+            if noise:
+                g = np.round(g)
+            sat = (g >= top) | (N > self.full_well_e)
+            g = np.clip(g, 0.0, top)
+            nan = np.full(g.shape, np.nan)
+            zero = np.zeros(g.shape)
+            return TofFrame(gray=g.astype(f32), depth_m=nan.astype(f32), amplitude_dn=zero.astype(f32),
+                            intensity_dn=g.astype(f32), saturated=sat, taps_dn=np.zeros((4,) + g.shape, f32),
+                            integration_time_s=float(T), mode=mode)
+        m = self.dcs_means_e(rendered, T)
+        if noise:
+            a = rng.poisson(np.maximum(0.5 * (N + m), 0.0))
+            b = rng.poisson(np.maximum(0.5 * (N - m), 0.0))
+            dcs = (a - b).astype(np.float64)
+            if self.read_noise_e > 0:  # both taps read: sqrt(2) x the per-tap read noise
+                dcs += rng.normal(0.0, np.sqrt(2.0) * self.read_noise_e, dcs.shape)
         else:
-            q = mu.copy()
-        q -= s * amb
-        sat = np.any(q > self.full_well_e, axis=0)
-        q = np.minimum(q, self.full_well_e)
-        if noise and self.read_noise_e > 0:
-            q += rng.normal(0.0, self.read_noise_e, q.shape)
-        dn = q * self.gain_dn_per_e
-        top = 2 ** int(self.adc_bits) - 1
+            dcs = m
+        dn = dcs / self.gain_e_per_lsb
         if noise:
             dn = np.round(dn)
-        sat |= np.any(dn >= top, axis=0)
-        dn = np.clip(dn, 0.0, top)
-        i_ = dn.mean(0)
-        re, im = dn[0] - dn[2], dn[1] - dn[3]
-        amp = 0.5 * np.hypot(re, im)
-        if mode == "active":
-            phi = np.mod(np.arctan2(im, re), 2 * np.pi)
-            depth = SPEED_OF_LIGHT_M_S * phi / (4 * np.pi * self.modulation_frequency_hz)
-            depth = np.where(depth >= unambiguous_range_m(self.modulation_frequency_hz), 0.0, depth)
-            ok = (amp >= self.min_amplitude_dn) & ~sat
-            depth = np.where(ok, depth, np.nan)
-            gray = amp
-        else:
-            depth = np.full(amp.shape, np.nan)
-            gray = i_
-        f32 = np.float32
-        return TofFrame(gray=gray.astype(f32), depth_m=depth.astype(f32), amplitude_dn=amp.astype(f32),
-                        intensity_dn=i_.astype(f32), saturated=sat, taps_dn=dn.astype(f32),
+        sat = np.any(np.abs(dn) >= top, axis=0) | (stored > self.full_well_e)
+        dn = np.clip(dn, -top, top)
+        cx, cy = dn[2] - dn[0], dn[3] - dn[1]
+        amp = 0.5 * np.hypot(cx, cy)
+        phi = np.mod(np.pi + np.arctan2(cy, cx), 2 * np.pi)
+        depth = SPEED_OF_LIGHT_M_S * phi / (4 * np.pi * self.modulation_frequency_hz)
+        depth = np.where(depth >= unambiguous_range_m(self.modulation_frequency_hz), 0.0, depth)
+        ok = (amp >= self.min_amplitude_dn) & ~sat
+        depth = np.where(ok, depth, np.nan)
+        intensity = stored / self.gray_gain_e_per_lsb
+        return TofFrame(gray=amp.astype(f32), depth_m=depth.astype(f32), amplitude_dn=amp.astype(f32),
+                        intensity_dn=intensity.astype(f32), saturated=sat, taps_dn=dn.astype(f32),
                         integration_time_s=float(T), mode=mode)
 
     def frames(self, rendered: RenderedTof, n: int, seed=None, **kw):

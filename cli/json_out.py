@@ -153,6 +153,27 @@ SCHEMAS = {
  "n_solved": int, "frame_statistics": {{"mean", "std", "min", "max", "fluctuation", "mean_error", ...}},
  "integration_time_s": float, "ambient_lux": float, "modulation_frequency_hz": float,
  "render_s": float, "frames_s": float, "outputs": {{file: path}}}}""",
+    "svgs tof stability": """\
+{"range_m": float, "frames": int, "solved": int,
+ "average", "maximum", "minimum", "fluctuation", "std", "truth":
+     {"x_mm", "y_mm", "z_mm", "pitch_deg", "yaw_deg", "roll_deg": float | null},
+ "paper": {table: {statistic: {column: float}}},   # Tables 1 and 3 at 0.697 m, 2 at 5.712 m; {} elsewhere
+ "ratio_to_paper": {table: {column: float}},       # our fluctuation / the paper's
+ "within_2x": {table: {column: bool}},
+ "failures": {reason: int}, "integration_time_s": float, "max_amplitude_lsb": float,
+ "saturated_pixels": int, "rot_err_median_deg": float | null, "reference": "markers" | "plate",
+ "noise_free": {"ok": bool, "centroid_err_rms_px", "centroid_err_max_px": float,   # the noise-free frame
+                "pose_error": {column: float}},                                     # (the bias part)
+ "spp": int, "render_s": float, "frames_s": float,
+ "outputs": {"frames", "summary", "plot": path}}     # with --out""",
+    "svgs tof study": """\
+{"stability": {range_m: <svgs tof stability object>},
+ "mechanisms": [{"label": str, "range_m": float, "ratio_to_paper": {table: {column: float}},
+                 "fluctuation": {column: float}, "solved": int}],
+ "fig14": [{"range_m": float, "solved": int, "frames": int, "mean_error", "rms_error", "std": {column: float},
+            "rot_err_rms_deg": float, "integration_time_s": float}],
+ "failure_modes": {"flying_pixels_1m", "multipath_1m", "ambient_1m", ...}, "wall_s": float,
+ "outputs": {"report", "csv", "series", "mechanisms", "fig14", "failure_modes": path}}""",
     "svgs range-sweep": f"""\
 {{"camera": str, "pattern": str, "trials_per_pose": int, "poses": int,
  "ranges": [{{"range_m": float, "trials": int, "solved": int, "success_rate": float,

@@ -44,6 +44,7 @@ COMMANDS = (
     ("calibrate", "cli.calibrate_study", ("render-board", "study")),
     ("tof", "cli.tof", ("solve",)),
     ("tof", "cli.tof_render", ("render-and-solve",)),
+    ("tof", "cli.tof_stability", ("stability", "study")),
     (None, "cli.studies", ("campaign", "sensitivity")),
 )
 

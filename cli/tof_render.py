@@ -177,7 +177,7 @@ def cmd_render_and_solve(args) -> int:
     from sim.metrics import POSE_ERROR_KEYS
 
     _check_args(args)
-    camera = load_camera(args.camera)
+    camera = load_camera(args.camera, render=True)
     target = load_target(args.pattern)
     R, t = pose_from_scenario(args.range_m, args.target_x_m, args.target_y_m, args.roll_deg, args.pitch_deg, args.yaw_deg)
     check_target_in_view(camera, target, R, t)

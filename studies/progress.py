@@ -12,7 +12,7 @@ class _NoBar:
 
 
 @contextlib.contextmanager
-def progress_bar(total: int, description: str, enabled: bool = True):
+def progress_bar(total: int, description: str, enabled: bool = True, unit: str = "trial"):
     """A tqdm bar over ``total`` trials on stderr (rate and ETA); a no-op when disabled.
 
     Yields
@@ -24,7 +24,7 @@ def progress_bar(total: int, description: str, enabled: bool = True):
         return
     from tqdm import tqdm
 
-    bar = tqdm(total=total, desc=description, unit="trial", file=sys.stderr, mininterval=0.5, smoothing=0.1,
+    bar = tqdm(total=total, desc=description, unit=unit, file=sys.stderr, mininterval=0.5, smoothing=0.1,
                dynamic_ncols=True)
     try:
         yield bar

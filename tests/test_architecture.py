@@ -93,5 +93,5 @@ def test_building_one_command_registers_only_its_modules():
 
     assert _selected(["solve", "x.png", "--camera", "galaxy-nexus"]) == {"cli.solve"}
     assert _selected(["calibrate", "focal"]) == {"cli.calibrate", "cli.calibrate_study"}
-    assert _selected(["tof", "solve"]) == {"cli.tof", "cli.tof_render"}
+    assert _selected(["tof", "solve"]) == {"cli.tof", "cli.tof_render", "cli.tof_stability"}
     assert _selected(["--help"]) is None and _selected(["no-such-command"]) is None

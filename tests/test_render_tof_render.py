@@ -87,18 +87,68 @@ def test_amplitude_falls_as_inverse_square_and_matches_the_radiometry(plate):
     assert L[1.0] / L[2.0] == pytest.approx(4.0, rel=3e-3)
     assert L[2.0] / L[4.0] == pytest.approx(4.0, rel=3e-3)
     # the sensor's amplitude (noise-free, fixed integration time) follows it
-    sensor = TofSensor.from_camera(plate.camera, integration_time_s=1e-3, ambient_lux=0.0)
+    sensor = TofSensor.from_camera(plate.camera, ambient_lux=0.0)
     amp = {}
+    T = None
     for d in (1.0, 2.0):
         R, t = pose_from_scenario(d)
-        amp[d] = crop(sensor.frame(plate.render(R, t, seed=1, window=win), noise=False).amplitude_dn, win).mean()
+        rd = plate.render(R, t, seed=1, window=win)
+        T = T or 1000.0 / float(sensor.expected_amplitude_lsb(rd, 1.0).max())  # ~1000 LSB at 1 m: unsaturated
+        amp[d] = crop(sensor.frame(rd, integration_time_s=T, noise=False).amplitude_dn, win).mean()
     assert amp[1.0] / amp[2.0] == pytest.approx(4.0, rel=3e-3)
+
+
+def _sheeting_row(name):
+    """The published table of a sheeting, read straight from the asset (not through render.tof.retro)."""
+    import tomllib
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "assets" / "materials" / "retroreflective-sheeting.toml"
+    with open(path, "rb") as fh:
+        return next(t for t in tomllib.load(fh)["sheeting"] if t["name"] == name)
+
+
+@pytest.mark.parametrize("distance_m, observation_deg, entrance_deg", [
+    (0.7, 2.0, 5.0), (2.5, 0.33, 30.0), (5.7, 0.2, 40.0), (1.0, 0.2, 5.0)])
+def test_a_retroreflective_sheet_returns_its_coefficient_of_retroreflection(distance_m, observation_deg, entrance_deg):
+    """A flat sheet of EN 12899-1 RA2 at a known distance, lit by the emitter ring at the
+    radius that makes the observation angle a tabulated one and tilted to a tabulated entrance
+    angle: the on-axis radiance is R_A E_perp / cos(view angle) + the diffuse part, with R_A the
+    published figure (CIE: R_A = I / (E_perp A), I = L A cos(view angle))."""
+    tab = _sheeting_row("en12899-ra2-white")
+    ra = tab["ra_cd_lx_m2"][tab["observation_deg"].index(observation_deg)][tab["entrance_deg"].index(entrance_deg)]
+    r_ring = distance_m * np.tan(np.radians(observation_deg))
+    ren = TofRenderer(spp=64, pinhole=True, illumination={"ring_radius_m": r_ring, "emitter_diameter_m": 1e-5},
+                      scene_options={"markers": False, "plate_size_m": (4.0, 4.0), "plate_material": "retroreflective",
+                                     "sheeting": "en12899-ra2-white"})
+    R, t = pose_from_scenario(distance_m, 0.0, 0.0, 0.0, entrance_deg, 0.0)  # the sheet turned about a vertical axis
+    n_target = np.array([0.0, 0.0, 1.0])
+    assert np.degrees(np.arccos(-(R @ n_target)[2])) == pytest.approx(entrance_deg, abs=1e-9)
+    win = (159, 119, 2, 2)
+    L = crop(ren.render(R, t, seed=3, window=win).active_radiance, win).mean()
+    ill = ren.illumination
+    d2 = distance_m**2 + r_ring**2
+    theta_e = np.arctan(r_ring / distance_m)
+    e_perp = ill.n_emitters * ill.intensity_w_sr * np.cos(theta_e) ** ill.cos_exponent / d2  # W m^-2 across the beam
+    b = np.radians(entrance_deg)
+    expect = ra * e_perp / np.cos(b) + tab["diffuse_albedo"] / np.pi * e_perp * np.cos(b)
+    assert L == pytest.approx(expect, rel=0.03)
+    # the same sheet as white paint returns ~1000x less at the small observation angles
+    if observation_deg < 0.5:
+        lam = TofRenderer(spp=16, pinhole=True, illumination={"ring_radius_m": r_ring, "emitter_diameter_m": 1e-5},
+                          scene_options={"markers": False, "plate_size_m": (4.0, 4.0), "plate_albedo": 0.85})
+        L_white = crop(lam.render(R, t, seed=3, window=win).active_radiance, win).mean()
+        assert L_white == pytest.approx(0.85 / np.pi * e_perp * np.cos(b), rel=0.03)
+        assert L / L_white > 300
 
 
 @pytest.fixture(scope="module")
 def edge_scene():
-    """tof-8 on a larger plate, emitters at the lens centre (no shadow fringe), head-on at 1 m."""
-    r = TofRenderer(spp=256, illumination={"ring_radius_m": 0.0}, scene_options={"plate_size_m": (1.0, 1.0)})
+    """tof-8 on a larger plate, emitters at the lens centre (no shadow fringe), head-on at 1 m;
+    white (Lambertian) markers so that rim pixels mix comparable returns (a retroreflective
+    face outshines the plate ~100x and pulls the mixed depth onto itself)."""
+    r = TofRenderer(spp=256, illumination={"ring_radius_m": 0.0},
+                    scene_options={"plate_size_m": (1.0, 1.0), "marker_material": "lambertian"})
     return r, pose_from_scenario(1.0)
 
 

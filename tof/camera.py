@@ -30,14 +30,39 @@ DEFAULT_PATTERN = "tof-8"
 DEPTH_KINDS = ("radial", "z")
 
 
-def load_camera(name_or_path=DEFAULT_CAMERA) -> Camera:
-    """Load a ToF camera profile (by name or path); a geometry-only profile is accepted.
+#: Tables that only a phone (SVGS) camera profile has.
+PHONE_TABLES = ("flash", "cfa", "isp", "glare", "exposure")
+#: What the ToF renderer and pixel model read from a profile.
+RENDER_TABLES = ("tof", "optics", "illumination", "noise")
+
+
+def load_camera(name_or_path=DEFAULT_CAMERA, *, render: bool = False) -> Camera:
+    """Load a ToF camera profile (by name or path).
+
+    A geometry-only profile (``[intrinsics]``, optional ``[distortion]`` and ``[tof]``) is
+    accepted for solving real frames; ``render=True`` also needs the tables the renderer and
+    the pixel model read (:data:`RENDER_TABLES`).
 
     Returns
     -------
     Camera
+
+    Raises
+    ------
+    ProfileError
+        A phone profile (it has a ``[flash]``/``[cfa]``... table: an SVGS camera, not a ToF
+        one), or ``render=True`` and a table missing.
     """
     cam = Camera.load(name_or_path)
+    phone = [t for t in PHONE_TABLES if t in cam.tables]
+    if phone:
+        raise ProfileError(f"camera {cam.name!r} is a phone (SVGS) profile (it has [{phone[0]}]), not a ToF camera; "
+                           f"ToF commands need a ToF profile such as {DEFAULT_CAMERA!r}")
+    if render:
+        missing = [t for t in RENDER_TABLES if not isinstance(cam.tables.get(t), dict)]
+        if missing:
+            raise ProfileError(f"camera {cam.name!r}: rendering the ToF camera needs the table(s) "
+                               f"{['[' + m + ']' for m in missing]} (see {DEFAULT_CAMERA!r})")
     depth_kind(cam)  # validates the [tof] table when present
     return cam
 

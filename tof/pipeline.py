@@ -75,7 +75,7 @@ class PipelineParams:
     refine: bool = True
     centroid_sigma_px: float = 0.05
     depth_sigma_floor_m: float = 0.002
-    depth_weight: float | None = None  # None: sigma_perp^2 / sigma_rho^2 per marker; 0: the paper's scheme
+    depth_weight: float | None = 0.0  # 0: the paper's scheme (section 5.2); None: sigma_perp^2 / sigma_rho^2 per marker
     max_residual_px: float = 3.0
 
     def replace(self, **kw) -> "PipelineParams":

@@ -14,7 +14,8 @@ Illumination
     ``n_emitters`` small Lambertian-disk emitters (``emitter_diameter_m``) on a ring of
     ``ring_radius_m`` around the lens, facing the boresight, each with radiant intensity
     ``I(theta) = I0 cos^m theta``: ``m`` from the divergence (half intensity at half the full
-    angle; 90 deg -> m = 2), ``I0 = duty * flux * (m + 1) / (2 pi)``. Not in the Mitsuba
+    angle; 90 deg -> m = 2), ``I0 = duty * I_e`` with the emitter's on-axis intensity ``I_e``
+    (``radiant_intensity_w_sr``, else ``flux * (m + 1) / (2 pi)``). Not in the Mitsuba
     scene: sampled explicitly (next-event estimation with a shadow ray), so the light has its
     real size and position and casts real (soft) shadows, and camera rays never see it.
 
@@ -66,7 +67,10 @@ class Illumination:
     ----------
     n_emitters : int
     radiant_flux_per_emitter_w : float
-        Optical flux of one emitter while on, W.
+        Optical flux of one emitter while on, W (used when ``radiant_intensity_w_sr`` is None).
+    radiant_intensity_w_sr : float or None
+        On-axis radiant intensity of one emitter while on, W/sr (a datasheet's I_e); when
+        given it sets the intensity and the flux follows from the ``cos^m`` profile.
     duty_cycle : float
         Mean / peak optical power of the modulated drive (square wave: 0.5).
     divergence_full_angle_deg : float
@@ -86,8 +90,11 @@ class Illumination:
     ring_radius_m: float = 0.016
     emitter_diameter_m: float = 0.002
     offset_from_lens_m: tuple = (0.0, 0.0, 0.0)
+    radiant_intensity_w_sr: float | None = None
 
     def __post_init__(self):
+        if self.radiant_intensity_w_sr is not None:
+            check_finite_positive(self.radiant_intensity_w_sr, "illumination.radiant_intensity_w_sr")
         if int(self.n_emitters) != self.n_emitters or self.n_emitters < 1:
             raise InputError(f"illumination.n_emitters: expected a positive integer, got {self.n_emitters!r}")
         check_finite_positive(self.radiant_flux_per_emitter_w, "illumination.radiant_flux_per_emitter_w")
@@ -131,9 +138,17 @@ class Illumination:
         return float(np.log(0.5) / np.log(np.cos(np.radians(0.5 * self.divergence_full_angle_deg))))
 
     @property
+    def peak_intensity_w_sr(self) -> float:
+        """On-axis radiant intensity of one emitter while on: ``radiant_intensity_w_sr``, else
+        ``flux (m + 1) / (2 pi)``."""
+        if self.radiant_intensity_w_sr is not None:
+            return float(self.radiant_intensity_w_sr)
+        return self.radiant_flux_per_emitter_w * (self.cos_exponent + 1) / (2 * np.pi)
+
+    @property
     def intensity_w_sr(self) -> float:
-        """Mean on-axis radiant intensity of one emitter, ``duty * flux * (m + 1) / (2 pi)``."""
-        return self.duty_cycle * self.radiant_flux_per_emitter_w * (self.cos_exponent + 1) / (2 * np.pi)
+        """Mean (time-averaged) on-axis radiant intensity of one emitter, ``duty * peak``."""
+        return self.duty_cycle * self.peak_intensity_w_sr
 
     def positions_cam_m(self) -> np.ndarray:
         """Emitter centres in the camera frame, shape (n, 3)."""
@@ -145,7 +160,7 @@ class Illumination:
     def to_json(self) -> dict:
         d = asdict(self)
         d.update(offset_from_lens_m=list(self.offset_from_lens_m), cos_exponent=self.cos_exponent,
-                 intensity_w_sr_per_emitter=self.intensity_w_sr)
+                 intensity_w_sr_per_emitter=self.intensity_w_sr, peak_intensity_w_sr=self.peak_intensity_w_sr)
         return d
 
 
@@ -271,7 +286,7 @@ class TofRenderer:
 
         from .scene import TofSceneOptions, build_tof_scene
 
-        self.camera = camera if hasattr(camera, "fx") else load_camera(camera)
+        self.camera = camera if hasattr(camera, "fx") else load_camera(camera, render=True)
         self.target = load_target(target)
         self.options = TofSceneOptions.resolve(scene_options)
         self.optics = TofOptics.from_camera(self.camera)

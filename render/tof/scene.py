@@ -28,6 +28,8 @@ from ..geometry import OptionsMixin
 #: Distractor kinds: ``sphere`` (``position_m``, ``radius_m``) and ``box`` (``lo_m``, ``hi_m``
 #: corners, axis-aligned in the target frame); both take ``albedo`` (Lambertian, default 0.8).
 DISTRACTOR_KINDS = ("sphere", "box")
+#: Surface materials: ``retroreflective`` (a sheeting table of :mod:`render.tof.retro`) or ``lambertian``.
+MATERIALS = ("retroreflective", "lambertian")
 
 
 def _reflectance(v, name):
@@ -87,6 +89,13 @@ class TofSceneOptions(OptionsMixin):
         Post diameter / marker diameter; None: the pattern's ``[marker]`` value (0.5).
     distractors : tuple of dict
         Extra diffuse objects in the target frame, see :data:`DISTRACTOR_KINDS`.
+    marker_material : str or None
+        One of :data:`MATERIALS`; None: the pattern's ``[marker] material`` (``tof-8``:
+        retroreflective; lambertian when the pattern names none).
+    sheeting : str or None
+        Sheeting table of retroreflective surfaces; None: the pattern's ``[marker] sheeting``.
+    plate_material : str
+        The plate's material (default lambertian; retroreflective for radiometry tests).
     """
 
     markers: bool = True
@@ -99,8 +108,19 @@ class TofSceneOptions(OptionsMixin):
     marker_thickness_m: float = 0.003
     post_diameter_ratio: float | None = None
     distractors: tuple = field(default_factory=tuple)
+    marker_material: str | None = None
+    sheeting: str | None = None
+    plate_material: str = "lambertian"
 
     def __post_init__(self):
+        for k in ("marker_material", "plate_material"):
+            v = getattr(self, k)
+            if v is not None and v not in MATERIALS:
+                raise InputError(f"scene_options.{k}: expected one of {MATERIALS}, got {v!r}")
+        if self.sheeting is not None:
+            from .retro import load_sheeting
+
+            load_sheeting(self.sheeting)
         for k in ("plate_albedo", "marker_albedo", "dark_albedo"):
             v = getattr(self, k)
             if v is not None:
@@ -144,6 +164,8 @@ class TofGeometry:
     marker_radius_m : ndarray, shape (N,)
     post_radius_m : ndarray, shape (N,)
     marker_thickness_m : float
+    materials : dict
+        ``marker`` and ``plate``: one of :data:`MATERIALS`; ``sheeting``: the table name (or None).
     """
 
     plate_size_m: tuple
@@ -153,13 +175,22 @@ class TofGeometry:
     marker_radius_m: np.ndarray
     post_radius_m: np.ndarray
     marker_thickness_m: float
+    materials: dict = field(default_factory=lambda: {"marker": "lambertian", "plate": "lambertian", "sheeting": None})
 
     def to_json(self) -> dict:
+        sheet = None
+        if self.materials.get("sheeting"):
+            from .retro import load_sheeting
+
+            sheet = load_sheeting(self.materials["sheeting"]).to_json()
         return {
             "plate_size_m": list(self.plate_size_m), "plate_thickness_m": self.plate_thickness_m,
             "albedo": dict(self.albedo), "marker_thickness_m": self.marker_thickness_m,
             "marker_radius_m": self.marker_radius_m.tolist(), "post_radius_m": self.post_radius_m.tolist(),
-            "materials": "Lambertian (Mitsuba diffuse); marker faces white, marker sides/backs and posts dark",
+            "materials": dict(self.materials),
+            "materials_note": (f"marker faces {self.materials['marker']}, plate {self.materials['plate']}; marker "
+                               "sides/backs and posts Lambertian dark"),
+            "sheeting": sheet,
         }
 
     def corners_m(self) -> np.ndarray:
@@ -200,6 +231,19 @@ def resolve_geometry(target, opts: TofSceneOptions) -> TofGeometry:
     a_marker = opts.marker_albedo if opts.marker_albedo is not None else _reflectance(marker.get("albedo", 0.85), "[marker].albedo")
     a_dark = opts.dark_albedo if opts.dark_albedo is not None else a_plate
     ratio = opts.post_diameter_ratio if opts.post_diameter_ratio is not None else float(marker.get("post_diameter_ratio", 0.5))
+    m_mat = opts.marker_material if opts.marker_material is not None else str(marker.get("material", "lambertian"))
+    if m_mat not in MATERIALS:
+        raise InputError(f"pattern {target.pattern.name!r}: [marker] material must be one of {MATERIALS}, got {m_mat!r}")
+    sheeting = opts.sheeting if opts.sheeting is not None else marker.get("sheeting")
+    if "retroreflective" in (m_mat, opts.plate_material):
+        from .retro import load_sheeting
+
+        if not sheeting:
+            raise InputError(f"pattern {target.pattern.name!r}: a retroreflective surface needs a sheeting "
+                             "([marker] sheeting or scene_options.sheeting)")
+        load_sheeting(str(sheeting))
+    else:
+        sheeting = None
     if opts.markers:
         centres = np.asarray(target.points_m, float)
         radius = np.asarray(target.radius_m, float)
@@ -212,7 +256,8 @@ def resolve_geometry(target, opts: TofSceneOptions) -> TofGeometry:
     return TofGeometry(plate_size_m=tuple(size), plate_thickness_m=thick,
                        albedo={"plate": a_plate, "marker": a_marker, "dark": a_dark},
                        marker_centres_m=centres, marker_radius_m=radius, post_radius_m=radius * ratio,
-                       marker_thickness_m=float(opts.marker_thickness_m))
+                       marker_thickness_m=float(opts.marker_thickness_m),
+                       materials={"marker": m_mat, "plate": opts.plate_material, "sheeting": sheeting})
 
 
 def scene_dict(geom: TofGeometry, opts: TofSceneOptions) -> dict:
@@ -229,17 +274,25 @@ def scene_dict(geom: TofGeometry, opts: TofSceneOptions) -> dict:
     def diffuse(a):
         return {"type": "diffuse", "reflectance": {"type": "uniform", "value": float(a)}}
 
+    def material(kind, albedo):
+        if kind == "retroreflective":
+            from .retro import bsdf_dict, register_bsdf
+
+            register_bsdf()
+            return bsdf_dict(geom.materials["sheeting"])
+        return diffuse(albedo)
+
     w, h = geom.plate_size_m
     th = geom.plate_thickness_m
     d = {"type": "scene",
          "plate": {"type": "cube", "to_world": T().translate([0.0, 0.0, -th / 2]).scale([w / 2, h / 2, th / 2]),
-                   "bsdf": diffuse(geom.albedo["plate"])}}
+                   "bsdf": material(geom.materials["plate"], geom.albedo["plate"])}}
     t_m = geom.marker_thickness_m
     for i, (c, r, rp) in enumerate(zip(geom.marker_centres_m, geom.marker_radius_m, geom.post_radius_m)):
         c = [float(x) for x in c]
         back = [c[0], c[1], c[2] - t_m]
         d[f"marker{i}_face"] = {"type": "disk", "to_world": T().translate(c).scale([float(r), float(r), 1.0]),
-                                "bsdf": diffuse(geom.albedo["marker"])}
+                                "bsdf": material(geom.materials["marker"], geom.albedo["marker"])}
         d[f"marker{i}_side"] = {"type": "cylinder", "p0": back, "p1": c, "radius": float(r),
                                 "bsdf": diffuse(geom.albedo["dark"])}
         d[f"marker{i}_back"] = {"type": "disk",
