@@ -14,7 +14,8 @@ $(STAMP): pyproject.toml
 	@# an older venv with another one is cleared of all of them before the install
 	@if $(PY) -m pip show -q opencv-python-headless opencv-python opencv-contrib-python >/dev/null 2>&1; then \
 	  $(PY) -m pip uninstall -y -q opencv-python-headless opencv-python opencv-contrib-python opencv-contrib-python-headless; fi
-	$(PY) -m pip install --quiet -e ".[render,test,dask]"
+	@echo "installing svgs-sim and its dependencies (a few minutes on a fresh machine; pip lists what it collects) ..."
+	$(PY) -m pip install --progress-bar off -e ".[render,test,dask]"
 	$(PY) -m cli.compile_kernels
 	touch $(STAMP)
 

@@ -163,6 +163,23 @@ class FocalEstimate:
         }
         return camera.replace(fx=float(self.f_px), fy=float(self.f_px * self.aspect), tables=tables)
 
+    @property
+    def warnings(self) -> list[str]:
+        """What makes this estimate suspect: images that disagree beyond their errors (chi^2
+        probability below 1 %: a range is probably wrong), or a focal length uncertain by over 5 %."""
+        from scipy.stats import chi2 as chi2_dist
+
+        out = []
+        k = len(self.per_image) - 1
+        if k >= 1 and np.isfinite(self.consistency_chi2):
+            p = float(chi2_dist.sf(self.consistency_chi2, k))
+            if p < 0.01:
+                out.append(f"the images disagree: chi2 {self.consistency_chi2:.1f} for {k} dof (p = {p:.1e}); "
+                           "check each image's --range (a wrong range moves its focal length)")
+        if self.f_px > 0 and self.sigma_f_px > 0.05 * self.f_px:
+            out.append(f"the focal length is uncertain by {100 * self.sigma_f_px / self.f_px:.0f} % (1 sigma)")
+        return out
+
     def to_json(self) -> dict:
         def num(x):
             x = float(x)
@@ -170,6 +187,7 @@ class FocalEstimate:
 
         return {
             "ok": True,
+            "warnings": self.warnings,
             "f_px": num(self.f_px),
             "sigma_f_px": num(self.sigma_f_px),
             "sigma_f_noise_px": num(self.sigma_f_noise_px),
@@ -196,6 +214,7 @@ class FocalEstimate:
             f"  residual RMS {self.residual_rms_px:.3f} px per axis; residual sigma "
             f"{self.residual_sigma_px:.3f} px ({self.dof} dof); fy/fx = {self.aspect:g}",
             f"  agreement between images: chi2 {self.consistency_chi2:.2f} for {len(self.per_image) - 1} dof",
+            *[f"  WARNING: {w}" for w in self.warnings],
             "  per image:",
         ]
         for p in self.per_image:

@@ -110,6 +110,7 @@ def synthesize_views(
     blur_px: float = 0.0,
     noise_dn: float = 0.0,
     seed=None,
+    progress=None,
 ) -> np.ndarray:
     """Geometric images of the board through the camera (distortion included).
 
@@ -136,6 +137,8 @@ def synthesize_views(
         Gaussian noise sigma, grey levels (0: none).
     seed : int or None
         Seed of the noise generator built inside.
+    progress : callable, optional
+        Called with a line of text when the rays are ready and after each view.
 
     Returns
     -------
@@ -157,6 +160,8 @@ def synthesize_views(
     zmin = min(float(np.min((board.object_points() @ Rk.T + tk)[:, 2])) for Rk, tk in zip(R, t))
     if zmin <= 0:
         raise InputError("synthesize_views: the board is (partly) behind the camera")
+    if progress is not None:
+        progress(f"undistorting {W * s} x {H * s} sample rays (shared by the views) ...")
     xy = _subsample_rays(camera, s)  # (H s, W s, 2), shared by all views
     lo, hi = float(levels[0]), float(levels[1])
     tex = None
@@ -189,6 +194,8 @@ def synthesize_views(
         if noise_dn > 0:
             img = img + rng.normal(0.0, float(noise_dn), img.shape).astype(np.float32)
         out[k] = np.clip(np.round(img), 0, 255).astype(np.uint8)
+        if progress is not None:
+            progress(f"view {k + 1}/{R.shape[0]}")
     return out[0] if single else out
 
 

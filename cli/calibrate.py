@@ -8,6 +8,7 @@ traceback by ``cli.main.main``).
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -77,6 +78,8 @@ def cmd_focal(args) -> int:
     if args.json:
         d = est.to_json()
         d.update(camera=camera.name, fx_px_before=camera.fx, out=out_path)
+        for w in d["warnings"]:
+            print(f"svgs calibrate focal: warning: {w}", file=sys.stderr)
         print(json.dumps(d))
     else:
         print(f"camera {camera.name!r}: fx was {camera.fx:.2f} px")

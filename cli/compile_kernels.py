@@ -14,6 +14,30 @@ import sys
 import time
 
 
+#: Modules whose numba kernels are cached on disk (``cache=True``).
+KERNEL_MODULES = ("svgs._lm_kernel", "camera.phone.sensor")
+
+
+def kernels_cached() -> bool:
+    """True when every kernel module has a numba cache index (``*.nbi``) where numba keeps it:
+    ``NUMBA_CACHE_DIR`` if set, else the module's ``__pycache__``. Imports nothing (``svgs solve``
+    must not load the camera package)."""
+    import os
+    from pathlib import Path
+
+    root = os.environ.get("NUMBA_CACHE_DIR")
+    project = Path(__file__).resolve().parents[1]
+    for mod in KERNEL_MODULES:
+        src = project.joinpath(*mod.split(".")).with_suffix(".py")
+        if not src.is_file():
+            return False
+        hits = (list(Path(root).rglob(f"{src.stem}*.nbi")) if root
+                else list((src.parent / "__pycache__").glob(f"{src.stem}*.nbi")))
+        if not hits:
+            return False
+    return True
+
+
 def compile_kernels(out=None) -> dict:
     """Call each kernel family once on a small input, so numba compiles and caches it.
 
@@ -38,6 +62,8 @@ def compile_kernels(out=None) -> dict:
 
     t0 = time.perf_counter()
     geometric_warm_up()
+    Camera.load("galaxy-nexus").replace(dist=np.array([0.01, 0.0, 0.0, 0.0, 0.0])).undistort_normalized(
+        np.zeros((4, 2)))  # the parallel undistortion kernel
     cam, pat = Camera.load("galaxy-nexus"), Pattern.load("svgs-3u")
     uv = cam.project_target(pat.points_m, *pose_from_scenario(10.0, 0.1, -0.1, 2.0, -3.0, 4.0))
     solve_centroids(np.stack([uv, uv]), cam, pat)  # the batch kernel

@@ -134,6 +134,7 @@ SCHEMAS = {
  "sigma_f_noise_px": float, "sigma_f_range_px": float, "centroid_sigma_px": float,
  "residual_sigma_px": float | null, "residual_rms_px": float, "dof": int,
  "consistency_chi2": float | null, "aspect": float, "iterations": int,
+ "warnings": [str],   # images that disagree (chi2 p < 1 %: a wrong --range?), sigma_f > 5 %
  "per_image": [{...}], "skipped": [{"image", "reason"}], "out": path | null}""",
     "svgs calibrate board": """\
 {"ok": true, "board": {"kind", "cols", "rows", "spacing_mm", ...}, "image_size": [w, h],
@@ -182,7 +183,7 @@ SCHEMAS = {
              "exposure_s": float, "iso": float,  # medians over the trials
              "mean_error": {_STATE},   # solved trials, estimate - truth (m, deg)
              "std": {{...same keys}}}}],          # null where no trial solved
- "outputs": {{"summary_csv", "trials_jsonl", "plot", "results_csv", "summary_json": path}},
+ "outputs": {{"summary_csv", "trials_jsonl", "plot", "overlays", "results_csv", "summary_json": path}},
  {_RUN}}}""",
     "svgs exposure-study": f"""\
 {{"camera": str, "trials": int, "ranges_m": [float], "success_level": float,

@@ -98,6 +98,15 @@ def main(argv=None) -> int:
     except SystemExit as exc:  # argparse: usage errors exit 2, --help exits 0
         return int(exc.code or 0)
     try:
+        from cli.validate import check_args
+
+        check_args(args, parser)  # every argument checked before any work (exit 2)
+        if args.command != "doctor":
+            from cli.compile_kernels import kernels_cached
+
+            if not kernels_cached():  # a fresh install that skipped `make`: say why the first call waits
+                print("compiling the solver and camera kernels (first run only, ~20 s; cached for later runs) ...",
+                      file=sys.stderr, flush=True)
         return int(args.func(args))
     except InputError as exc:
         print(f"svgs {args.command}: error: {exc}", file=sys.stderr)

@@ -85,8 +85,8 @@ def _check_camera_renderable(name):
     return cam
 
 
-def write_outputs(out: Path, frame, row) -> dict:
-    """flux.npy, raw.npy, image.png, preview.png, truth.json, solution.json."""
+def write_outputs(out: Path, frame, row, crlb=None, threshold=None) -> dict:
+    """flux.npy, raw.npy, image.png, preview.png, overlay.png, truth.json, solution.json."""
     import cv2
 
     from render.api import write_preview
@@ -103,7 +103,24 @@ def write_outputs(out: Path, frame, row) -> dict:
     (out / "truth.json").write_text(json.dumps(truth, indent=1, default=json_default))
     sol = {k: v for k, v in row.items() if not k.startswith("_")}
     (out / "solution.json").write_text(json.dumps(sol, indent=1, default=json_default))
-    return {k: str(out / k) for k in ("flux.npy", "raw.npy", "image.png", "preview.png", "truth.json", "solution.json")}
+    from svgs.profiles import Pattern
+
+    from cli.solve import write_solution_overlay
+
+    spots = (crlb or {}).get("per_spot_sigma_px")
+    result = row["_solution"]
+    title = None
+    if result:
+        t = row["truth_state"]
+        title = (f"SOLVED at {frame.truth.get('range_m', float('nan')):.3g} m: residual {result.residual_rms_px:.3f} px; "
+                 f"truth roll/pitch/yaw {t['roll_deg']:+.2f}/{t['pitch_deg']:+.2f}/{t['yaw_deg']:+.2f} deg")
+    from sim.closed_loop import solver_camera
+
+    write_solution_overlay(out / "overlay.png", ex.image, solver_camera(frame.camera, ex.image.shape),
+                           Pattern.load(frame.scenario.pattern), result, threshold,
+                           sigma_px=spots, sigma_label="CRLB 1-sigma (the simulated sensor)" if spots else None, title=title)
+    return {k: str(out / k) for k in ("flux.npy", "raw.npy", "image.png", "preview.png", "overlay.png", "truth.json",
+                                       "solution.json")}
 
 
 def cmd_render_and_solve(args) -> int:
@@ -112,14 +129,21 @@ def cmd_render_and_solve(args) -> int:
     _check_camera_renderable(args.camera)
     scen = _scenario(args)
     thr = _threshold(args.threshold)
-    print(f"rendering {scen.camera} at {scen.range_m:g} m ...", file=sys.stderr)
+    import time
+
+    t0 = time.perf_counter()
+    print(f"rendering {scen.camera} at {scen.range_m:g} m (Mitsuba) ...", file=sys.stderr, flush=True)
     frame = render_scenario(scen, seed=args.seed)
+    print(f"  rendered in {time.perf_counter() - t0:.1f} s; exposing (phone camera model) and solving ...",
+          file=sys.stderr, flush=True)
     exposer = frame.exposer()
     row = expose_and_solve(frame, exposer, seed=args.seed, threshold=thr, exposure_s=args.exposure_s, iso=args.iso)
     from sim.crlb import frame_crlb
 
+    if row["ok"]:
+        print("  the Cramer-Rao bound of the simulated sensor ...", file=sys.stderr, flush=True)
     crlb = frame_crlb(frame, exposer, row)
-    paths = write_outputs(Path(args.out), frame, row) if args.out else {}
+    paths = write_outputs(Path(args.out), frame, row, crlb, thr) if args.out else {}
     out = {k: v for k, v in row.items() if not k.startswith("_")}
     out["crlb"] = crlb
     out["render_s"] = frame.render_s
@@ -166,6 +190,7 @@ def range_sweep_json(cfg, table, stats, out: Path) -> dict:
                        "mean_error": {k: d[f"err_mean_{k}"] for k in STATE_KEYS},
                        "std": {k: d[f"err_std_{k}"] for k in STATE_KEYS}})
     outputs = {"summary_csv": out / "summary.csv", "trials_jsonl": out / "trials.jsonl", "plot": out / "range_sweep.png",
+               "overlays": out / "overlays.png",
                "results_csv": out / "results.csv", "summary_json": out / "summary.json"}
     return {"camera": cfg.camera, "pattern": cfg.pattern, "trials_per_pose": cfg.trials, "poses": cfg.poses,
             "ranges": ranges, "outputs": outputs, "run": run_info(stats, cfg.n_trials)}

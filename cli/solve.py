@@ -7,6 +7,7 @@ Imports only :mod:`svgs`: solving a photo loads no renderer, study or calibratio
 from __future__ import annotations
 
 import json
+from pathlib import Path
 import sys
 
 import numpy as np
@@ -32,8 +33,38 @@ def register(sub) -> None:
                    help="binarisation threshold in image counts, or 'auto' / 'otsu' (default: auto)")
     p.add_argument("--sigma-px", type=float, default=0.1,
                    help="centroid noise in px for the reported Cramer-Rao bound (default: 0.1)")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="write overlay.png (what the detector found and where the solution puts the targets) and "
+                        "solution.json here")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=cmd_solve)
+
+
+def write_solution_overlay(path, image, camera, pattern, result, threshold=None, sigma_px=None,
+                           sigma_label: str | None = None, title: str | None = None) -> str:
+    """``overlay.png`` of one solved (or unsolved) image: every blob the detector found, the
+    identified targets' labels, the solution's reprojection and each point's 1-sigma ellipse.
+
+    ``sigma_px`` (target id -> [su, sv]) defaults to the centroid scatter the image's own
+    background noise gives (:func:`svgs.overlay.centroid_sigma_from_image`)."""
+    from svgs.detect import detect_blobs, to_gray
+    from svgs.overlay import centroid_sigma_from_image, write_overlay
+
+    blobs = detect_blobs(image, threshold=threshold)
+    targets = {str(k): [float(x) for x in v] for k, v in (result.targets_px.items() if result else [])}
+    reproj = {}
+    if result:
+        uv = camera.project_target(pattern.points_m, result.R_cam_target, result.t_cam_target_m)
+        reproj = {str(int(i)): [float(a), float(b)] for i, (a, b) in zip(pattern.ids, uv)}
+        if sigma_px is None and targets:
+            sig = centroid_sigma_from_image(to_gray(image), list(targets.values()), float(blobs.noise_sigma))
+            sigma_px = dict(zip(targets, sig.tolist()))
+            sigma_label = sigma_label or "centroid 1-sigma from the image's background noise"
+    if title is None:
+        title = (f"SOLVED: range {result.t_cam_target_m[2]:.3f} m, residual {result.residual_rms_px:.3f} px RMS, "
+                 f"{len(blobs)} blobs" if result else f"NO SOLUTION ({result.reason}): {len(blobs)} blobs")
+    return write_overlay(path, image, blobs_px=blobs.centroid_px, targets_px=targets, reprojected_px=reproj,
+                         sigma_px=sigma_px, sigma_label=sigma_label or "1-sigma", title=title)
 
 
 def json_default(o):
@@ -104,9 +135,22 @@ def cmd_solve(args) -> int:
     pattern = Pattern.load(args.pattern)
     if not (np.isfinite(args.sigma_px) and args.sigma_px > 0):
         raise InputError(f"--sigma-px: expected a positive number of pixels, got {args.sigma_px}")
-    result = solve_image(args.image, camera, pattern, threshold=parse_threshold(args.threshold), sigma_px=args.sigma_px)
+    from svgs.pipeline import load_image
+
+    image = load_image(args.image)
+    thr = parse_threshold(args.threshold)
+    result = solve_image(image, camera, pattern, threshold=thr, sigma_px=args.sigma_px)
+    d = solution_json(result)
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        d["outputs"] = {"overlay": write_solution_overlay(out / "overlay.png", image, camera, pattern, result, thr),
+                        "solution": str(out / "solution.json")}
+        (out / "solution.json").write_text(json.dumps(d, indent=1))
     if args.json:
-        print(json.dumps(solution_json(result)))
+        print(json.dumps(d))
     else:
         print_solution(result)
+        for v in (d.get("outputs") or {}).values():
+            print(f"wrote {v}")
     return EXIT_OK if result else EXIT_NO_SOLUTION

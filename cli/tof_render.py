@@ -49,7 +49,8 @@ def register(group) -> None:
                    help="range along the boresight to the target origin (plate centre), m")
     for flag, dest, text in POSE_ARGS:
         p.add_argument(flag, dest=dest, type=float, default=0.0, help=text)
-    p.add_argument("--frames", type=int, default=1, help="noisy frames drawn from the one render (default 1)")
+    p.add_argument("--frames", type=int, default=1,
+                   help="noisy frames drawn from the one render (default 1; at most 20000, ~50 ms each)")
     p.add_argument("--seed", type=int, default=0, help="seed of the render and the noise (default 0)")
     p.add_argument("--camera", default="tof-epc660", help="ToF camera profile name or .toml path (default tof-epc660)")
     p.add_argument("--pattern", default="tof-8", help="marker target name or .toml path (default tof-8)")
@@ -77,8 +78,9 @@ def _check_args(args):
         raise InputError(f"--range: expected a positive distance in metres, got {args.range_m!r}")
     for flag, dest, _ in POSE_ARGS:
         check_finite(getattr(args, dest), flag)
-    if args.frames < 1:
-        raise InputError(f"--frames: expected a positive number of frames, got {args.frames}")
+    from sim.tof_stability import check_frames
+
+    check_frames(args.frames)  # 1..20000 (~50 ms each)
     if args.spp < 1:
         raise InputError(f"--spp: expected a positive number of samples per pixel, got {args.spp}")
     if not 1 <= args.bounces <= 4:
@@ -124,7 +126,7 @@ def frame_statistics(states, truth_state) -> dict:
     return out
 
 
-def run_frames(rendered, sensor, pipe, n_frames: int, seed, truth_state, keep_frames: int = 0):
+def run_frames(rendered, sensor, pipe, n_frames: int, seed, truth_state, keep_frames: int = 0, progress=None):
     """Draw ``n_frames`` noisy frames from one render and solve them in sequence.
 
     Returns
@@ -155,6 +157,8 @@ def run_frames(rendered, sensor, pipe, n_frames: int, seed, truth_state, keep_fr
         rows.append(row)
         if k < keep_frames:
             kept.append(fr)
+        if progress is not None:
+            progress(1)
     return rows, last, kept, np.array(states).reshape(-1, 6)
 
 
@@ -197,7 +201,12 @@ def cmd_render_and_solve(args) -> int:
                        persistence_min_count=max(1, (args.persistence + 1) // 2))
     t0 = time.perf_counter()
     keep = min(args.frames, MAX_SAVED_FRAMES) if args.out else 0
-    rows, last, kept, states = run_frames(rendered, sensor, pipe, args.frames, [args.seed, 1], truth_state, keep)
+    from studies.progress import progress_bar
+
+    with progress_bar(args.frames, "frames", enabled=args.frames > 20 and (not args.json or sys.stderr.isatty()),
+                      unit="frame") as bar:
+        rows, last, kept, states = run_frames(rendered, sensor, pipe, args.frames, [args.seed, 1], truth_state, keep,
+                                              progress=bar.update)
     frames_s = time.perf_counter() - t0
     stats = frame_statistics(states, truth_state)
     T = sensor.integration_time_s or sensor.auto_integration_time(rendered)

@@ -1,11 +1,61 @@
-"""Input checks that run before any work: output locations (more checks land here with issue 14)."""
+"""The input-checking layer: every ``svgs`` command's arguments are checked here before any work.
+
+:func:`check_args` runs in :func:`cli.main.main` between parsing and the command, by rules on
+the argument names (one vocabulary across the commands, ``docs/architecture.md``):
+
+- output locations (``--out``, ``--cache``): a folder that is a folder and writable (or can be
+  made), or - where the metavar says ``.toml`` - a file whose folder is writable and that is not
+  a folder;
+- seeds (>= 0), counts (>= 1: samples, trials, frames, views, workers...), finite floats,
+  positive physical quantities (exposure, ISO, sigmas, sizes), non-negative ones (jitter,
+  ambient light) - a value equal to the option's default is the command's own choice and
+  passes (some defaults are 0 for "none");
+- ranges (``--range``, ``--ranges``, ``--focal-ranges``, ``--pose-ranges``): positive, finite,
+  distinct, and inside the command's physical envelope, whose reason the message states - for
+  the phone sensor the range beyond which the pattern spans fewer than :data:`MIN_SPAN_PX`
+  pixels (its spots merge into one), for the ToF camera the paper's 0.27-15 m;
+- the camera profile's kind: a ToF profile for ``svgs tof ...``, a phone profile elsewhere.
+
+A failed check raises :class:`svgs.errors.InputError` naming the input (exit 2, one line,
+nothing written). Commands keep their own, more specific checks after this one.
+"""
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
 from svgs.errors import InputError
+
+#: The phone sensor's far limit: beyond the range where the pattern spans this many pixels its
+#: four spots merge into one blob (no identification is possible).
+MIN_SPAN_PX = 4.0
+#: The ToF camera's range envelope (m): the paper's design range 0.27-15 m (section 2.2), within
+#: the 15 m unambiguous range of its 10 MHz modulation.
+TOF_RANGE_M = (0.27, 15.0)
+
+#: Integer arguments that count something (>= 1).
+COUNTS = {"spp", "roi_spp", "spot_samples", "trials", "poses", "frames", "views", "subsets", "focal_exposures",
+          "poses_per_range", "exposures_per_render", "n", "exposures", "min_views", "persistence", "bounces",
+          "max_active_pixels", "variant_frames", "sweep_frames", "chunk_size", "workers", "cols",
+          "rows", "width", "height"}
+#: Integer arguments that must be >= 0 (``--processes 0``: run inline).
+NON_NEGATIVE_INTS = {"processes"}
+#: Float arguments that must be > 0.
+POSITIVE = {"sigma_px", "centroid_sigma_px", "range_sigma_m", "exposure_s", "iso", "focus_m", "integration_time_s",
+            "modulation_frequency_hz", "spacing_mm", "marker_mm", "exposure_fill", "merge_px", "aspect_ratio",
+            "range_m", "range"}
+#: Float arguments that must be >= 0.
+NON_NEGATIVE = {"jitter_deg", "jitter_m", "ambient", "ambient_lux", "backdrop_m", "true_pp_offset_px", "stage_m"}
+#: Comma-separated range lists (m).
+RANGE_LISTS = {"ranges", "focal_ranges", "pose_ranges"}
+#: Output locations: dest -> kind ("dir" or "file" by the metavar).
+OUTPUTS = ("out", "cache")
+
+
+def _flag(action) -> str:
+    return max(action.option_strings, key=len) if action.option_strings else action.dest
 
 
 def check_out_dir(path, flag: str = "--out") -> Path:
@@ -24,6 +74,22 @@ def check_out_dir(path, flag: str = "--out") -> Path:
         if not os.access(p, os.W_OK | os.X_OK):
             raise InputError(f"{flag}: folder {str(p)!r} is not writable")
         return p
+    _check_parent(p, flag)
+    return p
+
+
+def check_out_file(path, flag: str = "--out") -> Path:
+    """An output file: not a folder, in a folder that exists or can be made and is writable."""
+    p = Path(path)
+    if p.is_dir():
+        raise InputError(f"{flag}: {str(p)!r} is a folder; expected a file name")
+    if p.exists() and not os.access(p, os.W_OK):
+        raise InputError(f"{flag}: file {str(p)!r} is not writable")
+    _check_parent(p, flag)
+    return p
+
+
+def _check_parent(p: Path, flag: str) -> None:
     parent = p.absolute().parent
     while not parent.exists():
         parent = parent.parent
@@ -31,4 +97,143 @@ def check_out_dir(path, flag: str = "--out") -> Path:
         raise InputError(f"{flag}: cannot make {str(p)!r}: {str(parent)!r} is not a folder")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise InputError(f"{flag}: cannot make {str(p)!r}: {str(parent)!r} is not writable")
-    return p
+
+
+def parse_range_list(text, flag: str) -> list[float]:
+    """Comma-separated ranges (m): finite, positive and distinct."""
+    try:
+        vals = [float(x) for x in str(text).split(",") if x.strip()]
+    except ValueError:
+        raise InputError(f"{flag}: expected comma-separated numbers of metres, got {text!r}") from None
+    if not vals:
+        raise InputError(f"{flag}: no range given")
+    bad = [v for v in vals if not (math.isfinite(v) and v > 0)]
+    if bad:
+        raise InputError(f"{flag}: ranges must be positive, finite metres, got {bad}")
+    dup = sorted({v for v in vals if vals.count(v) > 1})
+    if dup:
+        raise InputError(f"{flag}: repeated range(s) {dup}; each range is one row of the results")
+    return vals
+
+
+def phone_range_envelope_m(camera, pattern) -> tuple[float, float]:
+    """(near, far) ranges of the phone sensor: the pattern fills the shorter side of the frame at
+    ``near``, spans :data:`MIN_SPAN_PX` pixels at ``far``."""
+    import numpy as np
+
+    P = np.asarray(pattern.points_m, float)[:, :2]
+    span = float(max(np.linalg.norm(a - b) for a in P for b in P))
+    f = float(np.sqrt(camera.fx * camera.fy))
+    return f * span / min(camera.width, camera.height), f * span / MIN_SPAN_PX
+
+
+def _command(args) -> str:
+    words = [args.command]
+    for k in ("calibrate_command", "tof_command"):
+        if getattr(args, k, None):
+            words.append(getattr(args, k))
+    return " ".join(words)
+
+
+def check_args(args, parser) -> None:
+    """Check ``args`` (a parsed namespace of ``parser``) by the rules of the module notes.
+
+    Raises
+    ------
+    InputError
+    """
+    actions = {a.dest: a for a in _actions(parser, args)}
+    cmd = _command(args)
+    for dest, a in actions.items():
+        if not hasattr(args, dest):
+            continue
+        v = getattr(args, dest)
+        if v is None or isinstance(v, bool):
+            continue
+        flag = _flag(a)
+        if dest in OUTPUTS and isinstance(v, str):
+            meta = (a.metavar or "").lower()
+            (check_out_file if meta.endswith(".toml") else check_out_dir)(v, flag)
+            continue
+        if v == a.default:
+            continue  # the command's own default (0 may mean "none" or "automatic" there)
+        vals = v if isinstance(v, list) else [v]
+        for x in vals:
+            if isinstance(x, bool):
+                continue
+            if isinstance(x, int):
+                if dest == "seed" and x < 0:
+                    raise InputError(f"{flag}: expected a non-negative integer seed, got {x}")
+                if dest in COUNTS and x < 1:
+                    raise InputError(f"{flag}: expected a positive whole number, got {x}")
+                if dest in NON_NEGATIVE_INTS and x < 0:
+                    raise InputError(f"{flag}: expected a whole number >= 0, got {x}")
+            elif isinstance(x, float):
+                if not math.isfinite(x):
+                    raise InputError(f"{flag}: expected a finite number, got {x!r}")
+                if dest in POSITIVE and x <= 0:
+                    raise InputError(f"{flag}: expected a positive value, got {x!r}")
+                if dest in NON_NEGATIVE and x < 0:
+                    raise InputError(f"{flag}: expected a value >= 0, got {x!r}")
+    ranges = {}
+    for dest in ("range_m", "range"):
+        if dest in actions and getattr(args, dest, None) is not None:
+            v = getattr(args, dest)
+            ranges[_flag(actions[dest])] = [float(x) for x in (v if isinstance(v, list) else [v])]
+    for dest in RANGE_LISTS:
+        if dest in actions and isinstance(getattr(args, dest, None), str):
+            ranges[_flag(actions[dest])] = parse_range_list(getattr(args, dest), _flag(actions[dest]))
+    _check_profile_and_envelope(args, cmd, ranges)
+
+
+def _actions(parser, args):
+    """The actions of the subparser that parsed ``args``."""
+    import argparse
+
+    p = parser
+    for key in ("command", "calibrate_command", "tof_command"):
+        name = getattr(args, key, None)
+        if not name:
+            continue
+        sub = next((a for a in p._actions if isinstance(a, argparse._SubParsersAction)), None)
+        if sub is None or name not in sub.choices:
+            break
+        p = sub.choices[name]
+    return [a for a in p._actions if a.dest not in ("help",) and not a.__class__.__name__.startswith("_SubParsers")]
+
+
+def _check_profile_and_envelope(args, cmd: str, ranges: dict) -> None:
+    cam_name = getattr(args, "camera", None)
+    if cmd.startswith("tof "):
+        lo, hi = TOF_RANGE_M
+        for flag, vals in ranges.items():
+            bad = [v for v in vals if not lo <= v <= hi]
+            if bad:
+                raise InputError(f"{flag}: expected {lo}-{hi} m (the ToF paper's design range, inside the 15 m "
+                                 f"unambiguous range of its 10 MHz modulation), got {bad}")
+        return  # the ToF commands load their profile with tof.load_camera (refuses phone profiles)
+    if not isinstance(cam_name, str) or cmd in ("calibrate board",):
+        return
+    from svgs.profiles import Camera, Pattern
+
+    cam = Camera.load(cam_name)
+    if "tof" in cam.tables and "flash" not in cam.tables:
+        raise InputError(f"--camera: {cam.name!r} is a time-of-flight camera profile; this command needs a phone "
+                         "(SVGS) profile such as 'galaxy-nexus' (the ToF sensor's commands are 'svgs tof ...')")
+    if not ranges:
+        return
+    pat_name = getattr(args, "pattern", None) or "svgs-3u"
+    try:
+        pat = Pattern.load(pat_name)
+    except InputError:
+        return  # the command reports the pattern itself
+    near, far = phone_range_envelope_m(cam, pat)
+    for flag, vals in ranges.items():
+        bad = [v for v in vals if v > far]
+        if bad:
+            raise InputError(f"{flag}: {bad} m is beyond {far:.0f} m, where the {pat.name} pattern spans fewer than "
+                             f"{MIN_SPAN_PX:g} px on {cam.name} and its spots merge into one")
+        bad = [v for v in vals if v < 0.25 * near]
+        if bad:
+            raise InputError(f"{flag}: {bad} m is closer than {0.25 * near:.2f} m, where the {pat.name} pattern "
+                             f"spans more than 4x the shorter side of the {cam.name} frame")

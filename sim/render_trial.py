@@ -443,6 +443,32 @@ def _solve_one(scenario: dict, seed: int, frame, exposers: dict) -> dict:
     return out
 
 
+def trial_picture(scenario: dict, seed: int) -> dict:
+    """What one trial's sensor saw, for pictures (``overlay.png`` panels of the study reports):
+    the same render, exposure and solve as :func:`render_trial` (same seeds, same numbers).
+
+    Returns
+    -------
+    dict
+        ``image`` (the delivered image), ``camera`` (the solver's, at the image's size),
+        ``pattern``, ``threshold`` and ``row`` (:func:`sim.closed_loop.solve_exposure`'s row,
+        ``_solution`` included).
+    """
+    from sim.closed_loop import solve_exposure, solver_camera
+    from svgs.profiles import Pattern
+
+    frame, exposers = _frame(render_key(scenario))
+    gkey = _glare_key(scenario)
+    exposer = _exposer(frame, exposers, gkey)
+    ex, _ = _exposure(exposer, exposers, gkey, scenario, seed)
+    cam_solver = camera_with_calibration_errors(frame.camera, scenario)
+    thr = _threshold(scenario["threshold"])
+    row = solve_exposure(frame, ex, threshold=thr, solver_camera_profile=cam_solver,
+                         truth="actual" if scenario["truth_actual"] else "commanded")
+    return {"image": ex.image, "camera": solver_camera(cam_solver, ex.image.shape),
+            "pattern": Pattern.load(frame.scenario.pattern), "threshold": thr, "row": row}
+
+
 def render_trial(scenario: dict, seed: int) -> dict:
     """One rendered trial: render (or reuse this worker's last render of the same key), expose, solve.
 

@@ -204,13 +204,27 @@ def write_outputs(out_dir, cfg: ExposureStudyConfig, rows: list[dict]) -> tuple[
         w = csv.DictWriter(fh, fieldnames=list(table[0]))
         w.writeheader()
         w.writerows(table)
-    fig = Figure(figsize=(8, 4.5))
-    ax = fig.subplots()
-    for d in table:
-        ax.plot(ranges, [d[f"{r:g} m"] for r in ranges], "o-", label=d["remedy"])
-    ax.axhline(SUCCESS_LEVEL, color="grey", lw=0.5)
-    ax.set(xlabel="range (m)", ylabel="fraction of trials solved", title=f"{cfg.camera}: remedies", ylim=(-0.05, 1.05))
-    ax.legend(fontsize=8)
+    # one panel per remedy beside the baseline: overlapping lines on one axis hid most of them
+    n = len(table)
+    ncols = min(4, n)
+    nrows = -(-n // ncols)
+    fig = Figure(figsize=(3.2 * ncols, 2.6 * nrows))
+    axes = np.atleast_1d(fig.subplots(nrows, ncols, sharex=True, sharey=True)).ravel()
+    base = next((d for d in table if d["remedy"] == "baseline"), None)
+    for ax, d in zip(axes, table):
+        if base is not None and d is not base:
+            ax.plot(ranges, [base[f"{r:g} m"] for r in ranges], "--", color="grey", lw=1, label="baseline")
+        ax.plot(ranges, [d[f"{r:g} m"] for r in ranges], "o-", color="C0" if d is not base else "k", label=d["remedy"])
+        ax.axhline(SUCCESS_LEVEL, color="grey", lw=0.5)
+        ax.set_title(d["remedy"], fontsize=9)
+        ax.set_ylim(-0.05, 1.05)
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    for ax in axes[(nrows - 1) * ncols:]:
+        ax.set_xlabel("range (m)")
+    for ax in axes[::ncols]:
+        ax.set_ylabel("fraction solved")
+    fig.suptitle(f"{cfg.camera}: remedies (grey dashed: the baseline)")
     fig.tight_layout()
     fig.savefig(out_dir / "remedies.png", dpi=110)
     lines = markdown_table(table, ranges)

@@ -311,7 +311,48 @@ def write_outputs(out_dir, cfg: RangeSweepConfig, rows: list[dict]) -> tuple[lis
         fh.writelines(json.dumps(rec) + "\n" for rec in records)
     plot_sweep(table, out_dir / "range_sweep.png",
                f"{cfg.camera}: range sweep ({cfg.trials} trials x {cfg.poses} pose(s) per range)")
+    sample_overlays(out_dir / "overlays.png", cfg)
     return records, table
+
+
+def sample_overlays(path, cfg: RangeSweepConfig, panel_px: int = 420) -> str:
+    """``overlays.png``: at each range, what the sensor saw in the sweep's first trial (the nominal
+    pose, its first exposure) - the detected blobs, the target labels and the solution's
+    reprojection (:func:`svgs.overlay.render_overlay`), re-made from the trial's own seeds."""
+    import cv2
+
+    from sim.render_trial import trial_picture
+    from svgs.detect import detect_blobs
+    from svgs.overlay import render_overlay
+
+    trials = range_sweep_trials(cfg)
+    firsts = {}
+    for t in trials:
+        if t.scenario["pose_index"] == 0 and t.scenario["trial"] == 0:
+            firsts.setdefault(t.scenario["range_m"], t)
+    panels = []
+    for r in cfg.ranges_m:
+        t = firsts[r]
+        pic = trial_picture(t.scenario, int(t.seed))
+        sol, cam, pat = pic["row"]["_solution"], pic["camera"], pic["pattern"]
+        blobs = detect_blobs(pic["image"], threshold=pic["threshold"])
+        targets = {str(k): v for k, v in sol.targets_px.items()} if sol else {}
+        reproj = ({str(int(i)): uv for i, uv in zip(pat.ids, cam.project_target(pat.points_m, sol.R_cam_target,
+                                                                                 sol.t_cam_target_m))} if sol else {})
+        title = f"{r:g} m: " + (f"solved, {sol.residual_rms_px:.3f} px" if sol else f"{sol.reason}") + f", {len(blobs)} blobs"
+        img = render_overlay(pic["image"], blobs_px=blobs.centroid_px, targets_px=targets, reprojected_px=reproj,
+                             title=title, size_px=panel_px)
+        panels.append(cv2.resize(img, (panel_px, int(round(img.shape[0] * panel_px / img.shape[1])))))
+    h = max(p.shape[0] for p in panels)
+    panels = [np.vstack([p, np.zeros((h - p.shape[0], panel_px, 3), np.uint8)]) for p in panels]
+    ncols = min(4, len(panels))
+    rows = []
+    for i in range(0, len(panels), ncols):
+        row = panels[i:i + ncols]
+        row += [np.zeros_like(panels[0])] * (ncols - len(row))
+        rows.append(np.hstack(row))
+    cv2.imwrite(str(path), np.vstack(rows))
+    return str(path)
 
 
 def run_range_sweep(cfg: RangeSweepConfig, out_dir, spec, *, chunk_size=None, progress: bool = True):

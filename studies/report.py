@@ -23,7 +23,7 @@ table{border-collapse:collapse;margin:.6em 0 1.2em 0;font-size:.86em}caption{tex
 padding:.3em 0}th,td{border:1px solid #bbb;padding:.2em .45em;text-align:right}th{background:#eef}
 td.t,th.t{text-align:left}tr:nth-child(even) td{background:#fafafa}figure{margin:1em 0}figcaption{font-size:.9em;
 color:#444}img{max-width:100%}code,pre{background:#f4f4f4;padding:.1em .3em}pre{padding:.6em;overflow-x:auto;
-white-space:pre-wrap}.note{color:#555;font-size:.92em}
+white-space:pre-wrap}.note{color:#555;font-size:.92em}.scroll{overflow-x:auto;max-width:100%}
 """
 
 
@@ -91,7 +91,7 @@ class Report:
     def table(self, columns, rows, caption: str | None = None, digits: int = 3, text_columns=()) -> None:
         """A table; ``rows`` is a list of sequences (or dicts keyed by ``columns``)."""
         text_columns = set(text_columns) | ({columns[0]} if columns else set())
-        out = ["<table>"]
+        out = ['<div class="scroll"><table>']  # a wide table scrolls within the page
         if caption:
             out.append(f"<caption>{html.escape(caption)}</caption>")
         out.append("<tr>" + "".join(
@@ -101,7 +101,7 @@ class Report:
             out.append("<tr>" + "".join(
                 f'<td class="{"t" if c in text_columns else ""}">{html.escape(fmt(v, digits))}</td>'
                 for c, v in zip(columns, vals)) + "</tr>")
-        out.append("</table>")
+        out.append("</table></div>")
         self._parts.append("".join(out))
         self.n_tables += 1
 

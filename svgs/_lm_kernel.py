@@ -447,3 +447,121 @@ def posit_batch(xy, P, Bmat, n_iter, R, t):
         t[f, 0] += x0 * Z0
         t[f, 1] += y0 * Z0
         t[f, 2] += Z0
+
+
+@njit(cache=True)
+def _distortion_jacobian(x, y, k1, k2, p1, p2, k3):
+    """``d(xd, yd)/d(x, y)`` of the Brown-Conrady model at ``(x, y)``: ``(a, b, d)`` of the
+    symmetric 2x2 ``[[a, b], [b, d]]``, and the radial factor."""
+    r2 = x * x + y * y
+    rad = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    drad = 2.0 * (k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2))
+    a = rad + x * x * drad + 2.0 * p1 * y + 6.0 * p2 * x
+    b = x * y * drad + 2.0 * p1 * x + 2.0 * p2 * y
+    d = rad + y * y * drad + 6.0 * p1 * y + 2.0 * p2 * x
+    return a, b, d, rad
+
+
+@njit(cache=True)
+def _undistort_one(x0, y0, k1, k2, p1, p2, k3):
+    """Newton's method on the distortion model, at most 20 steps, until the residual < 1e-15."""
+    x, y = x0, y0
+    for _ in range(20):
+        a, b, d, rad = _distortion_jacobian(x, y, k1, k2, p1, p2, k3)
+        r2 = x * x + y * y
+        fx_ = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - x0
+        fy_ = y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - y0
+        det = a * d - b * b
+        x -= (d * fx_ - b * fy_) / det
+        y -= (-b * fx_ + a * fy_) / det
+        if max(abs(fx_), abs(fy_)) < 1e-15:
+            break
+    return x, y
+
+
+@njit(cache=True)
+def measurements_batch(pts, fx, fy, cx, cy, dist, xy, meas, Winv):
+    """Undistortion (Newton, as :meth:`svgs.profiles.Camera.undistort_normalized`), the
+    azimuth/elevation measurements and their whitening ``W = G^-1`` for N frames of n centroids,
+    with the analytic Jacobian ``G = d(Az, El)/d(u, v) = d(Az, El)/d(x, y) (d(xd, yd)/d(x, y))^-1
+    diag(1/fx, 1/fy)``. Outputs ``xy`` (N, n, 2), ``meas`` (N, n, 2), ``Winv`` (N, n, 2, 2)."""
+    k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
+    has = (k1 != 0.0) or (k2 != 0.0) or (p1 != 0.0) or (p2 != 0.0) or (k3 != 0.0)
+    N, n = pts.shape[0], pts.shape[1]
+    for i in range(N):
+        for j in range(n):
+            xd = (pts[i, j, 0] - cx) / fx
+            yd = (pts[i, j, 1] - cy) / fy
+            x, y = xd, yd
+            a, b, c, d = 1.0, 0.0, 0.0, 1.0
+            if has:
+                x, y = _undistort_one(xd, yd, k1, k2, p1, p2, k3)
+                a, b, d, _ = _distortion_jacobian(x, y, k1, k2, p1, p2, k3)
+                c = b
+            xy[i, j, 0] = x
+            xy[i, j, 1] = y
+            s2 = x * x + y * y + 1.0
+            q = np.sqrt(1.0 + x * x)
+            meas[i, j, 0] = np.arctan(x)
+            meas[i, j, 1] = np.arcsin(-y / np.sqrt(s2))
+            # d(Az, El)/d(x, y)
+            e00 = 1.0 / (q * q)
+            e10 = x * y / (q * s2)
+            e11 = -q / s2
+            # (d(xd, yd)/d(x, y))^-1 diag(1/fx, 1/fy)
+            det = a * d - b * c
+            m00, m01 = d / det / fx, -b / det / fy
+            m10, m11 = -c / det / fx, a / det / fy
+            g00 = e00 * m00
+            g01 = e00 * m01
+            g10 = e10 * m00 + e11 * m10
+            g11 = e10 * m01 + e11 * m11
+            dg = g00 * g11 - g01 * g10
+            Winv[i, j, 0, 0] = g11 / dg
+            Winv[i, j, 0, 1] = -g01 / dg
+            Winv[i, j, 1, 0] = -g10 / dg
+            Winv[i, j, 1, 1] = g00 / dg
+
+
+@njit(cache=True)
+def check_points_batch(pts, bad):
+    """Per frame: 1 a non-finite centroid, 2 coincident or collinear centroids, else 0."""
+    N, n = pts.shape[0], pts.shape[1]
+    for i in range(N):
+        bad[i] = 0
+        for j in range(n):
+            if not (np.isfinite(pts[i, j, 0]) and np.isfinite(pts[i, j, 1])):
+                bad[i] = 1
+        if bad[i]:
+            continue
+        mx, my = 0.0, 0.0
+        for j in range(n):
+            mx += pts[i, j, 0]
+            my += pts[i, j, 1]
+        mx /= n
+        my /= n
+        sxx, syy, sxy = 0.0, 0.0, 0.0
+        for j in range(n):
+            dx, dy = pts[i, j, 0] - mx, pts[i, j, 1] - my
+            sxx += dx * dx
+            syy += dy * dy
+            sxy += dx * dy
+            for k in range(j + 1, n):
+                ex, ey = pts[i, j, 0] - pts[i, k, 0], pts[i, j, 1] - pts[i, k, 1]
+                if np.sqrt(ex * ex + ey * ey) < 1e-6:
+                    bad[i] = 2
+        half_tr, det = 0.5 * (sxx + syy), sxx * syy - sxy * sxy
+        disc = np.sqrt(max(half_tr * half_tr - det, 0.0))
+        if (half_tr - disc) < 1e-18 * max(half_tr + disc, 1e-300):
+            bad[i] = 2
+
+
+@njit(cache=True, parallel=True)
+def undistort_points(xd, dist, out):
+    """Invert the Brown-Conrady distortion of normalised points ``xd`` (M, 2) by Newton's
+    method, per point until the residual is below 1e-15 (at most 20 steps); ``out`` (M, 2)."""
+    k1, k2, p1, p2, k3 = dist[0], dist[1], dist[2], dist[3], dist[4]
+    for i in prange(xd.shape[0]):
+        x, y = _undistort_one(xd[i, 0], xd[i, 1], k1, k2, p1, p2, k3)
+        out[i, 0] = x
+        out[i, 1] = y

@@ -28,6 +28,8 @@ call (the Monte Carlo path); shape ``(n, 2)`` returns a single :class:`Solution`
 
 from __future__ import annotations
 
+import functools
+
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -98,6 +100,15 @@ def azel_pixel_jacobian(uv_px: np.ndarray, camera: Camera, h_px: float = 1e-3) -
 
 
 # --------------------------------------------------------------------------- initial guess
+@functools.lru_cache(maxsize=16)
+def _posit_basis(p_bytes: bytes, shape: tuple) -> np.ndarray:
+    """``pinv(P[1:] - P[0])`` of a pattern (the same for every frame: computed once)."""
+    P = np.frombuffer(p_bytes, dtype=np.float64).reshape(shape)
+    B = np.linalg.pinv(P[1:] - P[0])
+    B.setflags(write=False)
+    return B
+
+
 def posit(xy: np.ndarray, points_m: np.ndarray, n_iter: int = 10):
     """POSIT (DeMenthon & Davis 1995) for non-coplanar points, over N frames (compiled).
 
@@ -117,7 +128,7 @@ def posit(xy: np.ndarray, points_m: np.ndarray, n_iter: int = 10):
     from ._lm_kernel import posit_batch
 
     P = np.ascontiguousarray(points_m, dtype=np.float64)
-    B = np.linalg.pinv(P[1:] - P[0])
+    B = _posit_basis(P.tobytes(), P.shape)
     N = xy.shape[0]
     R = np.empty((N, 3, 3))
     t = np.empty((N, 3))
@@ -254,20 +265,15 @@ def _check_points(points_px, pattern: Pattern) -> tuple[np.ndarray, bool]:
         )
     if pts.shape[0] == 0:
         raise InputError("points_px: no frames (N = 0)")
-    bad = ~np.all(np.isfinite(pts), axis=(1, 2))
+    from ._lm_kernel import check_points_batch
+
+    pts = np.ascontiguousarray(pts, dtype=np.float64)
+    flags = np.empty(pts.shape[0], np.int64)
+    check_points_batch(pts, flags)
+    bad = flags == 1
     if np.any(bad):
         raise InputError(f"points_px: non-finite centroid in frame(s) {np.flatnonzero(bad)[:10].tolist()}")
-    # degenerate sets: coincident points or all points on one line
-    diff = pts[:, :, None, :] - pts[:, None, :, :]
-    dist = np.linalg.norm(diff, axis=-1) + np.eye(n)[None] * 1e9
-    coincident = np.min(dist, axis=(1, 2)) < 1e-6
-    c = pts - pts.mean(1, keepdims=True)
-    sxx, syy, sxy = np.sum(c[..., 0] ** 2, 1), np.sum(c[..., 1] ** 2, 1), np.sum(c[..., 0] * c[..., 1], 1)
-    # smallest over largest eigenvalue of the 2x2 scatter matrix, in closed form
-    half_tr, det = 0.5 * (sxx + syy), sxx * syy - sxy**2
-    disc = np.sqrt(np.maximum(half_tr**2 - det, 0.0))
-    collinear = (half_tr - disc) < 1e-18 * np.maximum(half_tr + disc, 1e-300)
-    deg = coincident | collinear
+    deg = flags == 2  # degenerate sets: coincident points or all points on one line
     if np.any(deg):
         which = np.flatnonzero(deg)[:10].tolist()
         raise InputError(
@@ -348,6 +354,10 @@ def solve_centroids(
     if not (np.isfinite(sigma_px) and sigma_px > 0):
         raise InputError(f"sigma_px: expected a positive centroid noise in px, got {sigma_px!r}")
     pts, single = _check_points(points_px, pattern)
+    if single and initial_state is None:
+        sol = _solve_single(pts, camera, pattern, sigma_px, max_iter, step_tol, max_residual_px, front_side_only)
+        if sol is not None:
+            return sol
     N, n = pts.shape[:2]
     xy, meas, Winv_sqrt = _measurements(pts, camera)
     P = pattern.points_m
@@ -383,6 +393,49 @@ def solve_centroids(
     return sol
 
 
+def _solve_single(pts, camera, pattern, sigma_px, max_iter, step_tol, max_residual_px, front_side_only):
+    """One frame the short way: the same kernels as the batch path (POSIT start, the compiled
+    Levenberg-Marquardt, the paper state from its kernel) without the batch bookkeeping. Returns
+    None whenever the batch path has more to do (a start that does not converge or fit, a
+    verdict other than solved): that path then runs and decides, so answers never differ."""
+    from ._lm_kernel import lm_batch_serial, paper_state, posit_batch
+
+    n = pts.shape[1]
+    xy, meas, W = _measurements(pts, camera)
+    P = _pattern_points(pattern)
+    R = np.empty((1, 3, 3))
+    t = np.empty((1, 3))
+    posit_batch(xy, P, _posit_basis(P.tobytes(), P.shape), 10, R, t)
+    conv, iters, rw, cov1, piv = lm_batch_serial(R, t, P, meas, W, int(max_iter), float(step_tol), _ONE_ACTIVE)
+    res = float(np.sqrt(np.dot(rw[0], rw[0]) / n))
+    if not (conv[0] and res <= max_residual_px and piv[0] > 1e-14):
+        return None
+    R0, t0 = R[0], t[0]
+    if not (np.isfinite(t0).all() and np.all(P @ R0[2] + t0[2] > 0)):
+        return None
+    x = np.empty(6)
+    paper_state(R0, t0, x)
+    if front_side_only and not x[2] > 0:
+        return None
+    sol = Solution(x, R0, t0, res, cov1[0] * sigma_px**2, float(sigma_px), int(iters[0]))
+    sol.targets_px = {int(i): pts[0, k].tolist() for k, i in enumerate(pattern.ids)}
+    return sol
+
+
+_ONE_ACTIVE = np.ones(1, np.bool_)
+
+
+def _pattern_points(pattern) -> np.ndarray:
+    P = getattr(pattern, "_points_c64", None)
+    if P is None:
+        P = np.ascontiguousarray(pattern.points_m, dtype=np.float64)
+        try:
+            object.__setattr__(pattern, "_points_c64", P)
+        except (AttributeError, TypeError):
+            pass
+    return P
+
+
 def _measurements(pts: np.ndarray, camera: Camera):
     """Normalised coordinates, az/el measurements and their whitening of centroids (N, n, 2).
 
@@ -395,12 +448,14 @@ def _measurements(pts: np.ndarray, camera: Camera):
     Winv_sqrt : ndarray, shape (N, n, 2, 2)
         ``G^-1`` (px/rad): whitens az/el residuals into pixel residuals.
     """
-    xy = camera.pixels_to_normalized(pts)
-    meas = azel_from_normalized(xy)
-    G = azel_pixel_jacobian(pts, camera)  # (N, n, 2, 2) rad/px
-    detG = G[..., 0, 0] * G[..., 1, 1] - G[..., 0, 1] * G[..., 1, 0]
-    Winv_sqrt = np.stack([np.stack([G[..., 1, 1], -G[..., 0, 1]], -1),
-                          np.stack([-G[..., 1, 0], G[..., 0, 0]], -1)], -2) / detG[..., None, None]
+    from ._lm_kernel import measurements_batch
+
+    pts = np.ascontiguousarray(pts, dtype=np.float64)
+    xy = np.empty_like(pts)
+    meas = np.empty_like(pts)
+    Winv_sqrt = np.empty(pts.shape + (2,))
+    measurements_batch(pts, float(camera.fx), float(camera.fy), float(camera.cx), float(camera.cy),
+                       np.ascontiguousarray(camera.dist, dtype=np.float64).reshape(5), xy, meas, Winv_sqrt)
     return xy, meas, Winv_sqrt
 
 

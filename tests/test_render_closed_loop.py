@@ -61,7 +61,7 @@ def test_render_and_solve_cli_writes_outputs(tmp_path, capsys):
 @pytest.mark.parametrize(
     "argv, match",
     [
-        (["render-and-solve", "--camera", "galaxy-nexus", "--range", "-3"], "range_m"),
+        (["render-and-solve", "--camera", "galaxy-nexus", "--range", "-3"], "--range"),
         (["render-and-solve", "--camera", "nope", "--range", "3"], "unknown camera profile"),
         (["render-and-solve", "--camera", "tests/data/geometry_only.toml", "--range", "3"], r"\[optics\]"),
         (["range-sweep", "--camera", "galaxy-nexus", "--ranges", "1,-2"], "--ranges"),

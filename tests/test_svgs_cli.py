@@ -38,6 +38,22 @@ def test_solve_json(example_png, capsys):
     np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-9)
 
 
+def test_solve_out_writes_the_overlay_and_the_solution(example_png, capsys, tmp_path):
+    """Issue 14 item 6: what the detector found and where the solution puts the targets."""
+    path, _ = example_png
+    out = tmp_path / "run"
+    assert main(["solve", str(path), "--camera", "galaxy-nexus", "--out", str(out), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["outputs"]["overlay"] == str(out / "overlay.png")
+    saved = json.loads((out / "solution.json").read_text())
+    assert saved["state"] == d["state"]
+    img = cv2.imread(str(out / "overlay.png"))
+    assert img is not None and img.ndim == 3 and max(img.shape[:2]) >= 900
+    # the four labels and the reprojection crosses are drawn
+    assert np.all(img == (0, 255, 255), axis=2).sum() > 100  # labels (yellow)
+    assert np.all(img == (60, 60, 255), axis=2).sum() > 20  # reprojected solution (red)
+
+
 def test_solve_readable(example_png, capsys):
     path, _ = example_png
     assert main(["solve", str(path), "--camera", "galaxy-nexus"]) == 0

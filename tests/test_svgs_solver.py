@@ -239,3 +239,39 @@ def test_model_jacobian_matches_finite_differences(pattern):
         e[p] = 1e-6
         Jn[..., p] = (model_azel(x + e, pattern.points_m, False)[0] - model_azel(x - e, pattern.points_m, False)[0]) / 2e-6
     np.testing.assert_allclose(J, Jn, atol=1e-8)
+
+
+def test_the_compiled_measurements_match_the_profile_undistortion_and_finite_differences():
+    """Issue 14 item 9: the measurements kernel (undistortion and the analytic whitening
+    Jacobian) against the profile's own Newton undistortion and central differences of it."""
+    from svgs.profiles import Camera
+    from svgs.solver import _measurements, azel_from_normalized
+
+    cam = Camera.load("galaxy-nexus").replace(dist=np.array([0.08, -0.21, 4e-4, -3e-4, 0.12]))
+    rng = np.random.default_rng(4)
+    pts = rng.uniform([50, 50], [cam.width - 50, cam.height - 50], (3, 4, 2))
+    xy, meas, W = _measurements(pts, cam)
+    np.testing.assert_allclose(xy, cam.pixels_to_normalized(pts), atol=1e-13)
+    np.testing.assert_allclose(meas, azel_from_normalized(cam.pixels_to_normalized(pts)), atol=1e-13)
+    h = 1e-3
+    G = np.stack([(azel_from_normalized(cam.pixels_to_normalized(pts + e)) - azel_from_normalized(
+        cam.pixels_to_normalized(pts - e))) / (2 * h) for e in (np.array([h, 0.0]), np.array([0.0, h]))], -1)
+    np.testing.assert_allclose(np.linalg.inv(W), G, rtol=1e-6, atol=1e-12)
+
+
+def test_one_frame_and_the_same_frame_in_a_batch_give_the_same_pose(nexus, pattern):
+    """The single-frame short path (issue 14 item 9) and the batch path agree."""
+    from svgs.frames import pose_from_scenario
+
+    rng = np.random.default_rng(9)
+    for k in range(20):
+        R, t = pose_from_scenario(rng.uniform(3, 40), rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5),
+                                  *rng.uniform(-20, 20, 3))
+        uv = nexus.project_target(pattern.points_m, R, t) + rng.normal(0, 0.1, (4, 2))
+        one = solve_centroids(uv, nexus, pattern)
+        many = solve_centroids(uv[None], nexus, pattern)
+        assert bool(one) == bool(many.ok[0])
+        if one:
+            np.testing.assert_allclose(one.state, many.state[0], rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(one.covariance, many.covariance[0], rtol=1e-10, atol=1e-18)
+            assert one.iterations == many.iterations[0]

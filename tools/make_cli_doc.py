@@ -45,6 +45,12 @@ def _render() -> str:
     out = ["# Command reference", "",
            "Generated from the commands' own help by `tools/make_cli_doc.py`; do not edit by hand.", "",
            "Exit codes everywhere: 0 done/solved, 1 no solution (the reason is printed), 2 bad input or usage.", "",
+           ("Every argument is checked before any work starts (`cli/validate.py`): output locations (a writable "
+            "folder, or a file where the metavar says `.toml`), seeds (>= 0), counts (>= 1), finite numbers, "
+            "positive and non-negative physical quantities, ranges (positive, distinct, inside the sensor's "
+            "physical envelope: for a phone, closer than where the pattern spans fewer than 4 px; for the ToF "
+            "camera 0.27-15 m) and the kind of camera profile. A bad input exits 2 with one line naming it and "
+            "writes nothing."), "",
            ("`--json`: every command that takes it prints exactly one JSON object on stdout (tables, status lines "
            "and progress bars go to stderr). Its object is shown after the command's help (`cli/json_out.py`); "
            "the study commands (range-sweep, exposure-study, campaign, sensitivity, calibrate study) write NaN as "

@@ -159,12 +159,19 @@ def _delivered(cam: Camera, like: Camera) -> Camera:
     return cam if (cam.width, cam.height) == (like.width, like.height) else cam.scaled(like.width, like.height)
 
 
-def _geometric_board_set(s: _Setup, n_views: int):
+def _geometric_board_set(s: _Setup, n_views: int, say=None):
     from calibration import sample_board_poses, synthesize_views
 
     seed = s.seeds["board_set"]
     R, t = sample_board_poses(s.board, s.camera_true, n_views, seed=seed)
-    images = list(synthesize_views(s.board, s.camera_true, R, t, oversample=3, blur_px=0.6, noise_dn=1.5, seed=seed + 1))
+    t0 = time.perf_counter()
+
+    def tell(msg):  # a line per view: at full resolution a view takes seconds
+        if say is not None:
+            say(f"  board set: {msg} ({time.perf_counter() - t0:.0f} s)")
+
+    images = list(synthesize_views(s.board, s.camera_true, R, t, oversample=3, blur_px=0.6, noise_dn=1.5, seed=seed + 1,
+                                   progress=tell))
     info = {"source": "geometric (calibration.synthesize_views: blur 0.6 px, noise 1.5 DN)", "n_views": n_views}
     return images, [f"view_{k:03d}" for k in range(n_views)], s.camera_true, info
 
@@ -210,12 +217,14 @@ def board_detections(s: _Setup, path: Path, board_set_dir, say, timings: dict):
     t0 = time.perf_counter()
     n_views = s.config["views_list"][-1]
     if s.config["geometric"]:
-        images, names, camera, info = _geometric_board_set(s, n_views)
-        say(f"board set: {n_views} geometric views")
+        say(f"board set: drawing {n_views} geometric views at {s.camera_true.width}x{s.camera_true.height} px ...")
+        images, names, camera, info = _geometric_board_set(s, n_views, say)
+        say(f"board set: {n_views} geometric views in {time.perf_counter() - t0:.1f} s")
     else:
         images, names, camera, info = _rendered_board_set(s, n_views, board_set_dir, say)
     info["board"] = s.board.describe()
     timings["board_set_s"] = time.perf_counter() - t0
+    say(f"detecting the board in {len(images)} views (OpenCV) ...")
     det = detect_all(images, s.board, names)
     info["found"] = len(det)
     info["skipped"] = [f"{n}: {f.message}" for n, f in det.skipped]
