@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from svgs.errors import InputError, check_finite, check_finite_positive
+from svgs.errors import InputError, check_finite
 
 from cli.exit_codes import EXIT_NO_SOLUTION, EXIT_OK
 from cli.solve import json_default
@@ -88,12 +88,7 @@ def register(group) -> None:
 
 
 def _check_common(args) -> None:
-    if args.spp < 1:
-        raise InputError(f"--spp: expected a positive number of samples per pixel, got {args.spp}")
-    if args.seed < 0:
-        raise InputError(f"--seed: expected a non-negative integer, got {args.seed}")
-    if args.ambient_lux is not None:
-        check_finite_positive(args.ambient_lux, "--ambient-lux", allow_zero=True)
+    """What :mod:`cli.validate` (run before every command) does not check already."""
     if args.sheeting is not None:
         from render.tof.retro import load_sheeting
 
@@ -119,10 +114,6 @@ def check_stability_args(args):
                          f"range of the 10 MHz modulation), got {args.range_m!r}")
     check_frames(args.frames)
     _check_common(args)
-    if args.persistence < 1:
-        raise InputError(f"--persistence: expected a positive number of frames, got {args.persistence}")
-    if args.max_active_pixels is not None and args.max_active_pixels < 1:
-        raise InputError(f"--max-active-pixels: expected a positive pixel count, got {args.max_active_pixels}")
     if not 1 <= args.bounces <= 4:
         raise InputError(f"--bounces: expected 1..4, got {args.bounces}")
     if args.out:
