@@ -13,7 +13,6 @@ import numpy as np
 
 from cli.json_out import failures_from_text, run_info
 from cli.solve import json_default
-from svgs.errors import InputError
 
 #: (flag, dest, help). ``--x``/``--y`` set the target's lateral offset (Scenario.target_x_m,
 #: target_y_m), not the camera position ``x_m``/``y_m`` of the solved state.
@@ -165,16 +164,9 @@ def cmd_render_and_solve(args) -> int:
 
 
 def _parse_ranges(text) -> list[float]:
-    try:
-        vals = [float(x) for x in str(text).split(",") if x.strip()]
-    except ValueError:
-        raise InputError(f"--ranges: expected comma-separated numbers of metres, got {text!r}") from None
-    if not vals:
-        raise InputError("--ranges: no range given")
-    bad = [v for v in vals if not (np.isfinite(v) and v > 0)]
-    if bad:
-        raise InputError(f"--ranges: ranges must be positive metres, got {bad}")
-    return vals
+    from cli.validate import parse_range_list
+
+    return parse_range_list(text, "--ranges")
 
 
 def range_sweep_json(cfg, table, stats, out: Path) -> dict:

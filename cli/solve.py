@@ -41,16 +41,18 @@ def register(sub) -> None:
 
 
 def write_solution_overlay(path, image, camera, pattern, result, threshold=None, sigma_px=None,
-                           sigma_label: str | None = None, title: str | None = None) -> str:
+                           sigma_label: str | None = None, title: str | None = None, blobs=None) -> str:
     """``overlay.png`` of one solved (or unsolved) image: every blob the detector found, the
     identified targets' labels, the solution's reprojection and each point's 1-sigma ellipse.
 
     ``sigma_px`` (target id -> [su, sv]) defaults to the centroid scatter the image's own
-    background noise gives (:func:`svgs.overlay.centroid_sigma_from_image`)."""
+    background noise gives (:func:`svgs.overlay.centroid_sigma_from_image`); ``blobs`` are the
+    image's detections when the caller has them."""
     from svgs.detect import detect_blobs, to_gray
     from svgs.overlay import centroid_sigma_from_image, write_overlay
 
-    blobs = detect_blobs(image, threshold=threshold)
+    if blobs is None:
+        blobs = detect_blobs(image, threshold=threshold)
     targets = {str(k): [float(x) for x in v] for k, v in (result.targets_px.items() if result else [])}
     reproj = {}
     if result:
@@ -137,14 +139,20 @@ def cmd_solve(args) -> int:
         raise InputError(f"--sigma-px: expected a positive number of pixels, got {args.sigma_px}")
     from svgs.pipeline import load_image
 
+    from svgs.detect import detect_blobs
+    from svgs.pipeline import check_image_matches_camera
+
     image = load_image(args.image)
+    check_image_matches_camera(image, camera)
     thr = parse_threshold(args.threshold)
-    result = solve_image(image, camera, pattern, threshold=thr, sigma_px=args.sigma_px)
+    blobs = detect_blobs(image, threshold=thr)  # once: for the solve and for the overlay
+    result = solve_image(image, camera, pattern, threshold=thr, sigma_px=args.sigma_px, blobs=blobs)
     d = solution_json(result)
     if args.out:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
-        d["outputs"] = {"overlay": write_solution_overlay(out / "overlay.png", image, camera, pattern, result, thr),
+        d["outputs"] = {"overlay": write_solution_overlay(out / "overlay.png", image, camera, pattern, result, thr,
+                                                          blobs=blobs),
                         "solution": str(out / "solution.json")}
         (out / "solution.json").write_text(json.dumps(d, indent=1))
     if args.json:

@@ -166,15 +166,9 @@ def register(sub) -> None:
 
 
 def _ranges(text):
-    if text is None:
-        return None
-    try:
-        vals = [float(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise InputError(f"--ranges: expected comma-separated numbers in m, got {text!r}") from None
-    if not vals:
-        raise InputError(f"--ranges: no ranges in {text!r}")
-    return vals
+    from cli.validate import parse_range_list
+
+    return None if text is None else parse_range_list(text, "--ranges")
 
 
 def _triple(text, flag):

@@ -126,7 +126,7 @@ def paper_statistics(range_mm) -> dict:
 
 
 def run_stability(renderer, sensor, range_m: float, frames: int, *, seed: int = 0, pipeline: dict | None = None,
-                  reference: str = "markers", progress=None) -> dict:
+                  reference: str = "markers", progress=None, rendered=None) -> dict:
     """Render once at the scenario of ``range_m``, draw ``frames`` noisy frames, solve them in sequence.
 
     Parameters
@@ -143,6 +143,9 @@ def run_stability(renderer, sensor, range_m: float, frames: int, *, seed: int = 
     reference : {"markers", "plate"}
     progress : callable, optional
         Called with 1 after each frame (a progress bar's ``update``).
+    rendered : camera.amcw.RenderedTof, optional
+        This renderer's render of the scenario at ``seed`` and the sensor's frequency, from an
+        earlier run (the ``rendered`` of its result): reused instead of rendering again.
 
     Returns
     -------
@@ -162,7 +165,8 @@ def run_stability(renderer, sensor, range_m: float, frames: int, *, seed: int = 
     R, t = sc["R_cam_target"], sc["t_cam_target_m"]
     pt = reference_point_m(renderer.target, reference)
     t0 = time.perf_counter()
-    rendered = renderer.render(R, t, seed=seed, modulation_frequency_hz=sensor.modulation_frequency_hz)
+    if rendered is None:
+        rendered = renderer.render(R, t, seed=seed, modulation_frequency_hz=sensor.modulation_frequency_hz)
     render_s = time.perf_counter() - t0
     clean = sensor.frame(rendered, noise=False)
     noise_free = _noise_free(renderer, rendered, clean, pipeline, R, t, pt)

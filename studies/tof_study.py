@@ -101,17 +101,21 @@ def run_study(camera, target, out: Path, *, frames=500, variant_frames=200, swee
                                   modulation_frequency_hz=sensor.modulation_frequency_hz)
             sen = sensor.replace(**skw) if skw else sensor
             for r in ranges:
+                reuse = runs[r]["rendered"] if ren is base and r in runs else None  # the same render
                 run = run_stability(ren, sen, r, variant_frames, seed=seed, pipeline=pkw, reference=ref,
-                                    progress=bar.update)
+                                    progress=bar.update, rendered=reuse)
                 var_rows.append({"label": label, "why": why, "range_m": r, "summary": summary(run)})
 
     # ---- Fig. 14: accuracy against distance
     sweep = []
     with progress_bar(len(SWEEP_SCHEMES) * len(SWEEP_RANGES_M) * sweep_frames, "Fig. 14 sweep", enabled=not quiet,
                       unit="frame") as bar:
+        renders = {}  # one render per range, shared by the two schemes
         for scheme, pkw in SWEEP_SCHEMES:
             for r in SWEEP_RANGES_M:
-                run = run_stability(base, sensor, r, sweep_frames, seed=seed, pipeline=pkw, progress=bar.update)
+                run = run_stability(base, sensor, r, sweep_frames, seed=seed, pipeline=pkw, progress=bar.update,
+                                    rendered=renders.get(r))
+                renders[r] = run["rendered"]
                 sweep.append(_sweep_row(scheme, r, run, sweep_frames))
 
     # ---- failure modes

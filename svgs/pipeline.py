@@ -77,6 +77,7 @@ def solve_image(
     sigma_px: float = 0.1,
     detect_options: dict | None = None,
     identify_options: dict | None = None,
+    blobs=None,
 ):
     """Detect, identify and solve the pose from one image.
 
@@ -92,6 +93,8 @@ def solve_image(
         Centroid noise (px) for which the Cramer-Rao covariance is reported.
     detect_options, identify_options : dict, optional
         Passed to :func:`svgs.detect.detect_blobs` and :func:`svgs.identify.identify`.
+    blobs : svgs.detect.Blobs, optional
+        This image's detections, when the caller already has them (detection is skipped).
 
     Returns
     -------
@@ -109,7 +112,8 @@ def solve_image(
         image = load_image(image)
     image = np.asarray(image)
     check_image_matches_camera(image, camera)
-    blobs = detect_blobs(image, threshold=threshold, **(detect_options or {}))
+    if blobs is None:
+        blobs = detect_blobs(image, threshold=threshold, **(detect_options or {}))
     ident = identify(blobs, camera, pattern, **{"sigma_px": sigma_px, **(identify_options or {})})
     if not ident:
         ident.details.setdefault("n_blobs", len(blobs))
