@@ -105,6 +105,38 @@ class PointFlux:
         """The same samples with every rate times ``factor`` (a neutral-density filter)."""
         return PointFlux(self.u_px, self.v_px, self.rate_ph_s * float(factor))
 
+    def moved(self, velocity_px_s, exposure_s: float, readout_time_s: float, height_px: int,
+              rng: np.random.Generator) -> "PointFlux":
+        """The samples as a moving scene exposes them: motion blur and rolling shutter.
+
+        Each sample is a photon bundle arriving at a uniformly random time within its row's
+        exposure; row ``v`` starts exposing ``(v - (H - 1) / 2) / H * readout_time_s`` after
+        the centre row (a rolling shutter reading top to bottom). Times are taken from the
+        frame's timestamp, the exposure midpoint of the centre row, so a global shutter
+        (``readout_time_s = 0``) gives a smear centred on the sample's position at the
+        timestamp. First order in the motion: the image velocity of each sample is constant
+        over the frame time.
+
+        Parameters
+        ----------
+        velocity_px_s : array_like, shape (M, 2) or (2,)
+            Image velocity ``(du/dt, dv/dt)`` of each sample, px/s.
+        exposure_s, readout_time_s : float
+            Exposure time per row and the frame's top-to-bottom readout time, s.
+        height_px : int
+            Rows of the frame.
+        rng : numpy.random.Generator
+            Draws the arrival times.
+
+        Returns
+        -------
+        PointFlux
+        """
+        vel = np.broadcast_to(np.asarray(velocity_px_s, float), (len(self), 2))
+        H = float(height_px)
+        tau = (self.v_px - 0.5 * (H - 1.0)) / H * float(readout_time_s) + (rng.random(len(self)) - 0.5) * float(exposure_s)
+        return PointFlux(self.u_px + vel[:, 0] * tau, self.v_px + vel[:, 1] * tau, self.rate_ph_s)
+
     def binned(self, shape) -> np.ndarray:
         """Sum of the rates in the pixel containing each sample (a perfect lens), float64 (H, W)."""
         H, W = int(shape[0]), int(shape[1])

@@ -175,6 +175,17 @@ SCHEMAS = {
             "rot_err_rms_deg": float, "integration_time_s": float}],
  "failure_modes": {"flying_pixels_1m", "multipath_1m", "ambient_1m", ...}, "wall_s": float,
  "outputs": {"report", "csv", "series", "mechanisms", "fig14", "failure_modes": path}}""",
+    "svgs approach": f"""\
+{{"camera": str, "preview": bool, "fps": float, "seed": int, "trajectory": str,
+ "frames": int, "solved": int, "solved_fraction": float,
+ "failures": {{reason: int}},                     # reasons of svgs.result.REASONS
+ "solved_range_m": [float, float] | null,        # nearest and farthest solved frame
+ "rms_by_range": [{{"range_m": [lo, hi | null], "frames": int, "solved": int,
+                   "rms_err_<k>", "mean_err_<k>", "rms_crlb_<k>": float | null}}],   # k in {_STATE}
+ "timing": {{"mean_render_s", "mean_optics_s", "mean_expose_s", "mean_solve_s", "mean_crlb_s",
+            "mean_frame_s", "frames_per_s": float | null}},
+ "run": {{"frames_run": int, "frames_reused": int, "wall_s": float}},
+ "outputs": {{"measurements", "plot", "video": path | null, "video_codec": str, "video_fps": float}}}}""",
     "svgs range-sweep": f"""\
 {{"camera": str, "pattern": str, "trials_per_pose": int, "poses": int,
  "ranges": [{{"range_m": float, "trials": int, "solved": int, "success_rate": float,

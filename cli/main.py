@@ -46,6 +46,7 @@ COMMANDS = (
     ("tof", "cli.tof_render", ("render-and-solve",)),
     ("tof", "cli.tof_stability", ("stability", "study")),
     (None, "cli.studies", ("campaign", "sensitivity")),
+    (None, "cli.approach", ("approach",)),
 )
 
 

@@ -10,7 +10,7 @@ the argument names (one vocabulary across the commands, ``docs/architecture.md``
   positive physical quantities (exposure, ISO, sigmas, sizes), non-negative ones (jitter,
   ambient light) - a value equal to the option's default is the command's own choice and
   passes (some defaults are 0 for "none");
-- ranges (``--range``, ``--ranges``, ``--focal-ranges``, ``--pose-ranges``): positive, finite,
+- ranges (``--range``, ``--ranges``, ``--focal-ranges``, ``--pose-ranges``, ``--from``, ``--to``): positive, finite,
   distinct, and inside the command's physical envelope, whose reason the message states - for
   the phone sensor the range beyond which the pattern spans fewer than :data:`MIN_SPAN_PX`
   pixels (its spots merge into one), for the ToF camera the paper's 0.27-15 m;
@@ -45,7 +45,7 @@ NON_NEGATIVE_INTS = {"processes"}
 #: Float arguments that must be > 0.
 POSITIVE = {"sigma_px", "centroid_sigma_px", "range_sigma_m", "exposure_s", "iso", "focus_m", "integration_time_s",
             "modulation_frequency_hz", "spacing_mm", "marker_mm", "exposure_fill", "merge_px", "aspect_ratio",
-            "range_m", "range"}
+            "range_m", "range", "from_m", "to_m", "duration_s", "fps"}
 #: Float arguments that must be >= 0.
 NON_NEGATIVE = {"jitter_deg", "jitter_m", "ambient", "ambient_lux", "backdrop_m", "true_pp_offset_px", "stage_m"}
 #: Comma-separated range lists (m).
@@ -176,7 +176,7 @@ def check_args(args, parser) -> None:
                 if dest in NON_NEGATIVE and x < 0:
                     raise InputError(f"{flag}: expected a value >= 0, got {x!r}")
     ranges = {}
-    for dest in ("range_m", "range"):
+    for dest in ("range_m", "range", "from_m", "to_m"):
         if dest in actions and getattr(args, dest, None) is not None:
             v = getattr(args, dest)
             ranges[_flag(actions[dest])] = [float(x) for x in (v if isinstance(v, list) else [v])]

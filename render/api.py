@@ -214,6 +214,31 @@ class Renderer:
                                        self.flash.cos_exponent, self.options.max_depth, self.camera.width,
                                        self.camera.height)
 
+    def set_focus_distance(self, focus_distance_m: float) -> None:
+        """Refocus the lens (an autofocus following the target along an approach) without
+        rebuilding the scene: the camera model's values are opaque Dr.Jit variables, so the
+        compiled kernels are reused.
+
+        Parameters
+        ----------
+        focus_distance_m : float
+            Where the lens is focused, m (> 0).
+        """
+        from dataclasses import replace
+
+        f = float(check_finite(focus_distance_m, "focus_distance_m"))
+        if f <= 0:
+            raise InputError(f"focus_distance_m: expected a positive distance, got {focus_distance_m!r}")
+        if f == self.optics.focus_distance_m:
+            return
+        self.optics = replace(self.optics, focus_distance_m=f)
+        self.options = replace(self.options, focus_distance_m=f)
+        m = self.model
+        m.values[-1] = f
+        if m.jit:
+            m._k = self._mi.Float(m.values)
+            self._dr.make_opaque(m._k)
+
     # ------------------------------------------------------------------ geometry
     def predicted_spots_px(self, R_cam_target, t_cam_target_m) -> np.ndarray:
         """Geometric-optics spot centre of every target, averaged over the LEDs

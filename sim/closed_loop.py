@@ -289,14 +289,15 @@ def render_seed(truth: dict) -> int:
     return int((truth.get("render") or {}).get("seed", 0) or 0)
 
 
-def lab_flux(camera: Camera, scenario: Scenario) -> tuple[np.ndarray, dict]:
+def lab_flux(camera: Camera, scenario: Scenario, factor: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
     """Photon flux of the lab around the target: a flash-lit Lambertian backdrop and
     uniform ambient light, photons/s/px, with the parameters used.
 
     Backdrop radiance ``rho * I_flash / (pi * D^2)`` (D from the camera to the backdrop,
     the flash's on-axis intensity, its cos^m fall-off towards the field edge ignored),
     plus the ambient radiance; photons per pixel through the aperture from
-    :func:`render.optics.radiance_to_photon_rate`.
+    :func:`render.optics.radiance_to_photon_rate`; ``factor`` (photons/s/px per
+    W m^-2 sr^-1, shape (H, W)) is that conversion when the caller has it already.
     """
     from render.optics import Flash, Optics, pixel_normalized_grid, radiance_to_photon_rate
 
@@ -313,6 +314,8 @@ def lab_flux(camera: Camera, scenario: Scenario) -> tuple[np.ndarray, dict]:
                      "backdrop_radiance_w_m2_sr": Lb})
     if L == 0:
         return np.zeros((camera.height, camera.width), np.float32), info
+    if factor is not None:
+        return (L * np.asarray(factor, np.float32)).astype(np.float32), info
     # the per-pixel factor varies smoothly: evaluate on a coarse grid and interpolate
     import cv2
 
@@ -394,16 +397,17 @@ def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposu
 
 
 def solve_exposure(frame: Frame, ex, *, threshold=None, solver_camera_profile: Camera | None = None,
-                   truth: str = "commanded") -> dict:
+                   truth: str = "commanded", blobs=None) -> dict:
     """The SVGS chain on one exposure (:meth:`camera.phone.Exposer.expose`) of a frame: the row
-    of :func:`expose_and_solve` (``expose_s`` 0)."""
+    of :func:`expose_and_solve` (``expose_s`` 0). ``blobs``: the image's detections when the
+    caller has made them (:func:`svgs.pipeline.solve_image`)."""
     from svgs.pipeline import solve_image
 
     if truth not in ("commanded", "actual"):
         raise InputError(f"truth: expected 'commanded' or 'actual', got {truth!r}")
     t1 = time.perf_counter()
     cam = solver_camera(solver_camera_profile or frame.camera, ex.image.shape)
-    sol = solve_image(ex.image, cam, frame.scenario.pattern, threshold=threshold)
+    sol = solve_image(ex.image, cam, frame.scenario.pattern, threshold=threshold, blobs=blobs)
     t2 = time.perf_counter()
     R, t = frame.scenario.commanded_pose() if truth == "commanded" else frame.scenario.pose()
     truth_state = pose_to_state(R, t)

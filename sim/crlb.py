@@ -82,7 +82,8 @@ def _window_core_image(phone, cfa: bool, points, dx: float, dy: float, box, seed
     return out[PAD_PX:PAD_PX + (y1 - y0), PAD_PX:PAD_PX + (x1 - x0)]
 
 
-def centroid_crlb_px(frame, exposer, exposure, spots_px, *, window_half_px: int = WINDOW_HALF_PX) -> np.ndarray:
+def centroid_crlb_px(frame, exposer, exposure, spots_px, *, window_half_px: int = WINDOW_HALF_PX,
+                     draws: int = CRLB_DRAWS) -> np.ndarray:
     """Per-spot Cramer-Rao bound of the centroid, px (1 sigma per axis).
 
     Parameters
@@ -95,6 +96,9 @@ def centroid_crlb_px(frame, exposer, exposure, spots_px, *, window_half_px: int 
         Gives the exposure time and ISO.
     spots_px : ndarray, shape (N, 2)
         Where the spots are (solved or true targets), full-resolution px.
+    draws : int
+        PSF draws per shifted image and channel (:data:`CRLB_DRAWS`; the Monte Carlo error of
+        the bound goes as ``1 / sqrt(draws)``).
 
     Returns
     -------
@@ -135,7 +139,7 @@ def centroid_crlb_px(frame, exposer, exposure, spots_px, *, window_half_px: int 
         if x1 <= x0 or y1 <= y0:
             continue
         sl = (slice(y0, y1), slice(x0, x1))
-        d = [_window_core_image(phone, exposer.cfa, pts, dx, dy, (y0, y1, x0, x1), seed)
+        d = [_window_core_image(phone, exposer.cfa, pts, dx, dy, (y0, y1, x0, x1), seed, draws)
              for dx, dy in ((SHIFT_PX, 0.0), (-SHIFT_PX, 0.0), (0.0, SHIFT_PX), (0.0, -SHIFT_PX))]
         dmu_dx = k * (d[0] - d[1]) / (2 * SHIFT_PX)
         dmu_dy = k * (d[2] - d[3]) / (2 * SHIFT_PX)
@@ -166,15 +170,16 @@ def pose_crlb(solution, centroid_sigma_px: float) -> dict:
     return {k: float(v) for k, v in zip(STATE_KEYS, std)}
 
 
-def frame_crlb(frame, exposer, row) -> dict | None:
+def frame_crlb(frame, exposer, row, *, draws: int = CRLB_DRAWS) -> dict | None:
     """The bound of one solved frame: ``centroid_sigma_px`` (per spot and the RMS used) and
-    ``crlb_std`` per state component. None when the frame is unsolved or has no points."""
+    ``crlb_std`` per state component. None when the frame is unsolved or has no points.
+    ``draws``: see :func:`centroid_crlb_px`."""
     sol = row.get("_solution")
     if not row.get("ok") or sol is None or frame.points is None:
         return None
     ids = list(sol.targets_px)
     spots = np.array([sol.targets_px[i] for i in ids], float)
-    sig = centroid_crlb_px(frame, exposer, row["_exposure"], spots)
+    sig = centroid_crlb_px(frame, exposer, row["_exposure"], spots, draws=draws)
     finite = np.isfinite(sig)
     if not np.all(finite):
         return {"centroid_sigma_px": None, "per_spot_sigma_px": {str(i): s.tolist() for i, s in zip(ids, sig)},

@@ -23,6 +23,17 @@ def pattern():
     return Pattern.load("svgs-3u")
 
 
+@pytest.fixture(scope="session")
+def small_camera(tmp_path_factory):
+    """The Galaxy Nexus profile scaled to 648 x 486 (the same lens delivering a quarter-size
+    image): a path to its .toml, for rendered tests that need frames of about a second."""
+    from svgs import Camera
+
+    path = tmp_path_factory.mktemp("cam") / "nexus-small.toml"
+    Camera.load("galaxy-nexus").scaled(648, 486).replace(name="nexus-small").save(path)
+    return str(path)
+
+
 def random_envelope_poses(n, seed, range_m=(1.0, 40.0)):
     """Poses drawn over the paper's test envelope: range log-uniform, roll/pitch +/-25 deg,
     yaw +/-45 deg, lateral offsets up to +/-15 % of range. Returns (R (n,3,3), t (n,3))."""

@@ -10,7 +10,6 @@ import pytest
 
 from cli.json_out import SCHEMAS, clean, failures_from_text
 from cli.main import main
-from svgs import Camera
 
 STATE = {"x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg"}
 RUN = {"trials_run", "already_done", "elapsed_s", "executor"}
@@ -127,13 +126,6 @@ def test_calibrate_study_json(tmp_path, capsys):
     assert obj["outputs"]["pose_errors"].endswith("pose_errors.csv")
     assert {r["n_views"] for r in _csv(obj["outputs"]["calibration_convergence"])} == {"4", "8"}
     _same_as_summary_json(obj, out)
-
-
-@pytest.fixture(scope="module")
-def small_camera(tmp_path_factory):
-    path = tmp_path_factory.mktemp("cam") / "nexus-small.toml"
-    Camera.load("galaxy-nexus").scaled(648, 486).replace(name="nexus-small").save(path)
-    return str(path)
 
 
 @pytest.mark.render

@@ -43,7 +43,7 @@ def base_argv(cmd, parser, files, out_dir):
     values = {"image": files["img"], "images": [files["img"]], "camera": "tof-epc660" if tof else "galaxy-nexus",
               "range_m": "2" if tof else "5", "range": "5", "ranges": "5,10", "gray": [files["gray"]],
               "depth": [files["depth"]], "out": str(out_dir / "out"), "board": "chessboard", "cols": "9",
-              "rows": "6", "spacing_mm": "20", "views": "3"}
+              "rows": "6", "spacing_mm": "20", "views": "3", "fps": "1"}
     argv = list(cmd)
     for a in parser._actions:
         if isinstance(a, (argparse._HelpAction, argparse._SubParsersAction)):

@@ -17,5 +17,5 @@ def test_every_command_is_documented():
     text = (TOOL.parents[1] / "docs" / "cli.md").read_text()
     for cmd in ("solve", "render", "render-and-solve", "range-sweep", "exposure-study", "campaign", "sensitivity",
                 "calibrate focal", "calibrate board", "tof solve", "tof render-and-solve", "tof stability", "tof study",
-                "doctor"):
+                "doctor", "approach"):
         assert f"## `svgs {cmd}`" in text, cmd

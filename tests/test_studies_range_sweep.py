@@ -13,7 +13,7 @@ from cli.main import main
 from studies import exposure_study, range_sweep
 from studies.execution import ExecutorSpec
 from studies.store import RESULTS, read_rows
-from svgs import Camera, InputError
+from svgs import InputError
 
 #: Columns that are wall times (they differ from run to run).
 TIMINGS = ("wall_s", "cpu_s", "expose_s", "solve_s")
@@ -21,13 +21,6 @@ TIMINGS = ("wall_s", "cpu_s", "expose_s", "solve_s")
 
 def _numbers(rows):
     return [{k: v for k, v in r.items() if k not in TIMINGS} for r in rows]
-
-
-@pytest.fixture(scope="module")
-def small_camera(tmp_path_factory):
-    path = tmp_path_factory.mktemp("cam") / "nexus-small.toml"
-    Camera.load("galaxy-nexus").scaled(648, 486).replace(name="nexus-small").save(path)
-    return str(path)
 
 
 def _drop_rows(out_dir, trial_ids):

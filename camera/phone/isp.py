@@ -9,6 +9,7 @@ histogram of the per-pixel signal in 4096 log bins (exact to within one bin).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import cv2
@@ -21,7 +22,19 @@ from camera.tonemap import gamma_u8
 
 
 def metering_weights(shape, mode: str) -> np.ndarray:
-    """Metering weight map (sums to 1), float64, shape (H, W)."""
+    """Metering weight map (sums to 1), float64, shape (H, W); read-only (one map per shape and
+    mode is kept: a stream meters every frame with it)."""
+    return _metering_weights(tuple(int(x) for x in shape), str(mode))
+
+
+@functools.lru_cache(maxsize=8)
+def _metering_weights(shape, mode: str) -> np.ndarray:
+    w = _metering_weights_uncached(shape, mode)
+    w.setflags(write=False)
+    return w
+
+
+def _metering_weights_uncached(shape, mode: str) -> np.ndarray:
     H, W = shape
     if mode == "mean":
         return np.full(shape, 1.0 / (H * W))
@@ -129,6 +142,41 @@ def auto_exposure(flux_ph_s: np.ndarray, sensor: SensorParams, exp: ExposurePara
         "limited": bool(abs(lvl - target) > 0.01 * target),
         "exposure_product": t * iso / sensor.base_iso,
     }
+
+
+#: Share of the metered error, in log exposure, that the phone's auto-exposure corrects per
+#: frame when it runs on a stream (ASSUMPTION: phone 3A loops settle in a few frames rather than
+#: jumping to the new level; 0.5 leaves 10 % of a step change after 3.3 frames).
+AE_STREAM_GAIN = 0.5
+
+
+def exposure_limits(sensor: SensorParams, exp: ExposureParams) -> tuple[float, float]:
+    """Smallest and largest exposure product ``t * ISO / base_ISO`` the phone allows."""
+    return exp.min_exposure_s * exp.min_iso / sensor.base_iso, exp.max_exposure_s * exp.max_iso / sensor.base_iso
+
+
+def next_exposure(exposure_s: float, iso: float, metered_level: float, sensor: SensorParams, exp: ExposureParams,
+                  gain: float = AE_STREAM_GAIN) -> tuple[float, float]:
+    """The auto-exposure's settings for the next frame of a stream, from this frame's.
+
+    The metered level of the frame just taken (``metered_level``, 0..1, at ``exposure_s`` and
+    ``iso``) is compared with the target; the exposure product moves by ``gain`` of the error
+    in log units, ``S' = S (target / level)^gain``, within the phone's limits, and is split into
+    time first, then ISO (:func:`split_exposure`).
+
+    Returns
+    -------
+    exposure_s, iso : float
+    """
+    S = float(exposure_s) * float(iso) / sensor.base_iso
+    target = min(exp.target_level * 2.0**exp.compensation_ev, 1.0)
+    S_min, S_max = exposure_limits(sensor, exp)
+    if metered_level <= 0:
+        S_next = S_max
+    else:
+        S_next = S * (target / float(metered_level)) ** float(gain)
+    S_next = min(max(S_next, S_min), S_max)
+    return split_exposure(S_next, exp, sensor.base_iso)
 
 
 def tone_lut(sensor: SensorParams, gamma: float, tone: bool) -> np.ndarray:

@@ -16,6 +16,7 @@ Tables (all optional; a missing key takes the documented default, marked ASSUMPT
     anti_blooming_drain = 0.99    # fraction of the charge above full well that is drained
     bloom_direction = "isotropic" # or "column": where the rest spills (charge conserved)
     serial = 1                    # seed of the fixed patterns (DSNU, PRNU): one per camera
+    readout_time_s = 0.0          # rolling shutter: top-to-bottom row delay of a frame (0: global)
 
     [glare]                       # lens PSF = diffraction/aberration core + power-law wings
     aberration_sigma_px = 0.5     # Gaussian blur of the lens besides diffraction
@@ -110,6 +111,7 @@ class SensorParams:
     anti_blooming_drain: float = 0.99
     bloom_direction: str = "isotropic"
     serial: int = 1
+    readout_time_s: float = 0.0
 
     @property
     def white_dn(self) -> float:
@@ -132,7 +134,7 @@ class SensorParams:
         for k in ("full_well_e", "base_iso"):
             if k in t:
                 kw[k] = _num(T, k, t[k], lo=0, lo_open=True)
-        for k in ("read_noise_e", "dark_current_e_s", "dsnu_e", "prnu", "black_level_dn"):
+        for k in ("read_noise_e", "dark_current_e_s", "dsnu_e", "prnu", "black_level_dn", "readout_time_s"):
             if k in t:
                 kw[k] = _num(T, k, t[k], lo=0)
         if "adc_bits" in t:

@@ -1,0 +1,114 @@
+"""Benchmark (issue 15): frames per second of ``svgs approach`` and where a frame's time goes.
+
+Along a 20 -> 5 m straight approach of the Galaxy Nexus (and, with ``--camera``, any phone), at
+full resolution and at the 640 x 480 preview stream (:func:`camera.phone.preview.binned_camera`),
+each frame is rendered (Mitsuba, LLVM on the CPU), exposed through the phone (optics, metering,
+noise, ISP), detected, identified and solved, and its Cramer-Rao bound computed.
+
+Ours: :class:`sim.approach.ApproachSensor` (the scene, the lab's radiometric factor, the phone's
+sensor and the auto-exposure kept from frame to frame; the lens refocused each frame).
+Peer: the same frames as isolated poses, the path of ``svgs render-and-solve``
+(:func:`sim.closed_loop.render_scenario`, a fresh phone model and exposer, ``expose_and_solve``,
+:func:`sim.crlb.frame_crlb`), measured in the same run. Both compute the same numbers
+(``tests/test_sim_approach.py``). Prints each stage's mean time, frames/s and the ratio.
+
+Goal (issue 15): 2 frames/s at full resolution, 8 at preview, on the 2-core machine.
+
+Run: ``.venv/bin/python benchmarks/bench_approach.py [--frames N] [--camera NAME]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def ours(camera, traj, times):
+    from sim.approach import ApproachSensor
+
+    sensor = ApproachSensor(camera, seed=1)
+    sensor.measure_on(traj, float(times[0]))  # warm-up: kernels compiled, scene built
+    stages = {}
+    t0 = time.perf_counter()
+    solved = 0
+    for t in times[1:]:
+        m = sensor.measure_on(traj, float(t))
+        solved += m.ok
+        for k, v in m.timings_s.items():
+            stages[k] = stages.get(k, 0.0) + (v or 0.0)
+    wall = time.perf_counter() - t0
+    n = len(times) - 1
+    return wall / n, {k: v / n for k, v in stages.items()}, solved
+
+
+def peer(camera, traj, times):
+    from sim.closed_loop import Scenario, expose_and_solve, render_scenario
+    from sim.crlb import frame_crlb
+
+    base = Scenario(camera=camera if isinstance(camera, str) else camera.name)
+    stages = {"render": 0.0, "optics": 0.0, "expose+solve": 0.0, "crlb": 0.0}
+
+    def one(t, k):
+        sc = traj.scenario(float(t), base)
+        a = time.perf_counter()
+        fr = render_scenario(sc, seed=k)
+        b = time.perf_counter()
+        ex = fr.exposer()
+        c = time.perf_counter()
+        row = expose_and_solve(fr, ex, seed=k, truth="actual")
+        d = time.perf_counter()
+        frame_crlb(fr, ex, row)
+        e = time.perf_counter()
+        return b - a, c - b, d - c, e - d, row["ok"]
+
+    one(times[0], 0)
+    t0 = time.perf_counter()
+    solved = 0
+    for k, t in enumerate(times[1:], start=1):
+        parts = one(t, k)
+        for key, v in zip(stages, parts[:4]):
+            stages[key] += v
+        solved += parts[4]
+    wall = time.perf_counter() - t0
+    n = len(times) - 1
+    return wall / n, {k: v / n for k, v in stages.items()}, solved
+
+
+def main(argv=None):
+    from camera.phone.preview import binned_camera
+    from sim.approach import Trajectory
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--frames", type=int, default=6, help="timed frames per run (default 6, after one warm-up)")
+    ap.add_argument("--camera", default="galaxy-nexus")
+    args = ap.parse_args(argv)
+    traj = Trajectory.straight(20.0, 5.0, 10.0)
+    times = np.linspace(0.0, 10.0, args.frames + 1)
+    # the peer needs a profile it can load by name: the preview profile is written to a file
+    import tempfile
+
+    tmp = Path(tempfile.mkdtemp())
+    prev = binned_camera(args.camera)
+    prev_path = str(prev.save(tmp / f"{prev.name}.toml"))
+    print(f"svgs approach, {args.camera}, 20 -> 5 m, {args.frames} timed frames after one warm-up (2-core CPU, "
+          "Mitsuba LLVM)")
+    for label, cam in (("full resolution", args.camera), ("preview 640x480", prev_path)):
+        o_s, o_st, o_ok = ours(cam, traj, times)
+        p_s, p_st, p_ok = peer(cam, traj, times)
+        print(f"\n{label}:")
+        print("  ours (ApproachSensor):   " + ", ".join(f"{k} {v:.3f} s" for k, v in o_st.items())
+              + f"  -> {o_s:.3f} s/frame = {1 / o_s:.2f} frames/s ({o_ok}/{args.frames} solved)")
+        print("  peer (isolated poses):   " + ", ".join(f"{k} {v:.3f} s" for k, v in p_st.items())
+              + f"  -> {p_s:.3f} s/frame = {1 / p_s:.2f} frames/s ({p_ok}/{args.frames} solved)")
+        print(f"  ratio ours / peer (frames/s): {p_s / o_s:.2f}x;  goal {'2' if label.startswith('full') else '8'} "
+              f"frames/s: {'met' if 1 / o_s >= (2 if label.startswith('full') else 8) else 'NOT met'}")
+
+
+if __name__ == "__main__":
+    main()

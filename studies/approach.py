@@ -1,0 +1,334 @@
+"""``svgs approach``: a docking approach simulated frame by frame, as a resumable study.
+
+Writes into ``out``:
+
+- ``manifest.json`` and ``results.csv``: the crash-safe store (:mod:`studies.store`): one row per
+  finished frame, appended and fsynced as it finishes; a rerun with the same parameters continues
+  where a killed run stopped (the auto-exposure state is read back from the last stored frame),
+  and a rerun with other parameters is refused before any work;
+- ``frames/NNNNN.jpg``: each frame's overlay (what the video is made of);
+- ``measurements.csv``: one row per frame, in time order (:data:`sim.approach.MEASUREMENT_COLUMNS`);
+- ``approach.mp4`` (OpenCV ``VideoWriter``, codec ``mp4v``, MPEG-4 Part 2; where the OpenCV build
+  cannot write it, ``approach.avi`` with Motion-JPEG, and the summary says which);
+- ``approach.png``: the errors against time and range, with the CRLB bands and the dropouts;
+- ``summary.json``: frames, solved, failures by reason, RMS error per component over range bins,
+  where the time went.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from svgs.errors import InputError
+from svgs.frames import STATE_KEYS
+
+from sim.approach import MEASUREMENT_COLUMNS, TIMING_KEYS, ApproachSensor, Trajectory, check_visible
+from studies.progress import progress_bar
+from studies.store import ResultStore
+
+#: Range bins of the summary's RMS errors, m (edges; the last bin is open).
+RANGE_BIN_EDGES_M = (0.0, 2.0, 5.0, 10.0, 15.0, 20.0, 30.0, 40.0)
+#: Size of a video frame, px (width, height): each frame's overlay, letterboxed.
+VIDEO_SIZE_PX = (960, 720)
+#: Slowest playback of the video, frames/s (slower approaches play faster than real time).
+MIN_VIDEO_FPS = 2.0
+FRAMES_DIR = "frames"
+TEXT_COLUMNS = ("reason",)
+
+
+def make_config(camera: str, trajectory: Trajectory, fps: float, *, seed: int = 0, preview: bool = False,
+                motion: bool = True, crlb: bool = True, pattern: str = "svgs-3u") -> dict:
+    """The approach's parameters (the store's manifest): what decides the numbers."""
+    return {"study": "approach", "camera": str(camera), "pattern": str(pattern), "fps": float(fps), "seed": int(seed),
+            "preview": bool(preview), "motion": bool(motion), "crlb": bool(crlb), "trajectory": trajectory.to_json()}
+
+
+def sensor_camera(cfg: dict):
+    """The camera the sensor images through: the profile, or its binned preview stream."""
+    from svgs.profiles import Camera
+
+    if cfg["preview"]:
+        from camera.phone.preview import binned_camera
+
+        return binned_camera(cfg["camera"])
+    return Camera.load(cfg["camera"])
+
+
+def trajectory_of(cfg: dict) -> Trajectory:
+    t = cfg["trajectory"]
+    return Trajectory(np.array(t["t_s"]), np.array(t["values"]), t["mount"], t["source"])
+
+
+def check_config(cfg: dict) -> np.ndarray:
+    """Everything checked before any rendering: the camera, the frames, the poses. Returns the
+    frame times."""
+    cam = sensor_camera(cfg)
+    for t in ("optics", "flash"):
+        cam.table(t)
+    traj = trajectory_of(cfg)
+    times = traj.frame_times(cfg["fps"])
+    check_visible(traj, times, cam, cfg["pattern"])
+    return times
+
+
+def _overlay(m, cam, pattern, title: str) -> np.ndarray:
+    """A video frame: the delivered image's overlay, letterboxed to :data:`VIDEO_SIZE_PX`."""
+    import cv2
+
+    from svgs.overlay import render_overlay
+
+    sol = m.solution
+    targets = {str(k): [float(x) for x in v] for k, v in (sol.targets_px.items() if sol else [])}
+    reproj = {}
+    if sol:
+        uv = cam.project_target(pattern.points_m, sol.R_cam_target, sol.t_cam_target_m)
+        reproj = {str(int(i)): [float(a), float(b)] for i, (a, b) in zip(pattern.ids, uv)}
+    pic = render_overlay(m.image, blobs_px=m.blobs_px if m.blobs_px is not None else (), targets_px=targets,
+                         reprojected_px=reproj, title=title, size_px=min(VIDEO_SIZE_PX) - 40)
+    W, H = VIDEO_SIZE_PX
+    s = min(W / pic.shape[1], H / pic.shape[0])
+    pic = cv2.resize(pic, (max(1, int(pic.shape[1] * s)), max(1, int(pic.shape[0] * s))), interpolation=cv2.INTER_AREA)
+    canvas = np.zeros((H, W, 3), np.uint8)
+    y0, x0 = (H - pic.shape[0]) // 2, (W - pic.shape[1]) // 2
+    canvas[y0:y0 + pic.shape[0], x0:x0 + pic.shape[1]] = pic
+    return canvas
+
+
+def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, command: str | None = None) -> dict:
+    """Run (or continue) an approach into ``out_dir`` and write its outputs.
+
+    Parameters
+    ----------
+    cfg : dict
+        From :func:`make_config`.
+    out_dir : str or Path
+    progress : bool
+        A progress bar on stderr.
+    on_frame : callable, optional
+        Called with each new :class:`sim.approach.Measurement` (tests).
+    command : str, optional
+        The command line that made the run, for ``report.md``.
+
+    Returns
+    -------
+    dict
+        The summary (:func:`summarise`) with ``outputs`` and ``run`` (frames run now, reused).
+    """
+    import cv2
+
+    from svgs.profiles import Pattern
+
+    times = check_config(cfg)
+    out = Path(out_dir)
+    ids = range(len(times))
+    store = ResultStore(out, cfg, ("trial_id",) + MEASUREMENT_COLUMNS, trial_ids=ids, text_columns=TEXT_COLUMNS)
+    cam = sensor_camera(cfg)
+    pattern = Pattern.load(cfg["pattern"])
+    traj = trajectory_of(cfg)
+    t_start = time.perf_counter()
+    n_new = 0
+    with store.open():
+        done = store.done_ids
+        todo = [k for k in ids if k not in done]
+        if todo and todo != list(range(todo[0], len(times))):
+            raise InputError(f"--out {str(out)!r}: the stored frames have a gap before frame {todo[0]}; a stream can "
+                             "only continue from its last frame (remove the folder to start again)")
+        frames_dir = out / FRAMES_DIR
+        frames_dir.mkdir(exist_ok=True)
+        if todo:
+            sensor = ApproachSensor(cam, cfg["pattern"], seed=cfg["seed"], motion=cfg["motion"], crlb=cfg["crlb"],
+                                    keep_images=True)
+            if todo[0] > 0:
+                last = {r["trial_id"]: r for r in store.read_rows()}[todo[0] - 1]
+                sensor.restore(todo[0], last["next_exposure_s"], last["next_iso"])
+            with progress_bar(len(todo), f"approach {cfg['camera']}", progress, unit="frame") as bar:
+                for k in todo:
+                    m = sensor.measure_on(traj, float(times[k]))
+                    title = (f"t = {m.t_s:7.2f} s  range {m.range_m:6.2f} m  "
+                             + ("SOLVED" if m.ok else f"NO SOLUTION ({m.reason})")
+                             + f"  exposure {m.exposure_s * 1e3:.2f} ms ISO {m.iso:.0f}")
+                    cv2.imwrite(str(frames_dir / f"{k:05d}.jpg"), _overlay(m, cam, pattern, title),
+                                [cv2.IMWRITE_JPEG_QUALITY, 90])
+                    store.append([{"trial_id": k, **m.row()}])
+                    n_new += 1
+                    if on_frame is not None:
+                        on_frame(m)
+                    bar.update(1)
+        rows = store.read_rows()
+    wall = time.perf_counter() - t_start
+    summary = summarise(rows, cfg)
+    summary["run"] = {"frames_run": n_new, "frames_reused": len(rows) - n_new, "wall_s": wall}
+    summary["outputs"] = write_outputs(rows, cfg, out)
+    summary["outputs"]["report"] = str(write_report(summary, out / "report.md", command))
+    (out / "summary.json").write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n")
+    return summary
+
+
+def _num(v):
+    return None if v is None or (isinstance(v, float) and math.isnan(v)) else v
+
+
+def summarise(rows: list[dict], cfg: dict) -> dict:
+    """frames, solved, failures by reason, RMS error per component over range bins, timings."""
+    n = len(rows)
+    ok = [r for r in rows if int(r["ok"]) == 1]
+    reasons: dict = {}
+    for r in rows:
+        if int(r["ok"]) != 1:
+            reasons[r["reason"] or "unknown"] = reasons.get(r["reason"] or "unknown", 0) + 1
+    bins = []
+    edges = list(RANGE_BIN_EDGES_M) + [math.inf]
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        inbin = [r for r in rows if lo <= float(r["range_m"]) < hi]
+        if not inbin:
+            continue
+        sol = [r for r in inbin if int(r["ok"]) == 1]
+        b = {"range_m": [lo, None if math.isinf(hi) else hi], "frames": len(inbin), "solved": len(sol)}
+        for k in STATE_KEYS:
+            e = np.array([float(r[f"err_{k}"]) for r in sol], float)
+            c = np.array([float(r[f"crlb_{k}"]) for r in sol if _num(r[f"crlb_{k}"]) is not None], float)
+            b[f"rms_err_{k}"] = float(np.sqrt(np.mean(e**2))) if e.size else None
+            b[f"mean_err_{k}"] = float(np.mean(e)) if e.size else None
+            b[f"rms_crlb_{k}"] = float(np.sqrt(np.mean(c**2))) if c.size else None
+        bins.append(b)
+    timing = {}
+    for k in TIMING_KEYS:
+        v = [float(r[f"{k}_s"]) for r in rows if _num(r.get(f"{k}_s")) is not None]
+        timing[f"mean_{k}_s"] = float(np.mean(v)) if v else None
+    per_frame = sum(v for v in timing.values() if v is not None)
+    timing["mean_frame_s"] = per_frame
+    timing["frames_per_s"] = 1.0 / per_frame if per_frame > 0 else None
+    solved_ranges = [float(r["range_m"]) for r in ok]
+    return {
+        "camera": cfg["camera"], "preview": cfg["preview"], "fps": cfg["fps"], "seed": cfg["seed"],
+        "trajectory": cfg["trajectory"]["source"], "frames": n, "solved": len(ok),
+        "solved_fraction": len(ok) / n if n else 0.0, "failures": reasons,
+        "solved_range_m": [min(solved_ranges), max(solved_ranges)] if solved_ranges else None,
+        "rms_by_range": bins, "timing": timing,
+    }
+
+
+def write_outputs(rows: list[dict], cfg: dict, out: Path) -> dict:
+    """measurements.csv, the video and approach.png from the stored rows; returns their paths."""
+    import csv
+
+    paths = {}
+    p = out / "measurements.csv"
+    with open(p, "w", newline="") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(MEASUREMENT_COLUMNS)
+        for r in sorted(rows, key=lambda r: r["frame"]):
+            w.writerow(["" if _num(r.get(c)) is None else r[c] for c in MEASUREMENT_COLUMNS])
+    paths["measurements"] = str(p)
+    paths.update(write_video(out, cfg["fps"], len(rows)))
+    paths["plot"] = str(plot_approach(rows, cfg, out / "approach.png"))
+    return paths
+
+
+def write_video(out: Path, fps: float, n: int) -> dict:
+    """The frames' overlays as a video: ``approach.mp4`` (mp4v), else ``approach.avi`` (MJPG)."""
+    import cv2
+
+    frames = [out / FRAMES_DIR / f"{k:05d}.jpg" for k in range(n)]
+    rate = max(float(fps), MIN_VIDEO_FPS)
+    for name, fourcc, codec in (("approach.mp4", "mp4v", "mp4v (MPEG-4 Part 2)"),
+                                ("approach.avi", "MJPG", "MJPG (Motion-JPEG)")):
+        path = out / name
+        vw = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), rate, VIDEO_SIZE_PX)
+        if not vw.isOpened():
+            vw.release()
+            continue
+        try:
+            for f in frames:
+                img = cv2.imread(str(f))
+                if img is None:
+                    raise InputError(f"video: frame picture {str(f)!r} is missing or unreadable; rerun the approach")
+                vw.write(img)
+        finally:
+            vw.release()
+        if path.exists() and path.stat().st_size > 0:
+            return {"video": str(path), "video_codec": codec, "video_fps": rate}
+    return {"video": None, "video_codec": "none: this OpenCV build writes neither mp4v nor MJPG", "video_fps": rate}
+
+
+def write_report(s: dict, path: Path, command: str | None) -> Path:
+    """``report.md``: the command, what was solved, the RMS errors per range bin beside the CRLB,
+    the plot and the video."""
+    lines = [f"# Approach: {s['camera']}{' (preview stream)' if s['preview'] else ''}", ""]
+    if command:
+        lines += ["Regenerate with:", "", "```", command, "```", ""]
+    lines += [f"Trajectory: {s['trajectory']}; {s['frames']} frames at {s['fps']:g} frames/s, seed {s['seed']}.", "",
+              f"**Solved {s['solved']} of {s['frames']} frames** ({100 * s['solved_fraction']:.0f} %)"
+              + (f", from {s['solved_range_m'][1]:.2f} m down to {s['solved_range_m'][0]:.2f} m" if s["solved_range_m"] else "")
+              + "." + (" Failures: " + ", ".join(f"`{k}` {v}" for k, v in sorted(s["failures"].items())) + "."
+                       if s["failures"] else ""), "",
+              "RMS error (estimate - truth) per range bin, and in brackets the RMS of the frames' 1-sigma CRLB:", "",
+              "| range, m | frames | solved | " + " | ".join(STATE_KEYS) + " |",
+              "|---|---|---|" + "---|" * len(STATE_KEYS)]
+    for b in s["rms_by_range"]:
+        lo, hi = b["range_m"]
+        cells = []
+        for k in STATE_KEYS:
+            e, c = b[f"rms_err_{k}"], b[f"rms_crlb_{k}"]
+            cells.append("-" if e is None else f"{e:.4g}" + ("" if c is None else f" ({c:.2g})"))
+        lines.append(f"| {lo:g}-{'' if hi is None else f'{hi:g}'} | {b['frames']} | {b['solved']} | " + " | ".join(cells) + " |")
+    t = s["timing"]
+    lines += ["", "Mean time per frame on the machine that ran it: " + ", ".join(
+        f"{k[5:-2]} {t[k]:.2f} s" for k in t if k.startswith("mean_") and k != "mean_frame_s" and t[k] is not None)
+        + f" ({t['frames_per_s']:.2f} frames/s).", "",
+        "![errors against time and range](approach.png)", ""]
+    o = s["outputs"]
+    if o.get("video"):
+        lines += [f"Video of the delivered frames with overlays: [{Path(o['video']).name}]({Path(o['video']).name}) "
+                  f"({o['video_codec']}, {o['video_fps']:g} frames/s).", ""]
+    lines += ["Each frame's row (truth, estimate, error, CRLB, settings, timings): [measurements.csv](measurements.csv).", ""]
+    path.write_text("\n".join(lines))
+    return path
+
+
+def plot_approach(rows: list[dict], cfg: dict, path: Path) -> Path:
+    """Errors against time (left) and range (right), +-1-sigma CRLB bands, dropouts marked."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    rows = sorted(rows, key=lambda r: r["frame"])
+    t = np.array([float(r["t_s"]) for r in rows])
+    rng = np.array([float(r["range_m"]) for r in rows])
+    ok = np.array([int(r["ok"]) == 1 for r in rows])
+    fig = Figure(figsize=(12, 14), constrained_layout=True)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(len(STATE_KEYS), 2, sharex="col")
+    for i, k in enumerate(STATE_KEYS):
+        e = np.array([float(r[f"err_{k}"]) if ok[j] else np.nan for j, r in enumerate(rows)])
+        c = np.array([float(r[f"crlb_{k}"]) if ok[j] and _num(r[f"crlb_{k}"]) is not None else np.nan
+                      for j, r in enumerate(rows)])
+        unit = "deg" if k.endswith("_deg") else "m"
+        scale = 1.0 if unit == "deg" else 1000.0
+        lab = k.replace("_deg", "").replace("_m", "") + (" error, deg" if unit == "deg" else " error, mm")
+        for col, x in enumerate((t, rng)):
+            ax = axes[i, col]
+            order = np.argsort(x)
+            ax.fill_between(x[order], -c[order] * scale, c[order] * scale, color="tab:green", alpha=0.3, lw=0,
+                            label="+-1-sigma CRLB")
+            ax.plot(x[order], e[order] * scale, ".-", ms=3, lw=0.8, color="tab:blue", label="estimate - truth")
+            ax.axhline(0, color="k", lw=0.5)
+            for xd in x[~ok]:
+                ax.axvline(xd, color="tab:red", alpha=0.25, lw=1)
+            ax.set_ylabel(lab)
+            if i == 0:
+                ax.set_title(("against time" if col == 0 else "against range")
+                             + f" ({int((~ok).sum())} dropouts in red)")
+                ax.legend(loc="best", fontsize=8)
+    axes[-1, 0].set_xlabel("t, s")
+    axes[-1, 1].set_xlabel("range, m")
+    if rng.size and rng[0] > rng[-1]:
+        axes[-1, 1].invert_xaxis()
+    fig.suptitle(f"svgs approach: {cfg['camera']}{' (preview)' if cfg['preview'] else ''}, {len(rows)} frames at "
+                 f"{cfg['fps']:g} fps, {int(ok.sum())} solved\n{cfg['trajectory']['source']}", fontsize=10)
+    fig.savefig(path, dpi=80)
+    return path

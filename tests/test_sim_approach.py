@@ -1,0 +1,257 @@
+"""svgs approach: trajectories checked on input, the sensor frame by frame, motion, the preview
+stream, the command's outputs and its resumption.
+
+The physics references are analytic: a uniform smear's centroid and variance, a rolling
+shutter's row delay, the photons of a binned pixel, the auto-exposure's fixed point from the
+metering solver. The sensor's frame is checked against the isolated-pose chain
+(:func:`sim.closed_loop.render_scenario` + :func:`sim.closed_loop.expose_and_solve`), which it
+must equal: keeping the renderer, the sensor and the exposure between frames is a saving of
+time, never a change of numbers. Rendered tests use the Galaxy Nexus scaled to 648 x 486."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from cli.main import main
+from sim.approach import ApproachSensor, Trajectory, check_visible, scenario_from_pose
+from sim.closed_loop import Scenario
+from svgs import Camera, InputError
+
+
+def _rows(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _write(path, text):
+    path.write_text(text)
+    return str(path)
+
+
+# ----------------------------------------------------------------------------- trajectory files
+BAD_FILES = [
+    ("", "empty file"),
+    ("x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,0,10,0,0,0\n", "no t_s column"),
+    ("t_s,a,b\n0,1,2\n1,1,2\n", "neither the paper state"),
+    ("t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,0,0,10,0,0,0\n", "at least 2 rows"),
+    ("t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,0,0,10,0,0,0\n1,0,0,abc,0,0,0\n", "row 3, column z_m"),
+    ("t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,0,0,10,0,0,0\n1,0,0,nan,0,0,0\n", "not finite"),
+    ("t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,0,0,10,0,0,0\n0,0,0,9,0,0,0\n", "increase strictly"),
+    ("t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,0,0,10,0,0,0\n1,0,0,9,0,0\n", "row 3 has 6 fields"),
+    # the camera 10 m on the target's far side: the target faces away, its origin behind the camera
+    ("t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,0,0,10,0,0,0\n1,0,0,-10,0,0,0\n", "behind the camera"),
+]
+
+
+@pytest.mark.parametrize("text,message", BAD_FILES)
+def test_bad_trajectory_files_are_refused_naming_the_problem(tmp_path, text, message):
+    with pytest.raises(InputError, match=message):
+        Trajectory.load(_write(tmp_path / "t.csv", text))
+
+
+def test_missing_trajectory_file(tmp_path):
+    with pytest.raises(InputError, match="no such file"):
+        Trajectory.load(tmp_path / "nope.csv")
+
+
+def test_state_file_gives_the_paper_pose_at_its_knots(tmp_path):
+    """A paper-state row is the camera's position in the target frame: its pose is
+    svgs.frames.state_to_pose's, whatever the interpolation between knots."""
+    from svgs.frames import state_to_pose
+
+    rows = [(0.0, 0.1, -0.2, 12.0, 2.0, -3.0, 5.0), (4.0, 0.0, 0.05, 6.0, 0.0, 1.0, 0.0)]
+    text = "t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n" + "".join(",".join(map(str, r)) + "\n" for r in rows)
+    traj = Trajectory.load(_write(tmp_path / "s.csv", text))
+    assert traj.mount == "target"
+    for r in rows:
+        R, t = traj.scenario(r[0], Scenario()).pose()
+        R0, t0 = state_to_pose(np.array([*r[1:4], *np.deg2rad(r[4:7])]))
+        np.testing.assert_allclose(R, R0, atol=1e-12)
+        np.testing.assert_allclose(t, t0, atol=1e-12)
+
+
+def test_stand_file_uses_the_test_stand_chain(tmp_path):
+    from sim.stand import TestStand
+
+    text = "t_s,rail_m,stage_m,roll_deg,pitch_deg,yaw_deg\n0,10,0.1,0,5,-10\n2,8,0,0,0,0\n"
+    traj = Trajectory.load(_write(tmp_path / "s.csv", text))
+    assert traj.mount == "stand"
+    R, t = traj.scenario(0.0, Scenario()).pose()
+    R0, t0 = TestStand().pose(10.0, stage_m=0.1, roll_deg=0.0, pitch_deg=5.0, yaw_deg=-10.0)
+    np.testing.assert_allclose(R, R0)
+    np.testing.assert_allclose(t, t0)
+    mid = traj.at(1.0)
+    assert mid["range_m"] == pytest.approx(9.0) and mid["yaw_deg"] == pytest.approx(-5.0)
+
+
+def test_scenario_from_pose_round_trips(nexus):
+    from svgs.frames import pose_from_scenario
+
+    R, t = pose_from_scenario(7.0, 0.2, -0.3, 4.0, -6.0, 20.0)
+    sc = scenario_from_pose(R, t, Scenario())
+    R2, t2 = sc.pose()
+    np.testing.assert_allclose(R2, R, atol=1e-12)
+    np.testing.assert_allclose(t2, t, atol=1e-12)
+
+
+def test_poses_the_camera_cannot_see_are_refused(nexus, pattern):
+    traj = Trajectory.straight(10.0, 2.0, 4.0, lateral_m=(6.0, 0.0))  # 6 m off the boresight at 10 m: out of view (5.3 m)
+    with pytest.raises(InputError, match=r"at t = 0 s: target\(s\) .* fall outside"):
+        check_visible(traj, traj.frame_times(1.0), nexus, pattern)
+    check_visible(Trajectory.straight(10.0, 2.0, 4.0), np.arange(5.0), nexus, pattern)
+
+
+def test_frame_times_and_their_limit():
+    traj = Trajectory.straight(20.0, 5.0, 10.0)
+    np.testing.assert_allclose(traj.frame_times(1.0), np.arange(11.0))
+    with pytest.raises(InputError, match="at most"):
+        traj.frame_times(1e5)
+
+
+# ----------------------------------------------------------------------------- motion (analytic)
+def test_global_shutter_smear_is_uniform_about_the_timestamp():
+    """A spot moving at v px/s exposed for T s: the samples spread uniformly over v*T about the
+    spot's position at the timestamp (mean unchanged, variance (vT)^2/12)."""
+    from camera.rendered import PointFlux
+
+    n = 200000
+    pts = PointFlux(np.full(n, 100.0), np.full(n, 50.0), np.ones(n))
+    moved = pts.moved(np.array([400.0, -100.0]), 0.01, 0.0, 101, np.random.default_rng(1))
+    du, dv = moved.u_px - 100.0, moved.v_px - 50.0
+    assert abs(du.mean()) < 4.0 * 4.0 / np.sqrt(12 * n) * 3 and abs(dv.mean()) < 0.01
+    assert du.var() == pytest.approx(4.0**2 / 12, rel=0.02) and dv.var() == pytest.approx(1.0**2 / 12, rel=0.02)
+    assert du.min() >= -2.0 and du.max() <= 2.0
+
+
+def test_rolling_shutter_delays_rows_by_the_readout():
+    """Zero exposure: a sample on row v is taken (v - (H - 1) / 2) / H * readout after the centre row."""
+    from camera.rendered import PointFlux
+
+    H, readout, vel = 1000, 0.03, 50.0
+    rows = np.array([0.0, 499.5, 999.0])
+    pts = PointFlux(np.zeros(3), rows, np.ones(3))
+    moved = pts.moved(np.array([vel, 0.0]), 0.0, readout, H, np.random.default_rng(0))
+    np.testing.assert_allclose(moved.u_px, vel * (rows - 499.5) / H * readout, atol=1e-12)
+    np.testing.assert_allclose(moved.v_px, rows)
+
+
+# ----------------------------------------------------------------------------- preview and exposure
+def test_binned_preview_collects_the_photons_of_its_pixels():
+    """The preview's pixel gets the light of s^2 picture pixels (same radiance, same lens): the lab
+    flux summed over the frame is the same in both streams."""
+    from camera.phone.preview import binned_camera
+    from sim.closed_loop import lab_flux
+
+    full = Camera.load("galaxy-nexus")
+    prev = binned_camera(full, 648, 486)
+    sc = Scenario(backdrop_distance_m=None, ambient_radiance_w_m2_sr=0.01)
+    a, _ = lab_flux(full, sc)
+    b, _ = lab_flux(prev, sc)
+    assert b.sum() == pytest.approx(a.sum(), rel=0.01)
+    assert b.mean() == pytest.approx(16.0 * a.mean(), rel=0.01)
+    with pytest.raises(InputError, match="aspect ratio"):
+        binned_camera(full, 640, 640)
+
+
+def test_stream_auto_exposure_settles_where_the_one_shot_does():
+    """The carried-over exposure converges on a static scene to the phone's one-shot solution
+    (camera.phone.isp.ExposureSolver.solve), from a start 8x too long."""
+    from camera.phone.isp import ExposureSolver, exposure_limits, next_exposure, split_exposure
+    from camera.phone.params import ExposureParams, SensorParams
+
+    sensor = SensorParams()
+    exp = ExposureParams(metering="mean", target_level=0.18)
+    rng = np.random.default_rng(2)
+    rate = rng.lognormal(0.0, 1.0, (60, 80)) * 20.0  # fraction of white per second at base ISO
+    solver = ExposureSolver(rate, np.full(rate.shape, 1.0 / rate.size))
+    S_star = solver.solve(0.18, *exposure_limits(sensor, exp))
+    t, iso = split_exposure(8 * S_star, exp, sensor.base_iso)
+    for _ in range(30):
+        t, iso = next_exposure(t, iso, solver.level(t * iso / sensor.base_iso), sensor, exp)
+    assert t * iso / sensor.base_iso == pytest.approx(S_star, rel=1e-3)
+
+
+# ----------------------------------------------------------------------------- rendered
+@pytest.mark.render
+def test_sensor_frame_equals_the_isolated_pose_chain(small_camera):
+    """Frame 0 of a stream (no motion) is render_scenario + expose_and_solve with the same seeds
+    and exposure: the kept renderer, sensor and lab factor change no number."""
+    from sim.closed_loop import expose_and_solve, render_scenario
+
+    traj = Trajectory.straight(6.0, 4.0, 2.0, attitude_deg=(0.0, 3.0, -5.0))
+    sensor = ApproachSensor(small_camera, seed=5, motion=False, crlb=False, keep_images=True)
+    m0 = sensor.measure_on(traj, 0.0)
+    m1 = sensor.measure_on(traj, 1.0)
+    rs, ns, _ = sensor._frame_seeds(1)
+    sc = traj.scenario(1.0, Scenario(camera=small_camera))
+    frame = render_scenario(sc, seed=rs)
+    row = expose_and_solve(frame, frame.exposer(), seed=ns, exposure_s=m1.exposure_s, iso=m1.iso, truth="actual")
+    np.testing.assert_array_equal(row["_exposure"].image, m1.image)
+    assert m0.ok and m1.ok and row["ok"]
+    for k, v in row["state"].items():
+        assert m1.estimate[k] == pytest.approx(v, abs=1e-12)
+
+
+@pytest.mark.render
+def test_approach_command_writes_its_outputs_and_resumes(small_camera, tmp_path, capsys):
+    out = tmp_path / "run"
+    argv = ["approach", "--camera", small_camera, "--from", "8", "--to", "5", "--duration", "2", "--fps", "1",
+            "--out", str(out), "--json", "--no-progress"]
+    assert main(argv) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["frames"] == 3 and s["solved"] >= 2 and s["run"]["frames_run"] == 3
+    rows = _rows(out / "measurements.csv")
+    assert [float(r["t_s"]) for r in rows] == [0.0, 1.0, 2.0]
+    assert {"true_z_m", "est_z_m", "err_yaw_deg", "crlb_yaw_deg", "ok", "reason", "solve_s"} <= set(rows[0])
+    solved = [r for r in rows if r["ok"] == "1"]
+    assert all(float(r["crlb_z_m"]) > 0 for r in solved)
+    assert (out / "approach.png").stat().st_size > 0 and s["outputs"]["video"] and s["outputs"]["video_codec"]
+    import cv2
+
+    cap = cv2.VideoCapture(s["outputs"]["video"])
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 3
+    cap.release()
+
+    # a run killed after frame 1: the rerun makes frame 2 only, with the same numbers
+    res = out / "results.csv"
+    lines = res.read_text().splitlines(keepends=True)
+    res.write_text("".join(lines[:-1]))
+    assert main(argv) == 0
+    s2 = json.loads(capsys.readouterr().out)
+    assert s2["run"] == {**s2["run"], "frames_run": 1, "frames_reused": 2}
+    rows2 = _rows(out / "measurements.csv")
+    timing = {c for c in rows[0] if c.endswith("_s") and c != "t_s" and c not in ("exposure_s", "next_exposure_s")}
+    assert [{k: v for k, v in r.items() if k not in timing} for r in rows2] == \
+        [{k: v for k, v in r.items() if k not in timing} for r in rows]
+
+    # other parameters into the same folder: refused before any work
+    assert main(argv[:-4] + ["--fps", "2", "--out", str(out), "--no-progress"]) == 2
+    assert "differ" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("extra,message", [
+    (["--trajectory", "T", "--from", "5"], "not both"),
+    (["--from", "5", "--to", "2"], "needs all three"),
+    (["--from", "5", "--to", "2", "--duration", "1", "--lateral", "1"], "--lateral"),
+    (["--from", "5", "--to", "2", "--duration", "1", "--fps", "1e6"], "at most"),
+    (["--from", "5", "--to", "2", "--duration", "1", "--lateral", "4,0"], "outside"),
+    (["--from", "-5", "--to", "2", "--duration", "1"], "--from"),
+    (["--from", "5", "--to", "2", "--duration", "0"], "--duration"),
+])
+def test_approach_bad_input_exits_2_before_any_work(tmp_path, capsys, extra, message):
+    out = tmp_path / "never"
+    traj = _write(tmp_path / "T", "t_s,x_m\n0,1\n")
+    extra = [traj if a == "T" else a for a in extra]
+    fps = [] if "--fps" in extra else ["--fps", "1"]
+    assert main(["approach", "--camera", "galaxy-nexus", *extra, *fps, "--out", str(out)]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_approach_bad_trajectory_file_exits_2(tmp_path, capsys):
+    bad = _write(tmp_path / "t.csv", BAD_FILES[6][0])
+    out = tmp_path / "never"
+    assert main(["approach", "--trajectory", bad, "--fps", "1", "--out", str(out)]) == 2
+    assert "increase strictly" in capsys.readouterr().err and not out.exists()
