@@ -6,11 +6,14 @@ each frame is rendered (Mitsuba, LLVM on the CPU), exposed through the phone (op
 noise, ISP), detected, identified and solved, and its Cramer-Rao bound computed.
 
 Ours: :class:`sim.approach.ApproachSensor` (the scene, the lab's radiometric factor, the phone's
-sensor and the auto-exposure kept from frame to frame; the lens refocused each frame).
+sensor and the auto-exposure kept from frame to frame; the lens refocused each frame), without
+motion so that both sides make the same frames.
 Peer: the same frames as isolated poses, the path of ``svgs render-and-solve``
 (:func:`sim.closed_loop.render_scenario`, a fresh phone model and exposer, ``expose_and_solve``,
-:func:`sim.crlb.frame_crlb`), measured in the same run. Both compute the same numbers
-(``tests/test_sim_approach.py``). Prints each stage's mean time, frames/s and the ratio.
+:func:`sim.crlb.frame_crlb` with the sensor's :data:`sim.approach.CRLB_DRAWS`), measured in the
+same run. Without motion a frame of ours is the peer's frame for the same seeds
+(``tests/test_sim_approach.py``); the seeds differ here, the work does not. Prints each stage's
+mean time, frames/s and the ratio; ``with motion`` adds the cost of the moved point samples.
 
 Goal (issue 15): 2 frames/s at full resolution, 8 at preview, on the 2-core machine.
 
@@ -29,10 +32,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
-def ours(camera, traj, times):
+def ours(camera, traj, times, motion=False):
     from sim.approach import ApproachSensor
 
-    sensor = ApproachSensor(camera, seed=1)
+    sensor = ApproachSensor(camera, seed=1, motion=motion)
     sensor.measure_on(traj, float(times[0]))  # warm-up: kernels compiled, scene built
     stages = {}
     t0 = time.perf_counter()
@@ -48,6 +51,7 @@ def ours(camera, traj, times):
 
 
 def peer(camera, traj, times):
+    from sim.approach import CRLB_DRAWS
     from sim.closed_loop import Scenario, expose_and_solve, render_scenario
     from sim.crlb import frame_crlb
 
@@ -63,7 +67,7 @@ def peer(camera, traj, times):
         c = time.perf_counter()
         row = expose_and_solve(fr, ex, seed=k, truth="actual")
         d = time.perf_counter()
-        frame_crlb(fr, ex, row)
+        frame_crlb(fr, ex, row, draws=CRLB_DRAWS)
         e = time.perf_counter()
         return b - a, c - b, d - c, e - d, row["ok"]
 
@@ -100,10 +104,12 @@ def main(argv=None):
           "Mitsuba LLVM)")
     for label, cam in (("full resolution", args.camera), ("preview 640x480", prev_path)):
         o_s, o_st, o_ok = ours(cam, traj, times)
+        m_s, _, _ = ours(cam, traj, times, motion=True)
         p_s, p_st, p_ok = peer(cam, traj, times)
         print(f"\n{label}:")
         print("  ours (ApproachSensor):   " + ", ".join(f"{k} {v:.3f} s" for k, v in o_st.items())
               + f"  -> {o_s:.3f} s/frame = {1 / o_s:.2f} frames/s ({o_ok}/{args.frames} solved)")
+        print(f"  ours with motion blur and rolling shutter: {m_s:.3f} s/frame = {1 / m_s:.2f} frames/s")
         print("  peer (isolated poses):   " + ", ".join(f"{k} {v:.3f} s" for k, v in p_st.items())
               + f"  -> {p_s:.3f} s/frame = {1 / p_s:.2f} frames/s ({p_ok}/{args.frames} solved)")
         print(f"  ratio ours / peer (frames/s): {p_s / o_s:.2f}x;  goal {'2' if label.startswith('full') else '8'} "

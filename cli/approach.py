@@ -102,7 +102,7 @@ def print_summary(s: dict, file=None) -> None:
         f" {'rms ' + k:>15s}" for k in ("x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg")), file=file)
     for b in s["rms_by_range"]:
         lo, hi = b["range_m"]
-        label = f"{lo:g}-{hi:g}" if hi is not None else f">= {lo:g}"
+        label = f"{lo:g}-{hi:g}" if hi is not None else f"> {lo:g}"
         vals = "".join(f" {b[f'rms_err_{k}']:15.4f}" if b[f"rms_err_{k}"] is not None else f" {'-':>15s}"
                        for k in ("x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg"))
         print(f"  {label:>14s} {b['frames']:6d} {b['solved']:6d}{vals}", file=file)
@@ -113,24 +113,31 @@ def print_summary(s: dict, file=None) -> None:
     print(f"  wrote {o['measurements']}, {o['plot']}, {o['video']} ({o['video_codec']})", file=file)
 
 
+def _exact(x: float) -> str:
+    """A number as the shortest text that reads back to the same float (``30``, ``0.2``)."""
+    return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else repr(float(x))
+
+
 def command_line(args) -> str:
     """The ``svgs approach`` command line of ``args`` (for the report), the output folder as given."""
-    parts = ["svgs approach", f"--camera {args.camera}"]
+    from shlex import quote
+
+    parts = ["svgs approach", f"--camera {quote(args.camera)}"]
     if args.pattern != "svgs-3u":
-        parts.append(f"--pattern {args.pattern}")
+        parts.append(f"--pattern {quote(args.pattern)}")
     if args.trajectory:
-        parts.append(f"--trajectory {args.trajectory}")
-    else:
-        parts.append(f"--from {args.from_m:g} --to {args.to_m:g} --duration {args.duration_s:g}")
+        parts.append(f"--trajectory {quote(args.trajectory)}")
+    else:  # repr-exact numbers: the command rebuilds the same study
+        parts.append(f"--from {_exact(args.from_m)} --to {_exact(args.to_m)} --duration {_exact(args.duration_s)}")
         if args.lateral != "0,0":
-            parts.append(f"--lateral {args.lateral}")
+            parts.append(f"--lateral {quote(args.lateral)}")
         if args.attitude != "0,0,0":
-            parts.append(f"--attitude {args.attitude}")
-    parts.append(f"--fps {args.fps:g}")
+            parts.append(f"--attitude {quote(args.attitude)}")
+    parts.append(f"--fps {_exact(args.fps)}")
     parts += [f"--seed {args.seed}"] if args.seed else []
     parts += [f for f, on in (("--preview", args.preview), ("--no-motion", args.no_motion), ("--no-crlb", args.no_crlb))
               if on]
-    parts.append(f"--out {args.out}")
+    parts.append(f"--out {quote(args.out)}")
     return " ".join(parts)
 
 

@@ -182,10 +182,11 @@ SCHEMAS = {
  "solved_range_m": [float, float] | null,        # nearest and farthest solved frame
  "rms_by_range": [{{"range_m": [lo, hi | null], "frames": int, "solved": int,
                    "rms_err_<k>", "mean_err_<k>", "rms_crlb_<k>": float | null}}],   # k in {_STATE}
- "timing": {{"mean_render_s", "mean_optics_s", "mean_expose_s", "mean_solve_s", "mean_crlb_s",
+ "timing": {{"mean_render_s", "mean_optics_s", "mean_expose_s", "mean_solve_s",   # frames after the first
+            "mean_crlb_s",                                  # over the solved frames
             "mean_frame_s", "frames_per_s": float | null}},
  "run": {{"frames_run": int, "frames_reused": int, "wall_s": float}},
- "outputs": {{"measurements", "plot", "video": path | null, "video_codec": str, "video_fps": float}}}}""",
+ "outputs": {{"measurements", "plot", "report", "video": path | null, "video_codec": str, "video_fps": float}}}}""",
     "svgs range-sweep": f"""\
 {{"camera": str, "pattern": str, "trials_per_pose": int, "poses": int,
  "ranges": [{{"range_m": float, "trials": int, "solved": int, "success_rate": float,

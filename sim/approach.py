@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from svgs.errors import InputError
+from svgs.errors import InputError, check_finite
 from svgs.frames import D_CAM_PHOTO, STATE_KEYS, angles_from_rotation, pose_to_state, state_dict, state_to_pose
 from svgs.profiles import Camera, Pattern
 
@@ -57,6 +57,14 @@ MAX_FRAMES = 100000
 #: PSF draws per shifted image of the per-frame Cramer-Rao bound (:func:`sim.crlb.frame_crlb`):
 #: a quarter of the study default, for a Monte Carlo error of about 1 % on a band in a plot.
 CRLB_DRAWS = 1 << 15
+#: The phone's preview stream rate when the exposure allows it, frames/s: its auto-exposure loop
+#: steps once per stream frame, whether or not the sensor processes that frame (ASSUMPTION:
+#: Android phones of 2011 streamed preview at up to 30 frames/s, and at 1/exposure when longer).
+STREAM_FPS = 30.0
+#: Most auto-exposure steps between two measurements (the loop has long settled by then).
+MAX_AE_STEPS = 200
+#: Reason of a frame whose target the camera cannot see at all (nothing is rendered).
+OUT_OF_VIEW = "out_of_view"
 #: A pose is visible when every target projects this far inside the image, px.
 VISIBILITY_MARGIN_PX = 2.0
 
@@ -94,6 +102,10 @@ class Trajectory:
         if t.ndim != 1 or t.size < 2 or v.shape != (t.size, len(self.fields)):
             raise InputError(f"trajectory: expected at least 2 knots of {len(self.fields)} values, got times "
                              f"{t.shape} and values {v.shape}")
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(v))):
+            raise InputError("trajectory: times and values must be finite")
+        if np.any(np.diff(t) <= 0):
+            raise InputError("trajectory: knot times t_s must increase strictly")
 
     @property
     def fields(self) -> tuple:
@@ -104,16 +116,39 @@ class Trajectory:
         return float(self.t_s[-1] - self.t_s[0])
 
     def at(self, t_s: float) -> dict:
-        """The Scenario fields at time ``t_s`` (clamped to the trajectory's span)."""
+        """The Scenario fields at a time, interpolated linearly between the knots.
+
+        Parameters
+        ----------
+        t_s : float
+            Time, s (clamped to the trajectory's span).
+
+        Returns
+        -------
+        dict
+            :attr:`fields` -> value (m, deg).
+        """
         t = float(np.clip(t_s, self.t_s[0], self.t_s[-1]))
         return {k: float(np.interp(t, self.t_s, self.values[:, j])) for j, k in enumerate(self.fields)}
 
     def scenario(self, t_s: float, base: Scenario) -> Scenario:
-        """``base`` (camera, lab, ...) at this trajectory's pose at ``t_s``."""
+        """``base`` (camera, lab, ...) at this trajectory's pose at time ``t_s`` (s): a
+        :class:`~sim.closed_loop.Scenario` with this trajectory's mount."""
         return base.replace(mount=self.mount, **self.at(t_s))
 
     def frame_times(self, fps: float) -> np.ndarray:
-        """Frame timestamps ``t0 + k / fps`` within the span, s."""
+        """Frame timestamps ``t0 + k / fps`` within the span.
+
+        Parameters
+        ----------
+        fps : float
+            Frames per second (> 0).
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            Times, s; at most :data:`MAX_FRAMES`.
+        """
         fps = float(fps)
         if not np.isfinite(fps) or fps <= 0:
             raise InputError(f"--fps: expected a positive frame rate, got {fps!r}")
@@ -123,6 +158,7 @@ class Trajectory:
         return self.t_s[0] + np.arange(n) / fps
 
     def to_json(self) -> dict:
+        """The knots as JSON-ready lists (the study's manifest: a changed file is a changed study)."""
         return {"mount": self.mount, "fields": list(self.fields), "t_s": self.t_s.tolist(),
                 "values": self.values.tolist(), "source": self.source}
 
@@ -160,10 +196,13 @@ class Trajectory:
         if not p.is_file():
             raise InputError(f"{where}: no such file")
         try:
-            text = p.read_text()
+            text = p.read_text(encoding="utf-8-sig")  # a byte-order mark (spreadsheets write one) is not a column
         except (OSError, UnicodeDecodeError) as exc:
             raise InputError(f"{where}: cannot read it as text ({exc})") from None
-        rows = list(csv.reader(line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")))
+        kept = [(n, line) for n, line in enumerate(text.splitlines(), start=1)
+                if line.strip() and not line.lstrip().startswith("#")]
+        line_no = [n for n, _ in kept]  # the file's own line numbers, for the messages
+        rows = list(csv.reader(line for _, line in kept))
         if not rows:
             raise InputError(f"{where}: empty file; expected a header with t_s and "
                              f"{', '.join(STATE_COLUMNS)} (paper state) or {', '.join(STAND_COLUMNS)} (test stand)")
@@ -179,34 +218,39 @@ class Trajectory:
                              f"nor the test stand's chain ({', '.join(STAND_COLUMNS)})")
         idx = [header.index(c) for c in ("t_s", *cols)]
         data = []
-        for n, row in enumerate(rows[1:], start=2):
+        for i, row in enumerate(rows[1:], start=1):
+            n = line_no[i]
             if len(row) != len(header):
-                raise InputError(f"{where}: row {n} has {len(row)} fields, the header {len(header)}")
+                raise InputError(f"{where}: line {n} has {len(row)} fields, the header {len(header)}")
             vals = []
             for j, c in zip(idx, ("t_s", *cols)):
                 try:
                     x = float(row[j])
                 except ValueError:
-                    raise InputError(f"{where}: row {n}, column {c}: {row[j]!r} is not a number") from None
+                    raise InputError(f"{where}: line {n}, column {c}: {row[j]!r} is not a number") from None
                 if not np.isfinite(x):
-                    raise InputError(f"{where}: row {n}, column {c}: {row[j]!r} is not finite")
+                    raise InputError(f"{where}: line {n}, column {c}: {row[j]!r} is not finite")
                 vals.append(x)
             data.append(vals)
         if len(data) < 2:
             raise InputError(f"{where}: expected at least 2 rows of poses, got {len(data)}")
         a = np.array(data)
+        rows_line = line_no[1:]
         dt = np.diff(a[:, 0])
         if np.any(dt <= 0):
             k = int(np.argmax(dt <= 0))
-            raise InputError(f"{where}: t_s must increase strictly; row {k + 3} (t_s = {a[k + 1, 0]:g}) follows "
-                             f"t_s = {a[k, 0]:g}")
+            raise InputError(f"{where}: t_s must increase strictly; line {rows_line[k + 1]} (t_s = {a[k + 1, 0]:g}) "
+                             f"follows t_s = {a[k, 0]:g}")
+        # angles: the shorter way round between rows (yaw 179 -> -179 is a 2 deg turn, not 358)
+        ang = [1 + cols.index(c) for c in ("roll_deg", "pitch_deg", "yaw_deg")]
+        a[:, ang] = np.degrees(np.unwrap(np.radians(a[:, ang]), axis=0))
         if mount == "stand":
             values = a[:, 1:]
         else:  # paper state -> the target's position in the camera frame (Scenario's fields)
             R, t = state_to_pose(np.column_stack([a[:, 1:4], np.deg2rad(a[:, 4:7])]))
             if np.any(t[:, 2] <= 0):
                 k = int(np.argmax(t[:, 2] <= 0))
-                raise InputError(f"{where}: row {k + 2}: the target is behind the camera (range along the "
+                raise InputError(f"{where}: line {rows_line[k]}: the target is behind the camera (range along the "
                                  f"boresight {t[k, 2]:.3g} m)")
             xyz = t @ D_CAM_PHOTO  # D t: (target_x, target_y, -range) in the paper's camera frame
             values = np.column_stack([t[:, 2], xyz[:, 0], xyz[:, 1], a[:, 4:7]])
@@ -216,11 +260,23 @@ class Trajectory:
 def check_visible(trajectory: Trajectory, times_s, camera, pattern, base: Scenario | None = None) -> None:
     """Refuse a trajectory on which the camera cannot see the whole pattern at some frame.
 
+    Parameters
+    ----------
+    trajectory : Trajectory
+    times_s : array_like, shape (n,)
+        The frame times, s.
+    camera : svgs.Camera or str
+        The camera the frames are made through.
+    pattern : svgs.Pattern or str
+    base : Scenario, optional
+        The scenario the trajectory's poses are set in.
+
     Raises
     ------
     InputError
         Naming the first frame time whose pose puts a target behind the camera or outside the
-        image (with :data:`VISIBILITY_MARGIN_PX`), or a stand setting the stand cannot take.
+        image (with :data:`VISIBILITY_MARGIN_PX`), shows the camera the back of the target (its
+        reflectors face the target's +z), or is a stand setting the stand cannot take.
     """
     cam = Camera.load(camera)
     pat = Pattern.load(pattern)
@@ -232,6 +288,11 @@ def check_visible(trajectory: Trajectory, times_s, camera, pattern, base: Scenar
         except InputError as exc:
             raise InputError(f"trajectory ({trajectory.source}) at t = {t:g} s: {exc}") from None
         p = pat.points_m @ R.T + tv
+        facing = float(-(R[:, 2] @ tv) / np.linalg.norm(tv))  # cos(target +z, direction to the camera)
+        if facing <= 0:
+            raise InputError(f"trajectory ({trajectory.source}) at t = {t:g} s: the camera sees the back of the target "
+                             f"({np.degrees(np.arccos(np.clip(facing, -1, 1))):.0f} deg from its face normal); its "
+                             "reflectors return no light there")
         if np.any(p[:, 2] <= 0.05):
             raise InputError(f"trajectory ({trajectory.source}) at t = {t:g} s: a target is behind (or at) the lens")
         uv = cam.project(p)
@@ -369,14 +430,22 @@ class ApproachSensor:
     motion : bool
         Model motion blur and the rolling shutter (see the module docstring).
     crlb : bool
-        Compute each solved frame's Cramer-Rao bound (:data:`CRLB_DRAWS`; 0.1-0.3 s a frame).
+        Compute each solved frame's Cramer-Rao bound (:data:`CRLB_DRAWS`; 0.3-0.5 s a frame at
+        full resolution).
+    frame_rate_hz : float, optional
+        The rate at which the sensor takes its frames. The phone must deliver a frame per period:
+        its auto-exposure's longest exposure is capped at the period, and a manual exposure or a
+        rolling-shutter readout longer than the period is refused. The auto-exposure then steps
+        ``period / max(1/STREAM_FPS, exposure)`` times between frames. None: free-running, the
+        steps counted from the times of consecutive calls.
     keep_images : bool
         Keep the delivered image, the blobs and the solution in each :class:`Measurement`.
     threshold : None, float or str
         The detector's threshold (:func:`svgs.detect.detect_blobs`).
     base : Scenario, optional
         The lab around the target (backdrop, ambient light) and render quality; default the
-        lab of :mod:`sim.lab`.
+        lab of :mod:`sim.lab`. Its camera fields (lens offsets, overrides, a fixed focus) are
+        refused: give the camera itself.
 
     Examples
     --------
@@ -385,16 +454,43 @@ class ApproachSensor:
     >>> for m in sensor.stream((t, R, t_vec) for ...): ...          # doctest: +SKIP
     """
 
-    def __init__(self, camera="galaxy-nexus", pattern: str = "svgs-3u", *, seed: int = 0, motion: bool = True,
-                 crlb: bool = True, keep_images: bool = False, threshold=None, base: Scenario | None = None):
+    def __init__(self, camera="galaxy-nexus", pattern="svgs-3u", *, seed: int = 0, motion: bool = True,
+                 crlb: bool = True, keep_images: bool = False, threshold=None, base: Scenario | None = None,
+                 frame_rate_hz: float | None = None):
+        import dataclasses
+
         from camera.phone import PhoneCamera
 
         self.camera = Camera.load(camera)
         for t in ("optics", "flash"):
             self.camera.table(t)
         self.pattern = Pattern.load(pattern)
+        base = base or Scenario()
+        if base.camera_overrides or any(base.lens_pp_offset_px) or base.lens_k1 or base.focus_distance_m is not None:
+            raise InputError("base: camera_overrides, lens_pp_offset_px, lens_k1 and focus_distance_m belong to the "
+                             "camera; give ApproachSensor the camera itself (the lens refocuses on the target)")
+        # the solver reloads the pattern from the scenario: keep what was given (a path stays a path)
+        pat_label = pattern if isinstance(pattern, str) else (self.pattern.source or self.pattern.name)
         label = camera if isinstance(camera, str) else self.camera.name
-        self.base = (base or Scenario()).replace(camera=label, pattern=self.pattern.name)
+        self.base = base.replace(camera=label, pattern=str(pat_label))
+        params = PhoneCamera(self.camera).params
+        self.frame_rate_hz = None
+        if frame_rate_hz is not None:
+            f = float(frame_rate_hz)
+            if not (np.isfinite(f) and f > 0):
+                raise InputError(f"frame_rate_hz: expected a positive frame rate, got {frame_rate_hz!r}")
+            period = 1.0 / f
+            e, ro = params.exposure, params.sensor.readout_time_s
+            if ro > period:
+                raise InputError(f"--fps: {f:g} frames/s leaves {period * 1e3:.1f} ms a frame, less than the "
+                                 f"{self.camera.name} sensor's {ro * 1e3:.0f} ms rolling-shutter readout")
+            if e.mode == "manual" and e.exposure_s > period:
+                raise InputError(f"--fps: {f:g} frames/s leaves {period * 1e3:.1f} ms a frame, less than the "
+                                 f"{self.camera.name}'s manual exposure of {e.exposure_s * 1e3:.1f} ms")
+            if e.max_exposure_s > period:  # the phone shortens its longest exposure to keep the frame rate
+                params = dataclasses.replace(params, exposure=dataclasses.replace(
+                    e, max_exposure_s=max(period, e.min_exposure_s)))
+            self.frame_rate_hz = f
         if int(seed) < 0:
             raise InputError(f"seed: expected a non-negative integer, got {seed!r}")
         self.seed = int(seed)
@@ -402,8 +498,9 @@ class ApproachSensor:
         self.crlb = bool(crlb)
         self.keep_images = bool(keep_images)
         self.threshold = threshold
-        self.phone = PhoneCamera(self.camera)
+        self.phone = PhoneCamera(self.camera, params=params)
         self._renderer = None
+        self._meter = None  # (t_s, exposure_s, iso, meter) of the last frame, free-running mode
         self._lab_factor = None
         self.frame_index = 0
         self._settings = None  # (exposure_s, iso) for the next frame; None: converge on it
@@ -420,9 +517,23 @@ class ApproachSensor:
         return self._settings
 
     def restore(self, frame_index: int, next_exposure_s: float | None, next_iso: float | None) -> None:
-        """Continue a stream at ``frame_index`` with the auto-exposure's stored settings (a resumed run)."""
+        """Continue a stream at ``frame_index`` with the auto-exposure's stored settings for it
+        (a resumed run; ``next_exposure_s``, ``next_iso`` of the last stored frame, which with
+        ``frame_rate_hz`` already include the steps between frames)."""
         self.frame_index = int(frame_index)
         self._settings = None if next_exposure_s is None else (float(next_exposure_s), float(next_iso))
+        self._meter = None
+
+    def _ae_steps(self, dt_s: float, exposure_s: float) -> int:
+        """Auto-exposure steps the phone's stream makes in ``dt_s`` at ``exposure_s``."""
+        period = max(1.0 / STREAM_FPS, float(exposure_s))
+        return int(np.clip(np.floor(float(dt_s) / period + 1e-9), 1, MAX_AE_STEPS))
+
+    def _advance_exposure(self, meter, exposure_s: float, iso: float, steps: int) -> tuple[float, float]:
+        from camera.phone.isp import stream_exposure
+
+        p = self.phone.params
+        return stream_exposure(exposure_s, iso, meter.level, p.sensor, p.exposure, steps)
 
     def _frame_seeds(self, k: int) -> tuple[int, int, int]:
         s = np.random.SeedSequence([self.seed, int(k)]).generate_state(3, dtype=np.uint32)
@@ -489,7 +600,24 @@ class ApproachSensor:
                 raise InputError("measure: give the pose (R_cam_target, t_cam_target_m) or a scenario")
             R, t = check_pose(R_cam_target, t_cam_target_m)
             sc = scenario_from_pose(R, t, self.base)
+        t_s = float(check_finite(t_s, "t_s"))
         k = self.frame_index
+        auto = self.phone.params.exposure.mode == "auto"
+        if auto and self._meter is not None:  # free-running: the steps the stream made since the last call
+            t_prev, e_prev, iso_prev, meter = self._meter
+            self._settings = self._advance_exposure(meter, e_prev, iso_prev,
+                                                    self._ae_steps(max(t_s - t_prev, 0.0), e_prev))
+            self._meter = None
+        uv_true = self.targets_px(R, t)
+        p_cam = self.pattern.points_m @ R.T + t
+        if np.any(p_cam[:, 2] <= 0) or not np.any(self.camera.in_image(uv_true)):
+            return self._out_of_view(k, t_s, R, t)
+        if image_velocity_px_s is not None:
+            image_velocity_px_s = np.asarray(image_velocity_px_s, float)
+            if image_velocity_px_s.shape != (self.pattern.n, 2) or not np.all(np.isfinite(image_velocity_px_s)):
+                raise InputError(f"image_velocity_px_s: expected finite (du/dt, dv/dt) px/s of each of the "
+                                 f"{self.pattern.n} targets, shape ({self.pattern.n}, 2), got shape "
+                                 f"{image_velocity_px_s.shape}")
         render_seed_k, noise_seed, motion_seed = self._frame_seeds(k)
         timings = {}
         t0 = time.perf_counter()
@@ -535,11 +663,10 @@ class ApproachSensor:
                              blobs=blobs)
         timings["solve"] = t_detect + row["solve_s"]
         level = exposer.metered_level(*settings)
-        if self.phone.params.exposure.mode == "auto":
-            from camera.phone.isp import next_exposure
-
-            self._settings = next_exposure(settings[0], settings[1], level, self.phone.params.sensor,
-                                           self.phone.params.exposure)
+        if auto:  # the stream's loop runs on: to the next frame with a frame rate, one step otherwise
+            steps = self._ae_steps(1.0 / self.frame_rate_hz, settings[0]) if self.frame_rate_hz else 1
+            self._settings = self._advance_exposure(exposer.meter, settings[0], settings[1], steps)
+            self._meter = None if self.frame_rate_hz else (t_s, settings[0], settings[1], exposer.meter)
         nxt = self.exposure_settings
         crlb = None
         t0 = time.perf_counter()
@@ -552,10 +679,11 @@ class ApproachSensor:
 
         truth_state = state_dict(pose_to_state(R, t))
         est = row["state"]
+        # frame.flux keeps the unmoved render; the image was made from frame.points (moved)
         sol = row["_solution"]
         m = Measurement(
             frame=k, t_s=float(t_s), ok=bool(row["ok"]), reason=row["reason"], truth=truth_state, estimate=est,
-            error=state_error(est, truth_state) if est else None, crlb_std=crlb, range_m=float(np.linalg.norm(t)),
+            error=state_error(est, truth_state) if est else None, crlb_std=crlb, range_m=float(t[2]),
             exposure_s=float(settings[0]), iso=float(settings[1]), metered_level=float(level),
             next_exposure_s=float(nxt[0]), next_iso=float(nxt[1]), timings_s=timings, n_blobs=row["n_blobs"],
             residual_rms_px=row["residual_rms_px"],
@@ -566,15 +694,48 @@ class ApproachSensor:
         self._last_pose = (float(t_s), R, t)
         return m
 
+    def _out_of_view(self, k: int, t_s: float, R, t) -> Measurement:
+        """A dropout: the target is behind the camera or outside its field of view (not rendered;
+        the auto-exposure keeps its settings)."""
+        nxt = self.exposure_settings or (float("nan"), float("nan"))
+        m = Measurement(frame=k, t_s=t_s, ok=False, reason=OUT_OF_VIEW, truth=state_dict(pose_to_state(R, t)),
+                        estimate=None, error=None, crlb_std=None, range_m=float(t[2]), exposure_s=float(nxt[0]),
+                        iso=float(nxt[1]), metered_level=float("nan"), next_exposure_s=float(nxt[0]),
+                        next_iso=float(nxt[1]), timings_s={}, n_blobs=0)
+        self.frame_index = k + 1
+        self._last_pose = (t_s, R, t)
+        return m
+
     def stream(self, poses):
-        """Measurements of an iterable of ``(t_s, R_cam_target, t_cam_target_m)``, one per pose,
-        as a generator (the velocity of each frame from the previous pose)."""
+        """Measurements of poses, one per pose, as they come.
+
+        Parameters
+        ----------
+        poses : iterable of (t_s, R_cam_target, t_cam_target_m)
+            Times (s) and poses (shapes (3, 3) and (3,), m); each frame's image velocity comes
+            from the previous pose.
+
+        Yields
+        ------
+        Measurement
+        """
         for t_s, R, t in poses:
             yield self.measure(t_s, R, t)
 
     def along(self, trajectory: Trajectory, times_s):
-        """Measurements along a :class:`Trajectory` at ``times_s`` (a generator); each frame's image
-        velocity from the trajectory itself (central difference, :data:`VELOCITY_STEP_S`)."""
+        """Measurements along a trajectory.
+
+        Parameters
+        ----------
+        trajectory : Trajectory
+        times_s : array_like, shape (n,)
+            Frame times, s; each frame's image velocity from the trajectory itself (central
+            difference, :data:`VELOCITY_STEP_S`).
+
+        Yields
+        ------
+        Measurement
+        """
         for t_s in np.asarray(times_s, float):
             yield self.measure_on(trajectory, float(t_s))
 

@@ -36,10 +36,10 @@ BAD_FILES = [
     ("x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,0,10,0,0,0\n", "no t_s column"),
     ("t_s,a,b\n0,1,2\n1,1,2\n", "neither the paper state"),
     ("t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,0,0,10,0,0,0\n", "at least 2 rows"),
-    ("t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,0,0,10,0,0,0\n1,0,0,abc,0,0,0\n", "row 3, column z_m"),
+    ("t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,0,0,10,0,0,0\n1,0,0,abc,0,0,0\n", "line 3, column z_m"),
     ("t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,0,0,10,0,0,0\n1,0,0,nan,0,0,0\n", "not finite"),
     ("t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,0,0,10,0,0,0\n0,0,0,9,0,0,0\n", "increase strictly"),
-    ("t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,0,0,10,0,0,0\n1,0,0,9,0,0\n", "row 3 has 6 fields"),
+    ("t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,0,0,10,0,0,0\n1,0,0,9,0,0\n", "line 3 has 6 fields"),
     # the camera 10 m on the target's far side: the target faces away, its origin behind the camera
     ("t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,0,0,10,0,0,0\n1,0,0,-10,0,0,0\n", "behind the camera"),
 ]
@@ -49,6 +49,47 @@ BAD_FILES = [
 def test_bad_trajectory_files_are_refused_naming_the_problem(tmp_path, text, message):
     with pytest.raises(InputError, match=message):
         Trajectory.load(_write(tmp_path / "t.csv", text))
+
+
+def test_messages_give_the_file_line_past_comments_and_a_byte_order_mark(tmp_path):
+    text = "\ufeff# an approach\nt_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n\n# knots\n0,0,0,10,0,0,0\n1,0,0,x,0,0,0\n"
+    with pytest.raises(InputError, match="line 6, column z_m"):
+        Trajectory.load(_write(tmp_path / "t.csv", text))
+
+
+def test_angles_take_the_short_way_between_rows(tmp_path):
+    text = "t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n0,0,0,10,0,0,179\n1,0,0,10,0,0,-179\n"
+    traj = Trajectory.load(_write(tmp_path / "t.csv", text))
+    assert traj.at(0.5)["yaw_deg"] == pytest.approx(180.0)
+
+
+def test_a_trajectory_showing_the_target_s_back_is_refused(nexus, pattern):
+    traj = Trajectory.straight(10.0, 5.0, 5.0, attitude_deg=(0.0, 170.0, 0.0))
+    with pytest.raises(InputError, match="back of the target"):
+        check_visible(traj, [0.0], nexus, pattern)
+
+
+def test_frame_rate_limits_the_exposure_and_the_readout():
+    """A frame period shorter than the readout or a manual exposure is refused; the auto-exposure's
+    longest exposure is cut to the period."""
+    with pytest.raises(InputError, match="rolling-shutter readout"):
+        ApproachSensor("htc-amaze-4g", frame_rate_hz=40.0)
+    s = ApproachSensor("htc-amaze-4g", frame_rate_hz=20.0)
+    assert s.phone.params.exposure.max_exposure_s == pytest.approx(0.05)
+    assert ApproachSensor("htc-amaze-4g", frame_rate_hz=1.0).phone.params.exposure.max_exposure_s == pytest.approx(0.0667)
+
+
+def test_a_pose_out_of_view_is_a_dropout_not_an_error(nexus):
+    """In a user's loop a target that leaves the field of view gives ok=False, reason out_of_view
+    (nothing rendered), and the stream goes on."""
+    from svgs.frames import pose_from_scenario
+
+    s = ApproachSensor("galaxy-nexus")
+    R, t = pose_from_scenario(5.0, 20.0, 0.0)  # 20 m to the side at 5 m
+    m = s.measure(0.0, R, t)
+    assert not m.ok and m.reason == "out_of_view" and m.estimate is None and s.frame_index == 1
+    with pytest.raises(InputError, match="image_velocity_px_s"):
+        s.measure(1.0, *pose_from_scenario(5.0), image_velocity_px_s=[1.0, 2.0])
 
 
 def test_missing_trajectory_file(tmp_path):
@@ -155,6 +196,21 @@ def test_binned_preview_collects_the_photons_of_its_pixels():
         binned_camera(full, 640, 640)
 
 
+def test_stream_auto_exposure_step_response():
+    """Linear regime (nothing clips): each step takes ``gain`` of the log error away, so after k
+    steps the error is (1 - gain)^k of the start's, whatever the scene."""
+    from camera.phone.isp import AE_STREAM_GAIN, stream_exposure
+    from camera.phone.params import ExposureParams, SensorParams
+
+    sensor = SensorParams()
+    exp = ExposureParams(target_level=0.18, min_exposure_s=1e-6, max_exposure_s=10.0, min_iso=100.0, max_iso=100.0)
+    c = 3.7  # level per unit exposure product: level = c S
+    S_star = 0.18 / c
+    for k in (1, 2, 5):
+        t, _ = stream_exposure(0.4 * S_star, 100.0, lambda S: c * S, sensor, exp, k)
+        assert np.log(t / S_star) == pytest.approx((1 - AE_STREAM_GAIN) ** k * np.log(0.4), rel=1e-9)
+
+
 def test_stream_auto_exposure_settles_where_the_one_shot_does():
     """The carried-over exposure converges on a static scene to the phone's one-shot solution
     (camera.phone.isp.ExposureSolver.solve), from a start 8x too long."""
@@ -194,19 +250,35 @@ def test_sensor_frame_equals_the_isolated_pose_chain(small_camera):
         assert m1.estimate[k] == pytest.approx(v, abs=1e-12)
 
 
+@pytest.fixture(scope="module")
+def small_auto_camera(tmp_path_factory):
+    """The small Galaxy Nexus without its fitted manual exposure: the prior's auto-exposure."""
+    path = tmp_path_factory.mktemp("cam") / "nexus-small-auto.toml"
+    Camera.load("galaxy-nexus", fitted=False).scaled(648, 486).replace(name="nexus-small-auto").save(path)
+    return str(path)
+
+
 @pytest.mark.render
-def test_approach_command_writes_its_outputs_and_resumes(small_camera, tmp_path, capsys):
+@pytest.mark.parametrize("exposure", ["manual", "auto"])
+def test_approach_command_writes_its_outputs_and_resumes(small_camera, small_auto_camera, tmp_path, capsys, exposure):
+    """With a manual exposure (the fitted Nexus) and an auto-exposure carried over from frame to
+    frame (the prior's): outputs, and a killed run resumed with the same numbers."""
+    cam, r0, r1 = (small_camera, "8", "5") if exposure == "manual" else (small_auto_camera, "2.5", "1.5")
     out = tmp_path / "run"
-    argv = ["approach", "--camera", small_camera, "--from", "8", "--to", "5", "--duration", "2", "--fps", "1",
+    argv = ["approach", "--camera", cam, "--from", r0, "--to", r1, "--duration", "2", "--fps", "1",
             "--out", str(out), "--json", "--no-progress"]
     assert main(argv) == 0
     s = json.loads(capsys.readouterr().out)
-    assert s["frames"] == 3 and s["solved"] >= 2 and s["run"]["frames_run"] == 3
+    assert s["frames"] == 3 and s["solved"] >= (2 if exposure == "manual" else 1) and s["run"]["frames_run"] == 3
     rows = _rows(out / "measurements.csv")
     assert [float(r["t_s"]) for r in rows] == [0.0, 1.0, 2.0]
     assert {"true_z_m", "est_z_m", "err_yaw_deg", "crlb_yaw_deg", "ok", "reason", "solve_s"} <= set(rows[0])
     solved = [r for r in rows if r["ok"] == "1"]
     assert all(float(r["crlb_z_m"]) > 0 for r in solved)
+    for a, b in zip(rows, rows[1:]):  # each frame takes the settings the previous one left
+        assert (a["next_exposure_s"], a["next_iso"]) == (b["exposure_s"], b["iso"])
+    if exposure == "auto":
+        assert float(rows[0]["metered_level"]) == pytest.approx(0.18, rel=0.02)  # the first frame has settled
     assert (out / "approach.png").stat().st_size > 0 and s["outputs"]["video"] and s["outputs"]["video_codec"]
     import cv2
 
@@ -239,6 +311,8 @@ def test_approach_command_writes_its_outputs_and_resumes(small_camera, tmp_path,
     (["--from", "5", "--to", "2", "--duration", "1", "--lateral", "4,0"], "outside"),
     (["--from", "-5", "--to", "2", "--duration", "1"], "--from"),
     (["--from", "5", "--to", "2", "--duration", "0"], "--duration"),
+    (["--from", "5", "--to", "2", "--duration", "1", "--fps", "40"], "rolling-shutter readout"),
+    (["--from", "5", "--to", "2", "--duration", "1", "--attitude", "0,170,0"], "back of the target"),
 ])
 def test_approach_bad_input_exits_2_before_any_work(tmp_path, capsys, extra, message):
     out = tmp_path / "never"
@@ -255,3 +329,18 @@ def test_approach_bad_trajectory_file_exits_2(tmp_path, capsys):
     out = tmp_path / "never"
     assert main(["approach", "--trajectory", bad, "--fps", "1", "--out", str(out)]) == 2
     assert "increase strictly" in capsys.readouterr().err and not out.exists()
+
+
+@pytest.mark.render
+def test_a_pattern_file_is_solved_with_its_own_geometry(small_camera, tmp_path):
+    """A pattern given as a .toml path (not a bundled name) is the one the solver uses."""
+    from svgs import Pattern
+    from svgs.frames import pose_from_scenario
+
+    src = Pattern.load("svgs-3u").source
+    from pathlib import Path
+
+    text = Path(src).read_text().replace('name = "svgs-3u"', 'name = "my-3u"')
+    path = _write(tmp_path / "my-3u.toml", text)
+    m = ApproachSensor(small_camera, pattern=path, crlb=False).measure(0.0, *pose_from_scenario(6.0, pitch_deg=2.0))
+    assert m.ok, m.reason

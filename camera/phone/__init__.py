@@ -219,13 +219,18 @@ class Exposer:
             self._solver = ExposureSolver(rate, metering_weights(self.flux_optics.shape, p.exposure.metering))
         return auto_exposure(self.flux_optics, p.sensor, p.exposure, self._solver)
 
+    @property
+    def meter(self) -> ExposureSolver:
+        """The phone's meter on this scene (:class:`camera.phone.isp.ExposureSolver`): the metered
+        level against the exposure product, from the noise-free signal."""
+        if self._solver is None:
+            self.auto_exposure()
+        return self._solver
+
     def metered_level(self, exposure_s: float, iso: float) -> float:
         """What the phone's meter reads on this scene at given settings: the weighted linear
         level (0..1, full-well clipping included) of the noise-free signal."""
-        p = self.phone.params
-        if self._solver is None:
-            self.auto_exposure()
-        return self._solver.level(float(exposure_s) * float(iso) / p.sensor.base_iso)
+        return self.meter.level(float(exposure_s) * float(iso) / self.phone.params.sensor.base_iso)
 
     def settings(self, exposure_s=None, iso=None):
         """Resolve the exposure: explicit values, the profile's manual values, or auto-exposure."""

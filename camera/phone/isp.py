@@ -179,6 +179,30 @@ def next_exposure(exposure_s: float, iso: float, metered_level: float, sensor: S
     return split_exposure(S_next, exp, sensor.base_iso)
 
 
+def stream_exposure(exposure_s: float, iso: float, level_of_product, sensor: SensorParams, exp: ExposureParams,
+                    steps: int, gain: float = AE_STREAM_GAIN) -> tuple[float, float]:
+    """``steps`` frames of the stream's auto-exposure loop (:func:`next_exposure`) on one scene.
+
+    Parameters
+    ----------
+    exposure_s, iso : float
+        The settings of the frame the loop starts from.
+    level_of_product : callable
+        The scene's metered level (0..1) at an exposure product ``S = t ISO / base_ISO``
+        (:meth:`ExposureSolver.level`).
+    steps : int
+        Stream frames (>= 0).
+
+    Returns
+    -------
+    exposure_s, iso : float
+    """
+    t, g = float(exposure_s), float(iso)
+    for _ in range(int(steps)):
+        t, g = next_exposure(t, g, level_of_product(t * g / sensor.base_iso), sensor, exp, gain)
+    return t, g
+
+
 def tone_lut(sensor: SensorParams, gamma: float, tone: bool) -> np.ndarray:
     """Raw DN (0..2^bits-1) -> 8-bit output, as a lookup table of uint8."""
     dn = np.arange(int(sensor.white_dn) + 1, dtype=np.float64)
