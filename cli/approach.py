@@ -67,29 +67,25 @@ def register(sub) -> None:
 
 
 def config_from_args(args) -> dict:
-    """The approach's parameters, with every input checked (no rendering)."""
+    """The approach's parameters from ``args`` (the trajectory read and checked; the rest is
+    checked by :func:`studies.approach.check_config` before any work, and the profile's kind by
+    :mod:`cli.validate`)."""
     from sim.approach import Trajectory
-    from studies.approach import check_config, make_config
-    from svgs.profiles import Camera
+    from studies.approach import make_config
 
     straight = [a is not None for a in (args.from_m, args.to_m, args.duration_s)]
     if args.trajectory is not None and any(straight):
         raise InputError("--trajectory: give either a trajectory file or --from/--to/--duration, not both")
     if args.trajectory is None and not all(straight):
         raise InputError("--from/--to/--duration: a straight approach needs all three (or give --trajectory FILE)")
-    cam = Camera.load(args.camera)
-    if "tof" in cam.tables and "flash" not in cam.tables:
-        raise InputError(f"--camera: {cam.name!r} is a time-of-flight profile; svgs approach needs a phone profile")
     if args.trajectory is not None:
         traj = Trajectory.load(args.trajectory)
     else:
         traj = Trajectory.straight(args.from_m, args.to_m, args.duration_s,
                                    lateral_m=_floats(args.lateral, 2, "--lateral"),
                                    attitude_deg=_floats(args.attitude, 3, "--attitude"))
-    cfg = make_config(args.camera, traj, args.fps, seed=args.seed, preview=args.preview, motion=not args.no_motion,
-                      crlb=not args.no_crlb, pattern=args.pattern)
-    check_config(cfg)
-    return cfg
+    return make_config(args.camera, traj, args.fps, seed=args.seed, preview=args.preview, motion=not args.no_motion,
+                       crlb=not args.no_crlb, pattern=args.pattern)
 
 
 def print_summary(s: dict, file=None) -> None:

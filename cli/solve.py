@@ -49,19 +49,15 @@ def write_solution_overlay(path, image, camera, pattern, result, threshold=None,
     background noise gives (:func:`svgs.overlay.centroid_sigma_from_image`); ``blobs`` are the
     image's detections when the caller has them."""
     from svgs.detect import detect_blobs, to_gray
-    from svgs.overlay import centroid_sigma_from_image, write_overlay
+    from svgs.overlay import centroid_sigma_from_image, solution_marks, write_overlay
 
     if blobs is None:
         blobs = detect_blobs(image, threshold=threshold)
-    targets = {str(k): [float(x) for x in v] for k, v in (result.targets_px.items() if result else [])}
-    reproj = {}
-    if result:
-        uv = camera.project_target(pattern.points_m, result.R_cam_target, result.t_cam_target_m)
-        reproj = {str(int(i)): [float(a), float(b)] for i, (a, b) in zip(pattern.ids, uv)}
-        if sigma_px is None and targets:
-            sig = centroid_sigma_from_image(to_gray(image), list(targets.values()), float(blobs.noise_sigma))
-            sigma_px = dict(zip(targets, sig.tolist()))
-            sigma_label = sigma_label or "centroid 1-sigma from the image's background noise"
+    targets, reproj = solution_marks(result, camera, pattern)
+    if sigma_px is None and targets:
+        sig = centroid_sigma_from_image(to_gray(image), list(targets.values()), float(blobs.noise_sigma))
+        sigma_px = dict(zip(targets, sig.tolist()))
+        sigma_label = sigma_label or "centroid 1-sigma from the image's background noise"
     if title is None:
         title = (f"SOLVED: range {result.t_cam_target_m[2]:.3f} m, residual {result.residual_rms_px:.3f} px RMS, "
                  f"{len(blobs)} blobs" if result else f"NO SOLUTION ({result.reason}): {len(blobs)} blobs")

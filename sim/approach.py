@@ -38,7 +38,7 @@ from svgs.errors import InputError, check_finite
 from svgs.frames import D_CAM_PHOTO, STATE_KEYS, angles_from_rotation, pose_to_state, state_dict, state_to_pose
 from svgs.profiles import Camera, Pattern
 
-from sim.closed_loop import Frame, Scenario, lab_flux, solve_exposure
+from sim.closed_loop import Frame, Scenario, lab_flux, lab_photon_factor, solve_exposure
 
 #: Columns of a trajectory file in the paper's state: the camera position in the target frame
 #: and the paper's attitude (x-y-z sequence).
@@ -459,7 +459,7 @@ class ApproachSensor:
                  frame_rate_hz: float | None = None):
         import dataclasses
 
-        from camera.phone import PhoneCamera
+        from camera.phone import PhoneCamera, PhoneParams
 
         self.camera = Camera.load(camera)
         for t in ("optics", "flash"):
@@ -473,7 +473,7 @@ class ApproachSensor:
         pat_label = pattern if isinstance(pattern, str) else (self.pattern.source or self.pattern.name)
         label = camera if isinstance(camera, str) else self.camera.name
         self.base = base.replace(camera=label, pattern=str(pat_label))
-        params = PhoneCamera(self.camera).params
+        params = PhoneParams.from_camera(self.camera)
         self.frame_rate_hz = None
         if frame_rate_hz is not None:
             f = float(frame_rate_hz)
@@ -549,10 +549,8 @@ class ApproachSensor:
 
     def _lab(self, scenario: Scenario) -> tuple[np.ndarray, dict]:
         if self._lab_factor is None:
-            probe = scenario.replace(backdrop_distance_m=None, ambient_radiance_w_m2_sr=1.0)
-            self._lab_factor, _ = lab_flux(self.camera, probe)
-        total, info = lab_flux(self.camera, scenario, factor=self._lab_factor)
-        return total, info
+            self._lab_factor = lab_photon_factor(self.camera)
+        return lab_flux(self.camera, scenario, factor=self._lab_factor)
 
     def targets_px(self, R, t) -> np.ndarray:
         """The pattern's targets projected at a pose, (N, 2) px."""
@@ -641,9 +639,8 @@ class ApproachSensor:
         vel = image_velocity_px_s if image_velocity_px_s is not None else self._velocity_since_last(t_s, R, t)
         if self.motion and vel is not None and frame.points is not None and len(frame.points):
             pts = frame.points
-            uv = self.targets_px(R, t)
-            near = np.argmin((pts.u_px[:, None] - uv[None, :, 0]) ** 2 + (pts.v_px[:, None] - uv[None, :, 1]) ** 2,
-                             axis=1)
+            near = np.argmin((pts.u_px[:, None] - uv_true[None, :, 0]) ** 2
+                             + (pts.v_px[:, None] - uv_true[None, :, 1]) ** 2, axis=1)
             frame.points = pts.moved(np.asarray(vel, float)[near], settings[0], self.phone.params.sensor.readout_time_s,
                                      self.camera.height, np.random.default_rng(motion_seed))
             exposer = frame.exposer()

@@ -296,10 +296,9 @@ def lab_flux(camera: Camera, scenario: Scenario, factor: np.ndarray | None = Non
     Backdrop radiance ``rho * I_flash / (pi * D^2)`` (D from the camera to the backdrop,
     the flash's on-axis intensity, its cos^m fall-off towards the field edge ignored),
     plus the ambient radiance; photons per pixel through the aperture from
-    :func:`render.optics.radiance_to_photon_rate`; ``factor`` (photons/s/px per
-    W m^-2 sr^-1, shape (H, W)) is that conversion when the caller has it already.
+    :func:`lab_photon_factor`; ``factor`` is that conversion when the caller has it already.
     """
-    from render.optics import Flash, Optics, pixel_normalized_grid, radiance_to_photon_rate
+    from render.optics import Flash, Optics
 
     optics = Optics.from_camera(camera)
     flash = Flash.from_camera(camera, optics.band_nm)
@@ -314,16 +313,26 @@ def lab_flux(camera: Camera, scenario: Scenario, factor: np.ndarray | None = Non
                      "backdrop_radiance_w_m2_sr": Lb})
     if L == 0:
         return np.zeros((camera.height, camera.width), np.float32), info
-    if factor is not None:
-        return (L * np.asarray(factor, np.float32)).astype(np.float32), info
-    # the per-pixel factor varies smoothly: evaluate on a coarse grid and interpolate
+    if factor is None:
+        factor = lab_photon_factor(camera)
+    return (L * np.asarray(factor, np.float32)).astype(np.float32), info
+
+
+def lab_photon_factor(camera: Camera) -> np.ndarray:
+    """Photons/s per pixel per unit scene radiance (W m^-2 sr^-1) through the lens, float32 (H, W):
+    :func:`render.optics.radiance_to_photon_rate`, which varies smoothly, on a 16-px grid
+    interpolated to every pixel."""
     import cv2
 
+    from render.optics import Flash, Optics, pixel_normalized_grid, radiance_to_photon_rate
+
+    optics = Optics.from_camera(camera)
+    flash = Flash.from_camera(camera, optics.band_nm)
     step = 16
     xy = pixel_normalized_grid(camera, 0, 0, camera.width, camera.height)[::step, ::step]
     k = radiance_to_photon_rate(camera, optics, flash.photometry["mean_photon_energy_j"], xy).astype(np.float32)
     full = cv2.resize(k, (k.shape[1] * step, k.shape[0] * step), interpolation=cv2.INTER_LINEAR)
-    return (L * full[: camera.height, : camera.width]).astype(np.float32), info
+    return np.ascontiguousarray(full[: camera.height, : camera.width])
 
 
 def render_scenario(scenario: Scenario, *, seed: int = 0) -> Frame:

@@ -64,31 +64,35 @@ def trajectory_of(cfg: dict) -> Trajectory:
     return Trajectory(np.array(t["t_s"]), np.array(t["values"]), t["mount"], t["source"])
 
 
-def check_config(cfg: dict) -> np.ndarray:
-    """Everything checked before any rendering: the camera, the frames, the poses. Returns the
-    frame times."""
+def check_config(cfg: dict):
+    """Everything checked before any rendering: the camera (a phone that renders, frames at this
+    rate), the frames, the poses.
+
+    Returns
+    -------
+    camera : svgs.Camera
+        The camera the sensor images through (:func:`sensor_camera`).
+    trajectory : Trajectory
+    times_s : ndarray, shape (n,)
+        The frame times, s.
+    """
     cam = sensor_camera(cfg)
     for t in ("optics", "flash"):
-        cam.table(t)
+        cam.table(t)  # before the trajectory's checks: a camera that cannot render is the first problem
     traj = trajectory_of(cfg)
     times = traj.frame_times(cfg["fps"])
     check_visible(traj, times, cam, cfg["pattern"])
     ApproachSensor(cam, cfg["pattern"], frame_rate_hz=cfg["fps"])  # the phone can take frames at this rate
-    return times
+    return cam, traj, times
 
 
 def _overlay(m, cam, pattern, title: str) -> np.ndarray:
     """A video frame: the delivered image's overlay, letterboxed to :data:`VIDEO_SIZE_PX`."""
     import cv2
 
-    from svgs.overlay import render_overlay
+    from svgs.overlay import render_overlay, solution_marks
 
-    sol = m.solution
-    targets = {str(k): [float(x) for x in v] for k, v in (sol.targets_px.items() if sol else [])}
-    reproj = {}
-    if sol:
-        uv = cam.project_target(pattern.points_m, sol.R_cam_target, sol.t_cam_target_m)
-        reproj = {str(int(i)): [float(a), float(b)] for i, (a, b) in zip(pattern.ids, uv)}
+    targets, reproj = solution_marks(m.solution, cam, pattern)
     pic = render_overlay(m.image, blobs_px=m.blobs_px if m.blobs_px is not None else (), targets_px=targets,
                          reprojected_px=reproj, title=title, size_px=min(VIDEO_SIZE_PX) - 40)
     W, H = VIDEO_SIZE_PX
@@ -124,13 +128,11 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
 
     from svgs.profiles import Pattern
 
-    times = check_config(cfg)
+    cam, traj, times = check_config(cfg)
     out = Path(out_dir)
     ids = range(len(times))
     store = ResultStore(out, cfg, ("trial_id",) + MEASUREMENT_COLUMNS, trial_ids=ids, text_columns=TEXT_COLUMNS)
-    cam = sensor_camera(cfg)
     pattern = Pattern.load(cfg["pattern"])
-    traj = trajectory_of(cfg)
     t_start = time.perf_counter()
     n_new = 0
     with store.open():

@@ -147,6 +147,29 @@ def render_overlay(image, *, blobs_px=(), targets_px=None, reprojected_px=None, 
     return np.vstack([bar, out])
 
 
+def solution_marks(result, camera, pattern) -> tuple[dict, dict]:
+    """What an overlay draws of a solve: the identified blobs and the solution's reprojection.
+
+    Parameters
+    ----------
+    result : svgs.solver.Solution or a failure (falsy)
+    camera : svgs.Camera
+        The solver's camera (at the image's size).
+    pattern : svgs.Pattern
+
+    Returns
+    -------
+    targets_px, reprojected_px : dict
+        Target id (str) -> ``[u, v]`` px; both empty for a failure.
+    """
+    if not result:
+        return {}, {}
+    targets = {str(k): [float(x) for x in v] for k, v in result.targets_px.items()}
+    uv = camera.project_target(pattern.points_m, result.R_cam_target, result.t_cam_target_m)
+    reproj = {str(int(i)): [float(a), float(b)] for i, (a, b) in zip(pattern.ids, uv)}
+    return targets, reproj
+
+
 def write_overlay(path, image, **kw) -> str:
     """:func:`render_overlay` written as a PNG; returns the path."""
     import cv2

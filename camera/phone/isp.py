@@ -116,6 +116,16 @@ def split_exposure(S: float, exp: ExposureParams, base_iso: float) -> tuple[floa
     return t, iso
 
 
+def metered_target(exp: ExposureParams) -> float:
+    """The linear level the auto-exposure aims at: ``target_level * 2^compensation_ev`` (at most 1)."""
+    return min(exp.target_level * 2.0**exp.compensation_ev, 1.0)
+
+
+def exposure_limits(sensor: SensorParams, exp: ExposureParams) -> tuple[float, float]:
+    """Smallest and largest exposure product ``t * ISO / base_ISO`` the phone allows."""
+    return exp.min_exposure_s * exp.min_iso / sensor.base_iso, exp.max_exposure_s * exp.max_iso / sensor.base_iso
+
+
 def auto_exposure(flux_ph_s: np.ndarray, sensor: SensorParams, exp: ExposureParams, solver: ExposureSolver | None = None):
     """Auto-exposure on a noise-free flux image (photons/s/px, after the optics).
 
@@ -130,10 +140,8 @@ def auto_exposure(flux_ph_s: np.ndarray, sensor: SensorParams, exp: ExposurePara
     if solver is None:
         rate = (sensor.qe * flux_ph_s + sensor.dark_current_e_s) / sensor.full_well_e  # fraction of white per s at base ISO
         solver = ExposureSolver(rate, metering_weights(flux_ph_s.shape, exp.metering))
-    target = min(exp.target_level * 2.0**exp.compensation_ev, 1.0)
-    S_min = exp.min_exposure_s * exp.min_iso / sensor.base_iso
-    S_max = exp.max_exposure_s * exp.max_iso / sensor.base_iso
-    S = solver.solve(target, S_min, S_max)
+    target = metered_target(exp)
+    S = solver.solve(target, *exposure_limits(sensor, exp))
     t, iso = split_exposure(S, exp, sensor.base_iso)
     lvl = solver.level(t * iso / sensor.base_iso)
     return t, iso, {
@@ -150,11 +158,6 @@ def auto_exposure(flux_ph_s: np.ndarray, sensor: SensorParams, exp: ExposurePara
 AE_STREAM_GAIN = 0.5
 
 
-def exposure_limits(sensor: SensorParams, exp: ExposureParams) -> tuple[float, float]:
-    """Smallest and largest exposure product ``t * ISO / base_ISO`` the phone allows."""
-    return exp.min_exposure_s * exp.min_iso / sensor.base_iso, exp.max_exposure_s * exp.max_iso / sensor.base_iso
-
-
 def next_exposure(exposure_s: float, iso: float, metered_level: float, sensor: SensorParams, exp: ExposureParams,
                   gain: float = AE_STREAM_GAIN) -> tuple[float, float]:
     """The auto-exposure's settings for the next frame of a stream, from this frame's.
@@ -169,7 +172,7 @@ def next_exposure(exposure_s: float, iso: float, metered_level: float, sensor: S
     exposure_s, iso : float
     """
     S = float(exposure_s) * float(iso) / sensor.base_iso
-    target = min(exp.target_level * 2.0**exp.compensation_ev, 1.0)
+    target = metered_target(exp)
     S_min, S_max = exposure_limits(sensor, exp)
     if metered_level <= 0:
         S_next = S_max
