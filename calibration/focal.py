@@ -490,7 +490,8 @@ def estimate_focal_from_images(
         Its focal length need only be rough: identification uses it as a start.
     pattern : Pattern or str
     threshold : None, number or str
-        See :func:`svgs.detect.detect_blobs`.
+        None: the app's brightness threshold for ``camera`` (:func:`svgs.pipeline.camera_threshold`);
+        else as :func:`svgs.detect.detect_blobs` takes it.
     detect_options, identify_options : dict, optional
         Passed to :func:`svgs.detect.detect_blobs` and :func:`svgs.identify.identify`.
     **kwargs
@@ -513,6 +514,8 @@ def estimate_focal_from_images(
     from svgs.identify import identify
     from svgs.pipeline import check_image_matches_camera, load_image
 
+    from svgs.pipeline import camera_threshold
+
     camera = Camera.load(camera)
     pattern = Pattern.load(pattern)
     images = list(images)
@@ -524,7 +527,7 @@ def estimate_focal_from_images(
     for im, r, n in zip(images, rng, names):
         arr = load_image(im) if isinstance(im, (str, Path)) else np.asarray(im)
         check_image_matches_camera(arr, camera, name=n)
-        blobs = detect_blobs(arr, threshold=threshold, **(detect_options or {}))
+        blobs = detect_blobs(arr, threshold=camera_threshold(arr, camera, threshold), **(detect_options or {}))
         ident = identify(blobs, camera, pattern, **(identify_options or {}))
         if not ident:
             skipped.append((n, f"{ident.reason}: {ident.message}"))

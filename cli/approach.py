@@ -60,6 +60,9 @@ def register(sub) -> None:
                    help="image through the phone's 640 x 480 preview stream (binned sensor) instead of full resolution")
     p.add_argument("--no-motion", action="store_true", help="no motion blur and no rolling shutter (a static target per frame)")
     p.add_argument("--no-crlb", action="store_true", help="skip the per-frame Cramer-Rao bound (about 0.1-0.3 s a frame)")
+    p.add_argument("--threshold", default=None,
+                   help="detector threshold: 'app' (the app's brightness threshold for the camera, "
+                        "assets/app/svgs-app.toml; the default), a level in 8-bit counts, 'auto' or 'otsu'")
     p.add_argument("--out", required=True, help="output folder (a rerun with the same arguments resumes it)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object on stdout")
@@ -85,7 +88,7 @@ def config_from_args(args) -> dict:
                                    lateral_m=_floats(args.lateral, 2, "--lateral"),
                                    attitude_deg=_floats(args.attitude, 3, "--attitude"))
     return make_config(args.camera, traj, args.fps, seed=args.seed, preview=args.preview, motion=not args.no_motion,
-                       crlb=not args.no_crlb, pattern=args.pattern)
+                       crlb=not args.no_crlb, pattern=args.pattern, threshold=args.threshold)
 
 
 def print_summary(s: dict, file=None) -> None:
@@ -133,6 +136,8 @@ def command_line(args) -> str:
     parts += [f"--seed {args.seed}"] if args.seed else []
     parts += [f for f, on in (("--preview", args.preview), ("--no-motion", args.no_motion), ("--no-crlb", args.no_crlb))
               if on]
+    if args.threshold not in (None, "app"):
+        parts.append(f"--threshold {quote(str(args.threshold))}")
     parts.append(f"--out {quote(args.out)}")
     return " ".join(parts)
 

@@ -46,7 +46,7 @@ def _add_focal(sub) -> None:
                    help="1-sigma uncertainty of each range, metres (default 0)")
     p.add_argument("--no-roll", action="store_true",
                    help="do not let the pattern rotate in the image plane (default: a free roll per image)")
-    p.add_argument("--threshold", default=None, help="blob threshold in image counts, or 'auto' / 'otsu'")
+    p.add_argument("--threshold", default=None, help="blob threshold: 'app' (the app's brightness threshold for the camera, assets/app/svgs-app.toml; the default), a level in image counts, 'auto' or 'otsu'")
     p.add_argument("--name", default=None, help="name written into the profile (default: the camera's)")
     p.add_argument("--out", default=None, metavar="PROFILE.toml", help="write the camera profile with the new focal length")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")

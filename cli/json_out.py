@@ -99,7 +99,9 @@ _SOLUTION = f"""\
 {{"ok": bool, "reason": str | null,          # reason: a code of svgs.result.REASONS when unsolved
  "state": {_STATE} | null,   # paper state (m, deg)
  "R_cam_target": [[float x3] x3] | null, "t_cam_target_m": [float x3] | null,
- "targets_px": {{target: [u, v]}}, "n_blobs": int, "residual_rms_px": float | null"""
+ "targets_px": {{target: [u, v]}}, "n_blobs": int, "residual_rms_px": float | null,
+ "chi2": float | null, "dof": int | null, "p_value": float | null,   # the consistency test (svgs.app),
+ "consistency_sigma_px": float | null, "alpha": float | null, "consistent": bool | null  # also for reason inconsistent"""
 _ERRORS = ('"pos_err_vec_m": [float x3] | null, "att_err_vec_deg": [float x3] | null,\n'
            ' "pos_err_norm_m": float | null, "rot_err_deg": float | null')
 
@@ -124,7 +126,8 @@ SCHEMAS = {
 {{"ok": bool, "reason": str | null, "message": str | null, "n_blobs": int,
  "truth_state": {_STATE}, "state": {{...}} | null,
  "exposure_s": float, "iso": float, "expose_s": float, "solve_s": float, "render_s": float,
- "residual_rms_px": float | null,
+ "residual_rms_px": float | null, "chi2": float | null, "chi2_dof": int | null,
+ "p_value": float | null,                      # the consistency test (svgs.app); reason "inconsistent" below alpha
  {_ERRORS},
  "crlb": {{"centroid_sigma_px": float, "per_spot_sigma_px": {{target: [su, sv]}},
           "crlb_std": {{...state keys, m and deg}}}} | null,   # Cramer-Rao 1-sigma from the simulated sensor
@@ -215,11 +218,14 @@ SCHEMAS = {
  "misalignment_deg": [roll, pitch, yaw], "budget": bool,
  "ranges": [{{"range_m": float, "trials": int, "solved": int, "success_rate": float,
              "failures": {{reason: int}},
-             "mean_abs_error": {_STATE},   # the paper's "mean error"
+             "mean_abs_error": {_STATE},   # three readings of the paper's "mean error": mean |e|,
+             "abs_mean_error": {{...}}, "rms_error": {{...}},   # |mean e| (the verdicts' headline), RMS
              "bias": {{...}}, "std": {{...}},
              "crlb_std": {{...}},                      # median Cramer-Rao bound of the solved trials
              "paper": {{"mean_error": {{...}} | null, "std": {{...}} | null}},   # Tables 2-5; null: no row
-             "ratio": {{"mean_error": {{...}}, "std": {{...}}}}}}],               # simulated / paper
+             "ratio": {{"mean_error": {{...}}, "std": {{...}},                    # simulated / paper
+                       "abs_mean_error": {{...}}, "rms_error": {{...}}}}}}],      # (mean_error: of mean |e|)
+ "honest_count": {{...}} | null,    # DIR/honest_count.json: fitted cells and the counts under each reading
  "outputs": {{"results_csv", "summary_csv", "report", "summary_json": path}},
  {_RUN}}}""",
     "svgs sensitivity": f"""\

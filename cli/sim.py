@@ -50,7 +50,7 @@ def _scene_args(p, with_range=True):
                    help="distance of a grey backdrop behind the target (m; default 3; 0 = none)")
     add_ambient_arg(p)
     add_focus_arg(p)
-    p.add_argument("--threshold", default=None, help="detector threshold: a level, 'auto' or 'otsu' (default auto)")
+    p.add_argument("--threshold", default=None, help="detector threshold: 'app' (the app's brightness threshold for the camera, assets/app/svgs-app.toml; the default), a level in image counts, 'auto' or 'otsu'")
     p.add_argument("--exposure-s", type=float, default=None, help="override the phone's exposure time (s)")
     p.add_argument("--iso", type=float, default=None, help="override the phone's ISO")
     p.add_argument("--seed", type=int, default=0, help="random seed (render and noise); same seed, same numbers")

@@ -30,9 +30,13 @@ def register(sub) -> None:
     p.add_argument("--camera", required=True, help="camera profile name (e.g. galaxy-nexus) or path to a .toml")
     p.add_argument("--pattern", default="svgs-3u", help="target pattern name or .toml path (default: svgs-3u)")
     p.add_argument("--threshold", default=None,
-                   help="binarisation threshold in image counts, or 'auto' / 'otsu' (default: auto)")
+                   help="binarisation threshold: 'app' (the app's brightness threshold for the camera, assets/app/svgs-app.toml; the default), a level in image counts, 'auto' or 'otsu'")
     p.add_argument("--sigma-px", type=float, default=0.1,
                    help="centroid noise in px for the reported Cramer-Rao bound (default: 0.1)")
+    p.add_argument("--consistency-sigma-px", type=float, default=None,
+                   help="the stated centroid accuracy in px that the solution's residual is tested against "
+                        "(chi-square, svgs.app; a solution with p < alpha is 'inconsistent'; default: the app's, "
+                        "assets/app/svgs-app.toml)")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="write overlay.png (what the detector found and where the solution puts the targets) and "
                         "solution.json here")
@@ -51,6 +55,9 @@ def write_solution_overlay(path, image, camera, pattern, result, threshold=None,
     from svgs.detect import detect_blobs, to_gray
     from svgs.overlay import centroid_sigma_from_image, solution_marks, write_overlay
 
+    from svgs.pipeline import camera_threshold
+
+    threshold = camera_threshold(image, camera, threshold)
     if blobs is None:
         blobs = detect_blobs(image, threshold=threshold)
     targets, reproj = solution_marks(result, camera, pattern)
@@ -88,6 +95,7 @@ def solution_json(result) -> dict:
         "targets_px": {},
         "n_blobs": result.details.get("n_blobs"),
         "residual_rms_px": result.details.get("residual_rms_px"),
+        **{k: result.details.get(k) for k in ("chi2", "dof", "p_value", "consistency_sigma_px", "alpha", "consistent")},
     }
     d["details"] = {k: v for k, v in result.details.items() if k not in ("n_blobs", "residual_rms_px")}
     return d
@@ -140,9 +148,15 @@ def cmd_solve(args) -> int:
 
     image = load_image(args.image)
     check_image_matches_camera(image, camera)
-    thr = parse_threshold(args.threshold)
+    from svgs.pipeline import camera_threshold
+
+    thr = camera_threshold(image, camera, parse_threshold(args.threshold))
     blobs = detect_blobs(image, threshold=thr)  # once: for the solve and for the overlay
-    result = solve_image(image, camera, pattern, threshold=thr, sigma_px=args.sigma_px, blobs=blobs)
+    if args.consistency_sigma_px is not None and not (np.isfinite(args.consistency_sigma_px)
+                                                      and args.consistency_sigma_px > 0):
+        raise InputError(f"--consistency-sigma-px: expected a positive number of pixels, got {args.consistency_sigma_px}")
+    result = solve_image(image, camera, pattern, threshold=thr, sigma_px=args.sigma_px, blobs=blobs,
+                         consistency_sigma_px=args.consistency_sigma_px)
     d = solution_json(result)
     if args.out:
         out = Path(args.out)

@@ -328,17 +328,22 @@ def campaign_json(config, summary, stats, out, report) -> dict:
     for s in summary:
         ranges.append({"range_m": s["range_m"], "trials": s["n"], "solved": s["n_ok"], "success_rate": s["success_rate"],
                        "failures": dict(sorted(s["reasons"].items())), "mean_abs_error": _state(s, "mean_abs_") or {},
+                       "abs_mean_error": _state(s, "abs_mean_") or {}, "rms_error": _state(s, "rms_") or {},
                        "bias": _state(s, "bias_") or {}, "std": _state(s, "std_") or {},
                        "crlb_std": _state(s, "crlb_") or {},
                        "paper": {"mean_error": _state(s, "paper_mean_"), "std": _state(s, "paper_std_")},
-                       "ratio": {"mean_error": _state(s, "ratio_mean_"), "std": _state(s, "ratio_std_")}})
+                       "ratio": {"mean_error": _state(s, "ratio_mean_"), "std": _state(s, "ratio_std_"),
+                                 "abs_mean_error": _state(s, "ratio_abs_mean_"), "rms_error": _state(s, "ratio_rms_")}})
     out = Path(out)
+    from studies.campaign import read_honest_count
+
     return {"trial_kind": config.trial_kind, "camera": config.camera, "trials_per_range": config.trials_per_range,
             "exposures_per_render": config.exposures_per_render, "stand_settings_per_range": config.poses_per_range,
             "sigma_px": config.sigma_px if config.trial_kind == "geometric" else None, "calibration": config.calibration,
             "calibration_error": dict(sorted(config.calibration_error.items())),
             "true_lens": dict(sorted(config.lens.items())), "focal_calibration": config.calibration_info or None,
             "misalignment_deg": list(config.misalignment_deg), "budget": bool(config.budget), "ranges": ranges,
+            "honest_count": read_honest_count(out),
             "outputs": {"results_csv": out / "results.csv", "summary_csv": out / "summary.csv", "report": report,
                         "summary_json": out / "summary.json"},
             "run": run_info(stats, len(config.ranges_m) * config.trials_per_range)}

@@ -337,6 +337,9 @@ class Measurement:
         identify, solve), ``crlb``, s.
     n_blobs : int or None
     residual_rms_px : float or None
+    p_value : float or None
+        The solution's consistency (:func:`svgs.app.consistency`; also for an ``inconsistent``
+        frame, whose ``reason`` says so).
     image : ndarray or None
         The delivered image (when the sensor keeps images).
     solution : object
@@ -362,6 +365,7 @@ class Measurement:
     timings_s: dict = field(default_factory=dict)
     n_blobs: int | None = None
     residual_rms_px: float | None = None
+    p_value: float | None = None
     image: np.ndarray | None = field(default=None, repr=False)
     solution: object = field(default=None, repr=False)
     blobs_px: np.ndarray | None = field(default=None, repr=False)
@@ -375,7 +379,7 @@ class Measurement:
             for k in STATE_KEYS:
                 out[f"{prefix}_{k}"] = None if d is None else d.get(k)
         out.update({"ok": int(self.ok), "reason": self.reason or "", "n_blobs": self.n_blobs,
-                    "residual_rms_px": self.residual_rms_px, "exposure_s": self.exposure_s, "iso": self.iso,
+                    "residual_rms_px": self.residual_rms_px, "p_value": self.p_value, "exposure_s": self.exposure_s, "iso": self.iso,
                     "metered_level": self.metered_level, "next_exposure_s": self.next_exposure_s,
                     "next_iso": self.next_iso})
         for k in TIMING_KEYS:
@@ -389,7 +393,7 @@ TIMING_KEYS = ("render", "optics", "expose", "solve", "crlb")
 MEASUREMENT_COLUMNS = (("frame", "t_s", "range_m") + tuple(f"true_{k}" for k in STATE_KEYS)
                        + tuple(f"est_{k}" for k in STATE_KEYS) + tuple(f"err_{k}" for k in STATE_KEYS)
                        + tuple(f"crlb_{k}" for k in STATE_KEYS)
-                       + ("ok", "reason", "n_blobs", "residual_rms_px", "exposure_s", "iso", "metered_level",
+                       + ("ok", "reason", "n_blobs", "residual_rms_px", "p_value", "exposure_s", "iso", "metered_level",
                           "next_exposure_s", "next_iso") + tuple(f"{k}_s" for k in TIMING_KEYS))
 
 
@@ -441,7 +445,7 @@ class ApproachSensor:
     keep_images : bool
         Keep the delivered image, the blobs and the solution in each :class:`Measurement`.
     threshold : None, float or str
-        The detector's threshold (:func:`svgs.detect.detect_blobs`).
+        The detector's threshold (None: the app's for the camera, :func:`svgs.pipeline.camera_threshold`).
     base : Scenario, optional
         The lab around the target (backdrop, ambient light) and render quality; default the
         lab of :mod:`sim.lab`. Its camera fields (lens offsets, overrides, a fixed focus) are
@@ -654,7 +658,9 @@ class ApproachSensor:
         from svgs.detect import detect_blobs
 
         t0 = time.perf_counter()
-        blobs = detect_blobs(ex.image, threshold=self.threshold)
+        from svgs.pipeline import camera_threshold
+
+        blobs = detect_blobs(ex.image, threshold=camera_threshold(ex.image, self.camera, self.threshold))
         t_detect = time.perf_counter() - t0
         row = solve_exposure(frame, ex, threshold=self.threshold, solver_camera_profile=self.camera, truth="actual",
                              blobs=blobs)
@@ -683,7 +689,7 @@ class ApproachSensor:
             error=state_error(est, truth_state) if est else None, crlb_std=crlb, range_m=float(t[2]),
             exposure_s=float(settings[0]), iso=float(settings[1]), metered_level=float(level),
             next_exposure_s=float(nxt[0]), next_iso=float(nxt[1]), timings_s=timings, n_blobs=row["n_blobs"],
-            residual_rms_px=row["residual_rms_px"],
+            residual_rms_px=row["residual_rms_px"], p_value=row.get("p_value"),
             image=ex.image if self.keep_images else None, solution=sol if self.keep_images else None,
             blobs_px=blobs.centroid_px if self.keep_images else None,
         )

@@ -373,7 +373,8 @@ def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposu
     seed : int
         Noise seed of this exposure.
     threshold : None, float or str
-        Detector threshold (see :func:`svgs.detect.detect_blobs`).
+        Detector threshold: None, the app's for the camera (:func:`svgs.pipeline.camera_threshold`);
+        else as :func:`svgs.detect.detect_blobs` takes it.
     exposure_s, iso : float, optional
         Override the phone's exposure.
     solver_camera_profile : Camera, optional
@@ -391,7 +392,8 @@ def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposu
         ``ok``, ``reason``, ``message``, ``n_blobs``, ``state`` (solved, paper keys) or None,
         ``truth_state``, the :data:`sim.metrics.POSE_ERROR_KEYS` (``pos_err_vec_m``,
         ``att_err_vec_deg``, ``pos_err_norm_m``, ``rot_err_deg``; None when unsolved),
-        ``residual_rms_px``,
+        ``residual_rms_px``, ``chi2``, ``chi2_dof``, ``p_value`` (the consistency test,
+        :func:`svgs.app.consistency`; also for an ``inconsistent`` failure),
         ``exposure_s``, ``iso``, ``expose_s``, ``solve_s``; and ``_exposure`` / ``_solution``
         (objects, for callers that write images).
     """
@@ -433,6 +435,8 @@ def solve_exposure(frame: Frame, ex, *, threshold=None, solver_camera_profile: C
         "_exposure": ex,
         "_solution": sol,
     }
+    cons = sol.consistency.to_json() if sol and sol.consistency is not None else (sol.details if not sol else {})
+    row.update({"chi2": cons.get("chi2"), "chi2_dof": cons.get("dof"), "p_value": cons.get("p_value")})
     if sol:
         row.update({"state": sol.state_dict, "residual_rms_px": sol.residual_rms_px,
                     **pose_errors(sol.state, truth_state)})

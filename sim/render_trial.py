@@ -19,7 +19,7 @@ Render once, expose many
 Scenario keys
     Text: ``camera``, ``pattern`` (name or path). Numbers: :data:`RENDER_PARAMETERS` (the
     defaults are a render with seed 0 of the pattern as it is, no ND filter, the renderer's
-    samples per pixel, the phone's auto-exposure, the automatic threshold and the exact
+    samples per pixel, the phone's auto-exposure, the app's brightness threshold (svgs.app) and the exact
     calibration). With ``stand = 1`` the angles turn the phone on the test stand
     (:mod:`sim.stand`); ``lens_*`` make the true lens differ from the profile (the solver's
     ``*_error`` are relative to it); ``sensor_noise``, ``glare``, ``quantise`` switch error
@@ -61,8 +61,10 @@ _POSE = POSE_KEYS
 #: The true lens' departures from the profile (the image is rendered through it).
 _LENS = ("lens_pp_u_px", "lens_pp_v_px", "lens_k1")
 
-#: ``threshold`` values that are not levels (the parameter is numeric, so a sensitivity study can vary it).
-THRESHOLD_AUTO, THRESHOLD_OTSU = 0.0, -1.0
+#: ``threshold`` values that are not levels (the parameter is numeric, so a sensitivity study can vary it):
+#: 0 the app's brightness threshold for the camera (:mod:`svgs.app`, the default), -1 Otsu's, -2 the
+#: automatic rule.
+THRESHOLD_APP, THRESHOLD_OTSU, THRESHOLD_AUTO = 0.0, -1.0, -2.0
 
 RENDER_PARAMETERS = {
     **{k: GEOMETRIC_PARAMETERS[k] for k in _POSE},
@@ -86,8 +88,8 @@ RENDER_PARAMETERS = {
                             False, lower=0.0, upper=60.0),
     "iso": Parameter("iso", "ISO", "sensitivity forced on the phone (0: the phone's auto-exposure)", 0.0, False,
                      lower=0.0),
-    "threshold": Parameter("threshold", "DN", "detector threshold in 8-bit counts (0: automatic, -1: Otsu's)", 0.0,
-                           False, lower=-1.0, upper=255.0),
+    "threshold": Parameter("threshold", "DN", "detector threshold in 8-bit counts (0: the app's for the camera, "
+                           "svgs.app; -1: Otsu's; -2: the automatic rule)", 0.0, False, lower=-2.0, upper=255.0),
     **{k: GEOMETRIC_PARAMETERS[k] for k in ("focal_error_frac", "pp_error_u_px", "pp_error_v_px", "k1_error")},
     # the true lens (the solver's calibration errors above are relative to it)
     "lens_pp_u_px": Parameter("lens_pp_u_px", "px", "the true lens' principal point cx minus the profile's (the image "
@@ -129,7 +131,7 @@ RENDER_OUTPUTS = (
     *(f"true_{k}" for k in STATE_KEYS),
     *(f"est_{k}" for k in STATE_KEYS),
     *ERR_KEYS, POS_ERR_NORM_M, ROT_ERR_DEG,
-    "residual_rms_px", "min_separation_px",
+    "residual_rms_px", "chi2", "chi2_dof", "p_value", "p_value_crlb", "min_separation_px",
     *(f"crlb_{k}" for k in STATE_KEYS),
     "merge_margin_dn",
     "centroid_err_rms_px", *(f"cen_{a}_px_{k}" for k in range(4) for a in ("du", "dv")), "crlb_centroid_px",
@@ -178,23 +180,34 @@ def merge_margin_dn(image: np.ndarray, targets_px: np.ndarray, threshold: float,
 
 
 def check_threshold(text) -> str:
-    """A threshold option: ``auto``, ``otsu`` or a positive level (as text); :class:`InputError` otherwise."""
+    """A threshold option: ``app`` (None), ``auto``, ``otsu`` or a positive level (as text);
+    :class:`InputError` otherwise."""
     from svgs.detect import parse_threshold
 
-    v = parse_threshold("auto" if text is None else str(text).strip())
-    return v if isinstance(v, str) else repr(v)
+    v = parse_threshold(None if text is None else str(text).strip())
+    return "app" if v is None else v if isinstance(v, str) else repr(v)
 
 
 def threshold_parameter(text) -> float:
-    """The ``threshold`` scenario value of a threshold option (``auto``: 0, ``otsu``: -1, a level: itself)."""
+    """The ``threshold`` scenario value of a threshold option (``app`` or None: 0, ``otsu``: -1,
+    ``auto``: -2, a level: itself)."""
     t = check_threshold(text)
-    return THRESHOLD_AUTO if t == "auto" else THRESHOLD_OTSU if t == "otsu" else float(t)
+    named = {"app": THRESHOLD_APP, "auto": THRESHOLD_AUTO, "otsu": THRESHOLD_OTSU}
+    return named[t] if t in named else float(t)
 
 
 def _threshold(value: float):
-    """The detector's ``threshold`` argument of a scenario value."""
+    """The detector's ``threshold`` argument of a scenario value (None: the app's)."""
     v = float(value)
-    return None if v == THRESHOLD_AUTO else "otsu" if v < 0 else v
+    if v == THRESHOLD_APP:
+        return None
+    if v == THRESHOLD_AUTO:
+        return "auto"
+    if v == THRESHOLD_OTSU:
+        return "otsu"
+    if v < 0:
+        raise InputError(f"threshold: {v:g} is neither a level (>= 0) nor 0 (app), -1 (otsu) or -2 (auto)")
+    return v
 
 
 def scaled_pattern_file(pattern, factor: float, folder) -> str:
@@ -271,6 +284,7 @@ def render_trial_scenario(labels: dict | None = None, **values) -> dict:
     if scen["glare_veiling_fraction"] != -1 and scen["glare_veiling_fraction"] < 0:
         raise InputError(f"glare_veiling_fraction: expected -1 (the profile's) or 0..0.5, got "
                          f"{scen['glare_veiling_fraction']:g}")
+    _threshold(scen["threshold"])  # a level >= 0, or 0 / -1 / -2 (app / otsu / auto): checked before any work
     return scen
 
 
@@ -401,8 +415,8 @@ def _solve_one(scenario: dict, seed: int, frame, exposers: dict) -> dict:
                          truth="actual" if scenario["truth_actual"] else "commanded")
     row["expose_s"] = expose_s
     out = {k: None for k in RENDER_OUTPUTS}
-    out.update({k: row[k] for k in ("ok", "reason", "message", "n_blobs", "residual_rms_px", "expose_s", "solve_s",
-                                    POS_ERR_NORM_M, ROT_ERR_DEG)})
+    out.update({k: row[k] for k in ("ok", "reason", "message", "n_blobs", "residual_rms_px", "chi2", "chi2_dof",
+                                    "p_value", "expose_s", "solve_s", POS_ERR_NORM_M, ROT_ERR_DEG)})
     out["ok"] = bool(row["ok"])
     out["exposure_s_used"], out["iso_used"] = float(row["exposure_s"]), float(row["iso"])
     out.update({f"true_{k}": v for k, v in row["truth_state"].items()})
@@ -437,6 +451,11 @@ def _solve_one(scenario: dict, seed: int, frame, exposers: dict) -> dict:
             from sim.crlb import pose_crlb
 
             out["crlb_centroid_px"] = rms
+            # the consistency test against the sensor's bound alone (what the residual would be
+            # judged by if the centroids were as good as the CRLB): reported, not applied
+            from svgs.app import consistency
+
+            out["p_value_crlb"] = consistency(sol.residual_rms_px, len(pat.ids), sigma_px=rms, alpha=0.5).p_value
             out.update({f"crlb_sensor_{k}": float(v) for k, v in pose_crlb(sol, rms).items()})
     if out["message"] is not None:
         out["message"] = " ".join(str(out["message"]).split())  # one line (a CSV field)

@@ -42,10 +42,22 @@ TEXT_COLUMNS = ("reason",)
 
 
 def make_config(camera: str, trajectory: Trajectory, fps: float, *, seed: int = 0, preview: bool = False,
-                motion: bool = True, crlb: bool = True, pattern: str = "svgs-3u") -> dict:
-    """The approach's parameters (the store's manifest): what decides the numbers."""
+                motion: bool = True, crlb: bool = True, pattern: str = "svgs-3u", threshold=None) -> dict:
+    """The approach's parameters (the store's manifest): what decides the numbers. ``threshold``:
+    the detector's (None or ``"app"``: the app's for the camera, :mod:`svgs.app`; ``"auto"``,
+    ``"otsu"`` or a level in 8-bit counts)."""
+    from svgs.detect import parse_threshold
+
+    t = parse_threshold(None if threshold is None else str(threshold))
     return {"study": "approach", "camera": str(camera), "pattern": str(pattern), "fps": float(fps), "seed": int(seed),
-            "preview": bool(preview), "motion": bool(motion), "crlb": bool(crlb), "trajectory": trajectory.to_json()}
+            "preview": bool(preview), "motion": bool(motion), "crlb": bool(crlb), "trajectory": trajectory.to_json(),
+            "threshold": "app" if t is None else t if isinstance(t, str) else float(t)}
+
+
+def _threshold(cfg: dict):
+    """The detector's ``threshold`` argument of a config (None: the app's)."""
+    t = cfg.get("threshold", "app")
+    return None if t == "app" else t
 
 
 def sensor_camera(cfg: dict):
@@ -145,7 +157,7 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
         frames_dir.mkdir(exist_ok=True)
         if todo:
             sensor = ApproachSensor(cam, cfg["pattern"], seed=cfg["seed"], motion=cfg["motion"], crlb=cfg["crlb"],
-                                    keep_images=True, frame_rate_hz=cfg["fps"])
+                                    keep_images=True, frame_rate_hz=cfg["fps"], threshold=_threshold(cfg))
             if todo[0] > 0:
                 last = {r["trial_id"]: r for r in store.read_rows()}[todo[0] - 1]
                 sensor.restore(todo[0], last["next_exposure_s"], last["next_iso"])

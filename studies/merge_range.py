@@ -20,7 +20,7 @@ Method (one parameter at a time, on the rendered chain)
 Parameters (:data:`PHYSICS`: the range and where it comes from)
     the glare's veiling fraction and wing exponent, the exposure (compensation in EV on what the
     phone's auto-exposure picks), the flash LED's offset from the lens, the cubes' spacing (the
-    pattern scaled), and the f-number.
+    pattern scaled), the f-number, the app's brightness threshold and the lab's light.
 """
 
 from __future__ import annotations
@@ -52,7 +52,19 @@ PHYSICS = {
     "pattern_scale": (0.8, 1.5, "the cubes' spacing 0.8-1.5x the 3U pattern's (27.5 cm tall); wider than a 3U face "
                       "needs booms"),
     "f_number": (2.0, 2.8, "phone camera lenses of 2011-2012: f/2.0 to f/2.8 (the Amaze's f/2.2)"),
+    "threshold": (170.0, 250.0, "the app's brightness threshold on the 8-bit image (an app setting, not a camera "
+                  "value: assets/app/svgs-app.toml, 200 for the Amaze, ASSUMED): from just above the lit lab the "
+                  "auto-exposure holds at mid-grey (its brightest per cent at ~155 counts) to just below white; "
+                  "without LOW:HIGH, 0.85-1.25x the camera's app value within the app's plausible range"),
+    "ambient_radiance_w_m2_sr": (0.014, 0.056, "the lab's light, half to twice the value fitted to the merge with "
+                                 "the windowed centroid and the automatic threshold (0.028 W m^-2 sr^-1, "
+                                 "assets/labs/fitted/msfc-frl.toml, whose plausible range is 0-0.2): through the "
+                                 "auto-exposure it sets how far the spots are over full well"),
 }
+#: The paper's last range with solutions, per phone (Becker, Howard & Rakoczy 2014: the Amaze 4G
+#: "only provided effective state calculations up to about a 6.5 meter range"; beyond it the spots
+#: merged). Marked on the figures; not used by any computation.
+PAPER_LAST_SOLVED_M = {"htc-amaze-4g": 6.5}
 DEFAULT_RANGES_M = (3.0, 4.0, 5.0, 5.5, 6.0, 6.5, 7.0, 7.5, 8.0, 9.0, 10.0, 12.0)
 #: The stand's attitude: off the exact facing, at which the on-axis cube's front-face glint
 #: reaches the lens (a 0.1 deg window).
@@ -115,6 +127,13 @@ def make_config(camera: str, *, ranges_m=None, vary=None, exposures: int = 2, se
         if name in names:
             raise InputError(f"--vary: {name} given twice")
         lo, hi = PHYSICS[name][:2]
+        if name == "threshold" and not rng:  # around this camera's app setting, within its plausible range
+            from svgs.app import settings
+            from svgs.profiles import Camera
+
+            app = settings()
+            t = app.threshold_for(Camera.load(camera).name)
+            lo, hi = max(app.threshold_range_dn[0], 0.85 * t), min(app.threshold_range_dn[1], 1.25 * t)
         if rng:
             try:
                 lo, hi = (float(x) for x in rng.split(":"))
@@ -229,6 +248,10 @@ def tornado_figure(eff: list[dict], config: MergeRangeConfig):
         ax.text(min(lo, hi) - 0.05, k, f"{_fmt(lo, e['bound_low'])} | {_fmt(hi, e['bound_high'])} m", ha="right",
                 va="center", fontsize=7)
     ax.axvline(nom, color="k", lw=1)
+    paper = PAPER_LAST_SOLVED_M.get(config.camera)
+    if paper is not None:
+        ax.axvspan(paper, config.ranges_m[-1] + 0.5, color="0.85", zorder=0,
+                   label=f"paper: solved to ~{paper:g} m, merged beyond")
     ax.set_yticks(range(len(eff)), [f"{e['parameter']}\n{e['low']:g} .. {e['high']:g}" for e in reversed(eff)],
                   fontsize=7)
     ax.set_xlabel("range at which the spots merge (m)")
@@ -256,6 +279,8 @@ def margin_figure(cases: list[dict], config: MergeRangeConfig):
             label = "nominal" if case == "nominal" else f"{c['value']:g}"
             ax.plot(config.ranges_m, c["margin_dn"], style, color=color, marker="o", ms=3, label=label)
         ax.axhline(0, color="0.5", lw=0.8)
+        if config.camera in PAPER_LAST_SOLVED_M:
+            ax.axvline(PAPER_LAST_SOLVED_M[config.camera], color="0.4", ls=":", lw=1)
         ax.set_title(p, fontsize=8)
         ax.set_xlabel("range (m)")
         ax.set_ylabel("merge margin (counts)")
@@ -284,7 +309,10 @@ def write_report(out_dir, config: MergeRangeConfig, cases: list[dict], eff: list
         "physical range, the others as profiled; the rendered chain (Mitsuba, the phone model with its "
         f"auto-exposure, the SVGS detector's threshold), {config.exposures} exposures per render, ranges "
         f"{', '.join(f'{r:g}' for r in config.ranges_m)} m, the phone facing the target on the stand (roll and pitch "
-        "0.5 deg)." + (f" Wall time {wall_s:.0f} s." if wall_s else ""))
+        "0.5 deg). The detector is the paper's (the app's fixed brightness threshold, the blobs' weighted centroids; "
+        "svgs.app)." + (f" Wall time {wall_s:.0f} s." if wall_s else "")
+        + (f" The paper's onset is marked on the figures (grey: beyond its last solved range, "
+           f"{PAPER_LAST_SOLVED_M[config.camera]:g} m)." if config.camera in PAPER_LAST_SOLVED_M else ""))
     rep.heading("Answer")
     lines = []
     for e in eff:

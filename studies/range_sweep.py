@@ -57,6 +57,7 @@ class RangeSweepConfig:
         1-sigma jitter of the extra poses.
     seed : int
     threshold : str
+        ``app`` (the app's brightness threshold for the camera, :mod:`svgs.app`; default),
         ``auto``, ``otsu`` or a level.
     target_x_m, target_y_m, roll_deg, pitch_deg, yaw_deg : float
         The nominal pose besides the range (the target's lateral offset, the paper's attitude).
@@ -77,7 +78,7 @@ class RangeSweepConfig:
     jitter_m: float = 0.01
     seed: int = 0
     pattern: str = "svgs-3u"
-    threshold: str = "auto"
+    threshold: str = "app"
     target_x_m: float = 0.0
     target_y_m: float = 0.0
     roll_deg: float = 0.0
@@ -335,7 +336,9 @@ def sample_overlays(path, cfg: RangeSweepConfig, panel_px: int = 420) -> str:
         t = firsts[r]
         pic = trial_picture(t.scenario, int(t.seed))
         sol, cam, pat = pic["row"]["_solution"], pic["camera"], pic["pattern"]
-        blobs = detect_blobs(pic["image"], threshold=pic["threshold"])
+        from svgs.pipeline import camera_threshold
+
+        blobs = detect_blobs(pic["image"], threshold=camera_threshold(pic["image"], cam, pic["threshold"]))
         targets = {str(k): v for k, v in sol.targets_px.items()} if sol else {}
         reproj = ({str(int(i)): uv for i, uv in zip(pat.ids, cam.project_target(pat.points_m, sol.R_cam_target,
                                                                                  sol.t_cam_target_m))} if sol else {})

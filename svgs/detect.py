@@ -3,7 +3,7 @@
 The steps
     1. Colour -> luminance (Rec. 601 weights, RGB channel order as :func:`svgs.load_image`
        returns it); 8/16-bit and float images are kept in their type.
-    2. Threshold: a fixed level, Otsu, or automatic (``"auto"``, the default): the
+    2. Threshold: a fixed level (the app's, by default), Otsu, or automatic (``"auto"``): the
        background level (median) plus ``k`` robust sigmas (1.4826 x MAD for float images,
        the histogram-interpolated inter-quartile range / 1.349 for 8/16-bit ones, whose
        MAD is quantised to whole DN), both estimated on a regular subsample of the frame,
@@ -20,12 +20,26 @@ The steps
        (eccentricity, with each pixel counted as a unit square) and roundness
        ``4 pi A / P^2`` (``P`` the outer contour through pixel centres plus ``pi``, the
        perimeter of the pixel squares' outline for a convex blob); shape gates.
-    5. Centroid: a Gaussian-weighted iterative centroid (the "windowed" centroid of
-       SExtractor's XWIN) on background-subtracted intensities in a window around the
-       blob. Unlike the weighted centroid of the thresholded pixels it is not biased by the
-       threshold truncating the spot's wings, and it weights down the noise of the wings.
-       ``centroid="component"`` gives the plain intensity-weighted centroid of the blob's
-       pixels instead (what the paper and most SVGS implementations do).
+    5. Centroid (``centroid``; default the app's, :mod:`svgs.app`: ``"weighted"``):
+
+       - ``"weighted"`` (the paper's rule, default): the intensity-weighted centroid of the
+         blob's own thresholded pixels, background subtracted (``"component"`` is another name);
+       - ``"binary"``: the unweighted centroid of the blob's pixels (the binary image's blob);
+       - ``"window"``: a Gaussian-weighted iterative centroid (SExtractor's XWIN) on
+         background-subtracted intensities in a window around the blob, *deblended*: every
+         other blob's thresholded pixels are masked, as SExtractor's windowed measurements
+         mask the other objects of the segmentation map, and the window's reach is at most
+         half the distance to the nearest other blob (never below the smallest window's, 6 px
+         at sigma 0.8 px), so it does not reach into a neighbour (its sub-threshold halo gets a
+         weight below ``exp(-8)``). Unbiased by the threshold
+         truncating the spot's wings; an option,
+         not the paper's rule (``docs/detector.md``, "What a better centroid buys").
+
+The default threshold is the app's "specified brightness threshold value" (Becker, Howard &
+Rakoczy 2014) on the 8-bit image: ``threshold=None`` takes :func:`svgs.app.settings`'
+``threshold_dn`` (scaled by 257 for a 16-bit image; a float image is taken in 8-bit units, as
+the camera model delivers it); :func:`svgs.pipeline.solve_image` takes the value of the
+camera's test set-up. ``threshold="auto"`` is the automatic rule of step 2.
 
 Pixel convention: OpenCV's, pixel centres at integer coordinates; ``centroid_px`` holds
 ``(u, v)`` = (column, row).
@@ -69,6 +83,7 @@ COARSE_MAX_REGIONS = 400
 WIN_MAX_ITER = 20
 WIN_TOL_PX = 1e-4
 WIN_MIN_SIGMA_PX = 0.8
+
 
 GATES = ("min_area", "max_area", "eccentricity", "roundness", "max_blobs")
 
@@ -291,12 +306,12 @@ def _otsu(gray: np.ndarray) -> float:
 
 
 def parse_threshold(text):
-    """A ``--threshold`` option: None, ``'auto'``, ``'otsu'`` or a non-negative level.
+    """A ``--threshold`` option: None, ``'app'``, ``'auto'``, ``'otsu'`` or a non-negative level.
 
     Parameters
     ----------
     text : str or None
-        ``auto``, ``otsu`` or a number (image counts).
+        ``app`` (the app's threshold; same as None), ``auto``, ``otsu`` or a number (image counts).
 
     Returns
     -------
@@ -310,29 +325,61 @@ def parse_threshold(text):
     """
     if text is None or text in ("auto", "otsu"):
         return text
+    if text == "app":
+        return None
     try:
         v = float(text)
     except ValueError:
-        raise InputError(f"--threshold: expected a number, 'auto' or 'otsu', got {text!r}") from None
+        raise InputError(f"--threshold: expected a number, 'app', 'auto' or 'otsu', got {text!r}") from None
     if not np.isfinite(v) or v < 0:
         raise InputError(f"--threshold: expected a non-negative finite level, got {text!r}")
     return v
 
 
+def app_level(dtype, threshold_dn: float | None = None) -> float:
+    """The app's brightness threshold (8-bit DN) as a level of an image of ``dtype``.
+
+    Parameters
+    ----------
+    dtype : numpy dtype
+        The image's type: uint8 and float images take the 8-bit value as it is (the camera model's
+        float images are in 8-bit units), uint16 ones scale it by 257.
+    threshold_dn : float, optional
+        Default: :func:`svgs.app.settings`' ``threshold_dn``.
+
+    Returns
+    -------
+    float
+        The level in the image's units.
+    """
+    from .app import settings
+
+    t = settings().threshold_dn if threshold_dn is None else float(threshold_dn)
+    return t * 257.0 if np.dtype(dtype) == np.uint16 else t
+
+
 def _resolve_threshold(gray, threshold, k_sigma, peak_fraction):
-    if threshold is None or (isinstance(threshold, str) and threshold == "auto"):
+    if isinstance(threshold, str) and threshold == "auto":
         return auto_threshold(gray, k_sigma=k_sigma, peak_fraction=peak_fraction)
     bg, sigma = background_stats(gray)
+    if threshold is None or (isinstance(threshold, str) and threshold == "app"):
+        if np.issubdtype(gray.dtype, np.floating) and 0 < float(gray.max()) <= 1.0:
+            import warnings
+
+            warnings.warn("a float image with values in [0, 1]: the app's brightness threshold is in 8-bit counts "
+                          "(0-255), so no pixel passes it; scale the image to 0-255 or pass threshold='auto' or a "
+                          "level", stacklevel=3)
+        return app_level(gray.dtype), bg, sigma
     if isinstance(threshold, str):
         if threshold == "otsu":
             return _otsu(gray), bg, sigma
-        raise InputError(f"threshold: expected a number, 'auto' or 'otsu', got {threshold!r}")
+        raise InputError(f"threshold: expected a number, 'app', 'auto' or 'otsu', got {threshold!r}")
     if isinstance(threshold, bool):
-        raise InputError(f"threshold: expected a number, 'auto' or 'otsu', got {threshold!r}")
+        raise InputError(f"threshold: expected a number, 'app', 'auto' or 'otsu', got {threshold!r}")
     try:
         t = float(threshold)
     except (TypeError, ValueError):
-        raise InputError(f"threshold: expected a number, 'auto' or 'otsu', got {threshold!r}") from None
+        raise InputError(f"threshold: expected a number, 'app', 'auto' or 'otsu', got {threshold!r}") from None
     if not np.isfinite(t):
         raise InputError(f"threshold: expected a finite level, got {threshold!r}")
     return t, bg, sigma
@@ -406,13 +453,19 @@ def _ring_background(gray, x0, y0, w, h, pad, fallback):
     return float(np.median(ring))
 
 
-def windowed_centroid(gray, u0, v0, sigma_w, background, *, max_iter=WIN_MAX_ITER, tol_px=WIN_TOL_PX):
+def windowed_centroid(gray, u0, v0, sigma_w, background, *, mask=None, max_iter=WIN_MAX_ITER,
+                      tol_px=WIN_TOL_PX):
     """Gaussian-weighted iterative centroid around ``(u0, v0)``.
 
     Iterates ``x <- x + 2 sum(w I (x_i - x)) / sum(w I)`` with ``w`` a Gaussian of sigma
     ``sigma_w`` centred on ``x`` and ``I`` the background-subtracted values in a window of
     half-width ``4 sigma_w + 2`` px. The factor 2 makes one step exact for a Gaussian spot
     of sigma ``sigma_w``; the fixed point is the centre of any symmetric spot.
+
+    ``mask`` (bool, the frame's shape, or ``(array, x0, y0)`` for a part of the frame whose top-left
+    pixel is ``(x0, y0)``) marks pixels to leave out (their value taken as 0): the
+    other blobs' pixels, so that the window never takes in a neighbour's thresholded light, as
+    SExtractor's windowed measurements mask the other objects of its segmentation map.
 
     Returns
     -------
@@ -427,6 +480,14 @@ def windowed_centroid(gray, u0, v0, sigma_w, background, *, max_iter=WIN_MAX_ITE
     I = gray[Y0:Y1, X0:X1].astype(np.float64) - background
     xs = np.arange(X0, X1, dtype=np.float64)
     ys = np.arange(Y0, Y1, dtype=np.float64)
+    if mask is not None:
+        m, mx0, my0 = mask if isinstance(mask, tuple) else (mask, 0, 0)
+        sub = np.zeros(I.shape, bool)
+        ys0, ys1 = max(Y0, my0), min(Y1, my0 + m.shape[0])
+        xs0, xs1 = max(X0, mx0), min(X1, mx0 + m.shape[1])
+        if ys1 > ys0 and xs1 > xs0:
+            sub[ys0 - Y0:ys1 - Y0, xs0 - X0:xs1 - X0] = m[ys0 - my0:ys1 - my0, xs0 - mx0:xs1 - mx0]
+        I = np.where(sub, 0.0, I)
     u, v = float(u0), float(v0)
     k = -0.5 / (sigma_w * sigma_w)
     for _ in range(max_iter):
@@ -460,7 +521,7 @@ def detect_blobs(
     shape_gate_min_area_px: int = SHAPE_GATE_MIN_AREA_PX,
     max_blobs: int = MAX_BLOBS,
     saturation_level=None,
-    centroid: str = "window",
+    centroid: str | None = None,
     k_sigma: float = AUTO_K_SIGMA,
     peak_fraction: float = AUTO_PEAK_FRACTION,
 ) -> Blobs:
@@ -470,10 +531,11 @@ def detect_blobs(
     ----------
     image : array_like, shape (H, W) or (H, W, 3)
         uint8, uint16 or float image, grey or RGB.
-    threshold : None, "auto", "otsu" or float
-        Binarisation level in image units (pixels strictly above it are foreground);
-        ``None``/``"auto"``: background + ``k_sigma`` robust sigmas, at least
-        ``peak_fraction`` of the brightest value above background.
+    threshold : None, "app", "auto", "otsu" or float
+        Binarisation level in image units (pixels strictly above it are foreground).
+        ``None`` or ``"app"``: the app's brightness threshold (:func:`svgs.app.settings`, ``threshold_dn``
+        on the 8-bit scale; x257 for 16-bit images). ``"auto"``: background + ``k_sigma``
+        robust sigmas, at least ``peak_fraction`` of the brightest value above background.
     min_area_px, max_area_px : int
         Size gate on the number of thresholded pixels (defaults 3 and 20000).
     max_eccentricity : float
@@ -487,9 +549,10 @@ def detect_blobs(
     saturation_level : float, optional
         Values at or above it count as saturated; default the integer type's maximum
         (none for float images).
-    centroid : {"window", "component"}
-        Gaussian-windowed iterative centroid (default, unbiased by the threshold) or the
-        plain intensity-weighted centroid of the blob's pixels.
+    centroid : {"weighted", "binary", "window"}, optional
+        The intensity-weighted centroid of each blob's own pixels (the paper's rule, the app's
+        default), their unweighted centroid, or the deblended Gaussian-windowed centroid (see
+        the module notes). ``"component"`` is another name of ``"weighted"``.
     k_sigma, peak_fraction : float
         Parameters of the automatic threshold.
 
@@ -504,7 +567,7 @@ def detect_blobs(
         For a bad ``image`` (see :func:`to_gray`) or bad options.
     """
     gray = to_gray(image)
-    _check_options(centroid, min_area_px, max_area_px, max_blobs)
+    centroid = _check_options(centroid, min_area_px, max_area_px, max_blobs)
     sat = _default_saturation(gray.dtype) if saturation_level is None else float(saturation_level)
     level, bg, sigma = _resolve_threshold(gray, threshold, k_sigma, peak_fraction)
     meta = dict(threshold_used=level, background_level=bg, noise_sigma=sigma, saturation_level=sat,
@@ -520,17 +583,27 @@ def detect_blobs(
                                  shape_gate_min_area_px, rejected)
         if row is not None:
             rows.append(row)
+    if centroid == "window":
+        _deblended_windows(gray, binary, rows)
     meta.update(rejected=rejected, n_components=n_components)
     return _blobs_from_rows(rows, meta)
 
 
-def _check_options(centroid: str, min_area_px, max_area_px, max_blobs) -> None:
-    """Raise :class:`InputError` for a bad centroid method or a non-positive integer gate."""
-    if centroid not in ("window", "component"):
-        raise InputError(f"centroid: expected 'window' or 'component', got {centroid!r}")
+def _check_options(centroid, min_area_px, max_area_px, max_blobs) -> str:
+    """The centroid rule (the app's default for None; ``"component"`` -> ``"weighted"``); raise
+    :class:`InputError` for a bad one or a non-positive integer gate."""
+    from .app import CENTROIDS, settings
+
+    if centroid is None:
+        centroid = settings().centroid
+    if centroid == "component":
+        centroid = "weighted"
+    if centroid not in CENTROIDS:
+        raise InputError(f"centroid: expected one of {', '.join(CENTROIDS)}, got {centroid!r}")
     for nm, v in (("min_area_px", min_area_px), ("max_area_px", max_area_px), ("max_blobs", max_blobs)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
             raise InputError(f"{nm}: expected a positive integer, got {v!r}")
+    return centroid
 
 
 def _binarise(gray: np.ndarray, level: float):
@@ -583,7 +656,10 @@ def _measure_candidate(gray, cand, bg, sat, centroid, max_eccentricity, min_roun
     -------
     tuple or None
         ``(u, v, area, x, y, w, h, peak, saturated_fraction, eccentricity, roundness, flux,
-        background)``; None when a shape gate rejects it (counted in ``rejected``).
+        background, window_sigma, (mask, x, y))``: the centroid is the weighted (or binary) one,
+        ``window_sigma`` the windowed centroid's Gaussian sigma (px; 0 unless ``centroid`` is
+        ``"window"``) and ``(mask, x, y)`` the component's mask and its top-left pixel (for the
+        deblending); None when a shape gate rejects it (counted in ``rejected``).
     """
     a, x, y, w, h, labels, lab, ox, oy = cand
     mask = labels[y - oy: y - oy + h, x - ox: x - ox + w] == lab
@@ -604,27 +680,53 @@ def _measure_candidate(gray, cand, bg, sat, centroid, max_eccentricity, min_roun
     peak = float(v.max())
     satf = float(np.count_nonzero(v >= sat)) / a
     yy, xx = np.nonzero(mask)
-    if flux > 0:
+    if flux > 0 and centroid != "binary":
         uc = float((I * xx).sum() / flux) + x
         vc = float((I * yy).sum() / flux) + y
     else:
         uc, vc = float(xx.mean()) + x, float(yy.mean()) + y
+    sw = 0.0
     if centroid == "window" and flux > 0:
         half = 0.5 * (peak - bgl)
         a_half = max(int(np.count_nonzero(v - bgl >= half)), 1)
         fwhm = 2.0 * np.sqrt(a_half / np.pi)
         sw = max(fwhm / 2.3548, WIN_MIN_SIGMA_PX)
-        res = windowed_centroid(gray, uc, vc, sw, bgl)
+    return (uc, vc, a, x, y, w, h, peak, satf, ecc, rnd, flux, bgl, sw, (mask, x, y))
+
+
+def _deblended_windows(gray, binary, rows: list) -> None:
+    """Replace each row's centroid by its windowed centroid (in place), deblended: every other
+    blob's thresholded pixels masked (``binary`` is the frame's foreground, 0/255), and the
+    window's reach (``4 sigma + 2``) at most half the distance to the nearest other blob (sigma
+    never below :data:`WIN_MIN_SIGMA_PX`), so the Gaussian weights a neighbour's sub-threshold halo
+    by less than ``exp(-8)``."""
+    H, W = gray.shape
+    c = np.array([(r[0], r[1]) for r in rows], np.float64)
+    for i, r in enumerate(rows):
+        if not r[13] > 0:
+            continue
+        m, x, y = r[14]  # this blob's component: its mask and the mask's top-left pixel
+        sw = r[13]
+        if len(rows) > 1:  # the window stays on this blob's side: its reach at most half-way to the nearest blob
+            d_nn = float(np.sqrt(np.min(np.sum((np.delete(c, i, axis=0) - c[i]) ** 2, axis=1))))
+            sw = max(min(sw, (0.5 * d_nn - 2.0) / 4.0), WIN_MIN_SIGMA_PX)
+        rad = int(np.ceil(4.0 * sw)) + 2
+        iu, iv = int(round(r[0])), int(round(r[1]))
+        X0, X1, Y0, Y1 = max(iu - rad, 0), min(iu + rad + 1, W), max(iv - rad, 0), min(iv + rad + 1, H)
+        other = binary[Y0:Y1, X0:X1] > 0
+        ys0, ys1, xs0, xs1 = max(Y0, y), min(Y1, y + m.shape[0]), max(X0, x), min(X1, x + m.shape[1])
+        if ys1 > ys0 and xs1 > xs0:
+            other[ys0 - Y0:ys1 - Y0, xs0 - X0:xs1 - X0] &= ~m[ys0 - y:ys1 - y, xs0 - x:xs1 - x]
+        res = windowed_centroid(gray, r[0], r[1], sw, r[12], mask=(other, X0, Y0))
         if res is not None:
-            uc, vc = res
-    return (uc, vc, a, x, y, w, h, peak, satf, ecc, rnd, flux, bgl)
+            rows[i] = (res[0], res[1], *r[2:])
 
 
 def _blobs_from_rows(rows: list, meta: dict) -> Blobs:
     """:class:`Blobs` from the measured rows (see :func:`_measure_candidate`), brightest first."""
     if not rows:
         return Blobs.empty(**meta)
-    r = np.array(rows, dtype=np.float64)
+    r = np.array([row[:14] for row in rows], dtype=np.float64)
     order = np.argsort(-r[:, 11], kind="stable")
     r = r[order]
     return Blobs(
@@ -640,4 +742,5 @@ def _blobs_from_rows(rows: list, meta: dict) -> Blobs:
         **meta,
     )
 
-__all__ = ["Blobs", "detect_blobs", "to_gray", "auto_threshold", "background_stats", "windowed_centroid", "GATES"]
+__all__ = ["Blobs", "detect_blobs", "to_gray", "auto_threshold", "app_level", "background_stats", "windowed_centroid",
+           "GATES"]

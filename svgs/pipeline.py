@@ -68,6 +68,31 @@ def check_image_matches_camera(image: np.ndarray, camera: Camera, name: str = "i
         )
 
 
+def camera_threshold(image, camera, threshold=None):
+    """The detector's threshold for an image of a camera: the app's brightness threshold for the
+    camera's test set-up when ``threshold`` is None or ``"app"`` (:mod:`svgs.app`, scaled to the
+    image's type by :func:`svgs.detect.app_level`), else ``threshold`` as given.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W) or (H, W, 3)
+    camera : Camera or str
+    threshold : None, "app", "auto", "otsu" or float
+
+    Returns
+    -------
+    float or str
+        A level in the image's units, or ``threshold`` itself ("auto", "otsu", a level).
+    """
+    from .app import settings
+    from .detect import app_level
+
+    if threshold is None or (isinstance(threshold, str) and threshold == "app"):
+        name = camera.name if isinstance(camera, Camera) else Camera.load(camera).name
+        return app_level(np.asarray(image).dtype, settings().threshold_for(name))
+    return threshold
+
+
 def solve_image(
     image,
     camera,
@@ -78,6 +103,9 @@ def solve_image(
     detect_options: dict | None = None,
     identify_options: dict | None = None,
     blobs=None,
+    consistency_sigma_px: float | None = None,
+    sensor_sigma_px: float | None = None,
+    alpha: float | None = None,
 ):
     """Detect, identify and solve the pose from one image.
 
@@ -88,20 +116,35 @@ def solve_image(
     camera : Camera or str
     pattern : Pattern or str
     threshold : None, number or str
-        Binarisation threshold (see :func:`svgs.detect.detect_blobs`); ``None`` is automatic.
+        Binarisation threshold (see :func:`svgs.detect.detect_blobs`); ``None``: the app's
+        brightness threshold for this camera's test set-up (:meth:`svgs.app.AppSettings.threshold_for`);
+        ``"auto"``: the automatic rule.
     sigma_px : float
-        Centroid noise (px) for which the Cramer-Rao covariance is reported.
+        Centroid noise (px) for which the Cramer-Rao covariance is reported (default 0.1).
     detect_options, identify_options : dict, optional
         Passed to :func:`svgs.detect.detect_blobs` and :func:`svgs.identify.identify`.
     blobs : svgs.detect.Blobs, optional
         This image's detections, when the caller already has them (detection is skipped).
+    consistency_sigma_px : float, optional
+        The stated centroid accuracy (px) the consistency test is made against (default: the
+        app's, :func:`svgs.app.settings`).
+    sensor_sigma_px : float, optional
+        The sensor's own centroid bound (a simulated frame's CRLB), px: added in quadrature to
+        ``sigma_px`` in the consistency test.
+    alpha : float, optional
+        Level of the consistency test (default the app's, 1e-3).
 
     Returns
     -------
     Solution or Failure
-        The failure's ``details`` hold ``n_blobs`` and ``threshold_used`` (the detector's level);
-        a solution's ``n_blobs`` and ``threshold_used`` likewise.
+        A solution carries :attr:`~svgs.solver.Solution.consistency` (:func:`svgs.app.consistency`);
+        one whose residual is improbable for its centroid noise (``p < alpha``) is returned as the
+        failure ``inconsistent``, whose ``details`` keep the rejected ``state``, ``chi2``, ``dof``,
+        ``p_value`` and ``residual_rms_px``. Every failure's ``details`` hold ``n_blobs`` and
+        ``threshold_used`` (the detector's level); a solution's ``n_blobs`` and ``threshold_used``
+        likewise.
     """
+    from .app import consistency
     from .detect import detect_blobs
     from .identify import identify
     from .solver import solve_centroids
@@ -112,6 +155,7 @@ def solve_image(
         image = load_image(image)
     image = np.asarray(image)
     check_image_matches_camera(image, camera)
+    threshold = camera_threshold(image, camera, threshold)
     if blobs is None:
         blobs = detect_blobs(image, threshold=threshold, **(detect_options or {}))
     ident = identify(blobs, camera, pattern, **{"sigma_px": sigma_px, **(identify_options or {})})
@@ -128,7 +172,35 @@ def solve_image(
         return sol
     sol.n_blobs = len(blobs)
     sol.threshold_used = float(blobs.threshold_used)
+    sol.consistency = consistency(sol.residual_rms_px, len(ident.points_px), sigma_px=consistency_sigma_px,
+                                  sensor_sigma_px=sensor_sigma_px, alpha=alpha)
+    if not sol.consistency.consistent:
+        return inconsistent_failure(sol)
     return sol
 
 
-__all__ = ["load_image", "solve_image", "check_image_matches_camera", "Failure"]
+def inconsistent_failure(sol) -> Failure:
+    """The ``inconsistent`` failure of a solution whose consistency test failed.
+
+    Parameters
+    ----------
+    sol : svgs.solver.Solution
+        With :attr:`~svgs.solver.Solution.consistency` set.
+
+    Returns
+    -------
+    Failure
+        Reason ``inconsistent``; ``details`` keep the state, targets, residual and the statistic.
+    """
+    c = sol.consistency
+    return Failure("inconsistent",
+                   f"the solution's residual ({sol.residual_rms_px:.3g} px RMS) is improbable for centroid noise of "
+                   f"{c.sigma_px:.3g} px: chi2 = {c.chi2:.3g} with {c.dof} degrees of freedom, p = {c.p_value:.2g} "
+                   f"< {c.alpha:g}",
+                   {"n_blobs": sol.n_blobs, "threshold_used": sol.threshold_used,
+                    "residual_rms_px": float(sol.residual_rms_px), "state": sol.state_dict,
+                    "targets_px": {str(k): [float(x) for x in v] for k, v in sol.targets_px.items()},
+                    **c.to_json()})
+
+
+__all__ = ["load_image", "solve_image", "camera_threshold", "check_image_matches_camera", "inconsistent_failure", "Failure"]

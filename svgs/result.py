@@ -10,6 +10,7 @@ REASONS = {
     "too_few_blobs": "fewer blobs than targets were found",
     "merged_spots": "the target spots merged into fewer, larger blobs",
     "no_consistent_set": "no subset of the blobs matches the target pattern geometrically",
+    "inconsistent": "a pose was solved, but its residual is improbable for the centroid noise the sensor should have (chi-square test, svgs.app)",
     "diverged": "the least-squares iteration diverged or did not converge",
     "behind_camera": "the solution puts the target behind the camera",
     "behind_target": "the only pose that fits views the target from behind, where its reflectors return no light",

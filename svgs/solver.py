@@ -161,6 +161,9 @@ class Solution(Solved):
         Blobs the detector found (:func:`svgs.pipeline.solve_image`).
     threshold_used : float or None
         The detector's binarisation level, image counts (:func:`svgs.pipeline.solve_image`).
+    consistency : svgs.app.Consistency or None
+        The residual's chi-square test against the stated centroid noise
+        (:func:`svgs.pipeline.solve_image`).
     """
 
     state: np.ndarray
@@ -173,6 +176,7 @@ class Solution(Solved):
     targets_px: dict = field(default_factory=dict)
     n_blobs: int | None = None
     threshold_used: float | None = None
+    consistency: object = None
 
     @property
     def std(self) -> np.ndarray:
@@ -195,6 +199,7 @@ class Solution(Solved):
                 [float(v) for v in np.concatenate([self.std[:3], np.degrees(self.std[3:])])],
             )),
             "crlb_sigma_px": float(self.sigma_px),
+            **(self.consistency.to_json() if self.consistency is not None else {}),
         }
 
 

@@ -96,7 +96,7 @@ def test_bad_scenarios_are_input_errors():
 
 def test_one_rendered_trial_kind_for_every_study():
     """``render`` is the rendered kind of the campaign, sensitivity, range sweep and exposure study;
-    its defaults are the campaign's render (seed 0, pattern as it is, no ND, default spp, auto threshold)."""
+    its defaults are the campaign's render (seed 0, pattern as it is, no ND, default spp, the app's threshold)."""
     from sim.render_trial import (
         RENDER,
         render_key,
@@ -113,7 +113,7 @@ def test_one_rendered_trial_kind_for_every_study():
     assert render_trial_scenario(camera="galaxy-nexus", range_m=8.0) == s
     assert render_key({**s, "target_scale": 0.01, "threshold": -1.0, "focal_error_frac": 0.02}) == render_key(s)
     assert render_key({**s, "pattern_scale": 1.5}) != render_key(s)
-    assert [threshold_parameter(t) for t in (None, "auto", "otsu", "12", 0)] == [0.0, 0.0, -1.0, 12.0, 0.0]
+    assert [threshold_parameter(t) for t in (None, "app", "auto", "otsu", "12", 0)] == [0.0, 0.0, -2.0, -1.0, 12.0, 0.0]
     with pytest.raises(InputError, match="threshold"):
         threshold_parameter("high")
     with pytest.raises(InputError, match="render_seed: expected an integer"):

@@ -55,7 +55,7 @@ def test_centroids_within_0p02_px_of_truth(dtype, peak, read_noise, gain):
         c = _spot_grid(shape, sigma, rng)
         img = _frame(shape, c, sigma, peak, background=10.0, read_noise=read_noise, gain=gain, dtype=dtype,
                      seed=int(sigma * 10))
-        b = detect_blobs(img)
+        b = detect_blobs(img, threshold="auto", centroid="window")
         assert len(b) == len(c), f"sigma {sigma}: found {len(b)} of {len(c)} spots"
         errs.append(_match(b.centroid_px, c))
     e = np.concatenate(errs)
@@ -74,8 +74,8 @@ def test_windowed_centroid_beats_threshold_truncated_centroid():
     shape = (400, 400)
     c = _spot_grid(shape, 1.0, rng)
     img = _frame(shape, c, 1.0, 1000.0, background=0.0, read_noise=0.0, gain=None, dtype="float64", seed=0)
-    win = np.linalg.norm(_match(detect_blobs(img).centroid_px, c), axis=1)
-    comp = np.linalg.norm(_match(detect_blobs(img, centroid="component").centroid_px, c), axis=1)
+    win = np.linalg.norm(_match(detect_blobs(img, threshold="auto", centroid="window").centroid_px, c), axis=1)
+    comp = np.linalg.norm(_match(detect_blobs(img, threshold="auto", centroid="weighted").centroid_px, c), axis=1)
     assert win.max() < 2e-3
     assert comp.max() > 0.03  # the bias the windowed centroid removes
     assert np.sqrt(np.mean(comp**2)) > 10 * np.sqrt(np.mean(win**2))
@@ -86,7 +86,7 @@ def test_spot_measurements():
     img = np.zeros((80, 120), np.float64)
     draw_gaussian_spots(img, [[30.3, 40.7]], 2.0, 5000.0)
     draw_elliptical_spots(img, [[90.0, 40.0]], 6.0, 1.5, 0.0, 300.0)  # horizontal streak
-    b = detect_blobs(img, threshold=5.0, max_eccentricity=1.0)
+    b = detect_blobs(img, threshold=5.0, max_eccentricity=1.0, centroid="window")
     assert len(b) == 2
     k = int(np.argmin(np.abs(b.centroid_px[:, 0] - 30.3)))
     assert np.allclose(b.centroid_px[k], [30.3, 40.7], atol=1e-3)
@@ -105,13 +105,13 @@ def test_saturated_spot_fraction_and_centre():
     img = np.full((60, 60), 5.0, np.float32)
     draw_gaussian_spots(img, [[29.4, 31.2]], 2.5, 2 * np.pi * 2.5**2 * 2000.0)
     u8 = quantize(img, "uint8")
-    b = detect_blobs(u8)
+    b = detect_blobs(u8, threshold="auto", centroid="window")
     assert len(b) == 1
     assert b.saturated_fraction[0] > 0.3
     assert b.peak[0] == 255
     assert np.allclose(b.centroid_px[0], [29.4, 31.2], atol=0.02)
     # an explicit saturation level
-    b2 = detect_blobs(u8, saturation_level=300)
+    b2 = detect_blobs(u8, saturation_level=300, threshold="auto", centroid="window")
     assert b2.saturated_fraction[0] == 0.0
 
 
@@ -157,10 +157,10 @@ def test_auto_threshold_ignores_noise_and_finds_spots():
     rng = np.random.default_rng(5)
     shape = (1000, 1200)
     noise_only = quantize(10.0 + noise_field(shape, 2.0, rng, tile_px=None), "uint8")
-    assert len(detect_blobs(noise_only)) == 0
+    assert len(detect_blobs(noise_only, threshold="auto", centroid="window")) == 0
     c = np.array([[100.3, 200.7], [900.1, 700.4], [500.5, 500.5]])
     img = _frame(shape, c, 1.5, 60.0, background=10.0, read_noise=2.0, gain=None, dtype="uint8", seed=1)
-    b = detect_blobs(img)
+    b = detect_blobs(img, threshold="auto", centroid="window")
     assert len(b) == 3
     level, bg, sigma = auto_threshold(img)
     assert bg == pytest.approx(10.0, abs=0.6)
@@ -177,7 +177,9 @@ def test_fixed_and_otsu_thresholds():
     assert len(detect_blobs(img, threshold=20)) == 2
     b = detect_blobs(img, threshold="otsu")
     assert len(b) >= 1 and 0 <= b.threshold_used < 100
-    assert detect_blobs(img, threshold="auto").threshold_used == detect_blobs(img).threshold_used
+    from svgs.detect import app_level
+
+    assert detect_blobs(img).threshold_used == app_level(img.dtype)  # no option: the app's level, not the automatic rule
 
 
 # ---------------------------------------------------------------- input types
@@ -188,19 +190,19 @@ def test_16bit_colour_and_float_give_the_same_blobs():
     img = np.full(shape, 8.0, np.float32) + noise_field(shape, 1.0, rng, tile_px=None)
     draw_gaussian_spots(img, c, 1.8, 2 * np.pi * 1.8**2 * 150.0)
     u8 = quantize(img, "uint8")
-    ref = detect_blobs(u8)
+    ref = detect_blobs(u8, threshold="auto", centroid="window")
     assert len(ref) == 3
     u16 = u8.astype(np.uint16) * 257
     rgb = np.repeat(u8[..., None], 3, axis=2)
     f32 = u8.astype(np.float32) / 255.0
     for other in (u16, rgb, f32, u8.astype(np.int32)):
-        b = detect_blobs(other)
+        b = detect_blobs(other, threshold="auto", centroid="window")
         assert len(b) == 3
         assert np.allclose(b.centroid_px, ref.centroid_px, atol=1e-6)
         assert np.array_equal(b.area_px, ref.area_px)
     # RGBA and (H, W, 1)
-    assert len(detect_blobs(np.dstack([rgb, np.full(shape, 255, np.uint8)]))) == 3
-    assert len(detect_blobs(u8[..., None])) == 3
+    assert len(detect_blobs(np.dstack([rgb, np.full(shape, 255, np.uint8)]), threshold="auto", centroid="window")) == 3
+    assert len(detect_blobs(u8[..., None], threshold="auto", centroid="window")) == 3
     # colour weights: a pure-blue spot is dimmer in luminance than a pure-green one
     col = np.zeros((50, 100, 3), np.uint8)
     col[20:25, 20:25, 1] = 200
@@ -212,7 +214,7 @@ def test_16bit_colour_and_float_give_the_same_blobs():
 def test_sizes_not_multiple_of_block_and_border_spots():
     img = np.zeros((77, 101), np.float32)
     draw_gaussian_spots(img, [[100.2, 40.0], [3.3, 76.1], [50.5, 38.2]], 1.2, 500.0)
-    b = detect_blobs(img, threshold=5.0, min_area_px=2)
+    b = detect_blobs(img, threshold=5.0, min_area_px=2, centroid="window")
     assert len(b) == 3
     assert np.any(np.abs(b.centroid_px[:, 0] - 100.2) < 1.0)
     assert np.any(np.abs(b.centroid_px[:, 1] - 76.1) < 1.0)
@@ -227,14 +229,14 @@ def test_many_regions_fall_back_to_full_frame_labelling():
     c = _spot_grid(img.shape, 1.0, rng, spacing=30)
     assert len(c) > 500
     draw_gaussian_spots(img, c, 1.0, 2 * np.pi * 300.0)
-    b = detect_blobs(img, threshold=20.0, max_blobs=10_000)
+    b = detect_blobs(img, threshold=20.0, max_blobs=10_000, centroid="window")
     assert b.n_components == len(c) and len(b) == len(c)
     assert np.abs(_match(b.centroid_px, c)).max() < 2e-3
 
 
 def test_empty_results_are_well_shaped():
     for img in (np.zeros((64, 48), np.uint8), np.full((64, 48), 7.5), np.zeros((10, 10, 3), np.uint16)):
-        b = detect_blobs(img)
+        b = detect_blobs(img, threshold="auto", centroid="window")
         assert isinstance(b, Blobs) and len(b) == 0
         assert b.centroid_px.shape == (0, 2) and b.bbox.shape == (0, 4)
         for k in ("area_px", "peak", "saturated_fraction", "eccentricity", "roundness", "flux"):

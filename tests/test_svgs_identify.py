@@ -215,7 +215,7 @@ def _image_trials(n, seed, camera, pattern, *, dtype="uint8", colour=False, max_
         peak = rng.uniform(80, 250) * (257 if dtype == "uint16" else 1)
         f = synth_frame(camera, pattern, R, t, sigma_px=sigma, peak=peak, n_distractors=m, dtype=dtype, colour=colour,
                         read_noise=1.5 * (257 if dtype == "uint16" else 1), seed=rng)
-        res = identify(detect_blobs(f.image), camera, pattern)
+        res = identify(detect_blobs(f.image, threshold="auto", centroid="window"), camera, pattern)
         if res:
             e = np.linalg.norm(res.points_px - f.targets_px, axis=1)
             if e.max() < 1.0:
@@ -277,7 +277,7 @@ def _merged_frame(camera, pattern, range_m, sigma_px):
 def test_merged_spots_into_one_blob(nexus, pattern):
     """Far away with a wide PSF (the Amaze 4G beyond 6.5 m): one saturated blob."""
     f = _merged_frame(nexus, pattern, 40.0, 4.0)
-    blobs = detect_blobs(f.image)
+    blobs = detect_blobs(f.image, threshold="auto", centroid="window")
     assert len(blobs) == 1 and blobs.saturated_fraction[0] > 0
     res = identify(blobs, nexus, pattern)
     assert not res and res.reason == "merged_spots"
@@ -294,7 +294,7 @@ def test_two_spots_merged_leave_three_blobs(nexus, pattern):
     d = np.linalg.norm(uv[:, None] - uv[None], axis=-1) + np.eye(4) * 1e9
     assert np.unravel_index(np.argmin(d), d.shape) in ((2, 3), (3, 2))
     f = synth_frame(nexus, pattern, R, t, sigma_px=2.0, peak=200.0, read_noise=1.0, seed=3)
-    blobs = detect_blobs(f.image)
+    blobs = detect_blobs(f.image, threshold="auto", centroid="window")
     assert len(blobs) == 3
     res = identify(blobs, nexus, pattern)
     assert not res and res.reason == "merged_spots"
@@ -312,7 +312,7 @@ def test_three_separate_spots_are_too_few_not_merged(nexus, pattern):
     img = f.image.copy()
     u, v = np.round(f.targets_px[3]).astype(int)
     img[v - 10: v + 11, u - 10: u + 11] = np.median(img)  # target 4 hidden
-    res = identify(detect_blobs(img), nexus, pattern)
+    res = identify(detect_blobs(img, threshold="auto", centroid="window"), nexus, pattern)
     assert not res and res.reason == "too_few_blobs"
 
 

@@ -116,7 +116,9 @@ def _identified_points(image, believed: Camera, pattern: Pattern):
 
     h, w = image.shape[:2]
     cam_b = believed if (w, h) == (believed.width, believed.height) else believed.scaled(w, h)
-    ident = identify(detect_blobs(image), cam_b, pattern)
+    from svgs.pipeline import camera_threshold
+
+    ident = identify(detect_blobs(image, threshold=camera_threshold(image, cam_b)), cam_b, pattern)
     if not ident:
         return ident
     pts = np.asarray(ident.points_px, float)
