@@ -286,3 +286,6 @@ def print_state_table(row, crlb) -> None:
               f"this exposure; saturated pixels carry no information)")
     else:
         print(f"residual {row['residual_rms_px']:.3f} px")
+    if row.get("p_value") is not None:
+        print(f"consistency: chi2 {row['chi2']:.3g} with {row['chi2_dof']} degrees of freedom, p = {row['p_value']:.2g} "
+              "(against the app's stated centroid accuracy, svgs.app; below its alpha the frame is 'inconsistent')")

@@ -124,6 +124,10 @@ def print_solution(result, out=None) -> None:
     sd = result.std
     print(f"  range along the boresight to the target origin: {result.t_cam_target_m[2]:.4f} m", file=out)
     print(f"  reprojection residual: {result.residual_rms_px:.3f} px RMS; blobs found: {result.n_blobs}", file=out)
+    if getattr(result, "consistency", None) is not None:
+        c = result.consistency
+        print(f"  consistency: chi2 {c.chi2:.3g} with {c.dof} degrees of freedom, p = {c.p_value:.2g} "
+              f"(centroid noise {c.sigma_px:.3g} px; 'inconsistent' below p = {c.alpha:g})", file=out)
     print(
         f"  Cramer-Rao 1-sigma for {result.sigma_px:g} px centroid noise: "
         f"pos {sd[0]:.3g} {sd[1]:.3g} {sd[2]:.3g} m, att {np.degrees(sd[3]):.3g} {np.degrees(sd[4]):.3g} {np.degrees(sd[5]):.3g} deg",
