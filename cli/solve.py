@@ -14,7 +14,7 @@ import numpy as np
 
 from cli.exit_codes import EXIT_NO_SOLUTION, EXIT_OK
 from svgs.detect import parse_threshold
-from svgs.errors import InputError
+from svgs.errors import InputError, check_finite_positive
 
 
 def register(sub) -> None:
@@ -145,6 +145,8 @@ def cmd_solve(args) -> int:
     pattern = Pattern.load(args.pattern)
     if not (np.isfinite(args.sigma_px) and args.sigma_px > 0):
         raise InputError(f"--sigma-px: expected a positive number of pixels, got {args.sigma_px}")
+    if args.consistency_sigma_px is not None:
+        check_finite_positive(args.consistency_sigma_px, "--consistency-sigma-px")
     from svgs.pipeline import load_image
 
     from svgs.detect import detect_blobs
@@ -156,9 +158,6 @@ def cmd_solve(args) -> int:
 
     thr = camera_threshold(image, camera, parse_threshold(args.threshold))
     blobs = detect_blobs(image, threshold=thr)  # once: for the solve and for the overlay
-    if args.consistency_sigma_px is not None and not (np.isfinite(args.consistency_sigma_px)
-                                                      and args.consistency_sigma_px > 0):
-        raise InputError(f"--consistency-sigma-px: expected a positive number of pixels, got {args.consistency_sigma_px}")
     result = solve_image(image, camera, pattern, threshold=thr, sigma_px=args.sigma_px, blobs=blobs,
                          consistency_sigma_px=args.consistency_sigma_px)
     d = solution_json(result)

@@ -656,10 +656,9 @@ class ApproachSensor:
         ex = exposer.expose(seed=noise_seed, exposure_s=settings[0], iso=settings[1])
         timings["expose"] = time.perf_counter() - t0
         from svgs.detect import detect_blobs
-
-        t0 = time.perf_counter()
         from svgs.pipeline import camera_threshold
 
+        t0 = time.perf_counter()
         blobs = detect_blobs(ex.image, threshold=camera_threshold(ex.image, self.camera, self.threshold))
         t_detect = time.perf_counter() - t0
         row = solve_exposure(frame, ex, threshold=self.threshold, solver_camera_profile=self.camera, truth="actual",

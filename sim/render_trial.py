@@ -455,7 +455,7 @@ def _solve_one(scenario: dict, seed: int, frame, exposers: dict) -> dict:
             # judged by if the centroids were as good as the CRLB): reported, not applied
             from svgs.app import consistency
 
-            out["p_value_crlb"] = consistency(sol.residual_rms_px, len(pat.ids), sigma_px=rms, alpha=0.5).p_value
+            out["p_value_crlb"] = consistency(sol.residual_rms_px, len(pat.ids), sigma_px=rms).p_value
             out.update({f"crlb_sensor_{k}": float(v) for k, v in pose_crlb(sol, rms).items()})
     if out["message"] is not None:
         out["message"] = " ".join(str(out["message"]).split())  # one line (a CSV field)

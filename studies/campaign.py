@@ -1157,7 +1157,7 @@ def write_campaign_report(out_dir, config: CampaignConfig, table: dict, summary:
     write_csv(out_dir / "summary.csv", list(SUMMARY_COLUMNS), summary_long_rows(summary, verdicts))
     write_csv(out_dir / "verdicts.csv", ["table", *VERDICT_COLUMNS], verdicts)
     (out_dir / "honest_count.json").write_text(json.dumps(_finite(honest_count_object(config, rows, verdicts)), indent=1,
-                                                          allow_nan=False, default=_json_default) + "\n")
+                                                          allow_nan=False) + "\n")
     n = int(np.sum([s["n"] for s in summary]))
     n_ok = int(np.sum([s["n_ok"] for s in summary]))
     rendered = config.trial_kind == "render"
@@ -1253,23 +1253,19 @@ def write_campaign_report(out_dir, config: CampaignConfig, table: dict, summary:
     return rep.write(out_dir / "report.html")
 
 
-def _json_default(obj):
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, tuple):
-        return list(obj)
-    raise TypeError(f"not JSON: {type(obj).__name__}")
-
-
 def _finite(obj):
-    """``obj`` with NaN and infinite floats as None (strict JSON)."""
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    if isinstance(obj, (float, np.floating)):
-        return float(obj) if np.isfinite(obj) else None
-    return obj
+    """``obj`` in plain JSON types (:func:`studies.store._jsonable`) with NaN and infinite floats as
+    None (strict JSON)."""
+    from .store import _jsonable
+
+    def fin(o):
+        if isinstance(o, dict):
+            return {k: fin(v) for k, v in o.items()}
+        if isinstance(o, list):
+            return [fin(v) for v in o]
+        return (o if np.isfinite(o) else None) if isinstance(o, float) else o
+
+    return fin(_jsonable(obj))
 
 
 def _budget_sections(rep, out_dir, config, summary, budget) -> None:
@@ -1479,7 +1475,7 @@ def rebuild_report(out_dir, *, command: str | None = None) -> Path:
         obj["honest_count"] = read_honest_count(out_dir)
         obj.setdefault("outputs", {}).update({"verdicts_csv": str(out_dir / "verdicts.csv"),
                                               "honest_count_json": str(out_dir / "honest_count.json")})
-        sj.write_text(json.dumps(_finite(obj), indent=1, allow_nan=False, default=_json_default) + "\n")
+        sj.write_text(json.dumps(_finite(obj), indent=1, allow_nan=False) + "\n")
     return path
 
 

@@ -20,7 +20,7 @@ import math
 import tomllib
 from dataclasses import dataclass
 
-from .errors import InputError
+from .errors import InputError, check_finite_positive
 from .profiles import ASSETS_DIR
 
 #: The app's settings file.
@@ -84,10 +84,10 @@ def settings() -> AppSettings:
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(f"app settings {APP_FILE.name}: missing or bad value ({exc!r}); needs threshold.default_dn, "
                          "threshold.range_dn, centroid.default, consistency.sigma_px and consistency.alpha") from None
-    lo, hi = (s.threshold_range_dn + (float("nan"),) * 2)[:2]
-    if len(s.threshold_range_dn) != 2 or not lo < hi:
+    if len(s.threshold_range_dn) != 2 or not s.threshold_range_dn[0] < s.threshold_range_dn[1]:
         raise InputError(f"app settings {APP_FILE.name}: threshold.range_dn must be [low, high], got "
                          f"{list(s.threshold_range_dn)}")
+    lo, hi = s.threshold_range_dn
     if s.centroid not in CENTROIDS:
         raise InputError(f"app settings {APP_FILE.name}: centroid.default must be one of {CENTROIDS}, got {s.centroid!r}")
     if not (s.sigma_px > 0 and 0 < s.alpha < 1):
@@ -161,9 +161,7 @@ def consistency(residual_rms_px: float, n_points: int, *, sigma_px: float | None
     from scipy.special import gammaincc
 
     app = settings()
-    s = app.sigma_px if sigma_px is None else float(sigma_px)
-    if not (math.isfinite(s) and s > 0):
-        raise InputError(f"sigma_px: expected a positive centroid noise in px, got {sigma_px!r}")
+    s = app.sigma_px if sigma_px is None else check_finite_positive(sigma_px, "consistency sigma_px")
     if sensor_sigma_px is not None and math.isfinite(float(sensor_sigma_px)):
         s = math.hypot(s, float(sensor_sigma_px))
     a = app.alpha if alpha is None else float(alpha)

@@ -453,7 +453,7 @@ def _ring_background(gray, x0, y0, w, h, pad, fallback):
     return float(np.median(ring))
 
 
-def windowed_centroid(gray, u0, v0, sigma_w, background, *, mask=None, max_iter=WIN_MAX_ITER,
+def windowed_centroid(gray, u0, v0, sigma_w, background, *, foreground=None, own=None, max_iter=WIN_MAX_ITER,
                       tol_px=WIN_TOL_PX):
     """Gaussian-weighted iterative centroid around ``(u0, v0)``.
 
@@ -462,10 +462,11 @@ def windowed_centroid(gray, u0, v0, sigma_w, background, *, mask=None, max_iter=
     half-width ``4 sigma_w + 2`` px. The factor 2 makes one step exact for a Gaussian spot
     of sigma ``sigma_w``; the fixed point is the centre of any symmetric spot.
 
-    ``mask`` (bool, the frame's shape, or ``(array, x0, y0)`` for a part of the frame whose top-left
-    pixel is ``(x0, y0)``) marks pixels to leave out (their value taken as 0): the
-    other blobs' pixels, so that the window never takes in a neighbour's thresholded light, as
-    SExtractor's windowed measurements mask the other objects of its segmentation map.
+    ``foreground`` (the frame's binary image, nonzero above the threshold, shape (H, W)) masks
+    every foreground pixel of the window (its value taken as 0) except this blob's own, ``own =
+    (mask, x0, y0)`` (its component's mask and that mask's top-left pixel): the window takes in
+    no other blob's thresholded light, as SExtractor's windowed measurements mask the other
+    objects of its segmentation map.
 
     Returns
     -------
@@ -480,14 +481,15 @@ def windowed_centroid(gray, u0, v0, sigma_w, background, *, mask=None, max_iter=
     I = gray[Y0:Y1, X0:X1].astype(np.float64) - background
     xs = np.arange(X0, X1, dtype=np.float64)
     ys = np.arange(Y0, Y1, dtype=np.float64)
-    if mask is not None:
-        m, mx0, my0 = mask if isinstance(mask, tuple) else (mask, 0, 0)
-        sub = np.zeros(I.shape, bool)
-        ys0, ys1 = max(Y0, my0), min(Y1, my0 + m.shape[0])
-        xs0, xs1 = max(X0, mx0), min(X1, mx0 + m.shape[1])
-        if ys1 > ys0 and xs1 > xs0:
-            sub[ys0 - Y0:ys1 - Y0, xs0 - X0:xs1 - X0] = m[ys0 - my0:ys1 - my0, xs0 - mx0:xs1 - mx0]
-        I = np.where(sub, 0.0, I)
+    if foreground is not None:
+        other = foreground[Y0:Y1, X0:X1] > 0
+        if own is not None:
+            m, mx0, my0 = own
+            ys0, ys1 = max(Y0, my0), min(Y1, my0 + m.shape[0])
+            xs0, xs1 = max(X0, mx0), min(X1, mx0 + m.shape[1])
+            if ys1 > ys0 and xs1 > xs0:
+                other[ys0 - Y0:ys1 - Y0, xs0 - X0:xs1 - X0] &= ~m[ys0 - my0:ys1 - my0, xs0 - mx0:xs1 - mx0]
+        I = np.where(other, 0.0, I)
     u, v = float(u0), float(v0)
     k = -0.5 / (sigma_w * sigma_w)
     for _ in range(max_iter):
@@ -700,24 +702,15 @@ def _deblended_windows(gray, binary, rows: list) -> None:
     window's reach (``4 sigma + 2``) at most half the distance to the nearest other blob (sigma
     never below :data:`WIN_MIN_SIGMA_PX`), so the Gaussian weights a neighbour's sub-threshold halo
     by less than ``exp(-8)``."""
-    H, W = gray.shape
     c = np.array([(r[0], r[1]) for r in rows], np.float64)
     for i, r in enumerate(rows):
         if not r[13] > 0:
             continue
-        m, x, y = r[14]  # this blob's component: its mask and the mask's top-left pixel
         sw = r[13]
         if len(rows) > 1:  # the window stays on this blob's side: its reach at most half-way to the nearest blob
             d_nn = float(np.sqrt(np.min(np.sum((np.delete(c, i, axis=0) - c[i]) ** 2, axis=1))))
             sw = max(min(sw, (0.5 * d_nn - 2.0) / 4.0), WIN_MIN_SIGMA_PX)
-        rad = int(np.ceil(4.0 * sw)) + 2
-        iu, iv = int(round(r[0])), int(round(r[1]))
-        X0, X1, Y0, Y1 = max(iu - rad, 0), min(iu + rad + 1, W), max(iv - rad, 0), min(iv + rad + 1, H)
-        other = binary[Y0:Y1, X0:X1] > 0
-        ys0, ys1, xs0, xs1 = max(Y0, y), min(Y1, y + m.shape[0]), max(X0, x), min(X1, x + m.shape[1])
-        if ys1 > ys0 and xs1 > xs0:
-            other[ys0 - Y0:ys1 - Y0, xs0 - X0:xs1 - X0] &= ~m[ys0 - y:ys1 - y, xs0 - x:xs1 - x]
-        res = windowed_centroid(gray, r[0], r[1], sw, r[12], mask=(other, X0, Y0))
+        res = windowed_centroid(gray, r[0], r[1], sw, r[12], foreground=binary, own=r[14])
         if res is not None:
             rows[i] = (res[0], res[1], *r[2:])
 

@@ -130,7 +130,7 @@ def solve_image(
         app's, :func:`svgs.app.settings`).
     sensor_sigma_px : float, optional
         The sensor's own centroid bound (a simulated frame's CRLB), px: added in quadrature to
-        ``sigma_px`` in the consistency test.
+        ``consistency_sigma_px`` in the consistency test.
     alpha : float, optional
         Level of the consistency test (default the app's, 1e-3).
 
