@@ -44,10 +44,14 @@ class RenderedFrame:
         return np.asarray(self.truth["R_cam_target"], float), np.asarray(self.truth["t_cam_target_m"], float)
 
 
-def bilinear_splat(u_px, v_px, weight, x0: int, y0: int, width: int, height: int) -> np.ndarray:
+def bilinear_splat(u_px, v_px, weight, x0: int, y0: int, width: int, height: int, *,
+                   derivative: str | None = None) -> np.ndarray:
     """Weights at sub-pixel positions spread bilinearly over their four nearest pixel centres,
     on the box of pixels ``[x0, x0 + width) x [y0, y0 + height)`` (what falls outside is
     dropped). Each sample's first moment is kept exactly.
+
+    ``derivative="u"`` (or ``"v"``): the derivative of that splat with respect to a common
+    shift of all the samples along u (v), per px.
 
     Returns
     -------
@@ -58,11 +62,21 @@ def bilinear_splat(u_px, v_px, weight, x0: int, y0: int, width: int, height: int
     fu = u_px - u0
     fv = v_px - v0
     out = np.zeros(height * width)
-    for du, dv, w in ((0, 0, (1 - fu) * (1 - fv)), (1, 0, fu * (1 - fv)), (0, 1, (1 - fu) * fv), (1, 1, fu * fv)):
-        x = u0 + du - x0
-        y = v0 + dv - y0
-        ok = (x >= 0) & (x < width) & (y >= 0) & (y < height)
-        out += np.bincount((y[ok] * width + x[ok]).astype(np.int64), weights=(weight * w)[ok], minlength=height * width)
+    if derivative is None:
+        corners = ((0, 0, (1 - fu) * (1 - fv)), (1, 0, fu * (1 - fv)), (0, 1, (1 - fu) * fv), (1, 1, fu * fv))
+    elif derivative == "u":
+        corners = ((0, 0, -(1 - fv)), (1, 0, 1 - fv), (0, 1, -fv), (1, 1, fv))
+    elif derivative == "v":
+        corners = ((0, 0, -(1 - fu)), (1, 0, -fu), (0, 1, 1 - fu), (1, 1, fu))
+    else:
+        raise ValueError(f"derivative: expected None, 'u' or 'v', got {derivative!r}")
+    xi = (u0 - x0).astype(np.int64)
+    yi = (v0 - y0).astype(np.int64)
+    idx = np.concatenate([(yi + dv) * width + (xi + du) for du, dv, _ in corners])
+    ok = np.concatenate([(xi + du >= 0) & (xi + du < width) & (yi + dv >= 0) & (yi + dv < height)
+                         for du, dv, _ in corners])
+    wts = np.concatenate([weight * w for _, _, w in corners])
+    out += np.bincount(idx[ok], weights=wts[ok], minlength=height * width)
     return out.reshape(height, width)
 
 

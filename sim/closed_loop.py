@@ -324,12 +324,13 @@ def lab_photon_factor(camera: Camera) -> np.ndarray:
     interpolated to every pixel."""
     import cv2
 
-    from render.optics import Flash, Optics, pixel_normalized_grid, radiance_to_photon_rate
+    from render.optics import Flash, Optics, radiance_to_photon_rate
 
     optics = Optics.from_camera(camera)
     flash = Flash.from_camera(camera, optics.band_nm)
     step = 16
-    xy = pixel_normalized_grid(camera, 0, 0, camera.width, camera.height)[::step, ::step]
+    u, v = np.meshgrid(np.arange(0, camera.width, step, dtype=float), np.arange(0, camera.height, step, dtype=float))
+    xy = camera.pixels_to_normalized(np.stack([u, v], -1))  # the 16-px grid only
     k = radiance_to_photon_rate(camera, optics, flash.photometry["mean_photon_energy_j"], xy).astype(np.float32)
     full = cv2.resize(k, (k.shape[1] * step, k.shape[0] * step), interpolation=cv2.INTER_LINEAR)
     return np.ascontiguousarray(full[: camera.height, : camera.width])

@@ -14,9 +14,11 @@ assumed but computed from the noise-free optical image at the exposure used:
   Processing: Estimation Theory, 1993, eq. 3.31 for independent Gaussian samples; the
   Poisson-Gaussian pixel as in Smith et al., Nat. Methods 7, 373 (2010)).
 
-``d mu / d x`` is exact: the point samples are shifted by +-h px and convolved with the PSF
-again with the same random draws (common random numbers), so the difference is the image's
-derivative, not Monte Carlo noise. The pose bound then is the solver's unit-noise covariance
+``d mu / d x`` is exact: the deterministic optical image's derivative with respect to a
+sub-pixel shift of the point samples (the PSF kernel's spectral derivative,
+:meth:`camera.phone.psf.CorePSF.splat` with ``gradient=True``). The earlier estimate - the
+points shifted by +-h px and convolved with the PSF by Monte Carlo with the same draws
+(common random numbers) - stays as ``method="monte-carlo"``. The pose bound then is the solver's unit-noise covariance
 (``(J^T J)^-1``, :attr:`svgs.solver.Solution.covariance`) scaled by the mean per-spot centroid
 variance (the spots' bounds are within a few tens of per cent of each other).
 """
@@ -74,16 +76,55 @@ def _window_core_image(phone, cfa: bool, points, dx: float, dy: float, box, seed
     n_draws = max(1, int(round(draws * m.sum() / max(len(points), 1))))
     zeros = np.zeros((h, w), np.float32)
     if not cfa:
-        out = core_image(zeros, phone.core_psf(), local, np.random.default_rng(seed), min_draws=n_draws)
+        out = core_image(zeros, phone.core_psf(), local, np.random.default_rng(seed), min_draws=n_draws,
+                         method="monte-carlo")
     else:
-        out = phone.core_mosaic(zeros, local, seed=seed, origin=(X0, Y0), min_draws=n_draws)
+        from camera.phone import PhoneCamera
+
+        mc = PhoneCamera(phone.camera, phone.params, point_method="monte-carlo")
+        out = mc.core_mosaic(zeros, local, seed=seed, origin=(X0, Y0), min_draws=n_draws)
         out *= response_map(p.cfa, (h + 2, w + 2))[(Y0 % 2):(Y0 % 2) + h, (X0 % 2):(X0 % 2) + w]
     out *= core_share(p.glare)
     return out[PAD_PX:PAD_PX + (y1 - y0), PAD_PX:PAD_PX + (x1 - x0)]
 
 
+def _window_core_gradient(phone, cfa: bool, points, box) -> tuple[np.ndarray, np.ndarray]:
+    """The derivatives of the optical image's core over one window ``box = (y0, y1, x0, x1)``
+    with respect to a common shift of the points there, ``(d/du, d/dv)``, photons/s per pixel
+    per px, float64: exact derivatives of the deterministic image
+    (:meth:`camera.phone.psf.CorePSF.splat` with ``gradient=True``), with the CFA's channels and
+    responses when ``cfa``. The glare wings and ghosts are left out, as in
+    :func:`_window_core_image`."""
+    from camera.phone.cfa import response_map
+    from camera.phone.optics import core_share
+    from camera.rendered import PointFlux
+
+    y0, y1, x0, x1 = box
+    X0, Y0 = x0 - PAD_PX, y0 - PAD_PX
+    h, w = (y1 - y0) + 2 * PAD_PX, (x1 - x0) + 2 * PAD_PX
+    m = ((points.u_px >= X0 - 0.5) & (points.u_px < X0 + w - 0.5) & (points.v_px >= Y0 - 0.5)
+         & (points.v_px < Y0 + h - 0.5))
+    local = PointFlux(points.u_px[m] - X0, points.v_px[m] - Y0, points.rate_ph_s[m])
+    p = phone.params
+    if not cfa:
+        _, gu, gv = phone.core_psf().splat(local.u_px, local.v_px, local.rate_ph_s, (h, w), gradient=True)
+    else:
+        _, gu, gv = phone.core_mosaic(np.zeros((h, w), np.float32), local, origin=(X0, Y0), gradient=True)
+        resp = response_map(p.cfa, (h + 2, w + 2))[(Y0 % 2):(Y0 % 2) + h, (X0 % 2):(X0 % 2) + w]
+        gu, gv = gu * resp, gv * resp
+    f = core_share(p.glare)
+    crop = (slice(PAD_PX, PAD_PX + (y1 - y0)), slice(PAD_PX, PAD_PX + (x1 - x0)))
+    return f * gu[crop], f * gv[crop]
+
+
+#: How the bound's image derivatives are computed: ``"analytic"`` (default; the deterministic
+#: image's exact derivatives) or ``"monte-carlo"`` (central differences of Monte Carlo
+#: convolutions with common random numbers: the earlier path).
+CRLB_METHODS = ("analytic", "monte-carlo")
+
+
 def centroid_crlb_px(frame, exposer, exposure, spots_px, *, window_half_px: int = WINDOW_HALF_PX,
-                     draws: int = CRLB_DRAWS) -> np.ndarray:
+                     draws: int = CRLB_DRAWS, method: str = "analytic") -> np.ndarray:
     """Per-spot Cramer-Rao bound of the centroid, px (1 sigma per axis).
 
     Parameters
@@ -98,7 +139,9 @@ def centroid_crlb_px(frame, exposer, exposure, spots_px, *, window_half_px: int 
         Where the spots are (solved or true targets), full-resolution px.
     draws : int
         PSF draws per shifted image and channel (:data:`CRLB_DRAWS`; the Monte Carlo error of
-        the bound goes as ``1 / sqrt(draws)``).
+        the bound goes as ``1 / sqrt(draws)``), ``method="monte-carlo"`` only.
+    method : str
+        One of :data:`CRLB_METHODS`.
 
     Returns
     -------
@@ -106,6 +149,8 @@ def centroid_crlb_px(frame, exposer, exposure, spots_px, *, window_half_px: int 
         ``(sigma_u, sigma_v)`` per spot, px; inf where a spot carries no information
         (entirely saturated or outside the frame).
     """
+    if method not in CRLB_METHODS:
+        raise ValueError(f"method: expected one of {CRLB_METHODS}, got {method!r}")
     phone = exposer.phone
     p = phone.params
     sp = p.sensor
@@ -139,10 +184,14 @@ def centroid_crlb_px(frame, exposer, exposure, spots_px, *, window_half_px: int 
         if x1 <= x0 or y1 <= y0:
             continue
         sl = (slice(y0, y1), slice(x0, x1))
-        d = [_window_core_image(phone, exposer.cfa, pts, dx, dy, (y0, y1, x0, x1), seed, draws)
-             for dx, dy in ((SHIFT_PX, 0.0), (-SHIFT_PX, 0.0), (0.0, SHIFT_PX), (0.0, -SHIFT_PX))]
-        dmu_dx = k * (d[0] - d[1]) / (2 * SHIFT_PX)
-        dmu_dy = k * (d[2] - d[3]) / (2 * SHIFT_PX)
+        if method == "analytic":
+            gu, gv = _window_core_gradient(phone, exposer.cfa, pts, (y0, y1, x0, x1))
+            dmu_dx, dmu_dy = k * gu, k * gv
+        else:
+            d = [_window_core_image(phone, exposer.cfa, pts, dx, dy, (y0, y1, x0, x1), seed, draws)
+                 for dx, dy in ((SHIFT_PX, 0.0), (-SHIFT_PX, 0.0), (0.0, SHIFT_PX), (0.0, -SHIFT_PX))]
+            dmu_dx = k * (d[0] - d[1]) / (2 * SHIFT_PX)
+            dmu_dy = k * (d[2] - d[3]) / (2 * SHIFT_PX)
         _, var_w, ok = noise(sl)
         ix = float(np.sum((dmu_dx**2 / var_w)[ok]))
         iy = float(np.sum((dmu_dy**2 / var_w)[ok]))

@@ -74,13 +74,22 @@ class PhoneCamera:
     camera : svgs.Camera or str
     params : PhoneParams, optional
         Defaults to the profile's ``[sensor]``, ``[glare]``, ``[exposure]``, ``[isp]`` tables.
+    point_method : str
+        ``"grid"`` (default): the points are convolved with the PSF deterministically;
+        ``"monte-carlo"``: by PSF draws (the earlier path, the reference of the tests).
     """
 
-    def __init__(self, camera, params: PhoneParams | None = None):
+    def __init__(self, camera, params: PhoneParams | None = None, *, point_method: str = "grid"):
         from svgs import Camera
+
+        from camera.phone.optics import POINT_METHODS
 
         self.camera = Camera.load(camera)
         self.params = params if params is not None else PhoneParams.from_camera(self.camera)
+        if point_method not in POINT_METHODS:
+            raise InputError(f"point_method: expected one of {POINT_METHODS}, got {point_method!r}")
+        #: How the point samples meet the lens PSF (:data:`camera.phone.optics.POINT_METHODS`).
+        self.point_method = point_method
         self._fpn = None
 
     @property
@@ -110,7 +119,8 @@ class PhoneCamera:
         pp = (self.camera.cx, self.camera.cy)
         use_cfa = p.cfa.enabled if cfa is None else (bool(cfa) and p.cfa.enabled)
         if not use_cfa:
-            return apply_psf(flux_ph_s, p.glare, self.core_psf(), pp, points=points, rng=np.random.default_rng(seed))
+            return apply_psf(flux_ph_s, p.glare, self.core_psf(), pp, points=points, rng=np.random.default_rng(seed),
+                             method=self.point_method)
         out = self.core_mosaic(flux_ph_s, points, seed=seed)
         out *= core_share(p.glare)
         g = glare_image(flux_ph_s, p.glare, pp, points)
@@ -120,7 +130,7 @@ class PhoneCamera:
         return out.astype(np.float32)
 
     def core_mosaic(self, flux_ph_s: np.ndarray, points=None, *, seed: int = 0, origin=(0, 0),
-                    min_draws: int | None = None) -> np.ndarray:
+                    min_draws: int | None = None, gradient: bool = False):
         """The lens' core PSF through the colour filter array: each pixel gets its channel's
         image (the Airy pattern at the channel's wavelength (x) the aberration Gaussian) of the
         flux and the points, unit share, before the channel responses (float64, the flux's shape).
@@ -128,20 +138,27 @@ class PhoneCamera:
         ``origin``: the frame pixel ``(x0, y0)`` of the flux's top-left pixel, when it is a
         window of the frame (the mosaic's phase); ``min_draws``: the points' PSF draws per
         channel (:func:`camera.phone.optics.core_image`). ``seed`` seeds the three channels'
-        Monte Carlo convolutions."""
+        Monte Carlo convolutions (``point_method="monte-carlo"``). ``gradient``: the points only
+        (the flux must be zero), with the grid method: a tuple ``(image, d_du, d_dv)``, the
+        derivatives with respect to a common shift of the points (for the Cramer-Rao bound)."""
         p = self.params
         H, W = np.shape(flux_ph_s)
         x0, y0 = int(origin[0]) % 2, int(origin[1]) % 2
         chan = channel_map(p.cfa.pattern, (H + 2, W + 2))[y0:y0 + H, x0:x0 + W]  # the mosaic repeats every 2 px
-        out = np.zeros((H, W))
+        outs = [np.zeros((H, W)) for _ in range(3 if gradient else 1)]
         seeds = np.random.SeedSequence(int(seed)).spawn(3)
         for c in range(3):
             core = core_psf(p.f_number, p.band_nm, p.sensor.pixel_pitch_m, p.glare.aberration_sigma_px,
                             wavelength_nm=p.cfa.wavelength_nm[c])
-            img = core_image(flux_ph_s, core, points, np.random.default_rng(seeds[c]), min_draws=min_draws)
+            if gradient:
+                imgs = core.splat(points.u_px, points.v_px, points.rate_ph_s, (H, W), gradient=True)
+            else:
+                imgs = (core_image(flux_ph_s, core, points, np.random.default_rng(seeds[c]), min_draws=min_draws,
+                                   method=self.point_method),)
             m = chan == c
-            out[m] = img[m]
-        return out
+            for out, img in zip(outs, imgs):
+                np.copyto(out, img, where=m)
+        return tuple(outs) if gradient else outs[0]
 
     def uses_cfa(self, stages) -> bool:
         """Whether exposures with these stages go through the colour filter array."""

@@ -4,8 +4,9 @@ PSF = (1 - eta - sum ghosts) * core + eta * wings (+ ghosts):
 
 - **core** (:class:`camera.phone.psf.CorePSF`): the Airy pattern of the f/N aperture at the
   band's middle wavelength convolved with the aberration Gaussian ``sigma_ab``. Point samples
-  (:class:`camera.rendered.PointFlux`, the retro spots) go through it by Monte Carlo
-  convolution and exact pixel-area integration; pixel images (the diffuse light) by the
+  (:class:`camera.rendered.PointFlux`, the retro spots) go through it by a deterministic
+  convolution on a sub-pixel grid with exact pixel-area integration (the expectation of the
+  earlier Monte Carlo convolution, kept as ``method="monte-carlo"``); pixel images (the diffuse light) by the
   pixel-integrated kernel. Light that reaches the film as a pixel image and as points is never
   blurred twice: each part takes one path.
 - **wings** (veiling glare, ISO 9358): ``w(r) ~ (1 + (r / r_c)^2)^(-alpha / 2)`` out to
@@ -96,12 +97,21 @@ def wings(image, glare: GlareParams) -> np.ndarray:
     return fine
 
 
+#: How point samples are convolved with the core PSF: ``"grid"`` (deterministic,
+#: :meth:`CorePSF.splat`, the default) or ``"monte-carlo"`` (:meth:`CorePSF.splat_monte_carlo`,
+#: the earlier path, kept as the reference the grid is tested against).
+POINT_METHODS = ("grid", "monte-carlo")
+
+
 def core_image(flux, core, points=None, rng: np.random.Generator | None = None, *,
-               min_draws: int | None = None) -> np.ndarray:
+               min_draws: int | None = None, method: str = "grid") -> np.ndarray:
     """The core PSF applied to a pixel image and to point samples, integrated over pixels
     (unit share; float64 (H, W)). ``core``: a :class:`CorePSF`, or a float (a Gaussian core of
     that sigma, px, on the pixel image and the points binned: the earlier order, for
-    comparisons). ``min_draws``: the points' PSF draws in all (default :meth:`CorePSF.splat`'s)."""
+    comparisons). ``method``: one of :data:`POINT_METHODS`; ``rng`` and ``min_draws`` (the
+    points' PSF draws in all) apply to ``"monte-carlo"`` only."""
+    if method not in POINT_METHODS:
+        raise ValueError(f"method: expected one of {POINT_METHODS}, got {method!r}")
     f = np.ascontiguousarray(flux, np.float32)
     H, W = f.shape
     has_points = points is not None and len(points) > 0
@@ -109,9 +119,12 @@ def core_image(flux, core, points=None, rng: np.random.Generator | None = None, 
         # the convolution of an empty image is empty (point-only images: the CRLB, the tests)
         out = core.convolve(f).astype(np.float64) if f.any() else np.zeros((H, W))
         if has_points:
-            rng = np.random.default_rng(0) if rng is None else rng
-            kw = {} if min_draws is None else {"min_draws": int(min_draws)}
-            out += core.splat(points.u_px, points.v_px, points.rate_ph_s, (H, W), rng, **kw)
+            if method == "grid":
+                out += core.splat(points.u_px, points.v_px, points.rate_ph_s, (H, W))
+            else:
+                rng = np.random.default_rng(0) if rng is None else rng
+                kw = {} if min_draws is None else {"min_draws": int(min_draws)}
+                out += core.splat_monte_carlo(points.u_px, points.v_px, points.rate_ph_s, (H, W), rng, **kw)
         return out
     sig = float(core)
     g = f + points.binned((H, W)).astype(np.float32) if has_points else f
@@ -150,7 +163,7 @@ def core_share(glare: GlareParams) -> float:
 
 
 def apply_psf(flux: np.ndarray, glare: GlareParams, core, principal_point=None, *, points=None,
-              rng: np.random.Generator | None = None) -> np.ndarray:
+              rng: np.random.Generator | None = None, method: str = "grid") -> np.ndarray:
     """The optical image: a flux image (and point samples) through the lens PSF, integrated
     over pixels.
 
@@ -167,13 +180,16 @@ def apply_psf(flux: np.ndarray, glare: GlareParams, core, principal_point=None, 
     points : camera.rendered.PointFlux, optional
         Light at exact sub-pixel film positions (the same unit per sample).
     rng : numpy.random.Generator, optional
-        Draws of the Monte Carlo convolution of the points (default: seed 0).
+        Draws of the Monte Carlo convolution of the points (``method="monte-carlo"``; default
+        seed 0).
+    method : str
+        How the points meet the core PSF (:data:`POINT_METHODS`; default the deterministic grid).
 
     Returns
     -------
     ndarray, float32, shape (H, W)
     """
-    out = core_share(glare) * core_image(flux, core, points, rng)
+    out = core_share(glare) * core_image(flux, core, points, rng, method=method)
     g = glare_image(flux, glare, principal_point, points)
     if g is not None:
         out += g

@@ -20,8 +20,11 @@ N(mu, mu) above, as in ISETCam's ``noiseShot``; mean and variance are exact eith
 
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
+
 from numba import njit, prange
 
 from camera.phone.params import SensorParams
@@ -30,15 +33,25 @@ from camera.phone.params import SensorParams
 def fixed_patterns(params: SensorParams, shape) -> tuple[np.ndarray, np.ndarray]:
     """PRNU gain map (1 + prnu * N(0,1)) and DSNU offset map (e-), fixed by ``serial``.
 
+    The same sensor's patterns are the same on every frame: they are drawn once per
+    ``(params, shape)`` and kept (read-only) for the process' later frames.
+
     Returns
     -------
     prnu_gain : ndarray, float32, shape (H, W)
     dsnu_e : ndarray, float32, shape (H, W)
         Zero-mean (a constant dark offset belongs to the black level).
     """
+    return _fixed_patterns(params, tuple(int(n) for n in shape))
+
+
+@functools.lru_cache(maxsize=4)
+def _fixed_patterns(params: SensorParams, shape: tuple) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng([int(params.serial), 1288])
     prnu = (1.0 + params.prnu * rng.standard_normal(shape, dtype=np.float32)).astype(np.float32)
     dsnu = (params.dsnu_e * rng.standard_normal(shape, dtype=np.float32)).astype(np.float32)
+    prnu.setflags(write=False)
+    dsnu.setflags(write=False)
     return prnu, dsnu
 
 
