@@ -33,7 +33,8 @@ Run it on an otherwise idle machine (a render keeps one core busy)::
     .venv/bin/python benchmarks/bench_scaleout.py [--trials-per-range 8] [--exposures 4] [--ranges 5,15]
                                                   [--no-dask] [--merge-range]
 
-About 2.5 minutes on two idle cores with the defaults (--merge-range: about 30 s more).
+About 3 minutes on this two-core machine with the defaults (170 s measured; the machine shared with
+another process, so the figures vary by 10-25 % from run to run); ``--merge-range``: about 30 s more.
 """
 
 from __future__ import annotations
@@ -50,7 +51,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from studies.campaign import campaign_trials, make_config, rendered_paper_calibration  # noqa: E402
-from studies.execution import DEFAULT_CHUNK_SIZE, ExecutorSpec, open_executor, run_study, run_task  # noqa: E402
+from studies.execution import (DEFAULT_CHUNK_SIZE, TASKS_PER_WORKER, ExecutorSpec, open_executor,  # noqa: E402
+                               run_study, run_task)
 from studies.store import ResultStore, read_rows  # noqa: E402
 from sim.render_trial import RENDER, RENDER_TIMING_OUTPUTS, render_key  # noqa: E402
 
@@ -229,11 +231,32 @@ def breakdown(trials) -> dict:
 def print_breakdown(title: str, b: dict) -> None:
     print(f"{title}: {b['n_trials']} trials, {b['n_renders']} renders, {b['total_s']:.1f} s in this process "
           f"({b['total_s'] / b['n_trials']:.3f} s per trial)")
-    print(f"  {'stage':<14}{'s per trial':>12}{'share':>8}{'calls':>7}")
+    print(f"  {'stage':<14}{'s per trial':>12}{'share':>8}{'calls':>7}  (calls: cache hits included)")
     for k, (s, calls) in b["stages"].items():
         print(f"  {k:<14}{s / b['n_trials']:>12.3f}{100 * s / b['total_s']:>7.1f}%{calls:>7d}")
     print(f"  once per render (render + optics + CRLB): {b['per_render_s']:.3f} s; per exposure (expose + "
           f"detect/solve + other): {b['per_exposure_s']:.3f} s; a trial alone on its render: {b['c1_s']:.3f} s")
+
+
+#: The Sobol' study of the rendered merge range (docs/performance.md): d = 9 parameters (range_m and the 8 of
+#: studies.merge_range.PHYSICS), k = 5 of them change the render (range_m, f_number, led_offset_scale,
+#: pattern_scale, ambient_radiance_w_m2_sr); 2 change the optics after the render (the glare's veiling fraction
+#: and wing exponent), 1 the exposure (exposure_compensation_ev), 1 only the detector (threshold).
+SOBOL_D, SOBOL_K, SOBOL_OPTICS, SOBOL_EXPOSURE, SOBOL_DETECTOR = 9, 5, 2, 1, 1
+
+
+def sobol_cost(b: dict) -> float:
+    """Mean cost of a trial of that Sobol' design (Saltelli: n (d + 2) trials, n (k + 2) renders; an
+    AB^(i) row of a post-render parameter shares the render of row A) from the stage times of
+    :func:`breakdown`: per design row, k + 2 trials alone on their renders, the optics' and the exposure's
+    variants redo the optics + CRLB + exposure or the CRLB + exposure, the detector's only detect + solve."""
+    g, n, st = b["n_renders"], b["n_trials"], b["stages"]
+    optics, crlb = st["optics"][0] / g, st["CRLB"][0] / g
+    detect = (st["detect+solve"][0] + st["other"][0]) / n
+    e = b["per_exposure_s"]
+    row = ((SOBOL_K + 2) * b["c1_s"] + SOBOL_OPTICS * (optics + crlb + e) + SOBOL_EXPOSURE * (crlb + e)
+           + SOBOL_DETECTOR * detect)
+    return row / (SOBOL_D + 2)
 
 
 def merge_range_trials():
@@ -321,16 +344,22 @@ def main(argv=None) -> int:
     N, P, eta = args.project_trials, args.project_workers, args.project_efficiency
     tasks = N / DEFAULT_CHUNK_SIZE
     print(f"\nprojection: {N:.0f} trials on {P} Dask workers, wall = trials * c / (workers * efficiency) "
-          f"(+ tasks * o = {tasks:.0f} * {o_ms:.2f} ms = {tasks * o_ms / 1e3:.0f} s of scheduling, spread over the run)")
+          f"(+ tasks * o = {tasks:.0f} * {o_ms:.2f} ms = {tasks * o_ms / 1e3:.0f} s of scheduling, spread over "
+          f"the run)")
     print(f"  efficiency measured on 2 workers ({'Dask' if ('dask-local', 2) in res else 'pool'}): {eff2:.2f}; "
           f"assumed for {P} workers: {eta:.2f}")
     cs = [("campaign trial, measured (1-process pool)", 1 / peer),
           ("campaign trial alone on its render", b["c1_s"])]
     if mr is not None:
-        cs += [("merge-range trial alone on its render", mr["c1_s"])]
+        cs += [("merge-range trial alone on its render", mr["c1_s"]),
+               (f"merge-range Sobol' trial (d {SOBOL_D}, k {SOBOL_K})", sobol_cost(mr))]
     for label, c in cs:
         print(f"  {label:<42} c = {c:.3f} s: {N * c / (P * eta) / 3600:.2f} h at efficiency {eta:.2f}, "
               f"{N * c / (P * eff2) / 3600:.2f} h at {eff2:.2f}")
+    cap = TASKS_PER_WORKER  # run_stored_study sizes the window with n_workers = max(0, 1) for --scheduler
+    print(f"  note: on an existing cluster (--scheduler) run_study keeps {cap} tasks in flight (the window of one "
+          f"worker), so at most {cap} of the {P} workers are busy: the times above are {P / cap:.0f}x longer until "
+          f"the window is sized from the cluster")
     print(f"load average after: {_load()}; the benchmark took {time.perf_counter() - t_start:.0f} s")
     return 0
 

@@ -11,10 +11,18 @@ part of the configuration both runs get. It then runs twice, independently: on a
 spawned processes (``--processes 2``) and on a Dask LocalCluster of 2 single-threaded worker
 processes (``--workers 2``); every row must agree, column by column, except the timings.
 
-About 40 s on two idle cores (two executors started, warmed up, two renders each).
+About 50 s on this two-core machine (60 s with another process busy on it): two executors
+started and warmed up, the calibration's and the campaign's renders.
+
+``test_scheduler_window_keeps_every_worker_busy`` (strict xfail, sleeping trials, a few
+seconds): a study on an existing cluster (``--scheduler``) keeps only 4 tasks in flight
+whatever the cluster's size; it documents the limit until the window is sized from the cluster.
 """
 
+import logging
 import math
+import threading
+import time
 
 import pytest
 
@@ -100,3 +108,43 @@ def test_rendered_campaign_same_rows_on_process_pool_and_dask(tmp_path):
 
     diff = differences(dask, pool, timings)
     assert not diff, f"{len(diff)} cell(s) differ between the process pool and Dask: {diff[:10]}"
+
+
+_ACTIVE = {"now": 0, "most": 0}
+_ACTIVE_LOCK = threading.Lock()
+SLEEP_S = 0.2
+
+
+def _sleep_trial(scenario, seed):
+    with _ACTIVE_LOCK:
+        _ACTIVE["now"] += 1
+        _ACTIVE["most"] = max(_ACTIVE["most"], _ACTIVE["now"])
+    time.sleep(SLEEP_S)
+    with _ACTIVE_LOCK:
+        _ACTIVE["now"] -= 1
+    return {"y": 1.0}
+
+
+@pytest.mark.xfail(strict=True, reason="run_stored_study passes n_workers=max(spec.n_workers, 1) = 1 for "
+                   "--scheduler (n_workers 0: unknown), so run_study keeps TASKS_PER_WORKER * 1 = 4 tasks in flight "
+                   "on a cluster of any size")
+def test_scheduler_window_keeps_every_worker_busy(tmp_path):
+    """An existing cluster (``--scheduler``) of 8 worker threads: 32 sleeping trials, one per
+    task, must run 8 at a time (in-process threads: sleeps, no CPU)."""
+    pytest.importorskip("distributed", reason="the 'dask' extra is not installed")
+    from distributed import LocalCluster
+
+    from sim.trials import TrialKind, register_trial_kind
+    from studies.execution import ExecutorSpec, Trial, run_stored_study
+
+    kind = register_trial_kind(TrialKind("test-scaleout-sleep", _sleep_trial, ("y",), {}, text_keys=(),
+                                         module=__name__))
+    trials = [Trial(i, {"range_m": float(i)}, 0) for i in range(32)]
+    _ACTIVE.update(now=0, most=0)
+    with LocalCluster(n_workers=1, threads_per_worker=8, processes=False, protocol="tcp", host="127.0.0.1",
+                      dashboard_address=None, silence_logs=logging.ERROR) as cluster:
+        spec = ExecutorSpec("dask-scheduler", 0, cluster.scheduler_address)
+        store, stats = run_stored_study(kind, trials, tmp_path / "study", {"study": "sleep"}, spec, chunk_size=1,
+                                        progress=False)
+    assert len(store.read_rows()) == 32
+    assert _ACTIVE["most"] == 8, f"at most {_ACTIVE['most']} of 8 workers were busy at once"
