@@ -361,7 +361,11 @@ def open_executor(spec: ExecutorSpec, kind: TrialKind | None = None):
     except (OSError, TimeoutError) as exc:
         raise InputError(f"--scheduler: cannot connect to the Dask scheduler at {spec.scheduler}: {exc}") from None
     try:
-        yield client.get_executor(pure=False)
+        ex = client.get_executor(pure=False)
+        # the cluster's size is not known from the command line and may change while the study
+        # runs (adaptive clusters): run_study asks it for its worker threads before each submission
+        ex.svgs_slots = lambda: max(1, sum(client.nthreads().values()))
+        yield ex
     finally:
         client.close()
 
@@ -439,7 +443,9 @@ def run_study(kind: TrialKind, trials: list[Trial], store, executor: Executor, *
     chunk_size : int
         Trials per task.
     n_workers : int
-        Used to size the window of tasks in flight.
+        Used to size the window of tasks in flight (``TASKS_PER_WORKER`` per worker). An
+        executor with an ``svgs_slots()`` method (an existing Dask cluster) is asked instead, so
+        the window follows the cluster's worker threads as they come and go.
     progress : bool
         Show a progress bar with ETA on stderr.
 
@@ -457,13 +463,18 @@ def run_study(kind: TrialKind, trials: list[Trial], store, executor: Executor, *
     tasks = make_tasks(kind, pending, _count(chunk_size, "--chunk-size", 1))
     n_groups = len({kind.render_key(t.scenario) for t in pending}) if kind.render_key else len(pending)
     t0 = time.perf_counter()
-    window = max(2, TASKS_PER_WORKER * max(1, n_workers))
+    slots = getattr(executor, "svgs_slots", None)
+
+    def window() -> int:
+        return max(2, TASKS_PER_WORKER * max(1, slots() if slots is not None else n_workers))
+
     with progress_bar(len(pending), description, enabled=progress) as bar:
         todo = list(reversed(tasks))
         in_flight = set()
         try:
             while todo or in_flight:
-                while todo and len(in_flight) < window:
+                limit = window() if todo else 0
+                while todo and len(in_flight) < limit:
                     in_flight.add(executor.submit(run_task, kind.ref, todo.pop()))
                 finished, in_flight = wait(in_flight, return_when=FIRST_COMPLETED)
                 error = None

@@ -14,9 +14,9 @@ processes (``--workers 2``); every row must agree, column by column, except the 
 About 50 s on this two-core machine (60 s with another process busy on it): two executors
 started and warmed up, the calibration's and the campaign's renders.
 
-``test_scheduler_window_keeps_every_worker_busy`` (strict xfail, sleeping trials, a few
-seconds): a study on an existing cluster (``--scheduler``) keeps only 4 tasks in flight
-whatever the cluster's size; it documents the limit until the window is sized from the cluster.
+``test_scheduler_window_keeps_every_worker_busy`` (sleeping trials, a few seconds): a study on
+an existing cluster (``--scheduler``) keeps every worker thread of the cluster busy (the window
+of tasks in flight is sized from the cluster, not from the command line).
 """
 
 import logging
@@ -125,9 +125,6 @@ def _sleep_trial(scenario, seed):
     return {"y": 1.0}
 
 
-@pytest.mark.xfail(strict=True, reason="run_stored_study passes n_workers=max(spec.n_workers, 1) = 1 for "
-                   "--scheduler (n_workers 0: unknown), so run_study keeps TASKS_PER_WORKER * 1 = 4 tasks in flight "
-                   "on a cluster of any size")
 def test_scheduler_window_keeps_every_worker_busy(tmp_path):
     """An existing cluster (``--scheduler``) of 8 worker threads: 32 sleeping trials, one per
     task, must run 8 at a time (in-process threads: sleeps, no CPU)."""
