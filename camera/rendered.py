@@ -57,27 +57,60 @@ def bilinear_splat(u_px, v_px, weight, x0: int, y0: int, width: int, height: int
     -------
     ndarray, float64, shape (height, width)
     """
+    return bilinear_splats(u_px, v_px, weight, x0, y0, width, height, derivatives=(derivative,))[0]
+
+
+def bilinear_splats(u_px, v_px, weight, x0: int, y0: int, width: int, height: int, *,
+                    derivatives=(None,)) -> list:
+    """:func:`bilinear_splat` for several ``derivative`` values (None, "u", "v") of the same
+    samples at once: the samples' pixel indices are found once.
+
+    Returns
+    -------
+    list of ndarray, float64, shape (height, width)
+        One per entry of ``derivatives``.
+    """
+    u_px = np.asarray(u_px, np.float64)
+    v_px = np.asarray(v_px, np.float64)
+    weight = np.asarray(weight, np.float64)
     u0 = np.floor(u_px)
     v0 = np.floor(v_px)
     fu = u_px - u0
     fv = v_px - v0
-    out = np.zeros(height * width)
-    if derivative is None:
-        corners = ((0, 0, (1 - fu) * (1 - fv)), (1, 0, fu * (1 - fv)), (0, 1, (1 - fu) * fv), (1, 1, fu * fv))
-    elif derivative == "u":
-        corners = ((0, 0, -(1 - fv)), (1, 0, 1 - fv), (0, 1, -fv), (1, 1, fv))
-    elif derivative == "v":
-        corners = ((0, 0, -(1 - fu)), (1, 0, -fu), (0, 1, 1 - fu), (1, 1, fu))
-    else:
-        raise ValueError(f"derivative: expected None, 'u' or 'v', got {derivative!r}")
     xi = (u0 - x0).astype(np.int64)
     yi = (v0 - y0).astype(np.int64)
-    idx = np.concatenate([(yi + dv) * width + (xi + du) for du, dv, _ in corners])
-    ok = np.concatenate([(xi + du >= 0) & (xi + du < width) & (yi + dv >= 0) & (yi + dv < height)
-                         for du, dv, _ in corners])
-    wts = np.concatenate([weight * w for _, _, w in corners])
-    out += np.bincount(idx[ok], weights=wts[ok], minlength=height * width)
-    return out.reshape(height, width)
+    base = yi * width + xi
+    n = height * width
+    inside = bool(xi.size == 0 or (xi.min() >= 0 and xi.max() + 1 < width and yi.min() >= 0
+                                   and yi.max() + 1 < height))
+    offsets = (0, 1, width, width + 1)  # corners (0, 0), (1, 0), (0, 1), (1, 1)
+    if inside:
+        idx = np.concatenate([base + o for o in offsets])
+        ok = None
+    else:
+        idx = np.concatenate([base + o for o in offsets])
+        ok = np.concatenate([(xi + du >= 0) & (xi + du < width) & (yi + dv >= 0) & (yi + dv < height)
+                             for du, dv in ((0, 0), (1, 0), (0, 1), (1, 1))])
+        idx = idx[ok]
+    gu, gv = 1.0 - fu, 1.0 - fv
+    outs = []
+    for derivative in derivatives:
+        if derivative is None:
+            a, b = weight * gu, weight * fu
+            corners = (a * gv, b * gv, a * fv, b * fv)
+        elif derivative == "u":
+            a, b = weight * gv, weight * fv
+            corners = (-a, a, -b, b)
+        elif derivative == "v":
+            a, b = weight * gu, weight * fu
+            corners = (-a, -b, a, b)
+        else:
+            raise ValueError(f"derivative: expected None, 'u' or 'v', got {derivative!r}")
+        wts = np.concatenate(corners)
+        if ok is not None:
+            wts = wts[ok]
+        outs.append(np.bincount(idx, weights=wts, minlength=n)[:n].reshape(height, width))
+    return outs
 
 
 @dataclass(frozen=True)

@@ -109,7 +109,8 @@ def _window_core_gradient(phone, cfa: bool, points, box) -> tuple[np.ndarray, np
     if not cfa:
         _, gu, gv = phone.core_psf().splat(local.u_px, local.v_px, local.rate_ph_s, (h, w), gradient=True)
     else:
-        _, gu, gv = phone.core_mosaic(np.zeros((h, w), np.float32), local, origin=(X0, Y0), gradient=True)
+        gu, gv = phone.core_mosaic(np.zeros((h, w), np.float32), local, origin=(X0, Y0), gradient=True,
+                                   value=False)
         resp = response_map(p.cfa, (h + 2, w + 2))[(Y0 % 2):(Y0 % 2) + h, (X0 % 2):(X0 % 2) + w]
         gu, gv = gu * resp, gv * resp
     f = core_share(p.glare)
@@ -185,7 +186,13 @@ def centroid_crlb_px(frame, exposer, exposure, spots_px, *, window_half_px: int 
             continue
         sl = (slice(y0, y1), slice(x0, x1))
         if method == "analytic":
-            gu, gv = _window_core_gradient(phone, exposer.cfa, pts, (y0, y1, x0, x1))
+            # the derivatives depend on the render and the window only: kept on the exposer
+            # for the other exposures of the same render (a campaign's several per stand setting)
+            cache = exposer.__dict__.setdefault("_crlb_gradients", {})
+            key = (id(pts), y0, y1, x0, x1)
+            if key not in cache:
+                cache[key] = (pts, _window_core_gradient(phone, exposer.cfa, pts, (y0, y1, x0, x1)))
+            gu, gv = cache[key][1]
             dmu_dx, dmu_dy = k * gu, k * gv
         else:
             d = [_window_core_image(phone, exposer.cfa, pts, dx, dy, (y0, y1, x0, x1), seed, draws)

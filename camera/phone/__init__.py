@@ -31,6 +31,7 @@ from svgs.errors import InputError
 from camera.phone.isp import ExposureSolver, auto_exposure, downscale, jpeg_roundtrip, metering_weights, tone_lut
 from camera.phone.cfa import channel_map, luminance, response_map, tone_image
 from camera.phone.optics import apply_psf, core_image, core_psf, core_share, glare_image
+from camera.phone.psf import splat_patches
 from camera.phone.params import ALL_STAGES, NOISE_STAGES, OPTICS_STAGES, PhoneParams, check_stages
 from camera.phone.sensor import bloom, electrons, fixed_patterns, readout
 from camera.tonemap import gamma_u8
@@ -130,7 +131,7 @@ class PhoneCamera:
         return out.astype(np.float32)
 
     def core_mosaic(self, flux_ph_s: np.ndarray, points=None, *, seed: int = 0, origin=(0, 0),
-                    min_draws: int | None = None, gradient: bool = False):
+                    min_draws: int | None = None, gradient: bool = False, value: bool = True):
         """The lens' core PSF through the colour filter array: each pixel gets its channel's
         image (the Airy pattern at the channel's wavelength (x) the aberration Gaussian) of the
         flux and the points, unit share, before the channel responses (float64, the flux's shape).
@@ -140,24 +141,39 @@ class PhoneCamera:
         channel (:func:`camera.phone.optics.core_image`). ``seed`` seeds the three channels'
         Monte Carlo convolutions (``point_method="monte-carlo"``). ``gradient``: the points only
         (the flux must be zero), with the grid method: a tuple ``(image, d_du, d_dv)``, the
-        derivatives with respect to a common shift of the points (for the Cramer-Rao bound)."""
+        derivatives with respect to a common shift of the points (for the Cramer-Rao bound);
+        with ``value=False`` as well, only ``(d_du, d_dv)``."""
         p = self.params
         H, W = np.shape(flux_ph_s)
         x0, y0 = int(origin[0]) % 2, int(origin[1]) % 2
         chan = channel_map(p.cfa.pattern, (H + 2, W + 2))[y0:y0 + H, x0:x0 + W]  # the mosaic repeats every 2 px
-        outs = [np.zeros((H, W)) for _ in range(3 if gradient else 1)]
-        seeds = np.random.SeedSequence(int(seed)).spawn(3)
-        for c in range(3):
-            core = core_psf(p.f_number, p.band_nm, p.sensor.pixel_pitch_m, p.glare.aberration_sigma_px,
-                            wavelength_nm=p.cfa.wavelength_nm[c])
-            if gradient:
-                imgs = core.splat(points.u_px, points.v_px, points.rate_ph_s, (H, W), gradient=True)
-            else:
-                imgs = (core_image(flux_ph_s, core, points, np.random.default_rng(seeds[c]), min_draws=min_draws,
-                                   method=self.point_method),)
-            m = chan == c
-            for out, img in zip(outs, imgs):
-                np.copyto(out, img, where=m)
+        cores = [core_psf(p.f_number, p.band_nm, p.sensor.pixel_pitch_m, p.glare.aberration_sigma_px,
+                          wavelength_nm=p.cfa.wavelength_nm[c]) for c in range(3)]
+        has_points = points is not None and len(points) > 0
+        if self.point_method == "monte-carlo" and not gradient:
+            out = np.zeros((H, W))
+            seeds = np.random.SeedSequence(int(seed)).spawn(3)
+            for c, core in enumerate(cores):
+                img = core_image(flux_ph_s, core, points, np.random.default_rng(seeds[c]), min_draws=min_draws,
+                                 method="monte-carlo")
+                np.copyto(out, img, where=chan == c)
+            return out
+        if gradient and np.any(flux_ph_s):
+            raise ValueError("core_mosaic: gradient=True takes the points only (the flux must be zero)")
+        n_out = (3 if value else 2) if gradient else 1
+        outs = [np.zeros((H, W)) for _ in range(n_out)]
+        f = np.ascontiguousarray(flux_ph_s, np.float32)
+        if not gradient and f.any():
+            for c, core in enumerate(cores):
+                np.copyto(outs[0], core.convolve(f), where=chan == c)
+        if has_points:
+            # each spot's three channel images at once, each pixel taking its channel's
+            for ys, xs, patches in splat_patches(cores, points.u_px, points.v_px, points.rate_ph_s, (H, W),
+                                                 gradient=gradient, value=value or not gradient):
+                h, w = patches[0][0].shape
+                sel = chan[ys:ys + h, xs:xs + w]
+                for k, out in enumerate(outs):
+                    out[ys:ys + h, xs:xs + w] += np.choose(sel, [patches[c][k] for c in range(3)])
         return tuple(outs) if gradient else outs[0]
 
     def uses_cfa(self, stages) -> bool:

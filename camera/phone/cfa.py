@@ -19,6 +19,8 @@ Model (ASSUMPTIONS, documented in each profile's ``[sources]``):
 
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
 from numba import njit, prange
@@ -33,16 +35,30 @@ LUMA = (0.299, 0.587, 0.114)
 
 
 def channel_map(pattern: str, shape) -> np.ndarray:
-    """Colour index (0 R, 1 G, 2 B) of every pixel, uint8 (H, W)."""
-    H, W = int(shape[0]), int(shape[1])
+    """Colour index (0 R, 1 G, 2 B) of every pixel, uint8 (H, W); read-only (cached)."""
+    return _channel_map(str(pattern), int(shape[0]), int(shape[1]))
+
+
+@functools.lru_cache(maxsize=8)
+def _channel_map(pattern: str, H: int, W: int) -> np.ndarray:
     block = np.array([[_COLOURS[pattern[0]], _COLOURS[pattern[1]]], [_COLOURS[pattern[2]], _COLOURS[pattern[3]]]],
                      np.uint8)
-    return np.tile(block, (-(-H // 2), -(-W // 2)))[:H, :W]
+    out = np.tile(block, (-(-H // 2), -(-W // 2)))[:H, :W].copy()
+    out.setflags(write=False)
+    return out
 
 
 def response_map(cfa: CfaParams, shape) -> np.ndarray:
-    """Each pixel's channel response (relative to the mono qe), float32 (H, W)."""
-    return np.asarray(cfa.response, np.float32)[channel_map(cfa.pattern, shape)]
+    """Each pixel's channel response (relative to the mono qe), float32 (H, W); read-only
+    (cached: a frame's optics and its bound use it for every exposure)."""
+    return _response_map(tuple(float(r) for r in cfa.response), str(cfa.pattern), int(shape[0]), int(shape[1]))
+
+
+@functools.lru_cache(maxsize=8)
+def _response_map(response: tuple, pattern: str, H: int, W: int) -> np.ndarray:
+    out = np.asarray(response, np.float32)[_channel_map(pattern, H, W)]
+    out.setflags(write=False)
+    return out
 
 
 def demosaic_code(cfa: CfaParams) -> int:

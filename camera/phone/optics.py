@@ -24,6 +24,7 @@ leaves the frame.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import cv2
@@ -32,6 +33,7 @@ from scipy.signal import fftconvolve
 
 from camera.phone.params import GlareParams
 from camera.phone.psf import CorePSF
+from camera.rendered import bilinear_splat
 
 #: Coarse grid size for the wing convolution, pixels.
 WING_GRID_PX = 1 << 19
@@ -84,17 +86,26 @@ def tent_matrix(n: int, s: int):
 def wings(image, glare: GlareParams) -> np.ndarray:
     """The wing PSF applied to a pixel image (unit-sum kernel; multiply by the share), float64.
 
-    Coarse grid: tent binning, FFT convolution, tent spreading back (first moments kept)."""
+    Coarse grid: tent binning, FFT convolution, tent spreading back (first moments kept; the
+    spreading is the tent binning's transpose, a linear interpolation, done by ``cv2.resize``)."""
     f = np.asarray(image, np.float64)
     H, W = f.shape
     s = max(1, int(math.ceil(math.sqrt(H * W / WING_GRID_PX))))
     if s == 1:
         return fftconvolve(f, wing_kernel(glare, 1), mode="same")
-    Ay, Ax = tent_matrix(H, s), tent_matrix(W, s)
+    Ay, Ax = _tent_pair(H, W, s)
     coarse = (Ax @ (Ay @ f).T).T  # (Hc, Wc)
-    wc = fftconvolve(coarse, wing_kernel(glare, s), mode="same")
-    fine = (Ax.T @ (Ay.T @ wc).T).T / float(s * s)
-    return fine
+    wc = fftconvolve(coarse, wing_kernel(glare, s), mode="same") / float(s * s)
+    # the transpose of the tent binning: fine x reads coarse (x - (s - 1) / 2) / s, linearly,
+    # clamped at the ends - cv2.resize's INTER_LINEAR on an exact s-fold grid, cropped
+    Hc, Wc = wc.shape
+    fine = cv2.resize(wc, (Wc * s, Hc * s), interpolation=cv2.INTER_LINEAR)
+    return fine[:H, :W]
+
+
+@functools.lru_cache(maxsize=4)
+def _tent_pair(H: int, W: int, s: int):
+    return tent_matrix(H, s), tent_matrix(W, s)
 
 
 #: How point samples are convolved with the core PSF: ``"grid"`` (deterministic,
@@ -138,12 +149,21 @@ def glare_image(flux, glare: GlareParams, principal_point=None, points=None) -> 
     eta = glare.veiling_fraction
     if eta <= 0 and not glare.ghosts:
         return None
-    f = np.asarray(flux, np.float64)
-    H, W = f.shape
-    whole = f + (points.bilinear((H, W)) if points is not None and len(points) > 0 else 0.0)
-    out = np.zeros((H, W))
+    whole = np.array(flux, np.float64)
+    H, W = whole.shape
+    if points is not None and len(points) > 0:  # the points' bilinear image, over their bounding box
+        x0 = max(0, int(np.floor(points.u_px.min())))
+        y0 = max(0, int(np.floor(points.v_px.min())))
+        x1 = min(W, int(np.floor(points.u_px.max())) + 2)
+        y1 = min(H, int(np.floor(points.v_px.max())) + 2)
+        if x1 > x0 and y1 > y0:
+            whole[y0:y1, x0:x1] += bilinear_splat(points.u_px, points.v_px, points.rate_ph_s, x0, y0, x1 - x0,
+                                                  y1 - y0)
     if eta > 0:
-        out += eta * wings(whole, glare)
+        out = wings(whole, glare)
+        out *= eta
+    else:
+        out = np.zeros((H, W))
     if glare.ghosts:
         cx, cy = principal_point if principal_point is not None else ((W - 1) / 2.0, (H - 1) / 2.0)
         w32 = whole.astype(np.float32)

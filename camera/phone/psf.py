@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from camera.rendered import bilinear_splat
+from camera.rendered import bilinear_splat, bilinear_splats
 
 #: Encircled-energy table of the Airy pattern: x = pi r / (lambda N) from 0 to this value.
 AIRY_TABLE_X_MAX = 400.0
@@ -265,35 +265,10 @@ class CorePSF:
             ``gradient``, a tuple ``(image, d_du, d_dv)`` of three such arrays.
         """
         H, W = int(shape[0]), int(shape[1])
-        u = np.asarray(u_px, float).ravel()
-        v = np.asarray(v_px, float).ravel()
-        w = np.asarray(weight, float).ravel()
         outs = [np.zeros((H, W)) for _ in range(3 if gradient else 1)]
-        if u.size == 0:
-            return tuple(outs) if gradient else outs[0]
-        e_in = self.drawn_energy
-        q = SPLAT_OVERSAMPLING
-        kern = fine_kernel(self.lam_over_d_px, self.aberration_sigma_px)
-        kernels = kern if gradient else kern[:1]
-        Rk = INNER_KERNEL_RADIUS_PX
-        for idx in point_clusters(u, v, H, W, AIRY_OUTER_RADIUS_PX):
-            uu, vv, ww = u[idx], v[idx], w[idx]
-            self._add_outer(outs[0], uu, vv, ww * (1.0 - e_in), grads=(outs[1], outs[2]) if gradient else None)
-            ww = ww * e_in
-            X0 = int(np.floor(uu.min())) - 1
-            Y0 = int(np.floor(vv.min())) - 1
-            nx = int((np.floor(uu.max()) + 2 - X0) * q) + 1
-            ny = int((np.floor(vv.max()) + 2 - Y0) * q) + 1
-            B = bilinear_splat((uu - X0) * q, (vv - Y0) * q, ww, 0, 0, nx, ny)
-            # pixel X of the full convolution sits at fine index (X - X0) q + c, c = Rk q - 1:
-            # the first at X0 - Rk + 1, index q - 1
-            PX0, PY0 = X0 - Rk + 1, Y0 - Rk + 1
-            for out, K in zip(outs, kernels):
-                conv = _fft_convolve(B, K)[q - 1::q, q - 1::q]
-                ys, xs = max(0, PY0), max(0, PX0)
-                ye, xe = min(H, PY0 + conv.shape[0]), min(W, PX0 + conv.shape[1])
-                if ye > ys and xe > xs:
-                    out[ys:ye, xs:xe] += conv[ys - PY0:ye - PY0, xs - PX0:xe - PX0]
+        for ys, xs, patches in splat_patches([self], u_px, v_px, weight, (H, W), gradient=gradient):
+            for out, patch in zip(outs, patches[0]):
+                out[ys:ys + patch.shape[0], xs:xs + patch.shape[1]] += patch
         return tuple(outs) if gradient else outs[0]
 
     def outer_kernel(self) -> np.ndarray:
@@ -457,6 +432,89 @@ def fine_kernel(lam_over_d_px: float, sigma_px: float) -> tuple:
     return res
 
 
+def splat_patches(cores, u_px, v_px, weight, shape, *, gradient: bool = False, value: bool = True):
+    """The deterministic point convolution of :meth:`CorePSF.splat`, for several PSFs at once
+    (the colour channels' Airy patterns), spot by spot.
+
+    What does not depend on the PSF is done once per spot: the spot's samples spread on the
+    pixel grid (for the outer Airy tail) and on the sub-pixel grid (for the inner kernel), and
+    their Fourier transforms; each PSF then costs one spectrum product and one inverse
+    transform per output image.
+
+    Parameters
+    ----------
+    cores : sequence of CorePSF
+    u_px, v_px, weight : ndarray, shape (M,)
+        The samples (see :meth:`CorePSF.splat`).
+    shape : (H, W)
+    gradient : bool
+        Also the derivatives with respect to a common shift of the points.
+    value : bool
+        With ``gradient``, ``False`` leaves the image out (the derivatives only).
+
+    Yields
+    ------
+    ys, xs : int
+        Frame pixel of the patch's top-left corner.
+    patches : list (one per core) of list of ndarray, float64, shape (h, w)
+        ``[image]``, ``[image, d_du, d_dv]`` or ``[d_du, d_dv]`` of that PSF over the patch
+        (inside the frame).
+    """
+    import scipy.fft as sfft
+
+    H, W = int(shape[0]), int(shape[1])
+    u = np.asarray(u_px, float).ravel()
+    v = np.asarray(v_px, float).ravel()
+    w = np.asarray(weight, float).ravel()
+    if u.size == 0:
+        return
+    q, Rk, R = SPLAT_OVERSAMPLING, INNER_KERNEL_RADIUS_PX, AIRY_OUTER_RADIUS_PX
+    which = [0, 1, 2] if gradient else [0]
+    if gradient and not value:
+        which = [1, 2]
+    derivs = tuple((None, "u", "v")[i] for i in which)
+    inner = [[fine_kernel(c.lam_over_d_px, c.aberration_sigma_px)[i] for i in which] for c in cores]
+    outer = [_outer_kernel(c.lam_over_d_px, c.aberration_sigma_px) for c in cores]
+    e_in = [c.drawn_energy for c in cores]
+    for idx in point_clusters(u, v, H, W, R):
+        uu, vv, ww = u[idx], v[idx], w[idx]
+        # the outer tail: the samples' bilinear pixel image (and its shift derivatives) with
+        # the outer kernel; the patch is that convolution's support
+        x0, y0 = int(np.floor(uu.min())), int(np.floor(vv.min()))
+        bw, bh = int(np.floor(uu.max())) - x0 + 2, int(np.floor(vv.max())) - y0 + 2
+        boxes = bilinear_splats(uu, vv, ww, x0, y0, bw, bh, derivatives=derivs)
+        sh_o = (bh + 2 * R, bw + 2 * R)
+        fs_o = (sfft.next_fast_len(sh_o[0], real=True), sfft.next_fast_len(sh_o[1], real=True))
+        Fb = [sfft.rfft2(b, fs_o) for b in boxes]
+        PX, PY = x0 - R, y0 - R  # frame pixel of the patch's (0, 0)
+        patches = [[sfft.irfft2(F * _kernel_spectrum(k, fs_o), fs_o)[:sh_o[0], :sh_o[1]] * (1.0 - e)
+                    for F in Fb] for k, e in zip(outer, e_in)]
+        # the inner part on the sub-pixel grid; pixel X of the full convolution sits at fine
+        # index (X - X0) q + c, c = Rk q - 1: the first at X0 - Rk + 1, index q - 1
+        X0, Y0 = int(np.floor(uu.min())) - 1, int(np.floor(vv.min())) - 1
+        nx = int((np.floor(uu.max()) + 2 - X0) * q) + 1
+        ny = int((np.floor(vv.max()) + 2 - Y0) * q) + 1
+        B = bilinear_splats((uu - X0) * q, (vv - Y0) * q, ww, 0, 0, nx, ny)[0]
+        kshape = inner[0][0].shape
+        sh_i = (ny + kshape[0] - 1, nx + kshape[1] - 1)
+        # only every q-th node of the fine convolution is read (the pixel centres): fold the
+        # spectrum onto the coarse frequencies and invert at pixel resolution (exact: the
+        # linear convolution fits the FFT grid, which is a multiple of q)
+        fs_i = (q * sfft.next_fast_len(-(-sh_i[0] // q)), q * sfft.next_fast_len(-(-sh_i[1] // q)))
+        FB = sfft.fft2(B, fs_i)
+        n_y, n_x = -(-(sh_i[0] - (q - 1)) // q), -(-(sh_i[1] - (q - 1)) // q)
+        iy, ix = (Y0 - Rk + 1) - PY, (X0 - Rk + 1) - PX  # the inner block's place in the patch (>= 0)
+        for ch, ks, e in zip(patches, inner, e_in):
+            for img, K in zip(ch, ks):
+                Z = (FB * _decimating_spectrum(K, fs_i, q)).reshape(q, fs_i[0] // q, q, fs_i[1] // q).sum(axis=(0, 2))
+                conv = sfft.ifft2(Z).real[:n_y, :n_x]
+                img[iy:iy + n_y, ix:ix + n_x] += (e / (q * q)) * conv
+        ys, xs = max(0, PY), max(0, PX)
+        ye, xe = min(H, PY + sh_o[0]), min(W, PX + sh_o[1])
+        if ye > ys and xe > xs:
+            yield ys, xs, [[img[ys - PY:ye - PY, xs - PX:xe - PX] for img in ch] for ch in patches]
+
+
 def point_clusters(u, v, H: int, W: int, margin_px: int) -> list:
     """Indices of the points grouped by spot: points within :data:`CLUSTER_CELL_PX` of each
     other share a window; points farther than ``margin_px`` outside the frame are dropped.
@@ -494,6 +552,28 @@ def _fft_convolve(a: np.ndarray, k: np.ndarray) -> np.ndarray:
     Fk = _kernel_spectrum(k, fs)
     out = sfft.irfft2(sfft.rfft2(a, fs) * Fk, fs)
     return out[:sh[0], :sh[1]]
+
+
+_DECIMATING: dict = {}
+
+
+def _decimating_spectrum(k: np.ndarray, fs: tuple, q: int) -> np.ndarray:
+    """The full 2-D spectrum of kernel ``k`` on an ``fs`` grid times the phase ramp that
+    reads the convolution at offset ``q - 1`` (cached by kernel and size): multiplied by a
+    signal's spectrum and folded q-fold per axis, it gives ``q^2 x`` the convolution sampled
+    at ``q - 1 + q m``."""
+    import scipy.fft as sfft
+
+    key = (id(k), fs, q)
+    hit = _DECIMATING.get(key)
+    if hit is None or hit[0] is not k:
+        if len(_DECIMATING) > 256:
+            _DECIMATING.clear()
+        ry = np.exp(2j * np.pi * np.arange(fs[0]) * (q - 1) / fs[0])
+        rx = np.exp(2j * np.pi * np.arange(fs[1]) * (q - 1) / fs[1])
+        hit = (k, sfft.fft2(k, fs) * ry[:, None] * rx[None, :])
+        _DECIMATING[key] = hit
+    return hit[1]
 
 
 _SPECTRA: dict = {}
