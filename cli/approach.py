@@ -64,6 +64,9 @@ def register(sub) -> None:
                    help="detector threshold: 'app' (the app's brightness threshold for the camera, "
                         "assets/app/svgs-app.toml; the default), a level in 8-bit counts, 'auto' or 'otsu'")
     p.add_argument("--out", required=True, help="output folder (a rerun with the same arguments resumes it)")
+    p.add_argument("--overlap-render", action="store_true",
+                   help="render the next frame in a background thread while the phone model works on this one "
+                        "(same numbers; no gain on a 2-core machine, docs/approach.md#speed)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object on stdout")
     p.set_defaults(func=cmd_approach)
@@ -148,7 +151,8 @@ def cmd_approach(args) -> int:
 
     cfg = config_from_args(args)
     with text_to_stderr(args.json):
-        s = run_approach(cfg, args.out, progress=not args.no_progress, command=command_line(args))
+        s = run_approach(cfg, args.out, progress=not args.no_progress, command=command_line(args),
+                         overlap_render=args.overlap_render)
         print_summary(s)
     emit(s, args.json)
     return EXIT_OK if s["solved"] > 0 else EXIT_NO_SOLUTION

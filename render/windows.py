@@ -52,9 +52,9 @@ def background_tiles(camera, scene_corners_m, R, t, tile_px: int, tile_counts) -
     Returns
     -------
     ndarray of int, shape (n, 2), or None
-        ``(x0, y0)`` per tile; None when the scene is partly behind the lens, the camera has
-        distortion (a box's edges are not straight), or more tiles than the largest mosaic
-        (or the whole frame's area) would be needed.
+        ``(x0, y0)`` per tile; None when the scene is partly behind the lens, the camera's
+        distortion is not one-to-one over the frame (:func:`_distorted_box_outline`), or more
+        tiles than the largest mosaic (or the whole frame's area) would be needed.
     """
     T = tile_px
     p = scene_corners_m @ R.T + t
@@ -62,7 +62,9 @@ def background_tiles(camera, scene_corners_m, R, t, tile_px: int, tile_counts) -
         return None
     uv = camera.project(p)
     if camera.has_distortion:
-        return None  # a box's edges are not straight under distortion: be safe
+        uv = _distorted_box_outline(camera, p)
+        if uv is None:
+            return None
     W, H = camera.width, camera.height
     u0, v0 = np.floor(uv.min(0) - 2.0)
     u1, v1 = np.ceil(uv.max(0) + 2.0)
@@ -78,3 +80,49 @@ def background_tiles(camera, scene_corners_m, R, t, tile_px: int, tile_counts) -
     xs = np.minimum(xs, max(0, W - T)) if W >= T else xs
     ys = np.minimum(ys, max(0, H - T)) if H >= T else ys
     return np.array([[x, y] for y in ys for x in xs], int)
+
+
+#: Samples per side of the rectangle whose distorted outline bounds a box's image.
+OUTLINE_SAMPLES = 256
+#: Grid of the one-to-one check of the distortion (points per axis).
+JACOBIAN_GRID = 33
+
+
+def _distorted_box_outline(camera, p_cam_m) -> np.ndarray | None:
+    """Pixels bounding the image of a box under the camera's distortion, or None.
+
+    A ray meets the box only if its undistorted normalised coordinates lie in the rectangle
+    spanned by the box corners' ``(X/Z, Y/Z)``. Where the distortion is one-to-one and
+    continuous, it maps that rectangle's boundary onto the boundary of its image, so the
+    distorted boundary (sampled densely) bounds every pixel that can see the box. One-to-one is
+    checked as a positive Jacobian determinant of the distortion on a grid over the rectangle
+    and the whole frame's undistorted extent; otherwise None (render the whole frame).
+
+    Returns
+    -------
+    ndarray, shape (4 * OUTLINE_SAMPLES, 2) or None
+        Pixel coordinates of the distorted outline.
+    """
+    import cv2
+
+    xy = p_cam_m[:, :2] / p_cam_m[:, 2:3]
+    (x0, y0), (x1, y1) = xy.min(0), xy.max(0)
+    W, H = camera.width, camera.height
+    K = np.array([[camera.fx, 0.0, camera.cx], [0.0, camera.fy, camera.cy], [0.0, 0.0, 1.0]])
+    frame = np.array([[0, 0], [W - 1, 0], [0, H - 1], [W - 1, H - 1], [W / 2, 0], [W / 2, H - 1], [0, H / 2],
+                      [W - 1, H / 2]], float)
+    und = cv2.undistortPoints(frame.reshape(-1, 1, 2), K, np.asarray(camera.dist, float)).reshape(-1, 2)
+    gx0, gy0 = min(x0, und[:, 0].min()), min(y0, und[:, 1].min())
+    gx1, gy1 = max(x1, und[:, 0].max()), max(y1, und[:, 1].max())
+    gx, gy = np.meshgrid(np.linspace(gx0, gx1, JACOBIAN_GRID), np.linspace(gy0, gy1, JACOBIAN_GRID))
+    g = np.stack([gx.ravel(), gy.ravel()], -1)
+    h = 1e-6 * max(1.0, gx1 - gx0, gy1 - gy0)
+    dx = (camera.distort_normalized(g + [h, 0.0]) - camera.distort_normalized(g - [h, 0.0])) / (2 * h)
+    dy = (camera.distort_normalized(g + [0.0, h]) - camera.distort_normalized(g - [0.0, h])) / (2 * h)
+    if np.any(dx[:, 0] * dy[:, 1] - dx[:, 1] * dy[:, 0] <= 0.0):
+        return None
+    t = np.linspace(0.0, 1.0, OUTLINE_SAMPLES)
+    one = np.ones_like(t)
+    edge = np.concatenate([np.stack([x0 + (x1 - x0) * t, y0 * one], -1), np.stack([x0 + (x1 - x0) * t, y1 * one], -1),
+                           np.stack([x0 * one, y0 + (y1 - y0) * t], -1), np.stack([x1 * one, y0 + (y1 - y0) * t], -1)])
+    return camera.normalized_to_pixels(edge)

@@ -444,6 +444,11 @@ class ApproachSensor:
         steps counted from the times of consecutive calls.
     keep_images : bool
         Keep the delivered image, the blobs and the solution in each :class:`Measurement`.
+    overlap_render : bool
+        Render the next frame of a trajectory (``next_pose``, :meth:`along`) in a background
+        thread while the phone model works on this one. Off by default: on the two-core machine
+        it bought nothing (Mitsuba's threads and the camera model's then share the two cores;
+        ``benchmarks/bench_approach.py``); with more cores it may. The numbers do not change.
     threshold : None, float or str
         The detector's threshold (None: the app's for the camera, :func:`svgs.pipeline.camera_threshold`).
     base : Scenario, optional
@@ -460,7 +465,7 @@ class ApproachSensor:
 
     def __init__(self, camera="galaxy-nexus", pattern="svgs-3u", *, seed: int = 0, motion: bool = True,
                  crlb: bool = True, keep_images: bool = False, threshold=None, base: Scenario | None = None,
-                 frame_rate_hz: float | None = None):
+                 frame_rate_hz: float | None = None, overlap_render: bool = False):
         import dataclasses
 
         from camera.phone import PhoneCamera, PhoneParams
@@ -501,6 +506,7 @@ class ApproachSensor:
         self.motion = bool(motion)
         self.crlb = bool(crlb)
         self.keep_images = bool(keep_images)
+        self.overlap_render = bool(overlap_render)
         self.threshold = threshold
         self.phone = PhoneCamera(self.camera, params=params)
         self._renderer = None
@@ -509,6 +515,8 @@ class ApproachSensor:
         self.frame_index = 0
         self._settings = None  # (exposure_s, iso) for the next frame; None: converge on it
         self._last_pose = None
+        self._pool = None  # the background render thread (next_pose)
+        self._pending = None  # ((frame, R bytes, t bytes), future) of the render in flight
 
     # ------------------------------------------------------------------ state
     @property
@@ -572,7 +580,7 @@ class ApproachSensor:
 
     # ------------------------------------------------------------------ measuring
     def measure(self, t_s: float, R_cam_target=None, t_cam_target_m=None, *, image_velocity_px_s=None,
-                scenario: Scenario | None = None) -> Measurement:
+                scenario: Scenario | None = None, next_pose=None) -> Measurement:
         """One frame at time ``t_s`` with the target at ``(R_cam_target, t_cam_target_m)``.
 
         Parameters
@@ -587,6 +595,12 @@ class ApproachSensor:
             velocity since the previous call (none on the first frame).
         scenario : Scenario, optional
             The frame as a scenario (e.g. a stand-mounted trajectory), instead of the pose.
+        next_pose : (R_cam_target, t_cam_target_m), optional
+            The pose of the next call, when known (a trajectory): its render starts in a
+            background thread as soon as this frame's render is done, and overlaps this frame's
+            camera model, detection, solution and bound, when the sensor was made with
+            ``overlap_render=True`` (ignored otherwise). The numbers do not change: the next
+            call uses that render only if its frame and pose match.
 
         Returns
         -------
@@ -613,7 +627,14 @@ class ApproachSensor:
         uv_true = self.targets_px(R, t)
         p_cam = self.pattern.points_m @ R.T + t
         if np.any(p_cam[:, 2] <= 0) or not np.any(self.camera.in_image(uv_true)):
+            self._drop_render()
             return self._out_of_view(k, t_s, R, t)
+        next_frame = None
+        if next_pose is not None and self.overlap_render:
+            Rn, tn = check_pose(*next_pose)
+            pn = self.pattern.points_m @ Rn.T + tn
+            if np.all(pn[:, 2] > 0) and np.any(self.camera.in_image(self.targets_px(Rn, tn))):
+                next_frame = (Rn, tn)
         if image_velocity_px_s is not None:
             image_velocity_px_s = np.asarray(image_velocity_px_s, float)
             if image_velocity_px_s.shape != (self.pattern.n, 2) or not np.all(np.isfinite(image_velocity_px_s)):
@@ -623,14 +644,15 @@ class ApproachSensor:
         render_seed_k, noise_seed, motion_seed = self._frame_seeds(k)
         timings = {}
         t0 = time.perf_counter()
-        r = self.renderer()
-        r.set_focus_distance(float(np.linalg.norm(t)))
-        res = r.render(R, t, seed=render_seed_k)
+        res = self._take_render(k, R, t)
+        if next_frame is not None:  # the next frame renders while this one goes through the phone
+            self._start_render(k + 1, *next_frame)
         lab, info = self._lab(sc)
         truth = dict(res.truth)
         truth.update({"lab": info, "scenario": sc.to_json(), "focus_distance_m": float(np.linalg.norm(t)), "t_s": float(t_s)})
         frame = Frame(sc, res.flux + lab, truth, 0.0, lab, target_diffuse=res.flux_diffuse, points=res.points,
-                      _phone={(True, None, None): self.phone})
+                      _phone={(True, None, None): self.phone},
+                      lab_unit=(info["radiance_w_m2_sr"], self._lab_factor))
         timings["render"] = time.perf_counter() - t0
 
         t0 = time.perf_counter()
@@ -696,6 +718,45 @@ class ApproachSensor:
         self._last_pose = (float(t_s), R, t)
         return m
 
+    # ------------------------------------------------------------------ renders, overlapped
+    def _render_now(self, k: int, R, t):
+        r = self.renderer()
+        r.set_focus_distance(float(np.linalg.norm(t)))
+        return r.render(R, t, seed=self._frame_seeds(k)[0])
+
+    def _start_render(self, k: int, R, t) -> None:
+        """Render frame ``k`` at ``(R, t)`` in the background thread (one at a time)."""
+        from concurrent.futures import ThreadPoolExecutor
+
+        self._drop_render()
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="svgs-render")
+        key = (int(k), np.asarray(R, float).tobytes(), np.asarray(t, float).tobytes())
+        self._pending = (key, self._pool.submit(self._render_now, k, R, t))
+
+    def _take_render(self, k: int, R, t):
+        """Frame ``k``'s render: the background one if it is that frame's, else rendered now."""
+        if self._pending is not None:
+            key, fut = self._pending
+            self._pending = None
+            res = fut.result()  # wait for it (and the renderer) in any case; errors surface here
+            if key == (int(k), np.asarray(R, float).tobytes(), np.asarray(t, float).tobytes()):
+                return res
+        return self._render_now(k, R, t)
+
+    def _drop_render(self) -> None:
+        if self._pending is not None:
+            _, fut = self._pending
+            self._pending = None
+            fut.result()
+
+    def close(self) -> None:
+        """Stop the background render thread (a later frame starts it again)."""
+        self._drop_render()
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+
     def _out_of_view(self, k: int, t_s: float, R, t) -> Measurement:
         """A dropout: the target is behind the camera or outside its field of view (not rendered;
         the auto-exposure keeps its settings)."""
@@ -738,16 +799,27 @@ class ApproachSensor:
         ------
         Measurement
         """
-        for t_s in np.asarray(times_s, float):
-            yield self.measure_on(trajectory, float(t_s))
+        times = np.asarray(times_s, float)
+        try:
+            for i, t_s in enumerate(times):
+                yield self.measure_on(trajectory, float(t_s), next_t_s=float(times[i + 1]) if i + 1 < len(times)
+                                      else None)
+        finally:
+            self.close()
 
-    def measure_on(self, trajectory: Trajectory, t_s: float) -> Measurement:
-        """One frame of a trajectory at ``t_s``, the image velocity from the trajectory itself."""
+    def measure_on(self, trajectory: Trajectory, t_s: float, *, next_t_s: float | None = None) -> Measurement:
+        """One frame of a trajectory at ``t_s``, the image velocity from the trajectory itself.
+        ``next_t_s``: the time of the next frame, whose render then overlaps this frame's camera
+        model (see :meth:`measure`)."""
         sc = trajectory.scenario(t_s, self.base)
+        nxt = None
+        if next_t_s is not None:
+            nxt = trajectory.scenario(float(next_t_s), self.base).replace(camera=self.base.camera,
+                                                                          pattern=self.base.pattern).pose()
         lo = max(t_s - VELOCITY_STEP_S, float(trajectory.t_s[0]))
         hi = min(t_s + VELOCITY_STEP_S, float(trajectory.t_s[-1]))
         vel = None
         if hi > lo:
             vel = (self.targets_px(*trajectory.scenario(hi, self.base).pose())
                    - self.targets_px(*trajectory.scenario(lo, self.base).pose())) / (hi - lo)
-        return self.measure(t_s, scenario=sc, image_velocity_px_s=vel)
+        return self.measure(t_s, scenario=sc, image_velocity_px_s=vel, next_pose=nxt)

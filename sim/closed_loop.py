@@ -218,6 +218,10 @@ class Frame:
         camera takes instead of ``flux - lab``.
     points : camera.rendered.PointFlux, optional
         The target's retro spots as samples at exact film positions (photons/s each).
+    lab_unit : (float, ndarray), optional
+        ``(radiance_w_m2_sr, factor)`` with ``lab = radiance_w_m2_sr * factor``
+        (:func:`lab_flux`, :func:`lab_photon_factor`): the camera model keeps the optical image
+        of ``factor`` and scales it, instead of convolving the lab's light again every frame.
     """
 
     scenario: Scenario
@@ -227,6 +231,7 @@ class Frame:
     lab: np.ndarray | None = None
     target_diffuse: np.ndarray | None = None
     points: object = None
+    lab_unit: tuple | None = None
     _phone: object = field(default=None, repr=False)
 
     @property
@@ -274,8 +279,11 @@ class Frame:
         seed = render_seed(self.truth)
         lab = self.lab if self.lab is not None else np.float32(0.0)
         if self.points is not None and self.target_diffuse is not None:
-            flux = (lab + self.target_diffuse * np.float32(target_scale)).astype(np.float32)
             pts = self.points if target_scale == 1.0 else self.points.scaled(target_scale)
+            if self.lab_unit is not None:  # the lab's optical image kept by the camera model
+                flux = (self.target_diffuse * np.float32(target_scale)).astype(np.float32)
+                return Exposer(phone, flux, points=pts, stages=stages, optics_seed=seed, background=self.lab_unit)
+            flux = (lab + self.target_diffuse * np.float32(target_scale)).astype(np.float32)
             return Exposer(phone, flux, points=pts, stages=stages, optics_seed=seed)
         flux = self.flux
         if target_scale != 1.0:
@@ -311,6 +319,7 @@ def lab_flux(camera: Camera, scenario: Scenario, factor: np.ndarray | None = Non
         L += Lb
         info.update({"backdrop_distance_from_camera_m": D, "backdrop_reflectance": scenario.backdrop_reflectance,
                      "backdrop_radiance_w_m2_sr": Lb})
+    info["radiance_w_m2_sr"] = L
     if L == 0:
         return np.zeros((camera.height, camera.width), np.float32), info
     if factor is None:
@@ -318,10 +327,27 @@ def lab_flux(camera: Camera, scenario: Scenario, factor: np.ndarray | None = Non
     return (L * np.asarray(factor, np.float32)).astype(np.float32), info
 
 
+_LAB_FACTORS: dict = {}
+
+
 def lab_photon_factor(camera: Camera) -> np.ndarray:
     """Photons/s per pixel per unit scene radiance (W m^-2 sr^-1) through the lens, float32 (H, W):
     :func:`render.optics.radiance_to_photon_rate`, which varies smoothly, on a 16-px grid
-    interpolated to every pixel."""
+    interpolated to every pixel. Read-only; the same array for the same camera (cached by the
+    profile's content), so that the camera model can keep its optical image between frames."""
+    key = (camera.name, camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy,
+           tuple(np.asarray(camera.dist, float).tolist()), repr(camera.tables))
+    hit = _LAB_FACTORS.get(key)
+    if hit is None:
+        if len(_LAB_FACTORS) >= 8:
+            _LAB_FACTORS.clear()
+        hit = _lab_photon_factor(camera)
+        hit.setflags(write=False)
+        _LAB_FACTORS[key] = hit
+    return hit
+
+
+def _lab_photon_factor(camera: Camera) -> np.ndarray:
     import cv2
 
     from render.optics import Flash, Optics, radiance_to_photon_rate
@@ -347,13 +373,15 @@ def render_scenario(scenario: Scenario, *, seed: int = 0) -> Frame:
     kw = {k: int(getattr(scenario, k)) for k in ("spp", "roi_spp") if getattr(scenario, k) is not None}
     focus = scenario.focus_distance_m if scenario.focus_distance_m is not None else float(np.linalg.norm(t))
     res = render_flux(camera, pattern, R, t, seed=int(seed), scene_options={"focus_distance_m": focus}, **kw)
-    lab, info = lab_flux(camera, scenario)
+    factor = lab_photon_factor(camera)
+    lab, info = lab_flux(camera, scenario, factor=factor)
     dt = time.perf_counter() - t0
     truth = dict(res.truth)
     truth["lab"] = info
     truth["scenario"] = scenario.to_json()
     truth["focus_distance_m"] = focus
-    return Frame(scenario, res.flux + lab, truth, dt, lab, target_diffuse=res.flux_diffuse, points=res.points)
+    return Frame(scenario, res.flux + lab, truth, dt, lab, target_diffuse=res.flux_diffuse, points=res.points,
+                 lab_unit=(info["radiance_w_m2_sr"], factor))
 
 
 def solver_camera(camera: Camera, image_shape) -> Camera:

@@ -93,8 +93,9 @@ def _window_core_gradient(phone, cfa: bool, points, box) -> tuple[np.ndarray, np
     with respect to a common shift of the points there, ``(d/du, d/dv)``, photons/s per pixel
     per px, float64: exact derivatives of the deterministic image
     (:meth:`camera.phone.psf.CorePSF.splat` with ``gradient=True``), with the CFA's channels and
-    responses when ``cfa``. The glare wings and ghosts are left out, as in
-    :func:`_window_core_image`."""
+    responses when ``cfa``. The points within :data:`PAD_PX` of the window count (their light
+    reaches it); the image is made over the window only. The glare wings and ghosts are left
+    out, as in :func:`_window_core_image`."""
     from camera.phone.cfa import response_map
     from camera.phone.optics import core_share
     from camera.rendered import PointFlux
@@ -104,18 +105,18 @@ def _window_core_gradient(phone, cfa: bool, points, box) -> tuple[np.ndarray, np
     h, w = (y1 - y0) + 2 * PAD_PX, (x1 - x0) + 2 * PAD_PX
     m = ((points.u_px >= X0 - 0.5) & (points.u_px < X0 + w - 0.5) & (points.v_px >= Y0 - 0.5)
          & (points.v_px < Y0 + h - 0.5))
-    local = PointFlux(points.u_px[m] - X0, points.v_px[m] - Y0, points.rate_ph_s[m])
+    local = PointFlux(points.u_px[m] - x0, points.v_px[m] - y0, points.rate_ph_s[m])
     p = phone.params
+    hh, ww = y1 - y0, x1 - x0
     if not cfa:
-        _, gu, gv = phone.core_psf().splat(local.u_px, local.v_px, local.rate_ph_s, (h, w), gradient=True)
+        gu, gv = phone.core_psf().splat(local.u_px, local.v_px, local.rate_ph_s, (hh, ww), gradient=True)[1:]
     else:
-        gu, gv = phone.core_mosaic(np.zeros((h, w), np.float32), local, origin=(X0, Y0), gradient=True,
+        gu, gv = phone.core_mosaic(np.zeros((hh, ww), np.float32), local, origin=(x0, y0), gradient=True,
                                    value=False)
-        resp = response_map(p.cfa, (h + 2, w + 2))[(Y0 % 2):(Y0 % 2) + h, (X0 % 2):(X0 % 2) + w]
+        resp = response_map(p.cfa, (hh + 2, ww + 2))[(y0 % 2):(y0 % 2) + hh, (x0 % 2):(x0 % 2) + ww]
         gu, gv = gu * resp, gv * resp
     f = core_share(p.glare)
-    crop = (slice(PAD_PX, PAD_PX + (y1 - y0)), slice(PAD_PX, PAD_PX + (x1 - x0)))
-    return f * gu[crop], f * gv[crop]
+    return f * gu, f * gv
 
 
 #: How the bound's image derivatives are computed: ``"analytic"`` (default; the deterministic

@@ -17,6 +17,7 @@ Writes into ``out``:
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import time
@@ -116,7 +117,8 @@ def _overlay(m, cam, pattern, title: str) -> np.ndarray:
     return canvas
 
 
-def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, command: str | None = None) -> dict:
+def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, command: str | None = None,
+                 overlap_render: bool = False) -> dict:
     """Run (or continue) an approach into ``out_dir`` and write its outputs.
 
     Parameters
@@ -157,13 +159,17 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
         frames_dir.mkdir(exist_ok=True)
         if todo:
             sensor = ApproachSensor(cam, cfg["pattern"], seed=cfg["seed"], motion=cfg["motion"], crlb=cfg["crlb"],
-                                    keep_images=True, frame_rate_hz=cfg["fps"], threshold=_threshold(cfg))
+                                    keep_images=True, frame_rate_hz=cfg["fps"], threshold=_threshold(cfg),
+                                    overlap_render=overlap_render)
             if todo[0] > 0:
                 last = {r["trial_id"]: r for r in store.read_rows()}[todo[0] - 1]
                 sensor.restore(todo[0], last["next_exposure_s"], last["next_iso"])
-            with progress_bar(len(todo), f"approach {cfg['camera']}", progress, unit="frame") as bar:
+            with progress_bar(len(todo), f"approach {cfg['camera']}", progress, unit="frame") as bar, \
+                    contextlib.closing(sensor):
                 for k in todo:
-                    m = sensor.measure_on(traj, float(times[k]))
+                    # the next frame renders while this one is exposed, solved and written
+                    m = sensor.measure_on(traj, float(times[k]),
+                                          next_t_s=float(times[k + 1]) if k + 1 < len(times) else None)
                     title = (f"t = {m.t_s:7.2f} s  range {m.range_m:6.2f} m  "
                              + ("SOLVED" if m.ok else f"NO SOLUTION ({m.reason})")
                              + f"  exposure {m.exposure_s * 1e3:.2f} ms ISO {m.iso:.0f}")

@@ -77,6 +77,7 @@ def camera_threshold(image, camera, threshold=None):
     ----------
     image : ndarray, shape (H, W) or (H, W, 3)
     camera : Camera or str
+        A binned preview profile (its ``[preview] of`` table) takes its phone's threshold.
     threshold : None, "app", "auto", "otsu" or float
 
     Returns
@@ -88,7 +89,10 @@ def camera_threshold(image, camera, threshold=None):
     from .detect import app_level
 
     if threshold is None or (isinstance(threshold, str) and threshold == "app"):
-        name = camera.name if isinstance(camera, Camera) else Camera.load(camera).name
+        cam = camera if isinstance(camera, Camera) else Camera.load(camera)
+        preview = cam.tables.get("preview")
+        # a phone's binned preview stream (camera.phone.preview) is the same phone and app
+        name = preview.get("of", cam.name) if isinstance(preview, dict) else cam.name
         return app_level(np.asarray(image).dtype, settings().threshold_for(name))
     return threshold
 

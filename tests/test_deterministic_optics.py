@@ -122,3 +122,46 @@ def test_gradient_equals_finite_difference_of_the_image():
     assert abs((gu**2).sum() / (fd_u**2).sum() - 1) < 0.02
     assert abs((gv**2).sum() / (fd_v**2).sum() - 1) < 0.02
     assert np.abs(gu - fd_u).max() < 0.03 * np.abs(fd_u).max()
+
+
+def test_support_windowed_convolution_equals_full_frame_filter():
+    """Light in a small part of the frame is convolved over its support only: the result must
+    equal OpenCV's convolution of the whole frame (zero outside), also at the frame's edge."""
+    import cv2
+
+    psf = CorePSF.from_optics(2.4, 535.0, 1.4e-6, 0.6)
+    rng = np.random.default_rng(7)
+    img = np.zeros((400, 600), np.float32)
+    img[150:190, 300:350] = rng.random((40, 50))
+    img[0:5, 590:600] = 3.0  # a corner: the window is clipped by the frame
+    k = psf.pixel_kernel().astype(np.float32)
+    ref = cv2.filter2D(img, -1, k, borderType=cv2.BORDER_CONSTANT)
+    out = psf.convolve(img)
+    assert np.abs(out - ref).max() <= 1e-6 * ref.max()
+    assert not psf.convolve(np.zeros((40, 60), np.float32)).any()
+
+
+def test_background_kept_between_frames_equals_its_sum():
+    """A background given as (scale, unit) - the lab's light, kept by the camera model from
+    frame to frame - gives the optical image of the summed flux (the optics are linear), and the
+    kept image is reused for the same array (not for a new one)."""
+    cam = PhoneCamera("galaxy-nexus")
+    H, W = cam.shape
+    yy, xx = np.mgrid[0:H, 0:W]
+    unit = (1.0 + 0.3 * np.cos(xx / 400.0) * np.sin(yy / 300.0)).astype(np.float32) * 1e3
+    target = np.zeros((H, W), np.float32)
+    target[900:1000, 1200:1350] = 5e4
+    pts = _spots(0.2)
+    pts = PointFlux(pts.u_px + 1200, pts.v_px + 880, pts.rate_ph_s * 1e6)
+    for scale in (0.7, 2.5):
+        ref = cam.optics(target + np.float32(scale) * unit, pts)
+        out = cam.optics(target, pts, background=(scale, unit))
+        assert np.abs(out - ref).max() <= 2e-6 * ref.max()
+    from camera.phone import _BACKGROUND_CACHE
+
+    _BACKGROUND_CACHE.clear()
+    cam.optics(target, pts, background=(1.0, unit))
+    PhoneCamera("galaxy-nexus").optics(target, pts, background=(1.0, unit))  # another phone, same model
+    assert len(_BACKGROUND_CACHE) == 1  # one unit array, kept
+    cam.optics(target, pts, background=(1.0, unit.copy()))
+    assert len(_BACKGROUND_CACHE) == 2

@@ -265,3 +265,55 @@ def test_render_and_render_and_solve_form_the_same_image(tmp_path):
     ta = json.loads((tmp_path / "a" / "truth.json").read_text())
     tb = json.loads((tmp_path / "b" / "truth.json").read_text())
     assert ta["focus_distance_m"] == pytest.approx(tb["focus_distance_m"]) == pytest.approx(np.linalg.norm(ta["t_cam_target_m"]))
+
+
+@pytest.mark.parametrize("k1,pp", [(0.0397, (21.4, 7.36)), (-0.12, (0.0, 0.0)), (0.25, (-30.0, 12.0))])
+def test_background_tiles_under_distortion_cover_every_pixel_that_sees_the_scene(k1, pp):
+    """With a distorted lens the diffuse background is rendered over tiles bounding the scene box's
+    distorted image (not the whole frame): every point of the box, projected with the distortion
+    by OpenCV (cv2.projectPoints, not this code), falls in a tile."""
+    import cv2
+
+    from render.scene import TILE_COUNTS, TILE_SIZE_PX
+    from render.windows import background_tiles
+    from svgs.frames import pose_from_scenario
+
+    cam = Camera.load("galaxy-nexus")
+    cam = cam.replace(cx=cam.cx + pp[0], cy=cam.cy + pp[1], dist=cam.dist + np.array([k1, 0.0, 0.0, 0.0, 0.0]))
+    lo, hi = np.array([-0.2, -0.2, -0.25]), np.array([0.2, 0.2, 0.05])
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    rng = np.random.default_rng(5)
+    inside = lo + (hi - lo) * rng.random((20000, 3))
+    K = np.array([[cam.fx, 0, cam.cx], [0, cam.fy, cam.cy], [0, 0, 1.0]])
+    for range_m, lateral in ((3.0, (0.0, 0.0)), (6.0, (0.4, -0.3)), (12.0, (1.5, 0.9))):
+        R, t = pose_from_scenario(range_m, lateral[0], lateral[1], 10.0, -8.0, 15.0)
+        tiles = background_tiles(cam, corners, R, t, TILE_SIZE_PX, TILE_COUNTS)
+        assert tiles is not None and len(tiles) > 0
+        uv, _ = cv2.projectPoints(inside, cv2.Rodrigues(R)[0], t, K, np.asarray(cam.dist, float))
+        uv = uv.reshape(-1, 2)
+        uv = uv[(uv[:, 0] >= 0) & (uv[:, 0] <= cam.width - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= cam.height - 1)]
+        ui, vi = np.floor(uv[:, 0] + 0.5).astype(int), np.floor(uv[:, 1] + 0.5).astype(int)
+        covered = np.zeros((cam.height, cam.width), bool)
+        for x0, y0 in tiles:
+            covered[y0:y0 + TILE_SIZE_PX, x0:x0 + TILE_SIZE_PX] = True
+        assert covered[vi, ui].all(), f"{(~covered[vi, ui]).sum()} box points outside the tiles at {range_m} m"
+        assert covered.sum() < 0.5 * covered.size  # tiles, not the whole frame
+
+
+def test_background_tiles_fall_back_to_the_whole_frame_when_the_distortion_folds():
+    """A distortion that is not one-to-one over the frame (strong barrel: the radial map turns
+    back within the field) gets the whole frame rendered (None), as before."""
+    from render.scene import TILE_COUNTS, TILE_SIZE_PX
+    from render.windows import background_tiles
+    from svgs.frames import pose_from_scenario
+
+    cam = Camera.load("galaxy-nexus")
+    cam = cam.replace(dist=np.array([-2.0, 0.0, 0.0, 0.0, 0.0]))
+    corners = np.array([[x, y, z] for x in (-0.2, 0.2) for y in (-0.2, 0.2) for z in (-0.25, 0.05)])
+    R, t = pose_from_scenario(6.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    assert background_tiles(cam, corners, R, t, TILE_SIZE_PX, TILE_COUNTS) is None
+    from render.windows import _distorted_box_outline
+
+    assert _distorted_box_outline(cam, corners @ R.T + t) is None  # the one-to-one check refuses it
+    mild = cam.replace(dist=np.array([0.04, 0.0, 0.0, 0.0, 0.0]))
+    assert _distorted_box_outline(mild, corners @ R.T + t) is not None

@@ -196,6 +196,24 @@ def test_binned_preview_collects_the_photons_of_its_pixels():
         binned_camera(full, 640, 640)
 
 
+def test_binned_preview_takes_its_phone_s_app_threshold(tmp_path):
+    """The preview stream is the same phone running the same app: the detector's threshold is the
+    phone's (assets/app/svgs-app.toml: 64 for the Galaxy Nexus, 200 for the Amaze), not the default
+    for unknown cameras, also after the preview profile went through a file."""
+    from camera.phone.preview import binned_camera
+    from svgs.app import settings
+    from svgs.pipeline import camera_threshold
+
+    img = np.zeros((4, 4), np.uint8)
+    for name in ("galaxy-nexus", "htc-amaze-4g"):
+        prev = binned_camera(name)
+        want = settings().threshold_for(name)
+        assert want != settings().threshold_dn
+        assert camera_threshold(img, prev) == want
+        path = prev.save(tmp_path / f"{prev.name}.toml")
+        assert camera_threshold(img, str(path)) == want
+
+
 def test_stream_auto_exposure_step_response():
     """Linear regime (nothing clips): each step takes ``gain`` of the log error away, so after k
     steps the error is (1 - gain)^k of the start's, whatever the scene."""
@@ -248,6 +266,28 @@ def test_sensor_frame_equals_the_isolated_pose_chain(small_camera):
     assert m0.ok and m1.ok and row["ok"]
     for k, v in row["state"].items():
         assert m1.estimate[k] == pytest.approx(v, abs=1e-12)
+
+
+@pytest.mark.render
+def test_overlapped_render_changes_no_number(small_camera):
+    """With the next frame rendered in the background thread (next_t_s), every frame is the
+    frame rendered in sequence; a pose that differs from the one prefetched is rendered anew."""
+    traj = Trajectory.straight(6.0, 4.0, 2.0, attitude_deg=(0.0, 3.0, -5.0))
+    times = [0.0, 0.5, 1.0]
+    seq = ApproachSensor(small_camera, seed=5, motion=True, crlb=False, keep_images=True)
+    ov = ApproachSensor(small_camera, seed=5, motion=True, crlb=False, keep_images=True, overlap_render=True)
+    a = [seq.measure_on(traj, t) for t in times]
+    b = list(ov.along(traj, times))
+    assert ov._pool is None  # along() closes its thread
+    for ma, mb in zip(a, b):
+        assert ma.ok and mb.ok
+        np.testing.assert_array_equal(ma.image, mb.image)
+    # a wrong guess of the next pose: the prefetched render is not used
+    wrong = ApproachSensor(small_camera, seed=5, motion=True, crlb=False, keep_images=True, overlap_render=True)
+    wrong.measure_on(traj, 0.0, next_t_s=2.0)
+    m1 = wrong.measure_on(traj, 0.5)
+    wrong.close()
+    np.testing.assert_array_equal(m1.image, a[1].image)
 
 
 @pytest.fixture(scope="module")

@@ -31,7 +31,7 @@ from svgs.errors import InputError
 from camera.phone.isp import ExposureSolver, auto_exposure, downscale, jpeg_roundtrip, metering_weights, tone_lut
 from camera.phone.cfa import channel_map, luminance, response_map, tone_image
 from camera.phone.optics import apply_psf, core_image, core_psf, core_share, glare_image
-from camera.phone.psf import splat_patches
+from camera.phone.psf import PIXEL_KERNEL_RADIUS_PX, splat_patches, support_box
 from camera.phone.params import ALL_STAGES, NOISE_STAGES, OPTICS_STAGES, PhoneParams, check_stages
 from camera.phone.sensor import bloom, electrons, fixed_patterns, readout
 from camera.tonemap import gamma_u8
@@ -67,6 +67,11 @@ class Exposure:
     electrons: np.ndarray | None = None
 
 
+#: Optical images of backgrounds that stay from frame to frame (:meth:`PhoneCamera.optics`),
+#: by unit array and phone model; a few entries at most.
+_BACKGROUND_CACHE: dict = {}
+
+
 class PhoneCamera:
     """A camera profile's sensor, optics and ISP.
 
@@ -78,9 +83,14 @@ class PhoneCamera:
     point_method : str
         ``"grid"`` (default): the points are convolved with the PSF deterministically;
         ``"monte-carlo"``: by PSF draws (the earlier path, the reference of the tests).
+    backend : str or camera.backend.Backend, optional
+        Array backend of the optics' convolutions (:data:`camera.backend.BACKENDS`; default
+        ``$SVGS_ARRAY_BACKEND``, else the CPU).
     """
 
-    def __init__(self, camera, params: PhoneParams | None = None, *, point_method: str = "grid"):
+    def __init__(self, camera, params: PhoneParams | None = None, *, point_method: str = "grid", backend=None):
+        from camera.backend import get_backend
+
         from svgs import Camera
 
         from camera.phone.optics import POINT_METHODS
@@ -91,6 +101,11 @@ class PhoneCamera:
             raise InputError(f"point_method: expected one of {POINT_METHODS}, got {point_method!r}")
         #: How the point samples meet the lens PSF (:data:`camera.phone.optics.POINT_METHODS`).
         self.point_method = point_method
+        try:
+            #: The array backend of the optics (:class:`camera.backend.Backend`).
+            self.backend = get_backend(backend)
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
         self._fpn = None
 
     @property
@@ -107,7 +122,8 @@ class PhoneCamera:
         p = self.params
         return core_psf(p.f_number, p.band_nm, p.sensor.pixel_pitch_m, p.glare.aberration_sigma_px)
 
-    def optics(self, flux_ph_s: np.ndarray, points=None, *, seed: int = 0, cfa: bool | None = None) -> np.ndarray:
+    def optics(self, flux_ph_s: np.ndarray, points=None, *, seed: int = 0, cfa: bool | None = None,
+               background=None) -> np.ndarray:
         """The optical image: the lens PSF applied to a flux image (photons/s/px, already
         integrated over pixels) and to point samples at sub-pixel positions
         (:class:`camera.rendered.PointFlux`), integrated over pixels. ``seed`` seeds the
@@ -115,20 +131,63 @@ class PhoneCamera:
 
         With the colour filter array (``cfa``: default, the profile's ``[cfa]``), each pixel
         gets its channel's image (Airy pattern at the channel's wavelength) times its
-        channel's response: the mosaic the pixels see. Returns float32 (H, W)."""
+        channel's response: the mosaic the pixels see. Returns float32 (H, W).
+
+        ``background = (scale, unit)``: light ``scale * unit`` (photons/s/px, ``unit`` an
+        (H, W) array that stays the same from frame to frame, e.g. the lab's light per unit
+        radiance) added to ``flux_ph_s``. The optics are linear: the optical image of ``unit``
+        is made once and kept (for that very array), then scaled."""
         p = self.params
         pp = (self.camera.cx, self.camera.cy)
         use_cfa = p.cfa.enabled if cfa is None else (bool(cfa) and p.cfa.enabled)
+        bg = None
+        if background is not None:
+            scale, unit = background
+            scale = float(scale)
+            if scale != 0.0:
+                bg = self._background_optics(unit, use_cfa)
         if not use_cfa:
-            return apply_psf(flux_ph_s, p.glare, self.core_psf(), pp, points=points, rng=np.random.default_rng(seed),
-                             method=self.point_method)
+            out = apply_psf(flux_ph_s, p.glare, self.core_psf(), pp, points=points, rng=np.random.default_rng(seed),
+                            method=self.point_method, backend=self.backend)
+            if bg is not None:
+                out += (scale * bg).astype(np.float32)
+            return out
         out = self.core_mosaic(flux_ph_s, points, seed=seed)
         out *= core_share(p.glare)
-        g = glare_image(flux_ph_s, p.glare, pp, points)
+        g = glare_image(flux_ph_s, p.glare, pp, points, self.backend)
         if g is not None:
             out += g
+        if bg is not None:
+            out += scale * bg
         out *= response_map(p.cfa, self.shape)
         return out.astype(np.float32)
+
+    def _background_optics(self, unit, use_cfa: bool) -> np.ndarray:
+        """The optical image of a background that stays (before the CFA's responses), kept per
+        array and phone model (shared by the phones of isolated frames: the lab's factor is one
+        array per camera): float64 (H, W), read-only."""
+        cache = _BACKGROUND_CACHE
+        key = (id(unit), bool(use_cfa), self.params, self.camera.cx, self.camera.cy, self.backend.name,
+               self.point_method)
+        hit = cache.get(key)
+        if hit is None or hit[0] is not unit:
+            u = self.check_flux(unit)
+            p = self.params
+            pp = (self.camera.cx, self.camera.cy)
+            if use_cfa:
+                img = self.core_mosaic(u)
+                img *= core_share(p.glare)
+                g = glare_image(u, p.glare, pp, backend=self.backend)
+                if g is not None:
+                    img += g
+            else:
+                img = apply_psf(u, p.glare, self.core_psf(), pp, backend=self.backend).astype(np.float64)
+            img.setflags(write=False)
+            if len(cache) >= 4:
+                cache.clear()
+            hit = (unit, img)
+            cache[key] = hit
+        return hit[1]
 
     def core_mosaic(self, flux_ph_s: np.ndarray, points=None, *, seed: int = 0, origin=(0, 0),
                     min_draws: int | None = None, gradient: bool = False, value: bool = True):
@@ -155,7 +214,7 @@ class PhoneCamera:
             seeds = np.random.SeedSequence(int(seed)).spawn(3)
             for c, core in enumerate(cores):
                 img = core_image(flux_ph_s, core, points, np.random.default_rng(seeds[c]), min_draws=min_draws,
-                                 method="monte-carlo")
+                                 method="monte-carlo", backend=self.backend)
                 np.copyto(out, img, where=chan == c)
             return out
         if gradient and np.any(flux_ph_s):
@@ -163,9 +222,13 @@ class PhoneCamera:
         n_out = (3 if value else 2) if gradient else 1
         outs = [np.zeros((H, W)) for _ in range(n_out)]
         f = np.ascontiguousarray(flux_ph_s, np.float32)
-        if not gradient and f.any():
+        box = None if gradient else support_box(f, PIXEL_KERNEL_RADIUS_PX)
+        if box is not None:  # the pixel images: over their support only
+            y0, y1, x0, x1 = box
+            sub, sel = outs[0][y0:y1, x0:x1], chan[y0:y1, x0:x1]
+            win = np.ascontiguousarray(f[y0:y1, x0:x1])
             for c, core in enumerate(cores):
-                np.copyto(outs[0], core.convolve(f), where=chan == c)
+                np.copyto(sub, core.convolve(win, backend=self.backend), where=sel == c)
         if has_points:
             # each spot's three channel images at once, each pixel taking its channel's
             for ys, xs, patches in splat_patches(cores, points.u_px, points.v_px, points.rate_ph_s, (H, W),
@@ -193,6 +256,26 @@ class PhoneCamera:
             raise InputError("points: expected finite positions and finite, non-negative photons per second")
         return points
 
+    def check_background(self, background):
+        """Validate ``(scale, unit)`` of a background (None passes); the unit image is checked
+        once per array."""
+        if background is None:
+            return None
+        try:
+            scale, unit = background
+            scale = float(scale)
+        except (TypeError, ValueError):
+            raise InputError("background: expected (scale, unit image)") from None
+        if not np.isfinite(scale) or scale < 0:
+            raise InputError(f"background: expected a finite, non-negative scale, got {scale!r}")
+        checked = self.__dict__.setdefault("_checked_backgrounds", {})
+        if checked.get(id(unit)) is not unit:
+            self.check_flux(unit)
+            if len(checked) >= 4:
+                checked.clear()
+            checked[id(unit)] = unit
+        return scale, unit
+
     def check_flux(self, flux_ph_s) -> np.ndarray:
         f = np.asarray(flux_ph_s)
         if f.shape != self.shape:
@@ -201,8 +284,9 @@ class PhoneCamera:
             raise InputError("flux: expected finite, non-negative photons per second per pixel")
         return f.astype(np.float32, copy=False)
 
-    def exposer(self, flux_ph_s, *, points=None, stages=ALL_STAGES, optics_seed: int = 0) -> "Exposer":
-        return Exposer(self, flux_ph_s, points=points, stages=stages, optics_seed=optics_seed)
+    def exposer(self, flux_ph_s, *, points=None, stages=ALL_STAGES, optics_seed: int = 0,
+                background=None) -> "Exposer":
+        return Exposer(self, flux_ph_s, points=points, stages=stages, optics_seed=optics_seed, background=background)
 
     def expose(self, flux_ph_s, *, points=None, seed: int = 0, exposure_s=None, iso=None, stages=ALL_STAGES,
                keep_electrons=False):
@@ -226,18 +310,25 @@ class Exposer:
         Pipeline stages that are on (see the module docstring).
     optics_seed : int
         Seed of the Monte Carlo convolution of the points with the PSF.
+    background : (float, ndarray (H, W)), optional
+        ``(scale, unit)``: light ``scale * unit`` photons/s/px added to ``flux_ph_s``, whose
+        optical image the phone keeps for that ``unit`` array (:meth:`PhoneCamera.optics`).
     """
 
-    def __init__(self, phone: PhoneCamera, flux_ph_s, *, points=None, stages=ALL_STAGES, optics_seed: int = 0):
+    def __init__(self, phone: PhoneCamera, flux_ph_s, *, points=None, stages=ALL_STAGES, optics_seed: int = 0,
+                 background=None):
         self.phone = phone
         self.stages = check_stages(stages)
         f = phone.check_flux(flux_ph_s)
         pts = phone.check_points(points)
+        bg = phone.check_background(background)
         self.cfa = phone.uses_cfa(self.stages)
         if "glare" in self.stages:
-            self.flux_optics = phone.optics(f, pts, seed=optics_seed, cfa=self.cfa)
+            self.flux_optics = phone.optics(f, pts, seed=optics_seed, cfa=self.cfa, background=bg)
         else:  # a perfect lens: each point counts in its own pixel
             self.flux_optics = f.copy() if pts is None else (f + pts.binned(f.shape)).astype(np.float32)
+            if bg is not None:
+                self.flux_optics += np.float32(bg[0]) * bg[1]
             if self.cfa:
                 self.flux_optics *= response_map(phone.params.cfa, f.shape)
         self._solver = None

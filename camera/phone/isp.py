@@ -14,6 +14,7 @@ import math
 
 import cv2
 import numpy as np
+from numba import njit
 
 from svgs.errors import InputError
 
@@ -49,6 +50,21 @@ def _metering_weights_uncached(shape, mode: str) -> np.ndarray:
     return w / w.sum()
 
 
+@njit(cache=True)
+def _log_bins(r, w, lo, hi, n_bins, w_bin, wr_bin):
+    """Add ``w`` and ``w * r`` of every pixel into its bin of ``log r`` over ``[lo, hi]``
+    (``n_bins`` bins, the ends clipped), in pixel order; ``r > 0`` everywhere."""
+    for i in range(r.size):
+        ri = r[i]
+        k = int((math.log(ri) - lo) / (hi - lo) * n_bins)
+        if k < 0:
+            k = 0
+        elif k > n_bins - 1:
+            k = n_bins - 1
+        w_bin[k] += w[i]
+        wr_bin[k] += w[i] * ri
+
+
 class ExposureSolver:
     """Metered level as a function of the exposure product, from one noise-free signal map.
 
@@ -62,11 +78,14 @@ class ExposureSolver:
     """
 
     def __init__(self, rate: np.ndarray, weights: np.ndarray, n_bins: int = 4096):
-        r = np.asarray(rate, np.float64).ravel()
-        w = np.asarray(weights, np.float64).ravel()
+        r = np.ascontiguousarray(rate, np.float64).ravel()
+        w = np.ascontiguousarray(weights, np.float64).ravel()
         pos = r > 0
-        self.w_zero = float(w[~pos].sum())
-        r, w = r[pos], w[pos]
+        if pos.all():  # the usual case (dark current): no copies
+            self.w_zero = 0.0
+        else:
+            self.w_zero = float(w[~pos].sum())
+            r, w = r[pos], w[pos]
         if r.size == 0:
             self.edges = None
             return
@@ -74,9 +93,11 @@ class ExposureSolver:
         if hi - lo < 1e-9:
             hi = lo + 1e-9
         edges = np.linspace(lo, hi, n_bins + 1)
-        idx = np.clip(((np.log(r) - lo) / (hi - lo) * n_bins).astype(int), 0, n_bins - 1)
-        self.w_bin = np.bincount(idx, weights=w, minlength=n_bins)
-        self.wr_bin = np.bincount(idx, weights=w * r, minlength=n_bins)
+        # one pass over the pixels: the same bins and sums (in pixel order) as
+        # np.bincount(idx, weights=...) of idx = clip(((log r - lo) / (hi - lo) * n).astype(int))
+        self.w_bin = np.zeros(n_bins)
+        self.wr_bin = np.zeros(n_bins)
+        _log_bins(r, w, float(lo), float(hi), int(n_bins), self.w_bin, self.wr_bin)
         self.edges = np.exp(edges)
         # suffix sums: weight above bin k (clipped) and prefix sums of w*r below (linear)
         self.w_above = np.concatenate([np.cumsum(self.w_bin[::-1])[::-1], [0.0]])

@@ -83,19 +83,23 @@ def tent_matrix(n: int, s: int):
     return csr_matrix((data, (rows, cols)), shape=(nc, n))
 
 
-def wings(image, glare: GlareParams) -> np.ndarray:
+def wings(image, glare: GlareParams, backend=None) -> np.ndarray:
     """The wing PSF applied to a pixel image (unit-sum kernel; multiply by the share), float64.
 
     Coarse grid: tent binning, FFT convolution, tent spreading back (first moments kept; the
-    spreading is the tent binning's transpose, a linear interpolation, done by ``cv2.resize``)."""
+    spreading is the tent binning's transpose, a linear interpolation, done by ``cv2.resize``).
+    ``backend``: the array backend of the FFT convolution (:mod:`camera.backend`)."""
+    from camera.backend import get_backend
+
+    be = get_backend(backend)
     f = np.asarray(image, np.float64)
     H, W = f.shape
     s = max(1, int(math.ceil(math.sqrt(H * W / WING_GRID_PX))))
     if s == 1:
-        return fftconvolve(f, wing_kernel(glare, 1), mode="same")
+        return be.fft_convolve_same(f, wing_kernel(glare, 1))
     Ay, Ax = _tent_pair(H, W, s)
     coarse = (Ax @ (Ay @ f).T).T  # (Hc, Wc)
-    wc = fftconvolve(coarse, wing_kernel(glare, s), mode="same") / float(s * s)
+    wc = be.fft_convolve_same(coarse, wing_kernel(glare, s)) / float(s * s)
     # the transpose of the tent binning: fine x reads coarse (x - (s - 1) / 2) / s, linearly,
     # clamped at the ends - cv2.resize's INTER_LINEAR on an exact s-fold grid, cropped
     Hc, Wc = wc.shape
@@ -115,7 +119,7 @@ POINT_METHODS = ("grid", "monte-carlo")
 
 
 def core_image(flux, core, points=None, rng: np.random.Generator | None = None, *,
-               min_draws: int | None = None, method: str = "grid") -> np.ndarray:
+               min_draws: int | None = None, method: str = "grid", backend=None) -> np.ndarray:
     """The core PSF applied to a pixel image and to point samples, integrated over pixels
     (unit share; float64 (H, W)). ``core``: a :class:`CorePSF`, or a float (a Gaussian core of
     that sigma, px, on the pixel image and the points binned: the earlier order, for
@@ -128,7 +132,7 @@ def core_image(flux, core, points=None, rng: np.random.Generator | None = None, 
     has_points = points is not None and len(points) > 0
     if isinstance(core, CorePSF):
         # the convolution of an empty image is empty (point-only images: the CRLB, the tests)
-        out = core.convolve(f).astype(np.float64) if f.any() else np.zeros((H, W))
+        out = core.convolve(f, backend=backend).astype(np.float64) if f.any() else np.zeros((H, W))
         if has_points:
             if method == "grid":
                 out += core.splat(points.u_px, points.v_px, points.rate_ph_s, (H, W))
@@ -143,7 +147,7 @@ def core_image(flux, core, points=None, rng: np.random.Generator | None = None, 
             if sig > 0 else g.copy()).astype(np.float64)
 
 
-def glare_image(flux, glare: GlareParams, principal_point=None, points=None) -> np.ndarray | None:
+def glare_image(flux, glare: GlareParams, principal_point=None, points=None, backend=None) -> np.ndarray | None:
     """The glare wings and ghosts of a pixel image and point samples, with their shares
     (float64 (H, W)); None when the lens has neither."""
     eta = glare.veiling_fraction
@@ -160,7 +164,7 @@ def glare_image(flux, glare: GlareParams, principal_point=None, points=None) -> 
             whole[y0:y1, x0:x1] += bilinear_splat(points.u_px, points.v_px, points.rate_ph_s, x0, y0, x1 - x0,
                                                   y1 - y0)
     if eta > 0:
-        out = wings(whole, glare)
+        out = wings(whole, glare, backend)
         out *= eta
     else:
         out = np.zeros((H, W))
@@ -183,7 +187,7 @@ def core_share(glare: GlareParams) -> float:
 
 
 def apply_psf(flux: np.ndarray, glare: GlareParams, core, principal_point=None, *, points=None,
-              rng: np.random.Generator | None = None, method: str = "grid") -> np.ndarray:
+              rng: np.random.Generator | None = None, method: str = "grid", backend=None) -> np.ndarray:
     """The optical image: a flux image (and point samples) through the lens PSF, integrated
     over pixels.
 
@@ -204,13 +208,15 @@ def apply_psf(flux: np.ndarray, glare: GlareParams, core, principal_point=None, 
         seed 0).
     method : str
         How the points meet the core PSF (:data:`POINT_METHODS`; default the deterministic grid).
+    backend : str or camera.backend.Backend, optional
+        Array backend of the convolutions (default: the CPU, or ``$SVGS_ARRAY_BACKEND``).
 
     Returns
     -------
     ndarray, float32, shape (H, W)
     """
-    out = core_share(glare) * core_image(flux, core, points, rng, method=method)
-    g = glare_image(flux, glare, principal_point, points)
+    out = core_share(glare) * core_image(flux, core, points, rng, method=method, backend=backend)
+    g = glare_image(flux, glare, principal_point, points, backend)
     if g is not None:
         out += g
     return out.astype(np.float32)

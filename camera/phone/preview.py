@@ -76,6 +76,8 @@ def binned_camera(camera, width: int = DEFAULT_PREVIEW_SIZE[0], height: int = DE
     isp = tables.get("isp")
     if isinstance(isp, dict) and isp.get("output_width"):
         isp["output_width"], isp["output_height"] = 0, 0  # the preview is delivered at its own size
+    # the phone whose stream this is: the app's settings for that phone apply to it
+    tables["preview"] = {"of": cam.name, "binning": int(s)}
     out = cam.scaled(width, height).replace(name=f"{cam.name}-preview-{width}x{height}", tables=tables)
     if not math.isfinite(out.fx) or out.fx <= 0:
         raise InputError(f"preview size: {width} x {height} gives no usable focal length")

@@ -324,14 +324,27 @@ class CorePSF:
         """
         return _pixel_kernel(self.lam_over_d_px, self.aberration_sigma_px, int(radius_px), bool(normalise)).copy()
 
-    def convolve(self, image, radius_px: int = PIXEL_KERNEL_RADIUS_PX) -> np.ndarray:
+    def convolve(self, image, radius_px: int = PIXEL_KERNEL_RADIUS_PX, *, backend=None) -> np.ndarray:
         """Convolve a pixel image (already integrated over pixels) with :meth:`pixel_kernel`.
-        float32 (H, W); zero outside the frame."""
-        import cv2
+        float32 (H, W); zero outside the frame. ``backend``: the array backend
+        (:func:`camera.backend.get_backend`; default the CPU's OpenCV)."""
+        from camera.backend import get_backend
 
+        be = get_backend(backend)
         k = self.pixel_kernel(radius_px).astype(np.float32)
         f = np.ascontiguousarray(image, np.float32)
-        return cv2.filter2D(f, -1, k, borderType=cv2.BORDER_CONSTANT)
+        H, W = f.shape
+        box = support_box(f, int(radius_px))
+        if box is None:
+            return np.zeros((H, W), np.float32)
+        y0, y1, x0, x1 = box
+        if (y1 - y0) * (x1 - x0) > 0.5 * H * W:
+            return be.filter_same(f, k)
+        # light in a small part of the frame (a rendered target without the lab's light): the
+        # convolution over its support and a kernel's radius around it, zero elsewhere (exact)
+        out = np.zeros((H, W), np.float32)
+        out[y0:y1, x0:x1] = be.filter_same(f[y0:y1, x0:x1], k)
+        return out
 
 
 @functools.lru_cache(maxsize=16)
@@ -375,6 +388,15 @@ def _outer_kernel(lam_over_d_px: float, sigma_px: float) -> np.ndarray:
     m = k.shape[0] // 2
     k = k[m - R:m + R + 1, m - R:m + R + 1]
     return k / k.sum()
+
+
+@functools.lru_cache(maxsize=64)
+def _outer_kernel_cropped(lam_over_d_px: float, sigma_px: float, radius: int) -> np.ndarray:
+    """:func:`_outer_kernel` cut to ``radius`` px (the part that can reach a small frame)."""
+    R = AIRY_OUTER_RADIUS_PX
+    k = np.ascontiguousarray(_outer_kernel(lam_over_d_px, sigma_px)[R - radius:R + radius + 1, R - radius:R + radius + 1])
+    k.setflags(write=False)
+    return k
 
 
 @functools.lru_cache(maxsize=16)
@@ -432,6 +454,19 @@ def fine_kernel(lam_over_d_px: float, sigma_px: float) -> tuple:
     return res
 
 
+def support_box(image, margin_px: int):
+    """The smallest box holding every non-zero pixel of ``image``, grown by ``margin_px`` and
+    clipped to the frame: ``(y0, y1, x0, x1)``, or None for an all-zero image."""
+    H, W = image.shape
+    rows = np.flatnonzero(image.any(axis=1))
+    if rows.size == 0:
+        return None
+    cols = np.flatnonzero(image[rows[0]:rows[-1] + 1].any(axis=0))
+    m = int(margin_px)
+    return (max(0, int(rows[0]) - m), min(H, int(rows[-1]) + m + 1), max(0, int(cols[0]) - m),
+            min(W, int(cols[-1]) + m + 1))
+
+
 def splat_patches(cores, u_px, v_px, weight, shape, *, gradient: bool = False, value: bool = True):
     """The deterministic point convolution of :meth:`CorePSF.splat`, for several PSFs at once
     (the colour channels' Airy patterns), spot by spot.
@@ -483,12 +518,17 @@ def splat_patches(cores, u_px, v_px, weight, shape, *, gradient: bool = False, v
         x0, y0 = int(np.floor(uu.min())), int(np.floor(vv.min()))
         bw, bh = int(np.floor(uu.max())) - x0 + 2, int(np.floor(vv.max())) - y0 + 2
         boxes = bilinear_splats(uu, vv, ww, x0, y0, bw, bh, derivatives=derivs)
-        sh_o = (bh + 2 * R, bw + 2 * R)
+        # the outer kernel's reach that can land in the frame (a frame smaller than the kernel:
+        # a window of the bound); what lies beyond would fall outside it - exact, not renormalised
+        reach = max(x0 + bw - 1, W - 1 - x0, y0 + bh - 1, H - 1 - y0)
+        Ro = int(min(R, max(reach, Rk)))
+        ks_o = outer if Ro == R else [_outer_kernel_cropped(c.lam_over_d_px, c.aberration_sigma_px, Ro) for c in cores]
+        sh_o = (bh + 2 * Ro, bw + 2 * Ro)
         fs_o = (sfft.next_fast_len(sh_o[0], real=True), sfft.next_fast_len(sh_o[1], real=True))
         Fb = [sfft.rfft2(b, fs_o) for b in boxes]
-        PX, PY = x0 - R, y0 - R  # frame pixel of the patch's (0, 0)
+        PX, PY = x0 - Ro, y0 - Ro  # frame pixel of the patch's (0, 0)
         patches = [[sfft.irfft2(F * _kernel_spectrum(k, fs_o), fs_o)[:sh_o[0], :sh_o[1]] * (1.0 - e)
-                    for F in Fb] for k, e in zip(outer, e_in)]
+                    for F in Fb] for k, e in zip(ks_o, e_in)]
         # the inner part on the sub-pixel grid; pixel X of the full convolution sits at fine
         # index (X - X0) q + c, c = Rk q - 1: the first at X0 - Rk + 1, index q - 1
         X0, Y0 = int(np.floor(uu.min())) - 1, int(np.floor(vv.min())) - 1
