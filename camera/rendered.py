@@ -84,11 +84,9 @@ def bilinear_splats(u_px, v_px, weight, x0: int, y0: int, width: int, height: in
     inside = bool(xi.size == 0 or (xi.min() >= 0 and xi.max() + 1 < width and yi.min() >= 0
                                    and yi.max() + 1 < height))
     offsets = (0, 1, width, width + 1)  # corners (0, 0), (1, 0), (0, 1), (1, 1)
-    if inside:
-        idx = np.concatenate([base + o for o in offsets])
-        ok = None
-    else:
-        idx = np.concatenate([base + o for o in offsets])
+    idx = np.concatenate([base + o for o in offsets])
+    ok = None
+    if not inside:
         ok = np.concatenate([(xi + du >= 0) & (xi + du < width) & (yi + dv >= 0) & (yi + dv < height)
                              for du, dv in ((0, 0), (1, 0), (0, 1), (1, 1))])
         idx = idx[ok]
@@ -109,7 +107,7 @@ def bilinear_splats(u_px, v_px, weight, x0: int, y0: int, width: int, height: in
         wts = np.concatenate(corners)
         if ok is not None:
             wts = wts[ok]
-        outs.append(np.bincount(idx, weights=wts, minlength=n)[:n].reshape(height, width))
+        outs.append(np.bincount(idx, weights=wts, minlength=n).reshape(height, width))
     return outs
 
 

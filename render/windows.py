@@ -60,11 +60,9 @@ def background_tiles(camera, scene_corners_m, R, t, tile_px: int, tile_counts) -
     p = scene_corners_m @ R.T + t
     if np.any(p[:, 2] <= 1e-3):
         return None
-    uv = camera.project(p)
-    if camera.has_distortion:
-        uv = _distorted_box_outline(camera, p)
-        if uv is None:
-            return None
+    uv = _distorted_box_outline(camera, p) if camera.has_distortion else camera.project(p)
+    if uv is None:
+        return None
     W, H = camera.width, camera.height
     u0, v0 = np.floor(uv.min(0) - 2.0)
     u1, v1 = np.ceil(uv.max(0) + 2.0)
@@ -103,15 +101,14 @@ def _distorted_box_outline(camera, p_cam_m) -> np.ndarray | None:
     ndarray, shape (4 * OUTLINE_SAMPLES, 2) or None
         Pixel coordinates of the distorted outline.
     """
-    import cv2
-
     xy = p_cam_m[:, :2] / p_cam_m[:, 2:3]
     (x0, y0), (x1, y1) = xy.min(0), xy.max(0)
     W, H = camera.width, camera.height
-    K = np.array([[camera.fx, 0.0, camera.cx], [0.0, camera.fy, camera.cy], [0.0, 0.0, 1.0]])
     frame = np.array([[0, 0], [W - 1, 0], [0, H - 1], [W - 1, H - 1], [W / 2, 0], [W / 2, H - 1], [0, H / 2],
                       [W - 1, H / 2]], float)
-    und = cv2.undistortPoints(frame.reshape(-1, 1, 2), K, np.asarray(camera.dist, float)).reshape(-1, 2)
+    und = camera.pixels_to_normalized(frame)
+    if not np.all(np.isfinite(und)):
+        return None
     gx0, gy0 = min(x0, und[:, 0].min()), min(y0, und[:, 1].min())
     gx1, gy1 = max(x1, und[:, 0].max()), max(y1, und[:, 1].max())
     gx, gy = np.meshgrid(np.linspace(gx0, gx1, JACOBIAN_GRID), np.linspace(gy0, gy1, JACOBIAN_GRID))

@@ -813,7 +813,7 @@ class ApproachSensor:
         model (see :meth:`measure`)."""
         sc = trajectory.scenario(t_s, self.base)
         nxt = None
-        if next_t_s is not None:
+        if next_t_s is not None and self.overlap_render:
             nxt = trajectory.scenario(float(next_t_s), self.base).replace(camera=self.base.camera,
                                                                           pattern=self.base.pattern).pose()
         lo = max(t_s - VELOCITY_STEP_S, float(trajectory.t_s[0]))

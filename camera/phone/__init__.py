@@ -171,7 +171,7 @@ class PhoneCamera:
                self.point_method)
         hit = cache.get(key)
         if hit is None or hit[0] is not unit:
-            u = self.check_flux(unit)
+            u = np.ascontiguousarray(unit, np.float32)  # checked by the caller (check_background)
             p = self.params
             pp = (self.camera.cx, self.camera.cy)
             if use_cfa:

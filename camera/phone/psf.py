@@ -583,50 +583,38 @@ def point_clusters(u, v, H: int, W: int, margin_px: int) -> list:
     return [sel[order[bounds[i]:bounds[i + 1]]] for i in range(n) if bounds[i + 1] > bounds[i]]
 
 
-def _fft_convolve(a: np.ndarray, k: np.ndarray) -> np.ndarray:
-    """Full 2-D linear convolution by real FFT (kernel spectra cached by size)."""
+_SPECTRA: dict = {}
+
+
+def _cached_spectrum(k: np.ndarray, key: tuple, make) -> np.ndarray:
+    """A kernel's spectrum ``make(k)``, kept by the kernel array and ``key`` (the kernels are
+    cached arrays; their spectra are reused for every spot and frame)."""
+    full = (id(k),) + key
+    hit = _SPECTRA.get(full)
+    if hit is None or hit[0] is not k:
+        if len(_SPECTRA) > 256:
+            _SPECTRA.clear()
+        hit = (k, make(k))
+        _SPECTRA[full] = hit
+    return hit[1]
+
+
+def _kernel_spectrum(k: np.ndarray, fs: tuple) -> np.ndarray:
+    """The real-FFT spectrum of kernel ``k`` on an ``fs`` grid."""
     import scipy.fft as sfft
 
-    sh = (a.shape[0] + k.shape[0] - 1, a.shape[1] + k.shape[1] - 1)
-    fs = (sfft.next_fast_len(sh[0], real=True), sfft.next_fast_len(sh[1], real=True))
-    Fk = _kernel_spectrum(k, fs)
-    out = sfft.irfft2(sfft.rfft2(a, fs) * Fk, fs)
-    return out[:sh[0], :sh[1]]
-
-
-_DECIMATING: dict = {}
+    return _cached_spectrum(k, ("rfft", fs), lambda a: sfft.rfft2(a, fs))
 
 
 def _decimating_spectrum(k: np.ndarray, fs: tuple, q: int) -> np.ndarray:
     """The full 2-D spectrum of kernel ``k`` on an ``fs`` grid times the phase ramp that
-    reads the convolution at offset ``q - 1`` (cached by kernel and size): multiplied by a
-    signal's spectrum and folded q-fold per axis, it gives ``q^2 x`` the convolution sampled
-    at ``q - 1 + q m``."""
+    reads the convolution at offset ``q - 1``: multiplied by a signal's spectrum and folded
+    q-fold per axis, it gives ``q^2 x`` the convolution sampled at ``q - 1 + q m``."""
     import scipy.fft as sfft
 
-    key = (id(k), fs, q)
-    hit = _DECIMATING.get(key)
-    if hit is None or hit[0] is not k:
-        if len(_DECIMATING) > 256:
-            _DECIMATING.clear()
+    def make(a):
         ry = np.exp(2j * np.pi * np.arange(fs[0]) * (q - 1) / fs[0])
         rx = np.exp(2j * np.pi * np.arange(fs[1]) * (q - 1) / fs[1])
-        hit = (k, sfft.fft2(k, fs) * ry[:, None] * rx[None, :])
-        _DECIMATING[key] = hit
-    return hit[1]
+        return sfft.fft2(a, fs) * ry[:, None] * rx[None, :]
 
-
-_SPECTRA: dict = {}
-
-
-def _kernel_spectrum(k: np.ndarray, fs: tuple) -> np.ndarray:
-    import scipy.fft as sfft
-
-    key = (id(k), fs)
-    hit = _SPECTRA.get(key)
-    if hit is None or hit[0] is not k:
-        if len(_SPECTRA) > 256:
-            _SPECTRA.clear()
-        hit = (k, sfft.rfft2(k, fs))
-        _SPECTRA[key] = hit
-    return hit[1]
+    return _cached_spectrum(k, ("decimating", fs, q), make)
