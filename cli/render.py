@@ -39,8 +39,8 @@ def register(sub) -> None:
     p.add_argument("--pitch", type=float, default=0.0, help="pitch (theta), deg")
     p.add_argument("--yaw", type=float, default=0.0, help="yaw (psi), deg")
     p.add_argument("--spp", type=int, default=None, help="samples per pixel of the background (default 4)")
-    p.add_argument("--roi-spp", type=int, default=None, help="samples per pixel in the windows around the spots")
-    p.add_argument("--spot-samples", type=int, default=None, help="guided samples per spot strategy (default 65536)")
+    p.add_argument("--roi-spp", type=int, default=None, help="samples per pixel in the windows around the spots (default 64 guided, 4096 path)")
+    p.add_argument("--spot-samples", type=int, default=None, help="guided samples per spot strategy (default 16384, placed by the 4-D R4 sequence)")
     p.add_argument("--reflector", default=None, help="'solid', 'hollow' or a model name (default: the pattern's)")
     p.add_argument("--body", default=None, choices=("plate", "3u", "none"), help="target body (default plate)")
     p.add_argument("--method", default="guided", choices=("guided", "path"),

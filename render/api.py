@@ -31,7 +31,9 @@ from svgs.profiles import Camera, Pattern
 
 from camera.rendered import PointFlux, RenderedFrame
 
-from .constants import DEFAULT_ROI_SIZE_PX, DEFAULT_ROI_SPP, DEFAULT_ROI_SPP_PATH, DEFAULT_SPOT_SAMPLES, DEFAULT_SPP
+from .constants import (DEFAULT_ROI_SIZE_PX, DEFAULT_ROI_SPP, DEFAULT_ROI_SPP_PATH, DEFAULT_SPOT_SAMPLER,
+                        DEFAULT_SPOT_SAMPLES, DEFAULT_SPP)
+from .spots import SPOT_SAMPLERS
 from .geometry import Reflector, SceneOptions
 from .optics import Flash, Optics, pixel_normalized_grid, radiance_to_photon_rate
 from .sampling import check_spp, film_to_numpy, to_numpy
@@ -128,9 +130,12 @@ class Renderer:
         Default samples per pixel of the background (tiles covering the projected
         scene, or the full frame) and of the windows around the spots, rounded up to
         powers of four as Mitsuba's ``ldsampler`` needs; ``spp=0`` skips the background.
-        ``roi_spp`` defaults to 256 (guided) or 4096 (path).
+        ``roi_spp`` defaults to 64 (guided) or 4096 (path).
     spot_samples : int
         Guided samples per virtual source (:mod:`render.spots`), method ``"guided"``.
+    spot_sampler : {"sobol", "independent"}
+        How the guided samples are placed (:class:`render.spots.SpotEstimator`): stratified
+        Sobol' points (default) or independent random numbers.
     method : {"guided", "path"}
         ``"guided"`` (default): diffuse light by Mitsuba's ``path`` integrator with the
         LEDs as point lights, the flash seen through glass and mirrors by the guided
@@ -150,7 +155,7 @@ class Renderer:
     def __init__(self, camera, pattern="svgs-3u", *, reflector=None, scene_options=None,
                  roi_size_px: int = DEFAULT_ROI_SIZE_PX, spp: int = DEFAULT_SPP, roi_spp: int | None = None,
                  spot_samples: int = DEFAULT_SPOT_SAMPLES, method: str = "guided", variant: str | None = None,
-                 extra_meshes=()):
+                 extra_meshes=(), spot_sampler: str = DEFAULT_SPOT_SAMPLER):
         self.camera = Camera.load(camera)
         self.pattern = Pattern.load(pattern)
         self.optics = Optics.from_camera(self.camera)
@@ -174,6 +179,9 @@ class Renderer:
             raise InputError(f"method: expected 'guided' or 'path', got {method!r}")
         self.method = method
         self.spot_samples = check_spp(spot_samples, "spot_samples")
+        if spot_sampler not in SPOT_SAMPLERS:
+            raise InputError(f"spot_sampler: expected one of {', '.join(SPOT_SAMPLERS)}, got {spot_sampler!r}")
+        self.spot_sampler = spot_sampler
         self.variant = select_variant(variant)
         t0 = time.perf_counter()
         self._load_scene(extra_meshes)
@@ -212,7 +220,7 @@ class Renderer:
             self.spots = SpotEstimator(self.scene, self.model, self._n_strategies, n_leds,
                                        0.5 * self.flash.emitter_diameter_m, self.flash.radiance_w_m2_sr,
                                        self.flash.cos_exponent, self.options.max_depth, self.camera.width,
-                                       self.camera.height)
+                                       self.camera.height, sampler=self.spot_sampler)
 
     def set_focus_distance(self, focus_distance_m: float) -> None:
         """Refocus the lens (an autofocus following the target along an approach) without
@@ -476,7 +484,7 @@ _CACHE: dict = {}
 def render_flux(camera, pattern, R_cam_target, t_cam_target_m, *, spp: int = DEFAULT_SPP,
                 roi_spp: int | None = None, roi_size_px: int = DEFAULT_ROI_SIZE_PX, seed: int = 0,
                 full_frame: bool = False, reflector=None, scene_options=None, spot_samples: int = DEFAULT_SPOT_SAMPLES,
-                method: str = "guided") -> RenderResult:
+                method: str = "guided", spot_sampler: str = DEFAULT_SPOT_SAMPLER) -> RenderResult:
     """Render the photon flux of one frame (see :class:`Renderer` for the parameters).
 
     A renderer per (camera, pattern, reflector, options, window size) is cached, so a
@@ -487,11 +495,11 @@ def render_flux(camera, pattern, R_cam_target, t_cam_target_m, *, spp: int = DEF
     refl = Reflector.resolve(reflector, pat)
     opts = SceneOptions.resolve(scene_options)
     key = json.dumps([cam.to_dict(), pat.name, pat.points_m.tolist(), refl.to_json(), opts.to_json(), int(roi_size_px),
-                      method, int(spot_samples)], sort_keys=True, default=str)
+                      method, int(spot_samples), spot_sampler], sort_keys=True, default=str)
     r = _CACHE.get(key)
     if r is None:
         r = Renderer(cam, pat, reflector=refl, scene_options=opts, roi_size_px=roi_size_px, spp=spp, roi_spp=roi_spp,
-                     spot_samples=spot_samples, method=method)
+                     spot_samples=spot_samples, method=method, spot_sampler=spot_sampler)
         _CACHE.clear()  # one scene at a time: they hold a lot of memory
         _CACHE[key] = r
     return r.render(R_cam_target, t_cam_target_m, seed=seed, spp=spp, roi_spp=roi_spp, full_frame=full_frame)

@@ -35,9 +35,10 @@ def nbk7_index(wavelength_nm) -> np.ndarray:
 
 # ------------------------------------------------------------------ render defaults
 DEFAULT_SPP = 4  # full-frame samples per pixel (the background: dark, diffuse)
-DEFAULT_ROI_SPP = 256  # samples per pixel inside the windows around the targets (guided method)
+DEFAULT_ROI_SPP = 64  # samples per pixel inside the windows around the targets (guided method; their diffuse light is ~1e-6 of a spot)
 DEFAULT_ROI_SPP_PATH = 4096  # the same for the brute-force method (the spots are path traced)
 DEFAULT_ROI_SIZE_PX = 32  # side of the square window rendered around each spot
-DEFAULT_SPOT_SAMPLES = 1 << 16  # guided samples per virtual source (render.spots)
+DEFAULT_SPOT_SAMPLES = 1 << 14  # guided samples per virtual source (render.spots; tools/render_noise.py)
+DEFAULT_SPOT_SAMPLER = "kronecker"  # placement of the guided samples: the 4-D R4 sequence (render.spots)
 DEFAULT_MAX_DEPTH = 12  # camera -> front face -> 3 TIR -> front face -> LED needs >= 7 (use more)
 DEFAULT_MESH_SEGMENTS = 48  # rim segments per cube face (aperture area error ~1e-4)

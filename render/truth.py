@@ -93,6 +93,7 @@ def svgs_frame_truth(r, R, t, targets_px, visible, spots, **render_info) -> dict
             "method": r.method,
             "integrator": "path" + (" (diffuse, LED as point light) + guided spot estimator" if r.method == "guided" else " (LED as disk area emitter)"),
             "spot_samples_per_strategy": r.spot_samples if r.method == "guided" else None,
+            "spot_sampler": r.spot_sampler if r.method == "guided" else None,
             "spot_strategies": render_info.get("strategies", []),
             "max_depth": int(r.options.max_depth),
             "sampler": "ldsampler",

@@ -30,7 +30,7 @@ from svgs.errors import InputError
 
 from camera.phone.isp import ExposureSolver, auto_exposure, downscale, jpeg_roundtrip, metering_weights, tone_lut
 from camera.phone.cfa import channel_map, luminance, response_map, tone_image
-from camera.phone.optics import apply_psf, core_image, core_psf, core_share, glare_image
+from camera.phone.optics import apply_psf, compose, core_image, core_psf, core_share, glare_image, wings_coarse
 from camera.phone.psf import PIXEL_KERNEL_RADIUS_PX, splat_patches, support_box
 from camera.phone.params import ALL_STAGES, NOISE_STAGES, OPTICS_STAGES, PhoneParams, check_stages
 from camera.phone.sensor import bloom, electrons, fixed_patterns, readout
@@ -153,6 +153,11 @@ class PhoneCamera:
                 out += (scale * bg).astype(np.float32)
             return out
         out = self.core_mosaic(flux_ph_s, points, seed=seed)
+        if not p.glare.ghosts:  # core, wings, background and response in one pass
+            eta = p.glare.veiling_fraction
+            wc, s = (wings_coarse(flux_ph_s, p.glare, points, self.backend) if eta > 0 else (np.zeros((1, 1)), 1))
+            return compose(out, core_share(p.glare), wc, s, max(eta, 0.0), response_map(p.cfa, self.shape),
+                           None if bg is None else (scale, bg))
         out *= core_share(p.glare)
         g = glare_image(flux_ph_s, p.glare, pp, points, self.backend)
         if g is not None:

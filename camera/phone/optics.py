@@ -29,6 +29,7 @@ import math
 
 import cv2
 import numpy as np
+from numba import njit, prange
 from scipy.signal import fftconvolve
 
 from camera.phone.params import GlareParams
@@ -83,23 +84,140 @@ def tent_matrix(n: int, s: int):
     return csr_matrix((data, (rows, cols)), shape=(nc, n))
 
 
+def wing_step(shape) -> int:
+    """The binning ``s`` of the wings' coarse grid for a frame of ``shape`` (at most
+    :data:`WING_GRID_PX` coarse pixels)."""
+    H, W = shape
+    return max(1, int(math.ceil(math.sqrt(H * W / WING_GRID_PX))))
+
+
+def wings_coarse(flux, glare: GlareParams, points=None, backend=None):
+    """The wing PSF (unit sum) applied to a pixel image and point samples, on its coarse grid.
+
+    The light the wings spread (the image plus the points' bilinear image) is tent-binned
+    over the box that holds it only (the binning of zeros is zero), convolved by FFT, and
+    returned with its binning for :func:`wings` or :func:`compose` to spread back.
+
+    Parameters
+    ----------
+    flux : ndarray, shape (H, W)
+    glare : GlareParams
+    points : camera.rendered.PointFlux, optional
+    backend : str or camera.backend.Backend, optional
+
+    Returns
+    -------
+    wc : ndarray, float64, shape (ceil(H / s), ceil(W / s))
+        Per fine pixel (the full-resolution image itself when ``s == 1``).
+    s : int
+    """
+    from camera.backend import get_backend
+    from camera.phone.psf import support_box
+
+    be = get_backend(backend)
+    f = np.asarray(flux)
+    H, W = f.shape
+    s = wing_step((H, W))
+    if s == 1:
+        return be.fft_convolve_same(glare_source(f, points), wing_kernel(glare, 1)), 1
+    pbox = _points_box(points, H, W)
+    boxes = [b for b in (support_box(f, 0), pbox) if b is not None]
+    Ay, Ax = _tent_pair(H, W, s)
+    if not boxes:
+        return np.zeros((Ay.shape[0], Ax.shape[0])), s
+    y0, y1 = min(b[0] for b in boxes), max(b[1] for b in boxes)
+    x0, x1 = min(b[2] for b in boxes), max(b[3] for b in boxes)
+    sub = np.array(f[y0:y1, x0:x1], np.float64)
+    if pbox is not None:
+        py0, py1, px0, px1 = pbox
+        sub[py0 - y0:py1 - y0, px0 - x0:px1 - x0] += bilinear_splat(
+            points.u_px, points.v_px, points.rate_ph_s, px0, py0, px1 - px0, py1 - py0)
+    coarse = (Ax[:, x0:x1] @ (Ay[:, y0:y1] @ sub).T).T  # (Hc, Wc)
+    return be.fft_convolve_same(coarse, wing_kernel(glare, s)) / float(s * s), s
+
+
+def _points_box(points, H: int, W: int):
+    """The box ``(y0, y1, x0, x1)`` of the points' bilinear image, or None."""
+    if points is None or len(points) == 0:
+        return None
+    x0 = max(0, int(np.floor(points.u_px.min())))
+    y0 = max(0, int(np.floor(points.v_px.min())))
+    x1 = min(W, int(np.floor(points.u_px.max())) + 2)
+    y1 = min(H, int(np.floor(points.v_px.max())) + 2)
+    return (y0, y1, x0, x1) if (x1 > x0 and y1 > y0) else None
+
+
+@njit(parallel=True, cache=True)
+def _compose_kernel(core, share, wc, s, eta, bg, scale, use_bg, resp, out):
+    """``out = resp * (share * core + eta * up(wc) + scale * bg)`` (float32 out): the optical
+    image's parts summed in one pass; ``up`` is the linear spreading of the coarse wing image
+    back to full resolution (fine x reads coarse (x + 1/2) / s - 1/2, clamped at the ends, the
+    tent binning's transpose, as ``cv2.resize``'s INTER_LINEAR on an s-fold grid)."""
+    H, W = core.shape
+    Hc, Wc = wc.shape
+    cx0 = np.empty(W, np.int64)
+    cx1 = np.empty(W, np.int64)
+    cfx = np.empty(W, np.float64)
+    for c in range(W):
+        sx = (c + 0.5) / s - 0.5
+        x0 = int(np.floor(sx))
+        fx = sx - x0
+        if x0 < 0:
+            x0, fx = 0, 0.0
+        if x0 >= Wc - 1:
+            x0, fx = Wc - 1, 0.0
+        cx0[c] = x0
+        cx1[c] = x0 + 1 if x0 + 1 < Wc else x0
+        cfx[c] = fx
+    for r in prange(H):
+        sy = (r + 0.5) / s - 0.5
+        y0 = int(np.floor(sy))
+        fy = sy - y0
+        if y0 < 0:
+            y0, fy = 0, 0.0
+        if y0 >= Hc - 1:
+            y0, fy = Hc - 1, 0.0
+        y1 = y0 + 1 if y0 + 1 < Hc else y0
+        for c in range(W):
+            x0, x1, fx = cx0[c], cx1[c], cfx[c]
+            w = ((1.0 - fy) * ((1.0 - fx) * wc[y0, x0] + fx * wc[y0, x1])
+                 + fy * ((1.0 - fx) * wc[y1, x0] + fx * wc[y1, x1]))
+            v = core[r, c] * share + eta * w
+            if use_bg:
+                v += scale * bg[r, c]
+            out[r, c] = v * resp[r, c]
+
+
+def compose(core, share: float, wc, s: int, eta: float, resp, background=None) -> np.ndarray:
+    """The optical image from its parts in one pass (:func:`_compose_kernel`): the core image
+    (float64 (H, W)) times its share, the wings' coarse image ``wc`` of binning ``s``
+    (:func:`wings_coarse`) times ``eta``, ``background = (scale, image)`` (float64 (H, W)) and
+    the per-pixel response ``resp`` (float32 (H, W)). Returns float32 (H, W)."""
+    H, W = core.shape
+    out = np.empty((H, W), np.float32)
+    if s == 1:
+        wc = np.ascontiguousarray(wc, np.float64)
+    if background is None:
+        scale, bg, use_bg = 0.0, np.zeros((1, 1)), False
+    else:
+        scale, bg, use_bg = float(background[0]), background[1], True
+    _compose_kernel(np.ascontiguousarray(core, np.float64), float(share), np.ascontiguousarray(wc, np.float64),
+                    int(s), float(eta), bg, scale, use_bg, np.ascontiguousarray(resp, np.float32), out)
+    return out
+
+
 def wings(image, glare: GlareParams, backend=None) -> np.ndarray:
     """The wing PSF applied to a pixel image (unit-sum kernel; multiply by the share), float64.
 
-    Coarse grid: tent binning, FFT convolution, tent spreading back (first moments kept; the
-    spreading is the tent binning's transpose, a linear interpolation, done by ``cv2.resize``).
-    ``backend``: the array backend of the FFT convolution (:mod:`camera.backend`)."""
-    from camera.backend import get_backend
-
-    be = get_backend(backend)
+    Coarse grid: tent binning, FFT convolution (:func:`wings_coarse`), tent spreading back
+    (first moments kept; the spreading is the tent binning's transpose, a linear interpolation,
+    done by ``cv2.resize``). ``backend``: the array backend of the FFT convolution
+    (:mod:`camera.backend`)."""
     f = np.asarray(image, np.float64)
     H, W = f.shape
-    s = max(1, int(math.ceil(math.sqrt(H * W / WING_GRID_PX))))
+    wc, s = wings_coarse(f, glare, backend=backend)
     if s == 1:
-        return be.fft_convolve_same(f, wing_kernel(glare, 1))
-    Ay, Ax = _tent_pair(H, W, s)
-    coarse = (Ax @ (Ay @ f).T).T  # (Hc, Wc)
-    wc = be.fft_convolve_same(coarse, wing_kernel(glare, s)) / float(s * s)
+        return wc
     # the transpose of the tent binning: fine x reads coarse (x - (s - 1) / 2) / s, linearly,
     # clamped at the ends - cv2.resize's INTER_LINEAR on an exact s-fold grid, cropped
     Hc, Wc = wc.shape
@@ -147,22 +265,26 @@ def core_image(flux, core, points=None, rng: np.random.Generator | None = None, 
             if sig > 0 else g.copy()).astype(np.float64)
 
 
+def glare_source(flux, points=None) -> np.ndarray:
+    """The light the glare spreads: the pixel image plus the points' bilinear image (over
+    their bounding box), float64 (H, W)."""
+    whole = np.array(flux, np.float64)
+    H, W = whole.shape
+    box = _points_box(points, H, W)
+    if box is not None:
+        y0, y1, x0, x1 = box
+        whole[y0:y1, x0:x1] += bilinear_splat(points.u_px, points.v_px, points.rate_ph_s, x0, y0, x1 - x0, y1 - y0)
+    return whole
+
+
 def glare_image(flux, glare: GlareParams, principal_point=None, points=None, backend=None) -> np.ndarray | None:
     """The glare wings and ghosts of a pixel image and point samples, with their shares
     (float64 (H, W)); None when the lens has neither."""
     eta = glare.veiling_fraction
     if eta <= 0 and not glare.ghosts:
         return None
-    whole = np.array(flux, np.float64)
+    whole = glare_source(flux, points)
     H, W = whole.shape
-    if points is not None and len(points) > 0:  # the points' bilinear image, over their bounding box
-        x0 = max(0, int(np.floor(points.u_px.min())))
-        y0 = max(0, int(np.floor(points.v_px.min())))
-        x1 = min(W, int(np.floor(points.u_px.max())) + 2)
-        y1 = min(H, int(np.floor(points.v_px.max())) + 2)
-        if x1 > x0 and y1 > y0:
-            whole[y0:y1, x0:x1] += bilinear_splat(points.u_px, points.v_px, points.rate_ph_s, x0, y0, x1 - x0,
-                                                  y1 - y0)
     if eta > 0:
         out = wings(whole, glare, backend)
         out *= eta
