@@ -353,20 +353,22 @@ class Renderer:
             )
         return targets_px, visible
 
-    def _background(self, R, t, spp: int, seed: int, timings: dict) -> np.ndarray:
+    def _background(self, R, t, spp: int, seed: int, timings: dict):
         """The diffuse background at ``spp``: over the tiles covering the projected scene (or the
-        full frame), zeros elsewhere; float64 (H, W). ``spp == 0``: zeros."""
+        full frame), zeros elsewhere; float64 (H, W), and the box ``(y0, y1, x0, x1)`` that holds
+        it (None when ``spp == 0``: zeros)."""
         from .scene import TILE_COUNTS, TILE_SIZE_PX as T
 
         H, W = self.camera.height, self.camera.width
         rad = np.zeros((H, W))
         if spp <= 0:
-            return rad
+            return rad, None
         t0 = time.perf_counter()
         tiles = background_tiles(self.camera, self._scene_corners, R, t, T, TILE_COUNTS)
         if tiles is None:
             rad = self._radiance(self._sensor_full, spp, seed)
             timings["background_tiles"] = "full frame"
+            box = (0, H, 0, W)
         else:
             n = next(c for c in sorted(self._sensor_tiles) if c >= len(tiles))
             org = np.concatenate([tiles, np.repeat(tiles[-1:], n - len(tiles), axis=0)])
@@ -376,29 +378,33 @@ class Renderer:
             for k, (x0, y0) in enumerate(tiles):
                 rad[y0:y0 + T, x0:x0 + T] = mosaic[k * T:(k + 1) * T, :][: H - y0, : W - x0]
             timings["background_tiles"] = int(len(tiles))
+            box = _union_box([(int(y0), min(H, int(y0) + T), int(x0), min(W, int(x0) + T)) for x0, y0 in tiles])
         timings["background_s"] = time.perf_counter() - t0
-        return rad
+        return rad, box
 
-    def _render_windows(self, rad, spots, roi_spp: int, seed: int, timings: dict) -> list:
+    def _render_windows(self, rad, spots, roi_spp: int, seed: int, timings: dict):
         """Render the window around every spot (one mosaic pass) into ``rad`` (in place; where
-        windows overlap, their mean). Returns the windows' records for the truth."""
+        windows overlap, their mean). Returns the windows' records for the truth and the box
+        ``(y0, y1, x0, x1)`` that holds them."""
         H, W = self.camera.height, self.camera.width
         t0 = time.perf_counter()
         win = spot_windows(spots, self.roi_size_px, W, H)
         w = self.roi_size_px
         self._sensor_roi.set_windows(win, w)
         mosaic = self._radiance(self._sensor_roi, roi_spp, seed)
-        acc = np.zeros((H, W))
-        cnt = np.zeros((H, W))
+        box = _union_box([(int(y0), min(H, int(y0) + w), int(x0), min(W, int(x0) + w)) for x0, y0 in win])
+        by0, by1, bx0, bx1 = box
+        acc = np.zeros((by1 - by0, bx1 - bx0))  # over the windows' box only
+        cnt = np.zeros((by1 - by0, bx1 - bx0))
         rois = []
         for k, (x0, y0) in enumerate(win):
-            acc[y0:y0 + w, x0:x0 + w] += mosaic[k * w:(k + 1) * w, :]
-            cnt[y0:y0 + w, x0:x0 + w] += 1
+            acc[y0 - by0:y0 - by0 + w, x0 - bx0:x0 - bx0 + w] += mosaic[k * w:(k + 1) * w, :]
+            cnt[y0 - by0:y0 - by0 + w, x0 - bx0:x0 - bx0 + w] += 1
             rois.append({"target": int(self.pattern.ids[k]), "x0": int(x0), "y0": int(y0), "width": w, "height": w})
         m = cnt > 0
-        rad[m] = acc[m] / cnt[m]
+        rad[by0:by1, bx0:bx1][m] = acc[m] / cnt[m]
         timings["roi_s"] = time.perf_counter() - t0
-        return rois
+        return rois, box
 
     # ------------------------------------------------------------------ rendering
     def render(self, R_cam_target, t_cam_target_m, *, seed: int = 0, spp: int | None = None,
@@ -442,13 +448,18 @@ class Renderer:
         spots = self.predicted_spots_px(R, t)
         timings["setup_s"] = time.perf_counter() - t0
         rois = []
+        H, W = self.camera.height, self.camera.width
         if full_frame:
             t0 = time.perf_counter()
             rad = self._radiance(self._sensor_full, spp, seed)
             timings["full_frame_s"] = time.perf_counter() - t0
+            lit = [(0, H, 0, W)]
         else:
-            rad = self._background(R, t, spp, seed, timings)
-            rois = self._render_windows(rad, spots, roi_spp, seed + 0x9E3779B1, timings)
+            rad, bg_box = self._background(R, t, spp, seed, timings)
+            rois, win_box = self._render_windows(rad, spots, roi_spp, seed + 0x9E3779B1, timings)
+            lit = [b for b in (bg_box, win_box) if b is not None]
+        # the light lies in these boxes, zeros elsewhere: the conversions below work on the box
+        # holding them all (the same numbers as over the whole frame)
         strategies = []
         points = None
         factor = self.flux_factor()
@@ -456,18 +467,32 @@ class Renderer:
         if self.spots is not None:
             t0 = time.perf_counter()
             spot_img, strategies, (su, sv, sval) = self._spot_image(R, t, seed + 0x5BD1E995)
-            flux_diffuse = (rad * factor).astype(np.float32)
-            rad = rad + spot_img
-            ui = np.floor(su + 0.5).astype(np.int64)
-            vi = np.floor(sv + 0.5).astype(np.int64)
-            points = PointFlux(su, sv, sval * factor[vi, ui])
+            sl = _box_slices(_union_box(lit)) if lit else None
+            flux_diffuse = _times_factor(rad, factor, sl)
+            if len(su):
+                ui = np.floor(su + 0.5).astype(np.int64)
+                vi = np.floor(sv + 0.5).astype(np.int64)
+                # one pixel more each side: the estimator bins in float32 (a sample at a pixel
+                # border may land one pixel over from this float64 rounding)
+                sbox = (max(0, int(vi.min()) - 1), min(H, int(vi.max()) + 2), max(0, int(ui.min()) - 1),
+                        min(W, int(ui.max()) + 2))
+                ss = _box_slices(sbox)
+                rad[ss] += spot_img[ss]
+                lit.append(sbox)
+                points = PointFlux(su, sv, sval * factor[vi, ui])
+            else:
+                points = PointFlux(su, sv, sval)
             timings["spots_s"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        flux = (rad * factor).astype(np.float32)
+        sl = _box_slices(_union_box(lit)) if lit else None
+        flux = _times_factor(rad, factor, sl)
+        radiance = np.zeros((H, W), np.float32)
+        if sl is not None:
+            radiance[sl] = rad[sl]
         timings["convert_s"] = time.perf_counter() - t0
         truth = self.truth(R, t, targets_px, visible, spots, seed=seed, spp=spp, roi_spp=roi_spp,
                            full_frame=full_frame, rois=rois, timings=timings, strategies=strategies)
-        return RenderResult(flux=flux, truth=truth, radiance=rad.astype(np.float32), timings_s=timings,
+        return RenderResult(flux=flux, truth=truth, radiance=radiance, timings_s=timings,
                             flux_diffuse=flux_diffuse, points=points)
 
     # ------------------------------------------------------------------ truth
@@ -476,6 +501,25 @@ class Renderer:
         from .truth import svgs_frame_truth
 
         return svgs_frame_truth(self, R, t, targets_px, visible, spots, **render_info)
+
+
+def _union_box(boxes):
+    """The smallest box ``(y0, y1, x0, x1)`` holding all of ``boxes`` (a non-empty list)."""
+    return (min(b[0] for b in boxes), max(b[1] for b in boxes), min(b[2] for b in boxes), max(b[3] for b in boxes))
+
+
+def _box_slices(box):
+    y0, y1, x0, x1 = box
+    return (slice(y0, y1), slice(x0, x1))
+
+
+def _times_factor(rad, factor, sl):
+    """``(rad * factor)`` as float32 (H, W), computed over the slices ``sl`` that hold all of
+    ``rad``'s light (None: none), zeros elsewhere."""
+    out = np.zeros(rad.shape, np.float32)
+    if sl is not None:
+        out[sl] = rad[sl] * factor[sl]
+    return out
 
 
 _CACHE: dict = {}

@@ -305,9 +305,15 @@ class SpotEstimator:
         idx_np = to_numpy(idx, np.int64)
         val_np = to_numpy(val, np.float64)
         nz = val_np > 0
-        acc = np.bincount(idx_np[nz], weights=val_np[nz], minlength=self.W * self.H)
+        img = np.zeros((self.H, self.W))
+        if np.any(nz):  # binned over the samples' box only
+            iy, ix = np.divmod(idx_np[nz], self.W)
+            y0, x0 = int(iy.min()), int(ix.min())
+            h, w = int(iy.max()) - y0 + 1, int(ix.max()) - x0 + 1
+            img[y0:y0 + h, x0:x0 + w] = np.bincount((iy - y0) * w + (ix - x0), weights=val_np[nz],
+                                                    minlength=h * w).reshape(h, w)
         samples = (to_numpy(u, np.float64)[nz], to_numpy(v, np.float64)[nz], val_np[nz])
-        return acc.reshape(self.H, self.W), samples
+        return img, samples
 
     def _render_scalar(self, sources_cam, radii_px, counts, led_centres_world, led_normal_world, seed):
         """Same estimator, one sample at a time (scalar variants; slow)."""

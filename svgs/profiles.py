@@ -16,6 +16,8 @@ which the model tests use.
 
 from __future__ import annotations
 
+import copy
+import os
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -63,13 +65,26 @@ def _resolve(name_or_path, folder: Path, kind: str) -> Path:
 
 
 def _read_toml(path: Path, kind: str) -> dict:
+    """The parsed TOML file (a fresh copy: callers may change it). Files are parsed once per
+    content: kept by path, modification time and size, so an edited file is read again."""
     try:
-        with open(path, "rb") as fh:
-            return tomllib.load(fh)
+        st = os.stat(path)
+        key = (str(path), st.st_mtime_ns, st.st_size)
+        hit = _TOML_CACHE.get(key)
+        if hit is None:
+            with open(path, "rb") as fh:
+                hit = tomllib.load(fh)
+            if len(_TOML_CACHE) >= 64:
+                _TOML_CACHE.clear()
+            _TOML_CACHE[key] = hit
+        return copy.deepcopy(hit)
     except tomllib.TOMLDecodeError as exc:
         raise ProfileError(f"{kind} file {str(path)!r} is not valid TOML: {exc}") from None
     except OSError as exc:
         raise ProfileError(f"{kind} file {str(path)!r} cannot be read: {exc}") from None
+
+
+_TOML_CACHE: dict = {}
 
 
 def fitted_overlay_path(profile_path) -> Path | None:
