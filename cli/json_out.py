@@ -168,7 +168,8 @@ SCHEMAS = {
  "saturated_pixels": int, "rot_err_median_deg": float | null, "reference": "markers" | "plate",
  "noise_free": {"ok": bool, "centroid_err_rms_px", "centroid_err_max_px": float,   # the noise-free frame
                 "pose_error": {column: float}},                                     # (the bias part)
- "spp": int, "render_s": float, "frames_s": float,
+ "spp": int, "rim_spp": int,                         # samples per pixel; on the marker rims
+ "render_s": float, "frames_s": float,
  "outputs": {"frames", "summary", "plot": path}}     # with --out""",
     "svgs tof study": """\
 {"stability": {range_m: <svgs tof stability object>},

@@ -54,7 +54,12 @@ def register(group) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the render and the noise (default 0)")
     p.add_argument("--camera", default="tof-epc660", help="ToF camera profile name or .toml path (default tof-epc660)")
     p.add_argument("--pattern", default="tof-8", help="marker target name or .toml path (default tof-8)")
-    p.add_argument("--spp", type=int, default=64, help="samples per pixel of the render (power of two; default 64)")
+    p.add_argument("--spp", type=int, default=None,
+                   help="samples per pixel of the render (power of two; default 256); the pixels on the marker "
+                        "faces' rims get --rim-spp-factor times more")
+    p.add_argument("--rim-spp-factor", type=int, default=None,
+                   help="factor on --spp for the marker-rim pixels (power of two; default 64, i.e. 16384 samples "
+                        "there; 1: the same spp everywhere)")
     p.add_argument("--bounces", type=int, default=1, help="1 = direct returns (default), 2-4 = with multipath")
     p.add_argument("--ambient-lux", type=float, default=None,
                    help="ambient illuminance (default: the profile's, 1000 lux = the paper's normal light)")
@@ -81,7 +86,7 @@ def _check_args(args):
     from sim.tof_stability import check_frames
 
     check_frames(args.frames)  # 1..20000 (~50 ms each)
-    if args.spp < 1:
+    if args.spp is not None and args.spp < 1:
         raise InputError(f"--spp: expected a positive number of samples per pixel, got {args.spp}")
     if not 1 <= args.bounces <= 4:
         raise InputError(f"--bounces: expected 1..4, got {args.bounces}")
@@ -192,7 +197,7 @@ def cmd_render_and_solve(args) -> int:
     if not args.json:
         print(f"rendering {camera.name} / {target.pattern.name} at {args.range_m:g} m ...", file=sys.stderr)
     t0 = time.perf_counter()
-    renderer = TofRenderer(camera, target, spp=args.spp, max_bounces=args.bounces,
+    renderer = TofRenderer(camera, target, spp=args.spp, rim_spp_factor=args.rim_spp_factor, max_bounces=args.bounces,
                            modulation_frequency_hz=sensor.modulation_frequency_hz, pinhole=args.pinhole)
     rendered = renderer.render(R, t, seed=args.seed)
     render_s = time.perf_counter() - t0
@@ -231,7 +236,9 @@ def cmd_render_and_solve(args) -> int:
         s = out["truth_state"]
         print(f"truth: x {s['x_m']:+.4f} y {s['y_m']:+.4f} z {s['z_m']:+.4f} m   roll {s['roll_deg']:+.3f} "
               f"pitch {s['pitch_deg']:+.3f} yaw {s['yaw_deg']:+.3f} deg")
-        print(f"render {render_s:.2f} s ({rendered.truth['render']['spp']} spp); {args.frames} frame(s) at "
+        rr = rendered.truth["render"]
+        print(f"render {render_s:.2f} s ({rr['spp']} spp, {rr['rim_spp']} on {rr['rim_pixels']} marker-rim pixels); "
+              f"{args.frames} frame(s) at "
               f"{T * 1e3:.3f} ms integration, {sensor.ambient_lux:g} lux ambient; solved {out['n_solved']}/{args.frames}")
         print_solution(last)
         if last:

@@ -33,7 +33,12 @@ def _common(p) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the render and the frames' noise (default 0)")
     p.add_argument("--camera", default="tof-epc660", help="ToF camera profile name or .toml path (default tof-epc660)")
     p.add_argument("--pattern", default="tof-8", help="marker target name or .toml path (default tof-8)")
-    p.add_argument("--spp", type=int, default=256, help="samples per pixel of the render (power of two; default 256)")
+    p.add_argument("--spp", type=int, default=None,
+                   help="samples per pixel of the render (power of two; default 256); the pixels on the marker "
+                        "faces' rims get --rim-spp-factor times more")
+    p.add_argument("--rim-spp-factor", type=int, default=None,
+                   help="factor on --spp for the marker-rim pixels (power of two; default 64, i.e. 16384 samples "
+                        "there; 1: the same spp everywhere)")
     p.add_argument("--ambient-lux", type=float, default=None,
                    help="ambient illuminance (default: the profile's 1000 lux, the paper's normal light)")
     p.add_argument("--marker-material", choices=("retroreflective", "lambertian"), default=None,
@@ -216,10 +221,11 @@ def cmd_stability(args) -> int:
 
     camera, target = check_stability_args(args)
     sensor = TofSensor.from_camera(camera, ambient_lux=args.ambient_lux)
+    renderer = TofRenderer(camera, target, spp=args.spp, rim_spp_factor=args.rim_spp_factor, max_bounces=args.bounces,
+                           scene_options=scene_options(args), modulation_frequency_hz=sensor.modulation_frequency_hz)
     if not args.json:
-        print(f"rendering {camera.name} / {target.pattern.name} at {args.range_m:g} m ({args.spp} spp) ...", file=sys.stderr)
-    renderer = TofRenderer(camera, target, spp=args.spp, max_bounces=args.bounces, scene_options=scene_options(args),
-                           modulation_frequency_hz=sensor.modulation_frequency_hz)
+        print(f"rendering {camera.name} / {target.pattern.name} at {args.range_m:g} m ({renderer.spp} spp, "
+              f"{renderer.spp * renderer.rim_spp_factor} on the marker rims) ...", file=sys.stderr)
     with progress_bar(args.frames, "frames", enabled=not args.json or sys.stderr.isatty(), unit="frame") as bar:
         run = run_stability(renderer, sensor, args.range_m, args.frames, seed=args.seed,
                             pipeline=pipeline_overrides(args), reference=args.reference, progress=bar.update)
@@ -252,7 +258,8 @@ def cmd_study(args) -> int:
     camera = load_camera(args.camera, render=True)
     target = load_target(args.pattern)
     res = run_study(camera, target, out, frames=args.frames, variant_frames=args.variant_frames,
-                    sweep_frames=args.sweep_frames, seed=args.seed, spp=args.spp, ambient_lux=args.ambient_lux,
+                    sweep_frames=args.sweep_frames, seed=args.seed, spp=args.spp, rim_spp_factor=args.rim_spp_factor,
+                    ambient_lux=args.ambient_lux,
                     scene=scene_options(args), argv=sys.argv[1:], quiet=args.json)
     if args.json:
         print(json.dumps(res, default=json_default))

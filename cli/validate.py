@@ -36,9 +36,9 @@ MIN_SPAN_PX = 4.0
 TOF_RANGE_M = (0.27, 15.0)
 
 #: Integer arguments that count something (>= 1).
-COUNTS = {"spp", "roi_spp", "spot_samples", "trials", "poses", "frames", "views", "subsets", "focal_exposures",
-          "poses_per_range", "exposures_per_render", "n", "exposures", "min_views", "persistence", "bounces",
-          "max_active_pixels", "variant_frames", "sweep_frames", "chunk_size", "workers", "cols",
+COUNTS = {"spp", "roi_spp", "rim_spp_factor", "spot_samples", "trials", "poses", "frames", "views", "subsets",
+          "focal_exposures", "poses_per_range", "exposures_per_render", "n", "exposures", "min_views", "persistence",
+          "bounces", "max_active_pixels", "variant_frames", "sweep_frames", "chunk_size", "workers", "cols",
           "rows", "width", "height"}
 #: Integer arguments that must be >= 0 (``--processes 0``: run inline).
 NON_NEGATIVE_INTS = {"processes"}

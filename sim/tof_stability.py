@@ -155,7 +155,7 @@ def run_stability(renderer, sensor, range_m: float, frames: int, *, seed: int = 
         ``fails`` (reason -> count), ``rot_err_deg`` (K,), ``integration_time_s``,
         ``saturated_pixels`` (first frame), ``max_amplitude_lsb`` (noise-free), ``noise_free``
         (the noise-free frame's centroid errors and pose error), ``render_s``, ``frames_s``,
-        ``spp``, ``reference``, ``rendered``.
+        ``spp``, ``rim_spp`` (the samples per pixel on the marker rims), ``reference``, ``rendered``.
     """
     import tof
     from svgs.frames import rotation_angle_deg
@@ -194,7 +194,8 @@ def run_stability(renderer, sensor, range_m: float, frames: int, *, seed: int = 
             "fails": fails, "rot_err_deg": np.array(rot), "integration_time_s": float(clean.integration_time_s),
             "saturated_pixels": sat0, "max_amplitude_lsb": float(np.max(clean.amplitude_dn)),
             "render_s": render_s, "frames_s": frames_s, "frames": frames,
-            "spp": rendered.truth["render"]["spp"], "reference": reference, "noise_free": noise_free,
+            "spp": rendered.truth["render"]["spp"], "rim_spp": rendered.truth["render"].get("rim_spp"),
+            "reference": reference, "noise_free": noise_free,
             "rendered": rendered}
 
 
@@ -257,6 +258,6 @@ def summary(run: dict) -> dict:
                 "max_amplitude_lsb": run["max_amplitude_lsb"], "saturated_pixels": run["saturated_pixels"],
                 "rot_err_median_deg": float(np.median(run["rot_err_deg"])) if run["rot_err_deg"].size else None,
                 "noise_free": run["noise_free"],
-                "reference": run["reference"], "spp": run["spp"], "render_s": run["render_s"],
+                "reference": run["reference"], "spp": run["spp"], "rim_spp": run["rim_spp"], "render_s": run["render_s"],
                 "frames_s": run["frames_s"]})
     return out

@@ -61,9 +61,12 @@ def _fmt(v, d=3):
     return "nan" if v is None or not np.isfinite(v) else f"{v:.{d}f}"
 
 
-def run_study(camera, target, out: Path, *, frames=500, variant_frames=200, sweep_frames=40, seed=0, spp=256,
-              ambient_lux=None, scene=None, argv=(), quiet=False) -> dict:
-    """Run everything and write the report; returns the numbers (JSON-serialisable)."""
+def run_study(camera, target, out: Path, *, frames=500, variant_frames=200, sweep_frames=40, seed=0, spp=None,
+              rim_spp_factor=None, ambient_lux=None, scene=None, argv=(), quiet=False) -> dict:
+    """Run everything and write the report; returns the numbers (JSON-serialisable).
+
+    ``spp`` and ``rim_spp_factor``: the renders' samples per pixel and the factor on them at the
+    marker rims (None: :class:`render.tof.camera.TofRenderer`'s defaults)."""
     from camera.amcw import TofSensor
     from render.tof.camera import TofRenderer
     from studies.progress import progress_bar
@@ -72,7 +75,8 @@ def run_study(camera, target, out: Path, *, frames=500, variant_frames=200, swee
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     sensor = TofSensor.from_camera(camera, ambient_lux=ambient_lux)
-    base = TofRenderer(camera, target, spp=spp, scene_options=scene or {},
+    counts = {"spp": spp, "rim_spp_factor": rim_spp_factor}  # the sample counts of every render below
+    base = TofRenderer(camera, target, **counts, scene_options=scene or {},
                        modulation_frequency_hz=sensor.modulation_frequency_hz)
 
     def log(msg):
@@ -97,7 +101,7 @@ def run_study(camera, target, out: Path, *, frames=500, variant_frames=200, swee
             ren = base
             if rkw:
                 so = {**(scene or {}), **rkw.get("scene_options", {})}
-                ren = TofRenderer(camera, target, spp=spp, scene_options=so, max_bounces=rkw.get("max_bounces", 1),
+                ren = TofRenderer(camera, target, **counts, scene_options=so, max_bounces=rkw.get("max_bounces", 1),
                                   modulation_frequency_hz=sensor.modulation_frequency_hz)
             sen = sensor.replace(**skw) if skw else sensor
             for r in ranges:
@@ -120,7 +124,7 @@ def run_study(camera, target, out: Path, *, frames=500, variant_frames=200, swee
 
     # ---- failure modes
     log("failure modes")
-    fm = failure_modes(camera, target, sensor, spp, scene or {}, seed, out / "tof_failure_modes.png")
+    fm = failure_modes(camera, target, sensor, counts, scene or {}, seed, out / "tof_failure_modes.png")
 
     # ---- figures and files
     plot_series(out / "tof_stability_series.png", runs, sums)
@@ -129,7 +133,7 @@ def run_study(camera, target, out: Path, *, frames=500, variant_frames=200, swee
     csv_path = write_csv(out / "tof_stability.csv", sums, var_rows, sweep)
     wall = time.perf_counter() - t_start
     md = write_markdown(out / "tof_stability.md", camera, target, sensor, base, sums, runs, var_rows, sweep, fm,
-                        frames, variant_frames, sweep_frames, seed, spp, argv, wall)
+                        frames, variant_frames, sweep_frames, seed, argv, wall)
     return {"stability": {str(r): s for r, s in sums.items()},
             "mechanisms": [{"label": v["label"], "range_m": v["range_m"], "ratio_to_paper": v["summary"]["ratio_to_paper"],
                             "fluctuation": v["summary"]["fluctuation"], "solved": v["summary"]["solved"]} for v in var_rows],
@@ -164,8 +168,9 @@ def _depth_change(ra, rb) -> dict:
             "plate_depth_change_mm_p95": float(np.nanpercentile(np.abs(dd[plate]), 95))}
 
 
-def failure_modes(camera, target, sensor, spp, scene, seed, png_path) -> dict:
-    """Flying pixels at the marker rims, multipath from the plate, 10 klux: measured at 1 m and 0.697 m."""
+def failure_modes(camera, target, sensor, counts, scene, seed, png_path) -> dict:
+    """Flying pixels at the marker rims, multipath from the plate, 10 klux: measured at 1 m and 0.697 m.
+    ``counts``: the renderers' ``spp`` and ``rim_spp_factor`` (keyword arguments)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -177,8 +182,8 @@ def failure_modes(camera, target, sensor, spp, scene, seed, png_path) -> dict:
     res = {}
     sc = scenario_for_range(1.0)
     R, t = sc["R_cam_target"], sc["t_cam_target_m"]
-    one = TofRenderer(camera, target, spp=spp, scene_options=scene, modulation_frequency_hz=sensor.modulation_frequency_hz)
-    two = TofRenderer(camera, target, spp=spp, scene_options=scene, max_bounces=2,
+    one = TofRenderer(camera, target, **counts, scene_options=scene, modulation_frequency_hz=sensor.modulation_frequency_hz)
+    two = TofRenderer(camera, target, **counts, scene_options=scene, max_bounces=2,
                       modulation_frequency_hz=sensor.modulation_frequency_hz)
     r1 = one.render(R, t, seed=seed)
     r2 = two.render(R, t, seed=seed)
@@ -206,7 +211,7 @@ def failure_modes(camera, target, sensor, spp, scene, seed, png_path) -> dict:
     res["multipath_1m"] = _depth_change(r1, r2)
     # multipath from a bright wall standing out of the plate beside the markers (a part of the spacecraft)
     wall = {"type": "box", "lo_m": [0.205, -0.16, 0.0], "hi_m": [0.215, 0.16, 0.30], "albedo": 0.8}
-    w1, w2 = (TofRenderer(camera, target, spp=spp, scene_options={**scene, "distractors": [wall]}, max_bounces=b,
+    w1, w2 = (TofRenderer(camera, target, **counts, scene_options={**scene, "distractors": [wall]}, max_bounces=b,
                           modulation_frequency_hz=sensor.modulation_frequency_hz) for b in (1, 2))
     rw1, rw2 = w1.render(R, t, seed=seed), w2.render(R, t, seed=seed)
     res["multipath_wall_1m"] = {**_depth_change(rw1, rw2), "wall": wall}
@@ -371,7 +376,7 @@ def write_csv(path, sums, var_rows, sweep) -> Path:
 
 
 def write_markdown(path, camera, target, sensor, renderer, sums, runs, var_rows, sweep, fm, frames, variant_frames,
-                   sweep_frames, seed, spp, argv, wall_s) -> Path:
+                   sweep_frames, seed, argv, wall_s) -> Path:
     ill = renderer.illumination
     sheet = renderer.geometry.materials
     L = ["# The ToF sensor re-enacted: Zhu et al. 2022, Tables 1-3 and Fig. 14", "",
@@ -383,7 +388,8 @@ def write_markdown(path, camera, target, sensor, renderer, sums, runs, var_rows,
          f"{sensor.integration_time_min_s * 1e9:.0f} ns - {sensor.integration_time_max_s * 1e3:g} ms, ambient "
          f"{sensor.ambient_lux:g} lux), target `{target.pattern.name}` with marker faces of "
          f"**{sheet['marker']}** `{sheet.get('sheeting')}`, {ill.n_emitters} emitters of "
-         f"{ill.peak_intensity_w_sr:g} W/sr on a {ill.ring_radius_m * 1e3:g} mm ring; {spp} spp, seed {seed}. "
+         f"{ill.peak_intensity_w_sr:g} W/sr on a {ill.ring_radius_m * 1e3:g} mm ring; {renderer.spp} spp, "
+         f"{renderer.spp * renderer.rim_spp_factor} on the marker rims ({renderer.sampler} sampler), seed {seed}. "
          "Where each figure comes from: `docs/tof.md`.", "",
          "Columns: the paper's axes. x, y, z (mm) of the centroid of the eight marker faces in the camera frame "
          "(the paper gives no target frame; its Table 2 - pitch fluctuating 0.52 deg, x only 0.19 mm - puts its "

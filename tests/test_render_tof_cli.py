@@ -22,6 +22,7 @@ needs_mitsuba = pytest.mark.skipif(importlib.util.find_spec("mitsuba") is None, 
     (["--range", "1", "--pattern", "no-such-pattern"], "no-such-pattern"),
     (["--range", "1", "--frames", "0"], "--frames"),
     (["--range", "1", "--ambient-lux", "-5"], "--ambient-lux"),
+    (["--range", "1", "--rim-spp-factor", "0"], "--rim-spp-factor"),
 ])
 def test_bad_input_exits_2_before_rendering(capsys, args, what):
     rc = main(["tof", "render-and-solve", *args])

@@ -30,6 +30,7 @@ def test_json_schema_and_the_paper_table_at_5712_mm(capsys, tmp_path):
     rc, d = run_json(capsys, "--range", "5.712", *FAST, "--out", str(tmp_path / "run"))
     assert rc == 0
     assert d["range_m"] == 5.712 and d["frames"] == 12 and 0 < d["solved"] <= 12
+    assert d["spp"] == 16 and d["rim_spp"] == 16 * 64  # the marker rims get 64x (render.tof.camera)
     for k in ("average", "maximum", "minimum", "fluctuation", "std", "truth"):
         assert set(d[k]) == set(COLUMNS)
     # Table 2 of the paper, as published (assets/data/tof_2022_stability.csv)
@@ -64,6 +65,7 @@ def test_the_near_range_carries_tables_1_and_3_and_other_ranges_none(capsys):
     (["--range", "5.712", "--camera", "galaxy-nexus"], "phone"),
     (["--range", "5.712", "--sheeting", "tinfoil"], "sheeting"),
     (["--range", "5.712", "--persistence", "0"], "--persistence"),
+    (["--range", "5.712", "--rim-spp-factor", "0"], "--rim-spp-factor"),
 ])
 def test_bad_input_is_refused_before_any_work(capsys, args, needle):
     rc = main(["tof", "stability", *args])

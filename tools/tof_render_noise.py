@@ -17,7 +17,15 @@ image against the sensor's noise), and the render time. The pose scatter of nois
 does not fall as 1/sqrt(spp) at high spp: the pipeline thresholds, so an edge pixel crossing
 the threshold moves a centroid by a step (the same happens under the sensor's own noise).
 
-Run: ``.venv/bin/python tools/tof_render_noise.py [--spp 64 256 1024] [--seeds 6] [--frames 40]``
+``--sampler`` picks the renderer's sample generator (``sobol``, the default, or the earlier
+``r2``) and ``--rim-spp-factor`` the factor on ``--spp`` for the pixels on the marker rims
+(default the renderer's; 1: uniform), for the before/after comparison (:mod:`render.tof.camera`).
+``--spp`` is the samples per pixel of the traced box (the rim pixels get the factor times more);
+the sensor's reference render is the last ``--spp`` entry with a 4x larger factor.
+
+Run: ``.venv/bin/python tools/tof_render_noise.py [--spp 64 256] [--rim-spp-factor 64] [--seeds 6]
+[--frames 40] [--range 5.712] [--sampler sobol]``; before issue 23's change:
+``--spp 64 1024 4096 --sampler r2 --rim-spp-factor 1``.
 """
 
 from __future__ import annotations
@@ -37,13 +45,16 @@ GOAL_RATIO = 1.0 / 3.0
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--spp", type=int, nargs="+", default=[64, 256, 1024], help="samples per pixel to compare")
+    ap.add_argument("--spp", type=int, nargs="+", default=[64, 256], help="samples per pixel to compare")
     ap.add_argument("--seeds", type=int, default=6, help="render seeds per spp (default 6)")
     ap.add_argument("--frames", type=int, default=40, help="sensor noise draws on one render (default 40)")
     ap.add_argument("--range", type=float, default=5.712, dest="range_m", help="range, m (default 5.712)")
+    ap.add_argument("--sampler", default="sobol", help="the renderer's sample generator: sobol (default) or r2")
+    ap.add_argument("--rim-spp-factor", type=int, default=None,
+                    help="factor on --spp for the marker-rim pixels (default the renderer's; 1: uniform)")
     args = ap.parse_args(argv)
     from camera.amcw import TofSensor
-    from render.tof.camera import TofRenderer
+    from render.tof.camera import DEFAULT_RIM_SPP_FACTOR, TofRenderer
     from svgs.frames import pose_from_scenario
     from tof import TofPipeline, load_camera, load_target
 
@@ -62,21 +73,32 @@ def main(argv=None):
                 out.append([d[k] for k in KEYS])
         return np.array(out).reshape(-1, 6)
 
-    def render(spp, seed):
-        r = TofRenderer(camera, target, spp=spp, modulation_frequency_hz=sensor.modulation_frequency_hz)
+    factor = DEFAULT_RIM_SPP_FACTOR if args.rim_spp_factor is None else args.rim_spp_factor
+    renderers = {}
+
+    def render(spp, seed, rim_factor=factor, warm_up=True):
+        key = (spp, rim_factor)
+        if key not in renderers:  # one scene per setting; the first render (kernel compilation) not timed
+            renderers[key] = TofRenderer(camera, target, spp=spp, modulation_frequency_hz=sensor.modulation_frequency_hz,
+                                         sampler=args.sampler, rim_spp_factor=rim_factor)
+            if warm_up:
+                renderers[key].render(R, t, seed=seed + 1_000_000)
         t0 = time.perf_counter()
-        out = r.render(R, t, seed=seed)
+        out = renderers[key].render(R, t, seed=seed)
         return out, time.perf_counter() - t0
 
-    top = max(args.spp)
-    ref, _ = render(top, 10_000)
+    top = args.spp[-1]
+    ref, _ = render(top, 10_000, 4 * factor, warm_up=False)
     clean_ref = next(sensor.frames(ref, 1, None, noise=False))
     marker = clean_ref.gray > 0.2 * np.nanmax(clean_ref.gray)  # the markers' bright pixels
     noisy = np.array([fr.gray for fr in sensor.frames(ref, args.frames, [99, 1])])
     pix_sensor = np.std(noisy, axis=0, ddof=1)[marker]
     # single frames (each the first of a fresh pipeline, as the render rows), noise seeds [s, 1]
     s_sensor = np.std(np.concatenate([states(ref, [s, 1], 1) for s in range(args.frames)]), axis=0, ddof=1)
-    print(f"ToF EPC660, tof-8, {args.range_m:g} m head-on; sensor: {args.frames} single-frame noise draws on one {top}-spp render")
+    rr = ref.truth["render"]
+    print(f"ToF EPC660, tof-8, {args.range_m:g} m head-on, sampler {args.sampler}, rim factor {factor}; sensor: "
+          f"{args.frames} single-frame noise draws on one render ({rr['spp']} spp, {rr['rim_spp']} on "
+          f"{rr['rim_pixels']} rim pixels)")
     print(f"{'':>10}" + "".join(f"{k:>11}" for k in KEYS))
     print(f"{'sensor':>10}" + "".join(f"{v:>11.4f}" for v in s_sensor))
     for spp in args.spp:
@@ -95,7 +117,8 @@ def main(argv=None):
         s_render = np.std(np.array(rows), axis=0, ddof=1)
         s_clean = np.std(np.array(clean), axis=0, ddof=1)
         print(f"{'render':>6}{spp:>4d}" + "".join(f"{v:>11.4f}" for v in s_render)
-              + f"   same noise draw ({len(rows)}/{args.seeds} solved, render {np.median(times):.2f} s)")
+              + f"   same noise draw ({len(rows)}/{args.seeds} solved, render {np.median(times):.2f} s, "
+              f"{spp * factor} spp on the rims)")
         print(f"{'':>10}" + "".join(f"{v:>11.4f}" for v in s_clean) + f"   noise-free frames ({len(clean)} solved)")
         pix_render = np.std(np.array(grays), axis=0, ddof=1)[marker]
         print(f"{'':>10}  per marker pixel (gray): render noise / sensor noise, median "

@@ -12,7 +12,7 @@ Importing this package does not import Mitsuba; the renderer's names load on fir
 
 >>> from render.tof import TofRenderer                      # doctest: +SKIP
 >>> from camera.amcw import TofSensor                       # doctest: +SKIP
->>> r = TofRenderer("tof-epc660", "tof-8", spp=64)          # doctest: +SKIP
+>>> r = TofRenderer("tof-epc660", "tof-8")                  # doctest: +SKIP
 >>> rendered = r.render(R_cam_target, t_cam_target_m)        # doctest: +SKIP
 >>> frame = TofSensor.from_camera(r.camera).frame(rendered, rng=1)   # doctest: +SKIP
 >>> frame.gray, frame.depth_m                                # doctest: +SKIP

@@ -20,16 +20,34 @@ Illumination
     real size and position and casts real (soft) shadows, and camera rays never see it.
 
 Integrator (custom, wavefront, Dr.Jit)
-    Per sample: a camera ray through a jittered point of the pixel (Cranley-Patterson rotated
-    R2 sequence per pixel) and of the aperture; at the first hit, one emitter point (shadow ray)
-    gives the return ``L = f cos / r^2 * n I(theta)``; its optical path length is
-    ``opl = |x - lens centre| + |x - emitter point|`` (Fermat: the path through the lens to the
+    Per sample: a camera ray through a point of the pixel and of the aperture; at the first
+    hit, one point of one emitter (chosen uniformly; shadow ray) gives the return
+    ``L = f cos / r^2 * n I(theta)``; its optical path length is ``opl = |x - lens centre| + |x - emitter point|`` (Fermat: the path through the lens to the
     pixel is the chief ray's). The sample adds ``L``, ``L cos(2 pi f opl / c)`` and
     ``L sin(...)`` to its pixel, so a pixel straddling a depth edge returns the phasor sum of
     both surfaces (flying pixel) and, with ``max_bounces > 1`` (BSDF-sampled bounces, each with
     next-event estimation and its accumulated path length), multipath returns too. The same
     BSDF-sampled ray gives the ambient term (uniform sky of unit radiance, occlusion included).
     ``dr.block_sum`` reduces the samples of each pixel; passes are summed in float64.
+
+Sampling (``sampler``)
+    ``"sobol"`` (default): the film point, the aperture point, the emitter's index and the point
+    on its disk (seven dimensions) are one Owen-scrambled Sobol' point per sample, one sequence
+    per pixel and seed (:mod:`render.tof.sobol`); the ambient ray and later bounces draw from a
+    PCG32 stream per lane. ``"r2"`` (the estimator before issue 23): the film point from a
+    Cranley-Patterson rotated R2 sequence per pixel, everything else from PCG32. Both are
+    unbiased estimators of the same pixel integrals; they differ only in noise. Measured
+    (issue 23, docs/tof.md): with ``"r2"`` the render noise on the marker pixels was dominated by the aperture point drawn independently of the film point at
+    5.7 m (the lens blurs a 2-4 px marker over ~1.5 px) and by the emitter choice at 0.7 m
+    (the retroreflector's return falls with the observation angle, which the emitter and the
+    aperture point set).
+
+Sample allocation
+    Every pixel of the traced box gets ``spp`` samples; the pixels within the defocus blur
+    radius + 0.71 px + :data:`RIM_MARGIN_PX` of a marker face's projected rim (where the
+    pixel integral has a jump: most of the noise) get ``spp * rim_spp_factor``, continuing
+    the same per-pixel sequence. The band is chosen from the pose and the geometry only, never
+    from rendered values, so every pixel's estimate stays unbiased.
 
 Only the box of pixels that can see the target (plate, markers, distractors) is traced; the
 rest of the frame returns nothing (no background, ``background_factor`` of ambient).
@@ -52,6 +70,21 @@ from svgs.constants import PLANCK_J_S, SPEED_OF_LIGHT_M_S
 from render.sampling import check_spp, to_numpy
 from render.truth import repo_relative
 
+from .sobol import sobol_owen
+
+#: Default samples per pixel of the traced window (power of two).
+DEFAULT_SPP = 256
+#: Default factor on ``spp`` for the pixels on the marker faces' rims (:meth:`TofRenderer.rim_mask`):
+#: with the ``"sobol"`` sampler, 256 x 64 = 16384 samples there keep the render noise at most a
+#: third of the sensor's single-frame noise at 5.712 m, per marker pixel and in the pose of a
+#: noise-free frame (issue 23; ``tools/tof_render_noise.py``, docs/tof.md).
+DEFAULT_RIM_SPP_FACTOR = 64
+#: Rim band half-width beyond the defocus blur and the pixel's half diagonal, px.
+RIM_MARGIN_PX = 0.5
+#: Sample generators of :class:`TofRenderer` (see the module docstring).
+SAMPLERS = ("sobol", "r2")
+#: Dimensions of the per-pixel Sobol' point: film u, v; aperture u, v; emitter index; emitter disk u, v.
+SOBOL_DIMS = (0, 1, 2, 3, 4, 5, 6)
 #: Most samples traced in one pass (memory: six float32 channels and the wavefront state per lane).
 MAX_LANES_PER_PASS = 1 << 22
 #: R2 low-discrepancy sequence (Roberts 2018): 1/g, 1/g^2 with g the plastic number, as 0.32 fixed point.
@@ -238,6 +271,14 @@ def check_target_in_view(camera, target, R, t) -> dict:
     return m
 
 
+def _passes(n_pixels: int, j0: int, n_samples: int) -> list:
+    """Split samples ``j0 .. j0 + n_samples - 1`` of ``n_pixels`` pixels into passes of at most
+    :data:`MAX_LANES_PER_PASS` lanes each: list of ``(first, count)``."""
+    cap = 1 << max(0, (MAX_LANES_PER_PASS // max(1, n_pixels)).bit_length() - 1)
+    per = max(1, min(n_samples, cap))
+    return [(j, min(per, j0 + n_samples - j)) for j in range(j0, j0 + n_samples, per)]
+
+
 def _next_2d(mi, rng):
     """Two floats from a lane's PCG32 stream as an mi.Point2f."""
     return mi.Point2f(rng.next_float32(), rng.next_float32())
@@ -258,8 +299,11 @@ class TofRenderer:
     target : str, Path or tof.MarkerTarget
         Marker target (default ``tof-8``).
     scene_options : None, dict or render.tof.scene.TofSceneOptions
-    spp : int
-        Default samples per pixel (rounded up to a power of two).
+    spp : int or None
+        Default samples per pixel (rounded up to a power of two; None: :data:`DEFAULT_SPP`).
+    rim_spp_factor : int or None
+        Default factor on ``spp`` for the pixels on the marker rims (rounded up to a power of
+        two; None: :data:`DEFAULT_RIM_SPP_FACTOR`; 1: every pixel gets ``spp``).
     max_bounces : int
         1: direct returns only (default); 2-4: also multipath via diffuse inter-reflections.
     modulation_frequency_hz : float, optional
@@ -272,6 +316,8 @@ class TofRenderer:
         Ambient radiance (per unit sky radiance) of pixels that see no geometry; 0 = space.
     variant : str, optional
         Passed to :func:`render.variant.select_variant` (a JIT variant is needed).
+    sampler : {"sobol", "r2"}
+        Sample generator (module docstring): ``"sobol"`` (default) or the earlier, noisier ``"r2"``.
 
     Raises
     ------
@@ -279,9 +325,10 @@ class TofRenderer:
         Unknown profile, bad options, or no JIT variant of Mitsuba.
     """
 
-    def __init__(self, camera=DEFAULT_CAMERA, target=DEFAULT_PATTERN, *, scene_options=None, spp: int = 64,
+    def __init__(self, camera=DEFAULT_CAMERA, target=DEFAULT_PATTERN, *, scene_options=None, spp: int | None = DEFAULT_SPP,
                  max_bounces: int = 1, modulation_frequency_hz: float | None = None, pinhole: bool = False,
-                 illumination: dict | None = None, background_factor: float = 0.0, variant: str | None = None):
+                 illumination: dict | None = None, background_factor: float = 0.0, variant: str | None = None,
+                 sampler: str = "sobol", rim_spp_factor: int | None = DEFAULT_RIM_SPP_FACTOR):
         from render.variant import select_variant
 
         from .scene import TofSceneOptions, build_tof_scene
@@ -295,11 +342,16 @@ class TofRenderer:
         if f is None:
             f = (self.camera.tables.get("tof") or {}).get("modulation_frequency_hz", 10.0e6)
         self.modulation_frequency_hz = check_finite_positive(f, "modulation_frequency_hz")
-        self.spp = check_spp(spp, "spp", base=2)
+        self.spp = check_spp(DEFAULT_SPP if spp is None else spp, "spp", base=2)
+        self.rim_spp_factor = check_spp(DEFAULT_RIM_SPP_FACTOR if rim_spp_factor is None else rim_spp_factor,
+                                        "rim_spp_factor", base=2)
         if int(max_bounces) != max_bounces or not 1 <= max_bounces <= 4:
             raise InputError(f"max_bounces: expected an integer 1..4, got {max_bounces!r}")
         self.max_bounces = int(max_bounces)
         self.pinhole = bool(pinhole)
+        if sampler not in SAMPLERS:
+            raise InputError(f"sampler: expected one of {list(SAMPLERS)}, got {sampler!r}")
+        self.sampler = sampler
         self.background_factor = check_finite_positive(background_factor, "background_factor", allow_zero=True)
         self.variant = select_variant(variant)
         if self.variant.backend == "scalar":
@@ -350,9 +402,64 @@ class TofRenderer:
         y1 = int(np.clip(np.ceil(uv[:, 1].max()) + margin_px + 1, 0, H))
         return (x0, y0, max(0, x1 - x0), max(0, y1 - y0))
 
+    def blur_radius_px(self, z_cam_m) -> np.ndarray:
+        """Thin-lens defocus blur radius (circle of confusion), px, of points at depth ``z_cam_m``
+        (array_like, m): ``fx r_aperture |1/focus - 1/z|`` (0 with ``pinhole=True``)."""
+        z = np.asarray(z_cam_m, float)
+        if self.pinhole:
+            return np.zeros_like(z)
+        return self.camera.fx * self.optics.aperture_radius_m * np.abs(1.0 / self.optics.focus_distance_m - 1.0 / z)
+
+    def rim_mask(self, R, t) -> np.ndarray:
+        """Pixels on the marker faces' rims: centre within ``blur + sqrt(2)/2 + RIM_MARGIN_PX`` of
+        the projected rim circle of a face (the distance and the blur taken per rim point).
+
+        Parameters
+        ----------
+        R : ndarray, shape (3, 3)
+        t : ndarray, shape (3,)
+            Pose ``p_cam = R p_target + t``.
+
+        Returns
+        -------
+        ndarray of bool, shape (H, W)
+            All False without markers.
+        """
+        W, H = self.camera.width, self.camera.height
+        mask = np.zeros((H, W), bool)
+        g = self.geometry
+        if not self.options.markers or g.marker_centres_m.size == 0:
+            return mask
+        for c, rad in zip(np.asarray(g.marker_centres_m, float), np.asarray(g.marker_radius_m, float)):
+            z_c = float((R @ c + t)[2])
+            if z_c <= rad:
+                continue
+            n = int(min(1 << 16, max(64, np.ceil(4 * 2 * np.pi * rad * self.camera.fx / (z_c - rad)))))  # <= 0.25 px apart
+            th = 2 * np.pi * np.arange(n) / n
+            P = (c + rad * np.stack([np.cos(th), np.sin(th), np.zeros(n)], 1)) @ R.T + t
+            P = P[P[:, 2] > 1e-6]
+            if not len(P):
+                continue
+            uv = self.camera.project(P)
+            reach = self.blur_radius_px(P[:, 2]) + 0.5 * np.sqrt(2.0) + RIM_MARGIN_PX
+            ok = np.all(np.isfinite(uv), 1) & (uv[:, 0] > -reach - 1) & (uv[:, 0] < W + reach) & \
+                (uv[:, 1] > -reach - 1) & (uv[:, 1] < H + reach)
+            uv, reach = uv[ok], reach[ok]
+            if not len(uv):
+                continue
+            r_max = int(np.ceil(reach.max()))
+            base = np.round(uv).astype(int)
+            for dy in range(-r_max, r_max + 1):
+                for dx in range(-r_max, r_max + 1):
+                    px, py = base[:, 0] + dx, base[:, 1] + dy
+                    inside = (np.hypot(px - uv[:, 0], py - uv[:, 1]) <= reach) & (px >= 0) & (px < W) & (py >= 0) & (py < H)
+                    mask[py[inside], px[inside]] = True
+        return mask
+
     # ------------------------------------------------------------------ rendering
     def render(self, R_cam_target, t_cam_target_m, *, seed: int = 0, spp: int | None = None,
-               window: tuple | None = None, modulation_frequency_hz: float | None = None) -> RenderedTof:
+               window: tuple | None = None, modulation_frequency_hz: float | None = None,
+               rim_spp_factor: int | None = None) -> RenderedTof:
         """Render the noise-free per-pixel means at one pose.
 
         Parameters
@@ -364,6 +471,8 @@ class TofRenderer:
             Seed of the sample positions (passes derive theirs with ``numpy.random.SeedSequence``).
         spp : int, optional
             Samples per pixel (power of two), default the renderer's.
+        rim_spp_factor : int, optional
+            Factor on ``spp`` for the pixels of :meth:`rim_mask` (power of two), default the renderer's.
         window : (x0, y0, w, h), optional
             Trace only this pixel box (default: the box that can see the target).
         modulation_frequency_hz : float, optional
@@ -381,6 +490,7 @@ class TofRenderer:
         R, t = check_pose(R_cam_target, t_cam_target_m)
         seed = int(check_finite(seed, "seed"))
         spp = self.spp if spp is None else check_spp(spp, "spp", base=2)
+        factor = self.rim_spp_factor if rim_spp_factor is None else check_spp(rim_spp_factor, "rim_spp_factor", base=2)
         f_mod = self.modulation_frequency_hz if modulation_frequency_hz is None else \
             check_finite_positive(modulation_frequency_hz, "modulation_frequency_hz")
         if self.options.markers:
@@ -401,11 +511,12 @@ class TofRenderer:
             if len(win) != 4 or x0 < 0 or y0 < 0 or w < 1 or h < 1 or x0 + w > W or y0 + h > H:
                 raise InputError(f"window: expected a box inside the {W}x{H} image, got {window!r}")
         timings = {}
-        t0 = time.perf_counter()
-        sums = self._render_window(R, t, win, spp, seed, f_mod)
-        timings["trace_s"] = time.perf_counter() - t0
         x0, y0, w, h = win
-        n = float(spp)
+        rim = self.rim_mask(R, t)[y0:y0 + h, x0:x0 + w] if factor > 1 else np.zeros((h, w), bool)
+        t0 = time.perf_counter()
+        sums = self._render_window(R, t, win, spp, seed, f_mod, rim, spp * factor)
+        timings["trace_s"] = time.perf_counter() - t0
+        n = np.where(rim, float(spp * factor), float(spp))
         active = np.zeros((H, W))
         phasor = np.zeros((H, W), complex)
         amb = np.full((H, W), float(self.background_factor))
@@ -419,27 +530,43 @@ class TofRenderer:
             hit[sl] = sums["hit"] / n
             with np.errstate(invalid="ignore", divide="ignore"):
                 rng1[sl] = np.where(sums["hit"] > 0, sums["r1"] / np.maximum(sums["hit"], 1), np.nan)
-        truth = self.truth(R, t, truth_m, seed=seed, spp=spp, window=win, timings=timings, f_mod=f_mod)
+        truth = self.truth(R, t, truth_m, seed=seed, spp=spp, window=win, timings=timings, f_mod=f_mod,
+                           rim_spp=spp * factor, rim_pixels=int(rim.sum()))
         return RenderedTof(active_radiance=active, phasor_radiance=phasor, ambient_factor=amb,
                            photons_per_radiance=self.photons_per_radiance(), hit_fraction=hit, range_first_m=rng1,
                            modulation_frequency_hz=f_mod, truth=truth, timings_s=timings)
 
-    def _render_window(self, R, t, win, spp, seed, f_mod) -> dict:
+    def _render_window(self, R, t, win, spp, seed, f_mod, rim=None, rim_spp=None) -> dict:
+        """Per-pixel sums over the window, shape (h, w) each: ``spp`` samples in every pixel,
+        then samples ``spp .. rim_spp - 1`` of the same sequences in the pixels of ``rim``
+        (bool, shape (h, w)). Passes: at most :data:`MAX_LANES_PER_PASS` lanes each."""
         x0, y0, w, h = win
         out = {k: np.zeros((h, w)) for k in ("dc", "re", "im", "amb", "hit", "r1")}
         if w == 0 or h == 0:
             return out
-        npx = w * h
-        cap = 1 << max(0, (MAX_LANES_PER_PASS // npx).bit_length() - 1)
-        per_pass = max(1, min(spp, cap))
-        n_pass = max(1, spp // per_pass)
         self._set_pose(R, t)
-        seeds = np.random.SeedSequence(seed).generate_state(n_pass + 1, dtype=np.uint32)
-        for k in range(n_pass):
-            res = self._trace(win, per_pass, k, int(seeds[k + 1]), int(seeds[0]), f_mod)
-            for name, arr in res.items():
-                out[name] += arr.reshape(h, w)
+        ys, xs = np.mgrid[y0:y0 + h, x0:x0 + w]
+        box = _passes(w * h, 0, spp)
+        # word 0 of SeedSequence(seed): the per-pixel sequences; words 1..: the box's passes' lane streams
+        words = np.random.SeedSequence(seed).generate_state(len(box) + 1, dtype=np.uint32)
+        seed_render = int(words[0])
+        self._trace_pixels(xs.ravel(), ys.ravel(), box, words[1:], seed_render, f_mod, out, (slice(None), slice(None)))
+        if rim is not None and rim_spp is not None and rim_spp > spp and np.any(rim):
+            ry, rx = np.nonzero(rim)
+            passes = _passes(rx.size, spp, rim_spp - spp)
+            words = np.random.SeedSequence([seed, 1]).generate_state(len(passes), dtype=np.uint32)
+            self._trace_pixels(rx + x0, ry + y0, passes, words, seed_render, f_mod, out, (ry, rx))
         return out
+
+    def _trace_pixels(self, gx, gy, passes, pass_seeds, seed_render, f_mod, out, where):
+        """Trace the pixels ``(gx, gy)`` (int arrays, shape (n,)) in ``passes`` (``(j0, count)``:
+        samples ``j0 .. j0 + count - 1`` of each pixel's sequence, lane streams seeded by
+        ``pass_seeds``) and add the per-pixel sums to ``out[name][where]``."""
+        pix = (self._mi.UInt32(np.asarray(gx, np.uint32)), self._mi.UInt32(np.asarray(gy, np.uint32)))
+        for (j0, count), s in zip(passes, pass_seeds):
+            res = self._trace(pix, count, j0, int(s), seed_render, f_mod)
+            for name, arr in res.items():
+                out[name][where] += arr.reshape(out[name][where].shape)
 
     def _set_pose(self, R, t):
         mi, dr = self._mi, self._dr
@@ -452,11 +579,12 @@ class TofRenderer:
         self._lens = mi.Point3f(*p_wc.tolist())
         dr.make_opaque(*self._em, *self._axes, self._lens)
 
-    def _trace(self, win, spp_pass: int, pass_index: int, seed_pass: int, seed_render: int, f_mod: float) -> dict:
-        """One wavefront pass over the window: per-pixel sums (numpy float64, flat)."""
+    def _trace(self, pix, spp_pass: int, j0: int, seed_pass: int, seed_render: int, f_mod: float) -> dict:
+        """One wavefront pass over the pixels ``pix`` (mi.UInt32 columns and rows): per-pixel
+        sums of samples ``j0 .. j0 + spp_pass - 1`` (numpy float64, flat)."""
         mi, dr = self._mi, self._dr
         Float = mi.Float
-        rng, ray = self._primary_rays(win, spp_pass, pass_index, seed_pass, seed_render)
+        rng, ray, nee_sample = self._primary_rays(pix, spp_pass, j0, seed_pass, seed_render)
         si = self.scene.ray_intersect(ray)
         hit0 = si.is_valid()
         r_first = dr.select(hit0, dr.norm(si.p - self._lens), 0.0)
@@ -472,7 +600,7 @@ class TofRenderer:
         active = mi.Bool(hit0)
         for bounce in range(self.max_bounces):
             bsdf = si.bsdf()
-            L, dist = self._emitter_return(si, bsdf, ctx, rng, active, beta)
+            L, dist = self._emitter_return(si, bsdf, ctx, rng, active, beta, nee_sample if bounce == 0 else None)
             phase = k_phase * (opl0 + dist)
             dc += L
             re += L * dr.cos(phase)
@@ -501,54 +629,64 @@ class TofRenderer:
         names = ("dc", "re", "im", "amb", "hit", "r1")
         return {nm: to_numpy(s, np.float64) for nm, s in zip(names, sums)}
 
-    def _primary_rays(self, win, spp_pass: int, pass_index: int, seed_pass: int, seed_render: int):
-        """The pass's camera rays, ``spp_pass`` per pixel of the window (pixel-major), and
-        the lanes' random streams.
+    def _primary_rays(self, pix, spp_pass: int, j0: int, seed_pass: int, seed_render: int):
+        """The pass's camera rays, ``spp_pass`` per pixel of ``pix`` (pixel-major), the lanes'
+        random streams and the samples of the first vertex's emitter.
 
-        Film positions: a per-pixel R2 sequence (sample ``pass_index * spp_pass + j``) with a
-        per-pixel Cranley-Patterson shift from ``seed_render`` (the same for every pass);
-        aperture points (thin lens) and everything after from a PCG32 stream per lane seeded
-        by ``seed_pass``.
+        Each pixel's samples are numbered ``j = j0 + 0 .. spp_pass - 1``.
+        ``sampler="sobol"``: the film point, aperture point, emitter index and emitter-disk
+        point are the dimensions :data:`SOBOL_DIMS` of point ``j`` of an Owen-scrambled Sobol'
+        sequence whose scramble seed hashes the pixel and ``seed_render`` (the same for every
+        pass: the passes together are one net). ``sampler="r2"``: film points from a per-pixel
+        R2 sequence (sample ``j``) with a per-pixel Cranley-Patterson shift from
+        ``seed_render``; aperture, emitter and everything after from the lane's stream. The
+        lane's PCG32 stream is seeded by ``seed_pass`` and the lane index.
 
         Returns
         -------
         rng : mi.PCG32
         ray : mi.Ray3f
+        nee_sample : (mi.Float, mi.Point2f) or None
+            Emitter-index and emitter-disk samples of the first vertex (None: draw from ``rng``).
         """
         mi, dr = self._mi, self._dr
-        x0, y0, w, h = win
-        n = w * h * spp_pass
         UInt32, UInt64, Float = mi.UInt32, mi.UInt64, mi.Float
+        n = dr.width(pix[0]) * spp_pass
         idx = dr.arange(UInt32, n)
         sp = dr.opaque(UInt32, spp_pass)
-        pix = idx // sp
-        j = idx - pix * sp + dr.opaque(UInt32, pass_index * spp_pass)
-        W_ = dr.opaque(UInt32, w)
-        py = pix // W_
-        px = pix - py * W_
-        gx = px + dr.opaque(UInt32, x0)
-        gy = py + dr.opaque(UInt32, y0)
-        # per-pixel Cranley-Patterson shift (same for all passes) of a per-pixel R2 sequence
+        k_pix = idx // sp
+        j = idx - k_pix * sp + dr.opaque(UInt32, j0)
+        gx = dr.gather(UInt32, pix[0], k_pix)
+        gy = dr.gather(UInt32, pix[1], k_pix)
         pid = gy * self.camera.width + gx
+        rng = mi.PCG32()
+        a, b = mi.sample_tea_32(idx, dr.opaque(UInt32, seed_pass), 4)
+        rng.seed(UInt64(a) | (UInt64(b) << 32), UInt64(idx))
+        if self.sampler == "sobol":
+            seed_px, _ = mi.sample_tea_32(pid, dr.opaque(UInt32, seed_render), 8)
+            q = sobol_owen(mi, dr, j, seed_px, SOBOL_DIMS)
+            u = Float(gx) + q[0] - 0.5
+            v = Float(gy) + q[1] - 0.5
+            a_cam = mi.Vector3f(0.0) if self.pinhole else self.model.aperture_point(mi.Point2f(q[2], q[3]))
+            return rng, self.model.ray(u, v, a_cam), (q[4], mi.Point2f(q[5], q[6]))
+        # per-pixel Cranley-Patterson shift (same for all passes) of a per-pixel R2 sequence
         s0, s1 = mi.sample_tea_32(pid, dr.opaque(UInt32, seed_render), 8)
         fu = Float(j * R2_STEP_U32[0] + s0) * (2.0**-32)
         fv = Float(j * R2_STEP_U32[1] + s1) * (2.0**-32)
         one = 1.0 - 2.0**-24
         u = Float(gx) + dr.minimum(fu, one) - 0.5
         v = Float(gy) + dr.minimum(fv, one) - 0.5
-        rng = mi.PCG32()
-        a, b = mi.sample_tea_32(idx, dr.opaque(UInt32, seed_pass), 4)
-        rng.seed(UInt64(a) | (UInt64(b) << 32), UInt64(idx))
         if self.pinhole:
             a_cam = mi.Vector3f(0.0)
         else:
             a_cam = self.model.aperture_point(_next_2d(mi, rng))
-        return rng, self.model.ray(u, v, a_cam)
+        return rng, self.model.ray(u, v, a_cam), None
 
-    def _emitter_return(self, si, bsdf, ctx, rng, active, beta):
+    def _emitter_return(self, si, bsdf, ctx, rng, active, beta, sample=None):
         """Next-event estimation from the vertex ``si`` to one point of one emitter (chosen
         uniformly; shadow ray): the return ``L = beta f (n I(theta)) / r^2`` and the distance
-        ``r`` from the vertex to the emitter point (mi.Float each)."""
+        ``r`` from the vertex to the emitter point (mi.Float each). ``sample``: the emitter
+        index (mi.Float in [0, 1)) and disk (mi.Point2f) samples; None draws them from ``rng``."""
         mi, dr = self._mi, self._dr
         UInt32, Float = mi.UInt32, mi.Float
         ill = self.illumination
@@ -557,11 +695,14 @@ class TofRenderer:
         I0 = ill.intensity_w_sr
         r_e = 0.5 * ill.emitter_diameter_m
         ex, ey, ez = self._axes
-        k = UInt32(dr.minimum(rng.next_float32() * n_e, n_e - 1))
+        u_k, u_disk = (rng.next_float32(), None) if sample is None else sample
+        k = UInt32(dr.minimum(u_k * n_e, n_e - 1))
         cx_ = dr.gather(Float, self._em[0], k, active)
         cy_ = dr.gather(Float, self._em[1], k, active)
         cz_ = dr.gather(Float, self._em[2], k, active)
-        dsk = mi.warp.square_to_uniform_disk_concentric(_next_2d(mi, rng)) * r_e
+        if u_disk is None:
+            u_disk = _next_2d(mi, rng)
+        dsk = mi.warp.square_to_uniform_disk_concentric(u_disk) * r_e
         e_pt = mi.Point3f(cx_, cy_, cz_) + ex * dsk.x + ey * dsk.y
         dvec = e_pt - si.p
         dist2 = dr.squared_norm(dvec)
@@ -602,8 +743,10 @@ class TofRenderer:
                 "variant": self.variant.name, "variant_notice": self.variant.notice,
                 "integrator": "custom AMCW phasor integrator (render/tof/camera.py): NEE to the emitter ring, "
                               + ("direct returns only" if self.max_bounces == 1 else f"{self.max_bounces} bounces (multipath)"),
+                "sampler": self.sampler,
                 "max_bounces": self.max_bounces, "pinhole": self.pinhole, "background_factor": self.background_factor,
-                "seed": info["seed"], "spp": info["spp"], "window": list(info["window"]),
+                "seed": info["seed"], "spp": info["spp"], "rim_spp": info.get("rim_spp", info["spp"]),
+                "rim_pixels": info.get("rim_pixels", 0), "window": list(info["window"]),
                 "timings_s": info["timings"],
                 "versions": {"mitsuba": mi.__version__, "drjit": dr.__version__, "numpy": np.__version__},
             },
@@ -611,9 +754,9 @@ class TofRenderer:
 
 
 def render_tof(R_cam_target, t_cam_target_m, camera=DEFAULT_CAMERA, target=DEFAULT_PATTERN, *, seed: int = 0,
-               spp: int = 64, **kw) -> RenderedTof:
+               spp: int = DEFAULT_SPP, **kw) -> RenderedTof:
     """One-call form of :class:`TofRenderer` (loads the scene every call)."""
     return TofRenderer(camera, target, spp=spp, **kw).render(R_cam_target, t_cam_target_m, seed=seed)
 
 
-__all__ = ["Illumination", "TofOptics", "TofRenderer", "render_tof", "check_pose", "check_target_in_view", "marker_truth"]
+__all__ = ["DEFAULT_SPP", "DEFAULT_RIM_SPP_FACTOR", "SAMPLERS", "Illumination", "TofOptics", "TofRenderer", "render_tof", "check_pose", "check_target_in_view", "marker_truth"]
