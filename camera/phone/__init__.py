@@ -28,7 +28,7 @@ import numpy as np
 
 from svgs.errors import InputError
 
-from camera.phone.isp import ExposureSolver, auto_exposure, downscale, jpeg_roundtrip, metering_weights, tone_lut
+from camera.phone.isp import ExposureSolver, auto_exposure, downscale, jpeg_roundtrip, tone_lut
 from camera.phone.cfa import channel_map, luminance, response_map, tone_image
 from camera.phone.optics import apply_psf, compose, core_image, core_psf, core_share, glare_image, wings_coarse
 from camera.phone.psf import PIXEL_KERNEL_RADIUS_PX, splat_patches, support_box
@@ -344,8 +344,7 @@ class Exposer:
         """(exposure_s, iso, info) chosen by the phone's auto-exposure for this scene."""
         p = self.phone.params
         if self._solver is None:
-            rate = (p.sensor.qe * self.flux_optics.astype(np.float64) + p.sensor.dark_current_e_s) / p.sensor.full_well_e
-            self._solver = ExposureSolver(rate, metering_weights(self.flux_optics.shape, p.exposure.metering))
+            self._solver = ExposureSolver.from_flux(self.flux_optics, p.sensor, p.exposure.metering)
         return auto_exposure(self.flux_optics, p.sensor, p.exposure, self._solver)
 
     @property

@@ -14,7 +14,7 @@ import math
 
 import cv2
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from svgs.errors import InputError
 
@@ -50,19 +50,54 @@ def _metering_weights_uncached(shape, mode: str) -> np.ndarray:
     return w / w.sum()
 
 
-@njit(cache=True)
-def _log_bins(r, w, lo, hi, n_bins, w_bin, wr_bin):
-    """Add ``w`` and ``w * r`` of every pixel into its bin of ``log r`` over ``[lo, hi]``
-    (``n_bins`` bins, the ends clipped), in pixel order; ``r > 0`` everywhere."""
-    for i in range(r.size):
-        ri = r[i]
-        k = int((math.log(ri) - lo) / (hi - lo) * n_bins)
-        if k < 0:
-            k = 0
-        elif k > n_bins - 1:
-            k = n_bins - 1
-        w_bin[k] += w[i]
-        wr_bin[k] += w[i] * ri
+#: Pixel chunks the meter's histogram is built over (each in pixel order, then added in chunk
+#: order: the same sums whatever the number of threads).
+METER_CHUNKS = 64
+
+
+@njit(parallel=True, cache=True)
+def _meter_range(x, a, b, c, n_chunks):
+    """Smallest and largest positive ``r = (a x + b) / c`` over ``x`` (flat), and whether any is."""
+    n = x.size
+    mins = np.full(n_chunks, np.inf)
+    maxs = np.full(n_chunks, -np.inf)
+    for j in prange(n_chunks):
+        lo, hi = np.inf, -np.inf
+        for i in range(j * n // n_chunks, (j + 1) * n // n_chunks):
+            r = (a * x[i] + b) / c
+            if r > 0.0:
+                if r < lo:
+                    lo = r
+                if r > hi:
+                    hi = r
+        mins[j] = lo
+        maxs[j] = hi
+    return mins.min(), maxs.max()
+
+
+@njit(parallel=True, cache=True)
+def _meter_bins(x, a, b, c, w, w_const, lo, hi, n_bins, n_chunks, w_bin, wr_bin, w_zero):
+    """Add ``w`` and ``w * r`` of every pixel (``r = (a x + b) / c``; ``w`` per pixel, or
+    ``w_const`` for all when ``w`` is empty) into its bin of ``log r`` over ``[lo, hi]`` (the ends
+    clipped), one histogram per chunk of pixels (rows of ``w_bin``, ``wr_bin``), in pixel order;
+    the weight of pixels with ``r <= 0`` into ``w_zero`` per chunk."""
+    n = x.size
+    const = w.size == 0
+    scale = n_bins / (hi - lo)
+    for j in prange(n_chunks):
+        for i in range(j * n // n_chunks, (j + 1) * n // n_chunks):
+            r = (a * x[i] + b) / c
+            wi = w_const if const else w[i]
+            if r <= 0.0:
+                w_zero[j] += wi
+                continue
+            k = int((math.log(r) - lo) * scale)
+            if k < 0:
+                k = 0
+            elif k > n_bins - 1:
+                k = n_bins - 1
+            w_bin[j, k] += wi
+            wr_bin[j, k] += wi * r
 
 
 class ExposureSolver:
@@ -75,29 +110,63 @@ class ExposureSolver:
         the ADC's white level per second at base ISO), noise-free.
     weights : ndarray, shape (H, W)
         Metering weights, summing to 1.
+
+    :meth:`from_flux` meters a flux image directly (the rate computed pixel by pixel in the
+    same pass, no full-frame temporaries).
     """
 
     def __init__(self, rate: np.ndarray, weights: np.ndarray, n_bins: int = 4096):
         r = np.ascontiguousarray(rate, np.float64).ravel()
         w = np.ascontiguousarray(weights, np.float64).ravel()
-        pos = r > 0
-        if pos.all():  # the usual case (dark current): no copies
-            self.w_zero = 0.0
+        self._build(r, 1.0, 0.0, 1.0, w, 0.0, n_bins)
+
+    @classmethod
+    def from_flux(cls, flux_ph_s: np.ndarray, sensor: SensorParams, metering: str, n_bins: int = 4096):
+        """The meter of a noise-free flux image (photons/s/px, after the optics): the rate
+        ``(qe flux + dark) / full_well`` per pixel, the metering weights of ``metering``.
+
+        Parameters
+        ----------
+        flux_ph_s : ndarray, shape (H, W), float32 or float64
+        sensor : SensorParams
+        metering : {"mean", "center_weighted", "spot"}
+        n_bins : int
+
+        Returns
+        -------
+        ExposureSolver
+        """
+        f = np.ascontiguousarray(flux_ph_s)
+        if f.dtype not in (np.float32, np.float64):
+            f = f.astype(np.float64)
+        self = cls.__new__(cls)
+        if metering == "mean":  # the same weight everywhere: no weight map
+            w, w_const = np.zeros(0), 1.0 / f.size
         else:
-            self.w_zero = float(w[~pos].sum())
-            r, w = r[pos], w[pos]
-        if r.size == 0:
+            w, w_const = np.ascontiguousarray(metering_weights(f.shape, metering)).ravel(), 0.0
+        self._build(f.ravel(), float(sensor.qe), float(sensor.dark_current_e_s), float(sensor.full_well_e), w,
+                    w_const, n_bins)
+        return self
+
+    def _build(self, x, a, b, c, w, w_const, n_bins):
+        """The histogram of ``r = (a x + b) / c`` in ``n_bins`` log bins, weighted by ``w`` (or
+        ``w_const`` each when ``w`` is empty)."""
+        rmin, rmax = _meter_range(x, a, b, c, METER_CHUNKS)
+        if not np.isfinite(rmin):  # no positive signal
             self.edges = None
+            self.w_zero = float(w.sum()) if w.size else w_const * x.size
             return
-        lo, hi = np.log(r.min()), np.log(r.max())
+        lo, hi = np.log(rmin), np.log(rmax)
         if hi - lo < 1e-9:
             hi = lo + 1e-9
         edges = np.linspace(lo, hi, n_bins + 1)
-        # one pass over the pixels: the same bins and sums (in pixel order) as
-        # np.bincount(idx, weights=...) of idx = clip(((log r - lo) / (hi - lo) * n).astype(int))
-        self.w_bin = np.zeros(n_bins)
-        self.wr_bin = np.zeros(n_bins)
-        _log_bins(r, w, float(lo), float(hi), int(n_bins), self.w_bin, self.wr_bin)
+        w_bin = np.zeros((METER_CHUNKS, n_bins))
+        wr_bin = np.zeros((METER_CHUNKS, n_bins))
+        w_zero = np.zeros(METER_CHUNKS)
+        _meter_bins(x, a, b, c, w, w_const, float(lo), float(hi), int(n_bins), METER_CHUNKS, w_bin, wr_bin, w_zero)
+        self.w_bin = w_bin.sum(axis=0)
+        self.wr_bin = wr_bin.sum(axis=0)
+        self.w_zero = float(w_zero.sum())
         self.edges = np.exp(edges)
         # suffix sums: weight above bin k (clipped) and prefix sums of w*r below (linear)
         self.w_above = np.concatenate([np.cumsum(self.w_bin[::-1])[::-1], [0.0]])
@@ -159,8 +228,7 @@ def auto_exposure(flux_ph_s: np.ndarray, sensor: SensorParams, exp: ExposurePara
         it short of the target), ``exposure_product``.
     """
     if solver is None:
-        rate = (sensor.qe * flux_ph_s + sensor.dark_current_e_s) / sensor.full_well_e  # fraction of white per s at base ISO
-        solver = ExposureSolver(rate, metering_weights(flux_ph_s.shape, exp.metering))
+        solver = ExposureSolver.from_flux(flux_ph_s, sensor, exp.metering)
     target = metered_target(exp)
     S = solver.solve(target, *exposure_limits(sensor, exp))
     t, iso = split_exposure(S, exp, sensor.base_iso)
