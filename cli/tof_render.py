@@ -35,6 +35,19 @@ POSE_ARGS = (("--x", "target_x_m", "lateral offset of the target origin from the
              ("--yaw", "yaw_deg", "yaw (deg)"))
 
 
+def add_scene_args(p) -> None:
+    """The options of the ToF commands that render: ``--camera``, ``--pattern``, ``--spp`` and
+    ``--rim-spp-factor`` (shared with :mod:`cli.tof_stability`)."""
+    p.add_argument("--camera", default="tof-epc660", help="ToF camera profile name or .toml path (default tof-epc660)")
+    p.add_argument("--pattern", default="tof-8", help="marker target name or .toml path (default tof-8)")
+    p.add_argument("--spp", type=int, default=None,
+                   help="samples per pixel of the render (power of two; default 256); the pixels on the marker "
+                        "faces' rims get --rim-spp-factor times more")
+    p.add_argument("--rim-spp-factor", type=int, default=None,
+                   help="factor on --spp for the marker-rim pixels (power of two; default 64, i.e. 16384 samples "
+                        "there; 1: the same spp everywhere)")
+
+
 def register(group) -> None:
     """Add ``render-and-solve`` to the ``svgs tof`` group's sub-parsers."""
     p = group.add_parser(
@@ -52,14 +65,7 @@ def register(group) -> None:
     p.add_argument("--frames", type=int, default=1,
                    help="noisy frames drawn from the one render (default 1; at most 20000, ~50 ms each)")
     p.add_argument("--seed", type=int, default=0, help="seed of the render and the noise (default 0)")
-    p.add_argument("--camera", default="tof-epc660", help="ToF camera profile name or .toml path (default tof-epc660)")
-    p.add_argument("--pattern", default="tof-8", help="marker target name or .toml path (default tof-8)")
-    p.add_argument("--spp", type=int, default=None,
-                   help="samples per pixel of the render (power of two; default 256); the pixels on the marker "
-                        "faces' rims get --rim-spp-factor times more")
-    p.add_argument("--rim-spp-factor", type=int, default=None,
-                   help="factor on --spp for the marker-rim pixels (power of two; default 64, i.e. 16384 samples "
-                        "there; 1: the same spp everywhere)")
+    add_scene_args(p)
     p.add_argument("--bounces", type=int, default=1, help="1 = direct returns (default), 2-4 = with multipath")
     p.add_argument("--ambient-lux", type=float, default=None,
                    help="ambient illuminance (default: the profile's, 1000 lux = the paper's normal light)")

@@ -23,6 +23,7 @@ from svgs.errors import InputError, check_finite
 
 from cli.exit_codes import EXIT_NO_SOLUTION, EXIT_OK
 from cli.solve import json_default
+from cli.tof_render import add_scene_args
 
 #: Ranges the stability run accepts (m): the paper's design range 0.27-15 m (section 2.2) within
 #: the 15 m unambiguous range of the 10 MHz modulation.
@@ -31,14 +32,7 @@ RANGE_LIMITS_M = (0.27, 15.0)
 
 def _common(p) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the render and the frames' noise (default 0)")
-    p.add_argument("--camera", default="tof-epc660", help="ToF camera profile name or .toml path (default tof-epc660)")
-    p.add_argument("--pattern", default="tof-8", help="marker target name or .toml path (default tof-8)")
-    p.add_argument("--spp", type=int, default=None,
-                   help="samples per pixel of the render (power of two; default 256); the pixels on the marker "
-                        "faces' rims get --rim-spp-factor times more")
-    p.add_argument("--rim-spp-factor", type=int, default=None,
-                   help="factor on --spp for the marker-rim pixels (power of two; default 64, i.e. 16384 samples "
-                        "there; 1: the same spp everywhere)")
+    add_scene_args(p)
     p.add_argument("--ambient-lux", type=float, default=None,
                    help="ambient illuminance (default: the profile's 1000 lux, the paper's normal light)")
     p.add_argument("--marker-material", choices=("retroreflective", "lambertian"), default=None,

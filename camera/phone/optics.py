@@ -147,6 +147,20 @@ def _points_box(points, H: int, W: int):
     return (y0, y1, x0, x1) if (x1 > x0 and y1 > y0) else None
 
 
+@njit(cache=True, inline="always")
+def _spread_index(i, s, n):
+    """Where fine pixel ``i`` reads a coarse grid of ``n`` cells of ``s`` pixels: the two cells
+    and the weight of the second (coarse coordinate ``(i + 1/2) / s - 1/2``, clamped at the ends)."""
+    t = (i + 0.5) / s - 0.5
+    i0 = int(np.floor(t))
+    f = t - i0
+    if i0 < 0:
+        i0, f = 0, 0.0
+    if i0 >= n - 1:
+        i0, f = n - 1, 0.0
+    return i0, (i0 + 1 if i0 + 1 < n else i0), f
+
+
 @njit(parallel=True, cache=True)
 def _compose_kernel(core, share, wc, s, eta, bg, scale, use_bg, resp, out):
     """``out = resp * (share * core + eta * up(wc) + scale * bg)`` (float32 out): the optical
@@ -159,25 +173,9 @@ def _compose_kernel(core, share, wc, s, eta, bg, scale, use_bg, resp, out):
     cx1 = np.empty(W, np.int64)
     cfx = np.empty(W, np.float64)
     for c in range(W):
-        sx = (c + 0.5) / s - 0.5
-        x0 = int(np.floor(sx))
-        fx = sx - x0
-        if x0 < 0:
-            x0, fx = 0, 0.0
-        if x0 >= Wc - 1:
-            x0, fx = Wc - 1, 0.0
-        cx0[c] = x0
-        cx1[c] = x0 + 1 if x0 + 1 < Wc else x0
-        cfx[c] = fx
+        cx0[c], cx1[c], cfx[c] = _spread_index(c, s, Wc)
     for r in prange(H):
-        sy = (r + 0.5) / s - 0.5
-        y0 = int(np.floor(sy))
-        fy = sy - y0
-        if y0 < 0:
-            y0, fy = 0, 0.0
-        if y0 >= Hc - 1:
-            y0, fy = Hc - 1, 0.0
-        y1 = y0 + 1 if y0 + 1 < Hc else y0
+        y0, y1, fy = _spread_index(r, s, Hc)
         for c in range(W):
             x0, x1, fx = cx0[c], cx1[c], cfx[c]
             w = ((1.0 - fy) * ((1.0 - fx) * wc[y0, x0] + fx * wc[y0, x1])
