@@ -327,8 +327,7 @@ class Renderer:
         ph = self.flash.photometry["mean_photon_energy_j"]
         if u0 == 0 and v0 == 0 and width in (None, self.camera.width) and height in (None, self.camera.height):
             if self._factor_full is None:
-                xy = pixel_normalized_grid(self.camera)
-                self._factor_full = radiance_to_photon_rate(self.camera, self.optics, ph, xy)
+                self._factor_full = _full_frame_factor(self.camera, self.optics, ph)
             return self._factor_full
         xy = pixel_normalized_grid(self.camera, u0, v0, width, height)
         return radiance_to_photon_rate(self.camera, self.optics, ph, xy)
@@ -503,6 +502,25 @@ class Renderer:
         return svgs_frame_truth(self, R, t, targets_px, visible, spots, **render_info)
 
 
+def _full_frame_factor(camera, optics, mean_photon_energy_j: float) -> np.ndarray:
+    """Photons/s per pixel per unit radiance over the whole frame (read-only), kept per camera
+    geometry, aperture and photon energy: under a distorted lens it costs seconds (the distortion's
+    Jacobian at 5-8 Mpx), and the renderers of a sweep's focus distances share it."""
+    key = (json.dumps(camera.to_dict(), sort_keys=True, default=str), float(optics.aperture_area_m2),
+           float(mean_photon_energy_j))
+    hit = _FACTORS.get(key)
+    if hit is None:
+        hit = radiance_to_photon_rate(camera, optics, mean_photon_energy_j, pixel_normalized_grid(camera))
+        hit.setflags(write=False)
+        if len(_FACTORS) >= 4:
+            _FACTORS.clear()
+        _FACTORS[key] = hit
+    return hit
+
+
+_FACTORS: dict = {}
+
+
 def _union_box(boxes):
     """The smallest box ``(y0, y1, x0, x1)`` holding all of ``boxes`` (a non-empty list)."""
     return (min(b[0] for b in boxes), max(b[1] for b in boxes), min(b[2] for b in boxes), max(b[3] for b in boxes))
@@ -534,17 +552,25 @@ def render_flux(camera, pattern, R_cam_target, t_cam_target_m, *, spp: int = DEF
     A renderer per (camera, pattern, reflector, options, window size) is cached, so a
     loop of calls reuses the loaded scene and compiled kernels.
     """
+    from dataclasses import replace
+
     cam = Camera.load(camera)
     pat = Pattern.load(pattern)
     refl = Reflector.resolve(reflector, pat)
     opts = SceneOptions.resolve(scene_options)
-    key = json.dumps([cam.to_dict(), pat.name, pat.points_m.tolist(), refl.to_json(), opts.to_json(), int(roi_size_px),
-                      method, int(spot_samples), spot_sampler], sort_keys=True, default=str)
+    # the focus distance is not part of the scene: a renderer is refocused, not rebuilt
+    key = json.dumps([cam.to_dict(), pat.name, pat.points_m.tolist(), refl.to_json(),
+                      replace(opts, focus_distance_m=None).to_json(), int(roi_size_px), method, int(spot_samples),
+                      spot_sampler], sort_keys=True, default=str)
     r = _CACHE.get(key)
     if r is None:
         r = Renderer(cam, pat, reflector=refl, scene_options=opts, roi_size_px=roi_size_px, spp=spp, roi_spp=roi_spp,
                      spot_samples=spot_samples, method=method, spot_sampler=spot_sampler)
         _CACHE.clear()  # one scene at a time: they hold a lot of memory
         _CACHE[key] = r
+    elif r.options.focus_distance_m != opts.focus_distance_m:
+        focus = opts.focus_distance_m
+        r.set_focus_distance(Optics.from_camera(cam).focus_distance_m if focus is None else focus)
+        r.options = replace(r.options, focus_distance_m=focus)  # as asked (None: the profile's)
     return r.render(R_cam_target, t_cam_target_m, seed=seed, spp=spp, roi_spp=roi_spp, full_frame=full_frame)
 
