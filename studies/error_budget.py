@@ -81,6 +81,15 @@ def _colour_420(p) -> bool:
     return p.cfa.enabled and p.isp.jpeg_quality > 0 and p.isp.jpeg_subsampling == "4:2:0"
 
 
+def image_path_on(p) -> bool:
+    """Whether a phone model uses the image path of issue 24 (a colour JPEG, the ISP's noise
+    reduction or sharpening): only then are its stages separate error-budget variants and switched
+    off in the floor. With ``[isp] jpeg_subsampling = "gray"`` and no NR or sharpening (the
+    profiles' defaults until the committed reports are regenerated on it) the budget is the one
+    before issue 24, variant for variant."""
+    return p.isp.jpeg_subsampling != "gray" or p.isp.nr_sigma_px > 0 or p.isp.sharpen_amount > 0
+
+
 VARIANTS = (
     Variant("perfect_calibration", "perfect calibration (the solver knows the true lens)", _PERFECT),
     Variant("no_sensor_noise", "no sensor noise (shot, dark, fixed pattern, read)", {"sensor_noise": 0.0}, False),
@@ -92,11 +101,11 @@ VARIANTS = (
             False),
     # the phone's image path (issue 24); after the others, so that their trial ids stay
     Variant("no_jpeg", "no JPEG round trip (the 8-bit image the encoder got)", {"jpeg": 0.0},
-            applies=lambda p: p.isp.jpeg_quality > 0),
+            applies=lambda p: image_path_on(p) and p.isp.jpeg_quality > 0),
     Variant("no_chroma_subsampling", "full chroma (4:4:4) instead of the profile's 4:2:0 JPEG", {"chroma": 0.0},
             applies=_colour_420),
     Variant("no_cfa", "no Bayer mosaic and no demosaic (a mono sensor)", {"cfa": 0.0},
-            applies=lambda p: p.cfa.enabled),
+            applies=lambda p: image_path_on(p) and p.cfa.enabled),
     Variant("no_noise_reduction", "no noise reduction in the ISP", {"nr": 0.0},
             applies=lambda p: p.isp.nr_sigma_px > 0),
     Variant("no_sharpening", "no sharpening in the ISP", {"sharpen": 0.0}, applies=lambda p: p.isp.sharpen_amount > 0),
@@ -136,6 +145,10 @@ def variant_trials(baseline: list, config) -> list:
     N = len(baseline)
     label_keys = ("nominal_range_m", "pose_index", "exposure_index")
     keep = {v.name for v in applicable_variants(config.camera)}
+    from camera.phone.params import PhoneParams
+    from svgs.profiles import Camera
+
+    on = image_path_on(PhoneParams.from_camera(Camera.load(config.camera)))
     out = []
     for v, var in enumerate(VARIANTS):
         if var.name not in keep:
@@ -144,7 +157,7 @@ def variant_trials(baseline: list, config) -> list:
             if not var.all_exposures and tr.scenario["exposure_index"] != 0:
                 continue
             sc = {k: x for k, x in tr.scenario.items() if k in kind.parameters or k in ("camera", "pattern")}
-            sc.update(var.values)
+            sc.update({k: x for k, x in var.values.items() if on or k not in _IMAGE_PATH_OFF})
             labels = {k: tr.scenario[k] for k in label_keys}
             labels["variant"] = var.name
             out.append(Trial(N * (v + 1) + tr.trial_id, build_scenario(kind, sc, labels), tr.seed))
