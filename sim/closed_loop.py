@@ -391,7 +391,8 @@ def solver_camera(camera: Camera, image_shape) -> Camera:
 
 
 def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposure_s=None, iso=None,
-                     solver_camera_profile: Camera | None = None, stages=None, truth: str = "commanded") -> dict:
+                     solver_camera_profile: Camera | None = None, stages=None, truth: str = "commanded", isp=None,
+                     demosaic=None) -> dict:
     """One exposure of a rendered frame through the SVGS chain.
 
     Parameters
@@ -414,6 +415,10 @@ def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposu
         The pose the errors are taken against: the one the lab knew
         (:meth:`Scenario.commanded_pose`, default) or the actual one (the phone's
         misalignment in its holder included).
+    isp : camera.phone.params.IspParams, optional
+        This exposure's ISP instead of the profile's ``[isp]`` (:meth:`camera.phone.Exposer.expose`).
+    demosaic : str, optional
+        This exposure's demosaic instead of the profile's ``[cfa] demosaic``.
 
     Returns
     -------
@@ -429,7 +434,7 @@ def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposu
     if truth not in ("commanded", "actual"):
         raise InputError(f"truth: expected 'commanded' or 'actual', got {truth!r}")
     t0 = time.perf_counter()
-    ex = exposer.expose(seed=seed, exposure_s=exposure_s, iso=iso, stages=stages)
+    ex = exposer.expose(seed=seed, exposure_s=exposure_s, iso=iso, stages=stages, isp=isp, demosaic=demosaic)
     t1 = time.perf_counter()
     row = solve_exposure(frame, ex, threshold=threshold, solver_camera_profile=solver_camera_profile, truth=truth)
     row["expose_s"] = t1 - t0

@@ -22,11 +22,13 @@ Scenario keys
     samples per pixel, the phone's auto-exposure, the app's brightness threshold (svgs.app) and the exact
     calibration). With ``stand = 1`` the angles turn the phone on the test stand
     (:mod:`sim.stand`); ``lens_*`` make the true lens differ from the profile (the solver's
-    ``*_error`` are relative to it); ``sensor_noise``, ``glare``, ``quantise`` switch error
-    sources off and ``truth_actual`` takes the errors against the actual pose (the campaign's
-    error budget); ``f_number``, ``led_offset_scale``, ``glare_*``, ``exposure_compensation_ev``
-    are the physics a sensitivity study varies. Studies add labels (``nominal_range_m``, ``pose_index``, ``trial``,
-    ``remedy``...) carried into the rows unchanged.
+    ``*_error`` are relative to it); ``sensor_noise``, ``glare``, ``quantise``, ``cfa``, ``nr``,
+    ``sharpen``, ``chroma``, ``jpeg`` switch error sources off and ``truth_actual`` takes the
+    errors against the actual pose (the campaign's error budget); ``demosaic``,
+    ``jpeg_quality`` and ``jpeg_grid_offset_*_px`` choose the ISP's demosaic and JPEG;
+    ``f_number``, ``led_offset_scale``, ``glare_*``, ``exposure_compensation_ev`` are the physics
+    a sensitivity study varies. Studies add labels (``nominal_range_m``, ``pose_index``,
+    ``trial``, ``remedy``...) carried into the rows unchanged.
 """
 
 from __future__ import annotations
@@ -105,6 +107,27 @@ RENDER_PARAMETERS = {
                        "diffraction and aberration core", 1.0, False, lower=0.0, upper=1.0),
     "quantise": Parameter("quantise", "1", "1: the delivered image in 8 bits and JPEG; 0: a float image (same tone "
                           "curve), no JPEG", 1.0, False, lower=0.0, upper=1.0),
+    "cfa": Parameter("cfa", "1", "1: the profile's colour filter array (Bayer mosaic, demosaic); 0: a mono sensor",
+                     1.0, False, lower=0.0, upper=1.0),
+    "nr": Parameter("nr", "1", "1: the ISP's noise reduction as the profile sets it ([isp] nr_*); 0: none", 1.0, False,
+                    lower=0.0, upper=1.0),
+    "sharpen": Parameter("sharpen", "1", "1: the ISP's sharpening as the profile sets it ([isp] sharpen_*); 0: none",
+                         1.0, False, lower=0.0, upper=1.0),
+    "chroma": Parameter("chroma", "1", "1: a colour JPEG's chroma subsampled as the profile sets it ([isp] "
+                        "jpeg_subsampling); 0: full chroma (4:4:4)", 1.0, False, lower=0.0, upper=1.0),
+    "jpeg": Parameter("jpeg", "1", "1: the JPEG round trip; 0: the 8-bit image the encoder would get", 1.0, False,
+                      lower=0.0, upper=1.0),
+    # the ISP's choices (after the render, per exposure)
+    "demosaic": Parameter("demosaic", "1", "the ISP's demosaic: 0 the profile's ([cfa] demosaic), 1 bilinear, "
+                          "2 edge-aware, 3 VNG (OpenCV)", 0.0, False, lower=0.0, upper=3.0),
+    "jpeg_quality": Parameter("jpeg_quality", "1", "JPEG quality 1-100 (-1: the profile's [isp] jpeg_quality)", -1.0,
+                              False, lower=-1.0, upper=100.0),
+    "jpeg_grid_offset_u_px": Parameter("jpeg_grid_offset_u_px", "px", "the JPEG block grid moved right by this "
+                                       "many pixels against the image, added to the profile's (0-15)", 0.0, False,
+                                       lower=0.0, upper=15.0),
+    "jpeg_grid_offset_v_px": Parameter("jpeg_grid_offset_v_px", "px", "the JPEG block grid moved down by this "
+                                       "many pixels against the image, added to the profile's (0-15)", 0.0, False,
+                                       lower=0.0, upper=15.0),
     "truth_actual": GEOMETRIC_PARAMETERS["truth_actual"],
     # the physics a sensitivity study varies (-1: the profile's value)
     "f_number": Parameter("f_number", "1", "the lens' f-number, for the render (aperture) and the PSF (-1: the "
@@ -122,7 +145,11 @@ RENDER_PARAMETERS = {
 }
 
 #: Post-render switches that must be 0 or 1.
-_SWITCHES = ("stand", "sensor_noise", "glare", "quantise", "truth_actual")
+_SWITCHES = ("stand", "sensor_noise", "glare", "quantise", "cfa", "nr", "sharpen", "chroma", "jpeg", "truth_actual")
+#: The error-budget switches (1: the source on, the default).
+_SOURCE_SWITCHES = ("sensor_noise", "glare", "quantise", "cfa", "nr", "sharpen", "chroma", "jpeg")
+#: The ``demosaic`` parameter's codes.
+DEMOSAIC_CODES = {0.0: None, 1.0: "bilinear", 2.0: "edge_aware", 3.0: "vng"}
 #: Render-affecting physics, in the render key after the lens.
 _PHYSICS = ("f_number", "led_offset_scale")
 
@@ -272,11 +299,15 @@ def render_trial_scenario(labels: dict | None = None, **values) -> dict:
     for k in _SWITCHES:
         if scen[k] not in (0.0, 1.0):
             raise InputError(f"{k}: expected 0 or 1, got {scen[k]!r}")
-    for k in ("spp", "roi_spp", "render_seed"):
+    for k in ("spp", "roi_spp", "render_seed", "demosaic", "jpeg_quality", "jpeg_grid_offset_u_px",
+              "jpeg_grid_offset_v_px"):
         if scen[k] != int(scen[k]):
             raise InputError(f"{k}: expected an integer, got {scen[k]!r}")
     if scen["roi_spp"] == 0:
         raise InputError("roi_spp: expected >= 1 (or -1: the renderer's default), got 0")
+    if scen["jpeg_quality"] == 0:
+        raise InputError("jpeg_quality: expected 1-100 (or -1: the profile's), got 0 (the JPEG is switched off "
+                         "with jpeg = 0)")
     if scen["f_number"] != -1 and scen["f_number"] < 1.0:
         raise InputError(f"f_number: expected -1 (the profile's) or an f-number >= 1, got {scen['f_number']:g}")
     if scen["glare_wing_exponent"] != -1 and scen["glare_wing_exponent"] <= 1.0:
@@ -326,30 +357,48 @@ def _frame(key):
 
 
 def _glare_key(scenario: dict) -> tuple:
-    """What decides the exposer of a trial (after the render): ND filter and the lens' glare."""
+    """What decides the exposer of a trial (after the render): ND filter, the lens' glare and the
+    colour filter array."""
     v, e = scenario["glare_veiling_fraction"], scenario["glare_wing_exponent"]
     return (float(scenario["target_scale"]), bool(scenario["glare"]), None if v == -1 else float(v),
-            None if e == -1 else float(e))
+            None if e == -1 else float(e), bool(scenario["cfa"]))
 
 
 def _exposer(frame, cache: dict, key: tuple):
     k = ("exposer", *key)
     if k not in cache:
-        ts, glare, veil, expo = key
-        cache[k] = frame.exposer(target_scale=ts, glare=glare, veiling_fraction=veil, wing_exponent=expo)
+        ts, glare, veil, expo, cfa = key
+        cache[k] = frame.exposer(_stages({"cfa": cfa}), target_scale=ts, glare=glare, veiling_fraction=veil,
+                                 wing_exponent=expo)
     return cache[k]
 
 
 def _stages(scenario: dict) -> tuple:
-    """The exposure's stages: every stage, less the sensor noise or the 8-bit/JPEG output when switched off."""
+    """The exposure's stages: every stage, less those the error-budget switches turn off (absent
+    switches: on)."""
     from camera.phone import ALL_STAGES, NOISE_STAGES
 
     off = set()
-    if not scenario["sensor_noise"]:
+    if not scenario.get("sensor_noise", 1):
         off |= set(NOISE_STAGES)
-    if not scenario["quantise"]:
+    if not scenario.get("quantise", 1):
         off |= {"u8", "jpeg"}
+    off |= {k for k in ("cfa", "nr", "sharpen", "chroma", "jpeg") if not scenario.get(k, 1)}
     return tuple(s for s in ALL_STAGES if s not in off)
+
+
+def _isp(exposer, scenario: dict) -> tuple:
+    """``(isp, demosaic)`` of a trial's exposure: the profile's ``[isp]`` with the scenario's JPEG
+    quality and block-grid offset, and its demosaic (None: the profile's)."""
+    import dataclasses
+
+    isp = exposer.phone.params.isp
+    q = int(scenario["jpeg_quality"])
+    ox, oy = isp.jpeg_grid_offset_px
+    du, dv = int(scenario["jpeg_grid_offset_u_px"]), int(scenario["jpeg_grid_offset_v_px"])
+    new = dataclasses.replace(isp, jpeg_quality=isp.jpeg_quality if q == -1 else q,
+                              jpeg_grid_offset_px=((ox + du) % 16, (oy + dv) % 16))
+    return (isp if new == isp else new), DEMOSAIC_CODES[float(scenario["demosaic"])]
 
 
 def _sensor_centroid_sigma(frame, exposer, row, cache: dict, key, spots_px) -> float | None:
@@ -379,7 +428,8 @@ def _exposure(exposer, cache: dict, key, scenario: dict, seed: int):
 
     store = cache.setdefault("exposures", OrderedDict())
     ev = scenario["exposure_compensation_ev"]
-    k = (key, int(seed), _stages(scenario), scenario["exposure_s"], scenario["iso"], ev)
+    isp, demosaic = _isp(exposer, scenario)
+    k = (key, int(seed), _stages(scenario), scenario["exposure_s"], scenario["iso"], ev, isp, demosaic)
     if k in store:
         store.move_to_end(k)
         return store[k], 0.0
@@ -388,7 +438,7 @@ def _exposure(exposer, cache: dict, key, scenario: dict, seed: int):
     if ev != 0:  # exposure compensation: the time the phone would choose, times 2^EV
         t_s, iso, _ = exposer.settings(t_s, iso)
         t_s *= 2.0 ** ev
-    ex = exposer.expose(seed=int(seed), exposure_s=t_s, iso=iso, stages=_stages(scenario))
+    ex = exposer.expose(seed=int(seed), exposure_s=t_s, iso=iso, stages=_stages(scenario), isp=isp, demosaic=demosaic)
     dt = time.perf_counter() - t0
     store[k] = ex
     while len(store) > _EXPOSURE_CACHE:
@@ -398,7 +448,7 @@ def _exposure(exposer, cache: dict, key, scenario: dict, seed: int):
 
 def _is_baseline(scenario: dict) -> bool:
     """Every error-budget switch at its default (the sensor bound is computed for these only)."""
-    return all(scenario[k] == RENDER_PARAMETERS[k].default for k in ("sensor_noise", "glare", "quantise"))
+    return all(scenario[k] == RENDER_PARAMETERS[k].default for k in _SOURCE_SWITCHES)
 
 
 def _solve_one(scenario: dict, seed: int, frame, exposers: dict) -> dict:

@@ -1269,7 +1269,7 @@ def _finite(obj):
 
 
 def _budget_sections(rep, out_dir, config, summary, budget) -> None:
-    from .error_budget import SOURCE_LABELS, VARIANTS, budget_figure, budget_rows_for_csv
+    from .error_budget import SOURCE_LABELS, VARIANTS, applicable_variants, budget_figure, budget_rows_for_csv
     from .report import write_csv
 
     cols, rows = budget_rows_for_csv(budget["attribution"])
@@ -1282,8 +1282,9 @@ def _budget_sections(rep, out_dir, config, summary, budget) -> None:
         "formation, the optics and the pattern's geometry give by themselves: the flash-to-lens parallax, the "
         "spots' pixel sampling); 'random centroid noise' is the geometric trial on the same settings at the "
         "centroid scatter measured on the rendered exposures (not a removal: that source alone).", "note")
+    ran = {v.name for v in applicable_variants(config.camera)}
     rep.bullets([f"{v.name}: {v.meaning}" + ("" if v.all_exposures else " (the first exposure of each setting)")
-                 for v in VARIANTS])
+                 for v in VARIANTS if v.name in ran])
     cs = budget["centroids"]
     rep.table(["range (m)", "scatter over exposures (px)", "common offset (px)", "differential offset (px)",
                "sensor CRLB (px)", "settings"],
@@ -1292,7 +1293,9 @@ def _budget_sections(rep, out_dir, config, summary, budget) -> None:
               caption="Measured centroids against the targets' true projections (through the true lens, at the "
                       "actual pose), medians over the stand settings")
     names = [n for n in ("floor", "perfect_calibration", "no_sensor_noise", "no_glare", "no_quantisation",
-                         "no_misalignment", "geometric")]
+                         "no_misalignment", "no_jpeg", "no_chroma_subsampling", "no_cfa", "no_noise_reduction",
+                         "no_sharpening", "geometric")
+             if n in ("floor", "geometric") or any(n in b for b in budget["attribution"])]
     for grp, comps in (("position", STATE_KEYS[:3]), ("attitude", STATE_KEYS[3:])):
         tcols = ["range (m)", "component", "RMS error"] + [SOURCE_LABELS[n] for n in names] + ["interaction"]
         trows = [[b["range_m"], b["component"], b["baseline"]] + [b.get(n, float("nan")) for n in names]

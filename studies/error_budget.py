@@ -17,8 +17,18 @@ no_quantisation        the delivered image's 8 bits and JPEG (a float image thro
                        curve)
 no_misalignment        the phone's rotation in its holder (the errors taken against the actual
                        pose instead of the commanded one)
-all_removed            all of the above at once: the floor, what the optics, the retro spots'
-                       formation and the pattern give by themselves
+all_removed            all of the above and below at once: the floor, what the optics, the retro
+                       spots' formation and the pattern give by themselves (on a mono sensor)
+no_jpeg                the JPEG round trip alone (the 8-bit image the encoder got: its 8 x 8
+                       blocks' quantisation, at the profile's quality and block-grid phase)
+no_chroma_subsampling  the 4:2:0 chroma of a colour JPEG (4:4:4 instead; only where the profile's
+                       ``[isp] jpeg_subsampling`` is "4:2:0")
+no_cfa                 the Bayer mosaic and the ISP's demosaic (a mono sensor: every pixel the
+                       luminance, the PSF at the band's middle)
+no_noise_reduction     the ISP's noise reduction (only where the profile's ``[isp] nr_sigma_px``
+                       is > 0)
+no_sharpening          the ISP's unsharp mask (only where the profile's ``[isp] sharpen_amount``
+                       is > 0)
 geometric              *only* random centroid noise: the geometric trial on the same settings at
                        the centroid scatter measured on the rendered exposures
 =====================  ==========================================================================
@@ -40,6 +50,7 @@ headline one (:data:`HEADLINE_READING`, why: :data:`HEADLINE_REASON`).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,15 +61,34 @@ from svgs.frames import STATE_KEYS
 @dataclass(frozen=True)
 class Variant:
     """One error source removed: its name, what it means, the scenario values that remove it,
-    and whether every exposure of a setting is run (``False``: the first only)."""
+    whether every exposure of a setting is run (``False``: the first only), and ``applies``: a
+    test on the camera's :class:`camera.phone.params.PhoneParams` (None: every camera) - a
+    variant that would change nothing for a camera (a stage its profile leaves off) is not run."""
 
     name: str
     meaning: str
     values: dict
     all_exposures: bool = True
+    applies: Callable | None = None
 
 
 _PERFECT = {"focal_error_frac": 0.0, "pp_error_u_px": 0.0, "pp_error_v_px": 0.0, "k1_error": 0.0}
+#: The image path's switches (issue 24), all off in the floor.
+_IMAGE_PATH_OFF = {"cfa": 0.0, "nr": 0.0, "sharpen": 0.0}
+
+
+def _colour_420(p) -> bool:
+    return p.cfa.enabled and p.isp.jpeg_quality > 0 and p.isp.jpeg_subsampling == "4:2:0"
+
+
+def image_path_on(p) -> bool:
+    """Whether a phone model uses the image path of issue 24 (a colour JPEG, the ISP's noise
+    reduction or sharpening): only then are its stages separate error-budget variants and switched
+    off in the floor. With ``[isp] jpeg_subsampling = "gray"`` and no NR or sharpening (the
+    profiles' defaults until the committed reports are regenerated on it) the budget is the one
+    before issue 24, variant for variant."""
+    return p.isp.jpeg_subsampling != "gray" or p.isp.nr_sigma_px > 0 or p.isp.sharpen_amount > 0
+
 
 VARIANTS = (
     Variant("perfect_calibration", "perfect calibration (the solver knows the true lens)", _PERFECT),
@@ -67,21 +97,46 @@ VARIANTS = (
     Variant("no_quantisation", "no 8-bit output and no JPEG", {"quantise": 0.0}),
     Variant("no_misalignment", "no installation misalignment of the phone in its holder", {"truth_actual": 1.0}),
     Variant("all_removed", "all of these removed (the floor)",
-            {**_PERFECT, "sensor_noise": 0.0, "glare": 0.0, "quantise": 0.0, "truth_actual": 1.0}, False),
+            {**_PERFECT, "sensor_noise": 0.0, "glare": 0.0, "quantise": 0.0, "truth_actual": 1.0, **_IMAGE_PATH_OFF},
+            False),
+    # the phone's image path (issue 24); after the others, so that their trial ids stay
+    Variant("no_jpeg", "no JPEG round trip (the 8-bit image the encoder got)", {"jpeg": 0.0},
+            applies=lambda p: image_path_on(p) and p.isp.jpeg_quality > 0),
+    Variant("no_chroma_subsampling", "full chroma (4:4:4) instead of the profile's 4:2:0 JPEG", {"chroma": 0.0},
+            applies=_colour_420),
+    Variant("no_cfa", "no Bayer mosaic and no demosaic (a mono sensor)", {"cfa": 0.0},
+            applies=lambda p: image_path_on(p) and p.cfa.enabled),
+    Variant("no_noise_reduction", "no noise reduction in the ISP", {"nr": 0.0},
+            applies=lambda p: p.isp.nr_sigma_px > 0),
+    Variant("no_sharpening", "no sharpening in the ISP", {"sharpen": 0.0}, applies=lambda p: p.isp.sharpen_amount > 0),
 )
 VARIANT_NAMES = tuple(v.name for v in VARIANTS)
 #: The geometric trial at the measured centroid scatter (a separate store, ``DIR/budget-geometric``).
 GEOMETRIC_VARIANT = "geometric"
 #: What each source is called in tables and figures.
 SOURCE_LABELS = {"perfect_calibration": "calibration", "no_sensor_noise": "sensor noise", "no_glare": "glare",
-                 "no_quantisation": "8-bit/JPEG", "no_misalignment": "misalignment",
+                 "no_quantisation": "8-bit/JPEG", "no_misalignment": "misalignment", "no_jpeg": "JPEG",
+                 "no_chroma_subsampling": "4:2:0 chroma", "no_cfa": "Bayer mosaic/demosaic",
+                 "no_noise_reduction": "ISP noise reduction", "no_sharpening": "ISP sharpening",
                  GEOMETRIC_VARIANT: "random centroid noise (geometric)", "floor": "floor (all removed)"}
 STATISTICS = ("mean_abs", "std", "rms")
 
 
+def applicable_variants(camera) -> tuple:
+    """The variants that change something for a camera (name or :class:`svgs.Camera`): those
+    whose ``applies`` holds for its phone model."""
+    from camera.phone.params import PhoneParams
+    from svgs.profiles import Camera
+
+    params = PhoneParams.from_camera(Camera.load(camera))
+    return tuple(v for v in VARIANTS if v.applies is None or v.applies(params))
+
+
 def variant_trials(baseline: list, config) -> list:
     """The variant trials of a campaign's baseline trials (same scenario but for the variant's
-    values, same seed; ``variant`` label set; ids from ``len(baseline) * (v + 1)``)."""
+    values, same seed; ``variant`` label set; ids from ``len(baseline) * (v + 1)``, ``v`` the
+    variant's index in :data:`VARIANTS`); the variants that do not apply to the campaign's camera
+    (:func:`applicable_variants`) are left out."""
     from sim.trials import build_scenario, get_trial_kind
 
     from .execution import Trial
@@ -89,13 +144,20 @@ def variant_trials(baseline: list, config) -> list:
     kind = get_trial_kind(config.trial_kind)
     N = len(baseline)
     label_keys = ("nominal_range_m", "pose_index", "exposure_index")
+    keep = {v.name for v in applicable_variants(config.camera)}
+    from camera.phone.params import PhoneParams
+    from svgs.profiles import Camera
+
+    on = image_path_on(PhoneParams.from_camera(Camera.load(config.camera)))
     out = []
     for v, var in enumerate(VARIANTS):
+        if var.name not in keep:
+            continue
         for tr in baseline:
             if not var.all_exposures and tr.scenario["exposure_index"] != 0:
                 continue
             sc = {k: x for k, x in tr.scenario.items() if k in kind.parameters or k in ("camera", "pattern")}
-            sc.update(var.values)
+            sc.update({k: x for k, x in var.values.items() if on or k not in _IMAGE_PATH_OFF})
             labels = {k: tr.scenario[k] for k in label_keys}
             labels["variant"] = var.name
             out.append(Trial(N * (v + 1) + tr.trial_id, build_scenario(kind, sc, labels), tr.seed))
@@ -260,7 +322,9 @@ HEADLINE_REASON = (
     "counts under all three readings are given beside the headline.")
 #: Machine-readable names of the measured mechanisms (the variants that switch them off).
 SOURCE_IDS = {"perfect_calibration": "calibration", "no_sensor_noise": "sensor_noise", "no_glare": "glare",
-              "no_quantisation": "quantisation", "no_misalignment": "misalignment", "all_removed": "all_sources"}
+              "no_quantisation": "quantisation", "no_misalignment": "misalignment", "all_removed": "all_sources",
+              "no_jpeg": "jpeg", "no_chroma_subsampling": "chroma_subsampling", "no_cfa": "cfa",
+              "no_noise_reduction": "noise_reduction", "no_sharpening": "sharpening"}
 VERDICTS = ("within_2x", "below", "above", "fitted", "no_solution")
 
 
@@ -448,8 +512,10 @@ def budget_figure(budget: list[dict], ranges_m, camera: str, statistic: str = "r
     fig = Figure(figsize=(12, 6.8))
     axes = fig.subplots(2, 3).ravel()
     x = np.arange(len(ranges_m))
-    names = ["floor", *[n for n in VARIANT_NAMES if n != "all_removed"]]
-    colors = dict(zip(names + ["interaction"], ["0.55", "C0", "C1", "C2", "C3", "C4", "0.85"]))
+    names = ["floor", *[n for n in VARIANT_NAMES if n != "all_removed" and any(n in b for b in budget)]]
+    palette = ["0.55", *[f"C{i}" for i in range(10)]]
+    colors = {n: palette[i % len(palette)] for i, n in enumerate(names)}
+    colors["interaction"] = "0.85"
     for ax, c in zip(axes, STATE_KEYS):
         rows = [next(b for b in budget if b["range_m"] == r and b["component"] == c and b["statistic"] == statistic)
                 for r in ranges_m]

@@ -4,8 +4,9 @@ Flux (photons/s/px, from :mod:`render`; the retro spots as sub-pixel point sampl
 PSF (Airy + aberration core, glare wings, ghosts; :mod:`camera.phone.optics`), integrated over
 each pixel -> Bayer mosaic (:mod:`camera.phone.cfa`) -> exposure (auto or manual) -> sensor
 in electrons (shot, dark, DSNU/PRNU, blooming) -> readout (read noise, gain, black level,
-ADC) = **raw** (DN) -> ISP (white balance, demosaic to luminance, tone curve, 8 bits,
-downscale, JPEG) = **image** (uint8). No Mitsuba here: it runs on any flux image.
+ADC) = **raw** (DN) -> ISP (white balance, demosaic, noise reduction, tone curve, sharpening,
+8 bits, downscale, JPEG; :mod:`camera.phone.isp`) = **image** (uint8, the luminance the app
+thresholds). No Mitsuba here: it runs on any flux image.
 
 Render once, expose many: :class:`Exposer` holds one noise-free flux, applies the optics and
 meters the scene once, and then makes as many exposures (noise draws, exposure or gain
@@ -14,10 +15,13 @@ changes) as asked, each from its own seed.
 Stages (``stages=``): ``glare`` (optics PSF; off: a perfect lens), ``cfa`` (the profile's
 colour filter array; off, or ``[cfa] pattern = "none"``: mono), ``shot``, ``dark``, ``fpn``
 (DSNU and PRNU), ``read``, ``bloom`` (off: plain full-well clipping), ``adc`` (quantise and
-clip; off: float DN), ``tone`` (off: linear), ``u8`` (the delivered image in 8 bits; off: a
-float32 image on the same 0-255 scale, and no JPEG), ``downscale``, ``jpeg``. The optics
-stages (``glare``, ``cfa``) are fixed per :class:`Exposer`; the others may change per
-exposure (:meth:`Exposer.expose`'s ``stages``).
+clip; off: float DN), ``nr`` (the ISP's noise reduction, ``[isp] nr_sigma_px`` > 0), ``tone``
+(off: linear), ``sharpen`` (unsharp mask, ``[isp] sharpen_amount`` > 0), ``u8`` (the delivered
+image in 8 bits; off: a float32 image on the same 0-255 scale, and no JPEG), ``downscale``,
+``chroma`` (a colour JPEG's chroma subsampled as ``[isp] jpeg_subsampling``; off: 4:4:4),
+``jpeg``. The optics stages (``glare``, ``cfa``) are fixed per :class:`Exposer`; the others
+may change per exposure (:meth:`Exposer.expose`'s ``stages``), and so may the ISP's
+parameters and the demosaic (its ``isp`` and ``demosaic``).
 """
 
 from __future__ import annotations
@@ -28,11 +32,28 @@ import numpy as np
 
 from svgs.errors import InputError
 
-from camera.phone.isp import ExposureSolver, auto_exposure, downscale, jpeg_roundtrip, tone_lut
-from camera.phone.cfa import channel_map, luminance, response_map, tone_image
+from camera.phone.isp import (
+    ExposureSolver,
+    auto_exposure,
+    downscale,
+    jpeg_roundtrip,
+    luma,
+    noise_reduction,
+    tone_lut,
+    unsharp_mask,
+)
+from camera.phone.cfa import channel_map, linear_bgr, luminance, response_map, tone_bgr, tone_image
 from camera.phone.optics import apply_psf, compose, core_image, core_psf, core_share, glare_image, wings_coarse
 from camera.phone.psf import PIXEL_KERNEL_RADIUS_PX, splat_patches, support_box
-from camera.phone.params import ALL_STAGES, NOISE_STAGES, OPTICS_STAGES, PhoneParams, check_stages
+from camera.phone.params import (
+    ALL_STAGES,
+    NOISE_STAGES,
+    OPTICS_STAGES,
+    IspParams,
+    PhoneParams,
+    check_demosaic,
+    check_stages,
+)
 from camera.phone.sensor import bloom, electrons, fixed_patterns, readout
 from camera.tonemap import gamma_u8
 
@@ -382,7 +403,8 @@ class Exposer:
             raise InputError(f"exposure_s: impossible exposure of {exposure_s} s for a phone camera (> 60 s)")
         return float(exposure_s), float(iso), info
 
-    def expose(self, *, seed: int = 0, exposure_s=None, iso=None, keep_electrons=False, stages=None) -> Exposure:
+    def expose(self, *, seed: int = 0, exposure_s=None, iso=None, keep_electrons=False, stages=None, isp=None,
+               demosaic=None) -> Exposure:
         """One exposure with its own noise draw.
 
         Parameters
@@ -396,6 +418,12 @@ class Exposer:
         stages : sequence of str, optional
             The stages of this exposure (default the exposer's); the optics stages
             (``glare``, ``cfa``) must be the exposer's, since its optical image is made.
+        isp : camera.phone.params.IspParams, optional
+            The ISP of this exposure (JPEG quality, chroma sampling and block grid, noise
+            reduction, sharpening, tone, downscale) instead of the profile's ``[isp]``.
+        demosaic : str, optional
+            The demosaic of this exposure (:data:`camera.phone.params.DEMOSAIC_METHODS`) instead
+            of the profile's ``[cfa] demosaic``.
 
         Returns
         -------
@@ -409,6 +437,11 @@ class Exposer:
             if tuple(s for s in OPTICS_STAGES if s in st) != tuple(s for s in OPTICS_STAGES if s in self.stages):
                 raise InputError(f"stages: the optics stages ({', '.join(OPTICS_STAGES)}) are fixed by the exposer "
                                  f"({', '.join(s for s in OPTICS_STAGES if s in self.stages) or 'none'})")
+        if isp is None:
+            isp = p.isp
+        elif not isinstance(isp, IspParams):
+            raise InputError(f"isp: expected a camera.phone.params.IspParams, got {type(isp).__name__}")
+        method = p.cfa.demosaic if demosaic is None else check_demosaic(demosaic)
         t, iso, info = self.settings(exposure_s, iso)
         prnu, dsnu = self.phone.fixed_patterns()
         e = electrons(self.flux_optics, sp, t, prnu, dsnu, seed, shot="shot" in st, dark="dark" in st, fpn="fpn" in st)
@@ -416,23 +449,70 @@ class Exposer:
             info["bloom"] = bloom(e, sp.full_well_e, sp.anti_blooming_drain, sp.bloom_direction)
         else:
             np.minimum(e, sp.full_well_e, out=e)
-        raw, img = readout(e, sp, iso, seed, read="read" in st, adc="adc" in st, lut=None if self.cfa else self._lut)
-        if self.cfa:  # white balance, demosaic, luminance; then the tone curve
-            if "adc" in st:
-                img = tone_image(raw, p.cfa, sp.black_level_dn, sp.white_dn, self._lut)
-            else:
-                img = gamma_u8(luminance(raw, p.cfa, sp.black_level_dn, sp.white_dn), p.isp.gamma if "tone" in st else 0.0)
-        if "u8" not in st:  # the same tone curve, not quantised: float32 on the 0-255 scale
-            lin = (luminance(raw, p.cfa, sp.black_level_dn, sp.white_dn) if self.cfa
-                   else np.clip((raw - sp.black_level_dn) / (sp.white_dn - sp.black_level_dn), 0, 1))
-            g = p.isp.gamma if "tone" in st else 0.0
-            img = (255.0 * (np.asarray(lin, np.float64) ** (1.0 / g) if g > 0 else lin)).astype(np.float32)
-        elif img is None:
-            img = gamma_u8(np.clip((raw - sp.black_level_dn) / (sp.white_dn - sp.black_level_dn), 0, 1),
-                           p.isp.gamma if "tone" in st else 0.0)
-        if "downscale" in st and p.isp.output_width > 0:
-            img = downscale(img, p.isp.output_width, p.isp.output_height)
-        if "jpeg" in st and "u8" in st and p.isp.jpeg_quality > 0:
-            img = jpeg_roundtrip(img, p.isp.jpeg_quality)
-        info.update({"seed": int(seed), "stages": list(st)})
+        g = isp.gamma if "tone" in st else 0.0
+        same_lut = isp.gamma == p.isp.gamma and ("tone" in st) == ("tone" in self.stages)
+        lut = self._lut if same_lut else tone_lut(sp, isp.gamma, "tone" in st)
+        nr = "nr" in st and isp.nr_sigma_px > 0
+        sharpen = "sharpen" in st and isp.sharpen_amount > 0
+        colour = self.cfa and isp.jpeg_subsampling != "gray"
+        legacy = not (nr or sharpen or colour)  # the luminance image through the one-pass paths
+        raw, img = readout(e, sp, iso, seed, read="read" in st, adc="adc" in st,
+                           lut=None if (self.cfa or not legacy) else lut)
+        if legacy:
+            if self.cfa:  # white balance, demosaic, luminance; then the tone curve
+                if "adc" in st:
+                    img = tone_image(raw, p.cfa, sp.black_level_dn, sp.white_dn, lut, method)
+                else:
+                    img = gamma_u8(luminance(raw, p.cfa, sp.black_level_dn, sp.white_dn, method), g)
+            if "u8" not in st:  # the same tone curve, not quantised: float32 on the 0-255 scale
+                lin = (luminance(raw, p.cfa, sp.black_level_dn, sp.white_dn, method) if self.cfa
+                       else np.clip((raw - sp.black_level_dn) / (sp.white_dn - sp.black_level_dn), 0, 1))
+                img = (255.0 * (np.asarray(lin, np.float64) ** (1.0 / g) if g > 0 else lin)).astype(np.float32)
+            elif img is None:
+                img = gamma_u8(np.clip((raw - sp.black_level_dn) / (sp.white_dn - sp.black_level_dn), 0, 1), g)
+        else:
+            img = self._isp_image(raw, isp, method, g, nr=nr, sharpen=sharpen, colour=colour, u8="u8" in st)
+        if "downscale" in st and isp.output_width > 0:
+            img = downscale(img, isp.output_width, isp.output_height)
+        if "jpeg" in st and "u8" in st and isp.jpeg_quality > 0:
+            sub = (isp.jpeg_subsampling if "chroma" in st else "4:4:4") if colour else "gray"
+            img = jpeg_roundtrip(img, isp.jpeg_quality, sub, isp.jpeg_grid_offset_px)
+        if img.ndim == 3:  # the app reads the colour picture's luma
+            img = luma(img)
+        info.update({"seed": int(seed), "stages": list(st), "demosaic": method if self.cfa else None})
         return Exposure(raw, img, t, iso, sp.gain_dn_per_e(iso), info, e if keep_electrons else None)
+
+    def _isp_image(self, raw, isp, method: str, gamma: float, *, nr: bool, sharpen: bool, colour: bool,
+                   u8: bool) -> np.ndarray:
+        """The ISP's image with noise reduction, sharpening or a colour output: linear image
+        (demosaiced and white-balanced with the mosaic) -> noise reduction -> [luminance, unless
+        ``colour``] -> tone curve -> sharpening of the luminance -> 8 bits (unless ``u8`` is off).
+
+        Returns
+        -------
+        ndarray, shape (H, W) or (H, W, 3) (``colour``: BGR); uint8, or float32 on the 0-255 scale
+        """
+        p = self.phone.params
+        sp = p.sensor
+        black, white = sp.black_level_dn, sp.white_dn
+        if colour and not nr:
+            if u8 and not sharpen:  # rounded in the tables: the same numbers in one pass
+                return tone_bgr(raw, p.cfa, black, white, gamma, method, u8=True)
+            toned = tone_bgr(raw, p.cfa, black, white, gamma, method)
+        else:
+            if self.cfa:
+                lin = linear_bgr(raw, p.cfa, black, white, method)
+            else:
+                lin = np.clip((raw - black) / (white - black), 0, 1).astype(np.float32)
+            if nr:
+                lin = np.clip(noise_reduction(lin, isp.nr_sigma_px, isp.nr_range), 0.0, 1.0)
+            if self.cfa and not colour:
+                lin = luma(lin)
+            lin64 = np.asarray(lin, np.float64)
+            toned = (255.0 * (lin64 ** (1.0 / gamma) if gamma > 0 else lin64)).astype(np.float32)
+        if sharpen:  # the luminance sharpened; a colour image's chroma kept (the same step on B, G and R)
+            y = luma(toned) if toned.ndim == 3 else toned
+            d = unsharp_mask(y, isp.sharpen_amount, isp.sharpen_sigma_px) - y
+            toned = toned + (d[..., None] if toned.ndim == 3 else d)
+        np.clip(toned, 0.0, 255.0, out=toned)
+        return np.rint(toned).astype(np.uint8) if u8 else toned.astype(np.float32)

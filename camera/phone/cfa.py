@@ -61,22 +61,70 @@ def _response_map(response: tuple, pattern: str, H: int, W: int) -> np.ndarray:
     return out
 
 
-def demosaic_code(cfa: CfaParams) -> int:
-    """The ``cv2.cvtColor`` code that demosaics this layout to BGR with the chosen method."""
-    suffix = {"bilinear": "", "edge_aware": "_EA", "vng": "_VNG"}[cfa.demosaic]
+def demosaic_code(cfa: CfaParams, method: str | None = None) -> int:
+    """The ``cv2.cvtColor`` code that demosaics this layout to BGR with ``method`` (default the
+    profile's ``[cfa] demosaic``; :data:`camera.phone.params.DEMOSAIC_METHODS`)."""
+    suffix = {"bilinear": "", "edge_aware": "_EA", "vng": "_VNG"}[cfa.demosaic if method is None else method]
     return getattr(cv2, f"COLOR_Bayer{_CV_CODES[cfa.pattern]}2BGR{suffix}")
 
 
-def _demosaic(raw: np.ndarray, cfa: CfaParams, white_dn: float) -> np.ndarray:
-    """OpenCV's demosaic of a uint16 mosaic to BGR (uint16; float32 for VNG, which takes 8-bit
-    input only: the top bits go through it and are scaled back)."""
-    if cfa.demosaic == "vng":
+def demosaic(raw: np.ndarray, cfa: CfaParams, white_dn: float, method: str | None = None) -> np.ndarray:
+    """OpenCV's demosaic of a uint16 mosaic to BGR.
+
+    Parameters
+    ----------
+    raw : ndarray, uint16, shape (H, W)
+        The mosaic (DN).
+    cfa : CfaParams
+    white_dn : float
+        The ADC's white level (VNG takes 8-bit input only: the top 8 bits of the ADC's range go
+        through it and are scaled back).
+    method : str, optional
+        ``"bilinear"``, ``"edge_aware"`` or ``"vng"``; default the profile's ``[cfa] demosaic``.
+
+    Returns
+    -------
+    ndarray, shape (H, W, 3): uint16 (float32 for VNG), DN
+    """
+    m = cfa.demosaic if method is None else method
+    if m == "vng":
         shift = max(0, int(np.ceil(np.log2(white_dn + 1))) - 8)
-        return cv2.cvtColor((raw >> shift).astype(np.uint8), demosaic_code(cfa)).astype(np.float32) * (1 << shift)
-    return cv2.cvtColor(raw, demosaic_code(cfa))
+        return cv2.cvtColor((raw >> shift).astype(np.uint8), demosaic_code(cfa, m)).astype(np.float32) * (1 << shift)
+    return cv2.cvtColor(raw, demosaic_code(cfa, m))
 
 
-def luminance(raw_dn: np.ndarray, cfa: CfaParams, black_dn: float, white_dn: float) -> np.ndarray:
+def linear_bgr(raw_dn: np.ndarray, cfa: CfaParams, black_dn: float, white_dn: float,
+               method: str | None = None) -> np.ndarray:
+    """The ISP from the raw mosaic to white-balanced linear colour: demosaic, black level, white
+    balance, each channel clipped to white.
+
+    Parameters
+    ----------
+    raw_dn : ndarray, shape (H, W)
+        ADC output (DN) of the mosaic.
+    cfa : CfaParams
+    black_dn, white_dn : float
+    method : str, optional
+        The demosaic (default the profile's).
+
+    Returns
+    -------
+    ndarray, float32, shape (H, W, 3)
+        B, G, R (OpenCV's order) as fractions of white, in [0, 1].
+    """
+    raw = np.clip(np.rint(raw_dn), 0, 65535).astype(np.uint16)
+    bgr = demosaic(raw, cfa, white_dn, method).astype(np.float32)
+    span = float(white_dn - black_dn)
+    for c_bgr, c in ((2, 0), (1, 1), (0, 2)):  # BGR planes -> R, G, B
+        ch = bgr[..., c_bgr]
+        ch -= black_dn
+        ch /= span * cfa.response[c]
+        np.clip(ch, 0.0, 1.0, out=ch)
+    return bgr
+
+
+def luminance(raw_dn: np.ndarray, cfa: CfaParams, black_dn: float, white_dn: float,
+              method: str | None = None) -> np.ndarray:
     """The ISP from the raw mosaic to linear luminance.
 
     Parameters
@@ -85,6 +133,8 @@ def luminance(raw_dn: np.ndarray, cfa: CfaParams, black_dn: float, white_dn: flo
         ADC output (DN) of the mosaic.
     cfa : CfaParams
     black_dn, white_dn : float
+    method : str, optional
+        The demosaic (default the profile's).
 
     Returns
     -------
@@ -93,13 +143,65 @@ def luminance(raw_dn: np.ndarray, cfa: CfaParams, black_dn: float, white_dn: flo
         white is clipped there, as an ISP does).
     """
     raw = np.clip(np.rint(raw_dn), 0, 65535).astype(np.uint16)
-    bgr = _demosaic(raw, cfa, white_dn).astype(np.float32)
+    bgr = demosaic(raw, cfa, white_dn, method).astype(np.float32)
     span = float(white_dn - black_dn)
     out = np.zeros(raw.shape, np.float32)
     for c_bgr, c in ((2, 0), (1, 1), (0, 2)):  # BGR planes -> R, G, B
         ch = (bgr[..., c_bgr] - black_dn) / (span * cfa.response[c])
         np.clip(ch, 0.0, 1.0, out=ch)
         out += np.float32(LUMA[c]) * ch
+    return out
+
+
+@njit(parallel=True, cache=True)
+def _plane_lut_kernel(bgr, luts, out):
+    """Per pixel and channel: that channel's table at the pixel's DN (clamped to the table)."""
+    H, W = out.shape[0], out.shape[1]
+    n = luts.shape[1]
+    for r in prange(H):
+        for c in range(W):
+            for k in range(3):
+                v = bgr[r, c, k]
+                out[r, c, k] = luts[k, v if v < n else n - 1]
+
+
+def tone_bgr(raw_dn: np.ndarray, cfa: CfaParams, black_dn: float, white_dn: float, gamma: float,
+             method: str | None = None, u8: bool = False) -> np.ndarray:
+    """The ISP from the raw mosaic to a toned colour image: demosaic, black level, white balance,
+    each channel clipped to white, then the tone curve on each channel (what a colour ISP hands
+    to its YCbCr encoder).
+
+    Parameters
+    ----------
+    raw_dn : ndarray, shape (H, W)
+    cfa : CfaParams
+    black_dn, white_dn : float
+    gamma : float
+        ``out = 255 lin^(1/gamma)`` (0: linear).
+    method : str, optional
+        The demosaic (default the profile's).
+    u8 : bool
+        Rounded to 8 bits (else float32, not rounded).
+
+    Returns
+    -------
+    ndarray, shape (H, W, 3)
+        B, G, R on the 0-255 scale: float32, or uint8 with ``u8``.
+    """
+    raw = np.clip(np.rint(raw_dn), 0, 65535).astype(np.uint16)
+    bgr = demosaic(raw, cfa, white_dn, method)
+    bgr16 = bgr if bgr.dtype == np.uint16 else np.clip(np.rint(bgr), 0, 65535).astype(np.uint16)
+    span = float(white_dn - black_dn)
+    dn = np.arange(int(white_dn) + 1, dtype=np.float64)
+    luts = np.empty((3, dn.size))
+    for c_bgr, c in ((2, 0), (1, 1), (0, 2)):
+        lin = np.clip((dn - black_dn) / (span * cfa.response[c]), 0.0, 1.0)
+        luts[c_bgr] = 255.0 * (lin ** (1.0 / gamma) if gamma > 0 else lin)
+    if u8:
+        luts, out = np.rint(luts).astype(np.uint8), np.empty(bgr16.shape, np.uint8)
+    else:
+        luts, out = luts.astype(np.float32), np.empty(bgr16.shape, np.float32)
+    _plane_lut_kernel(np.ascontiguousarray(bgr16), luts, out)
     return out
 
 
@@ -120,16 +222,18 @@ def _luma_tone_kernel(bgr, plane_luts, lut, out8):
             out8[r, c] = lut[i if i < nl else nl - 1]
 
 
-def tone_image(raw_dn: np.ndarray, cfa: CfaParams, black_dn: float, white_dn: float, lut: np.ndarray) -> np.ndarray:
-    """The ISP from the raw mosaic to the 8-bit image in one pass after OpenCV's demosaic:
-    :func:`luminance` followed by the tone LUT (indexed by DN, as the mono path's).
+def tone_image(raw_dn: np.ndarray, cfa: CfaParams, black_dn: float, white_dn: float, lut: np.ndarray,
+               method: str | None = None) -> np.ndarray:
+    """The ISP from the raw mosaic to the 8-bit image in one pass after OpenCV's demosaic
+    (``method``, default the profile's): :func:`luminance` followed by the tone LUT (indexed by
+    DN, as the mono path's).
 
     Returns
     -------
     ndarray, uint8, shape (H, W)
     """
     raw = raw_dn.astype(np.uint16)  # the ADC's output: whole DN in [0, white]
-    bgr = _demosaic(raw, cfa, white_dn)
+    bgr = demosaic(raw, cfa, white_dn, method)
     span = float(white_dn - black_dn)
     dn = np.arange(int(white_dn) + 1, dtype=np.float64)
     planes = np.empty((3, dn.size))

@@ -1,4 +1,5 @@
-"""Phone image processing: auto-exposure, tone curve, 8-bit output, downscale, JPEG.
+"""Phone image processing: auto-exposure, tone curve, 8-bit output, downscale, noise
+reduction, sharpening, JPEG.
 
 Auto-exposure as Android 4-era phones did it: meter the scene (mean, centre-weighted or
 spot), then choose the exposure time first and the ISO second so that the metered linear
@@ -307,9 +308,138 @@ def downscale(image: np.ndarray, width: int, height: int) -> np.ndarray:
     return cv2.resize(image, (int(width), int(height)), interpolation=cv2.INTER_AREA)
 
 
-def jpeg_roundtrip(image: np.ndarray, quality: int) -> np.ndarray:
-    """Encode as JPEG at ``quality`` and decode again (OpenCV)."""
-    ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
-    if not ok:  # pragma: no cover - OpenCV always encodes uint8 grey
+#: OpenCV's chroma sampling flag for each colour :data:`camera.phone.params.JPEG_SUBSAMPLING`.
+_JPEG_SAMPLING = {"4:4:4": cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444, "4:2:0": cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420}
+
+
+def jpeg_roundtrip(image: np.ndarray, quality: int, subsampling: str = "gray", grid_offset_px=(0, 0)) -> np.ndarray:
+    """Encode as a baseline JPEG and decode again (OpenCV's libjpeg; IJG quality scaling).
+
+    Parameters
+    ----------
+    image : ndarray, uint8, shape (H, W) or (H, W, 3)
+        A grey image (``subsampling="gray"``), or a colour one in OpenCV's BGR order, coded in
+        YCbCr (JFIF: full-range BT.601) with full (``"4:4:4"``) or 2 x 2 subsampled
+        (``"4:2:0"``) chroma and decoded with libjpeg's default (smooth) chroma upsampling.
+    quality : int
+        1-100.
+    subsampling : {"gray", "4:4:4", "4:2:0"}
+    grid_offset_px : (int, int)
+        ``(x, y)``, 0-15: image pixel ``(u, v)`` is coded at ``(u + x, v + y)`` of the block
+        grid (the image is padded by edge replication on the left and top, coded, decoded and
+        cropped back): the phase of the 8 x 8 blocks (16 x 16 MCUs at 4:2:0) against what the
+        image shows.
+
+    Returns
+    -------
+    ndarray, uint8, the shape of ``image``
+    """
+    from camera.phone.params import check_grid_offset, check_subsampling
+
+    img = np.asarray(image)
+    try:
+        q = float(quality)
+    except (TypeError, ValueError):
+        raise InputError(f"quality: expected a whole number 1-100, got {quality!r}") from None
+    if not (q.is_integer() and 1 <= q <= 100):
+        raise InputError(f"quality: expected a whole number 1-100, got {quality!r}")
+    sub = check_subsampling(subsampling, "subsampling")
+    ox, oy = check_grid_offset(grid_offset_px, "grid_offset_px")
+    if img.dtype != np.uint8:
+        raise InputError(f"image: expected uint8, got {img.dtype}")
+    if (sub == "gray") != (img.ndim == 2) or (img.ndim == 3 and img.shape[2] != 3) or img.ndim not in (2, 3):
+        raise InputError(f"image: shape {img.shape} does not fit subsampling {sub!r} (gray: (H, W); colour: (H, W, 3))")
+    if ox or oy:
+        img = cv2.copyMakeBorder(img, oy, 0, ox, 0, cv2.BORDER_REPLICATE)
+    params = [cv2.IMWRITE_JPEG_QUALITY, int(q)]
+    if sub != "gray":
+        params += [cv2.IMWRITE_JPEG_SAMPLING_FACTOR, _JPEG_SAMPLING[sub]]
+    ok, buf = cv2.imencode(".jpg", np.ascontiguousarray(img), params)
+    if not ok:  # pragma: no cover - OpenCV always encodes uint8 images
         raise RuntimeError("JPEG encoding failed")
-    return cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
+    out = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED if sub == "gray" else cv2.IMREAD_COLOR)
+    return np.ascontiguousarray(out[oy:, ox:])
+
+
+#: Luminance weights of OpenCV's BGR channel order (ITU-R BT.601).
+LUMA_BGR = np.array([0.114, 0.587, 0.299], np.float32)
+
+
+def luma(image: np.ndarray) -> np.ndarray:
+    """The BT.601 luma of a BGR image (what the app reads from a colour picture).
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W, 3)
+        uint8 (rounded, OpenCV's ``COLOR_BGR2GRAY``) or float (0-255 scale, not rounded).
+
+    Returns
+    -------
+    ndarray, shape (H, W): uint8, or float32 for a float image
+    """
+    if image.dtype == np.uint8:
+        return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    return np.tensordot(np.asarray(image, np.float32), LUMA_BGR, axes=([2], [0])).astype(np.float32)
+
+
+def noise_reduction(image: np.ndarray, sigma_px: float, range_sigma: float = 0.0) -> np.ndarray:
+    """The ISP's noise reduction: each channel filtered on its own (OpenCV).
+
+    ``range_sigma == 0``: a Gaussian of standard deviation ``sigma_px`` (``cv2.GaussianBlur``,
+    kernel to 4 sigma, edges replicated). ``range_sigma > 0``: a bilateral filter
+    (``cv2.bilateralFilter``), spatial sigma ``sigma_px`` over a disk of radius ``ceil(4 sigma)``,
+    range sigma ``range_sigma`` in the image's units: it smooths the noise of flat regions and
+    keeps edges such as a spot's rim.
+
+    Parameters
+    ----------
+    image : ndarray, float32, shape (H, W) or (H, W, C)
+        A linear image (fraction of white).
+    sigma_px : float
+        > 0.
+    range_sigma : float
+        >= 0.
+
+    Returns
+    -------
+    ndarray, float32, the shape of ``image``
+    """
+    if not (np.isfinite(sigma_px) and sigma_px > 0):
+        raise InputError(f"sigma_px: expected a positive number of pixels, got {sigma_px!r}")
+    if not (np.isfinite(range_sigma) and range_sigma >= 0):
+        raise InputError(f"range_sigma: expected a non-negative number, got {range_sigma!r}")
+    img = np.ascontiguousarray(image, np.float32)
+    planes = [img] if img.ndim == 2 else [np.ascontiguousarray(img[..., k]) for k in range(img.shape[2])]
+    out = []
+    for pl in planes:
+        if range_sigma == 0:
+            out.append(cv2.GaussianBlur(pl, (0, 0), float(sigma_px), borderType=cv2.BORDER_REPLICATE))
+        else:
+            d = 2 * int(np.ceil(4.0 * sigma_px)) + 1
+            out.append(cv2.bilateralFilter(pl, d, float(range_sigma), float(sigma_px), borderType=cv2.BORDER_REPLICATE))
+    return out[0] if img.ndim == 2 else np.stack(out, axis=-1)
+
+
+def unsharp_mask(image: np.ndarray, amount: float, sigma_px: float) -> np.ndarray:
+    """Unsharp masking, ``out = in + amount (in - G_sigma * in)`` (``cv2.GaussianBlur``, kernel
+    to 4 sigma, edges replicated), not clipped.
+
+    Parameters
+    ----------
+    image : ndarray, float32, shape (H, W)
+    amount : float
+        >= 0.
+    sigma_px : float
+        > 0.
+
+    Returns
+    -------
+    ndarray, float32, shape (H, W)
+    """
+    if not (np.isfinite(amount) and amount >= 0):
+        raise InputError(f"amount: expected a non-negative number, got {amount!r}")
+    if not (np.isfinite(sigma_px) and sigma_px > 0):
+        raise InputError(f"sigma_px: expected a positive number of pixels, got {sigma_px!r}")
+    img = np.ascontiguousarray(image, np.float32)
+    blur = cv2.GaussianBlur(img, (0, 0), float(sigma_px), borderType=cv2.BORDER_REPLICATE)
+    return (img + np.float32(amount) * (img - blur)).astype(np.float32)

@@ -49,7 +49,18 @@ Tables (all optional; a missing key takes the documented default, marked ASSUMPT
     output_width = 0              # 0 = full resolution; else downscale (INTER_AREA) to this size
     output_height = 0
     jpeg_quality = 0              # 0 = no JPEG round trip; else 1-100
-    stages = ["glare", "cfa", "shot", "dark", "fpn", "read", "bloom", "adc", "tone", "downscale", "jpeg"]
+    jpeg_subsampling = "gray"     # "gray": one luminance plane (tone after luma); "4:4:4" or "4:2:0":
+                                  # a colour image (tone per channel), JPEG with that chroma sampling,
+                                  # read back as its BT.601 luma
+    jpeg_grid_offset_px = [0, 0]  # (x, y): image pixel (u, v) lies at (u + x, v + y) of the JPEG's
+                                  # block grid (0-15: the 8 x 8 blocks, 16 x 16 MCUs at 4:2:0)
+    nr_sigma_px = 0.0             # noise reduction on the linear image after demosaic (0: none):
+    nr_range = 0.0                # Gaussian of this sigma (px), bilateral when nr_range (fraction of
+                                  # white) > 0
+    sharpen_amount = 0.0          # unsharp mask on the toned image (0: none):
+    sharpen_sigma_px = 1.0        # out = in + amount (in - Gaussian_sigma(in))
+    stages = ["glare", "cfa", "shot", "dark", "fpn", "read", "bloom", "adc", "nr", "tone", "sharpen", "u8",
+              "downscale", "chroma", "jpeg"]
 
 Every value is validated where it enters; a bad one raises :class:`svgs.errors.InputError`
 naming ``table.key``.
@@ -63,7 +74,10 @@ import numpy as np
 
 from svgs.errors import InputError
 
-ALL_STAGES = ("glare", "cfa", "shot", "dark", "fpn", "read", "bloom", "adc", "tone", "u8", "downscale", "jpeg")
+ALL_STAGES = ("glare", "cfa", "shot", "dark", "fpn", "read", "bloom", "adc", "nr", "tone", "sharpen", "u8", "downscale",
+              "chroma", "jpeg")
+#: The ISP's stages after the readout (each may change per exposure).
+ISP_STAGES = ("nr", "tone", "sharpen", "u8", "downscale", "chroma", "jpeg")
 #: Stages that act on the optical image before the exposure (fixed per :class:`camera.phone.Exposer`).
 OPTICS_STAGES = ("glare", "cfa")
 #: The sensor's noise sources (off together: a noise-free sensor).
@@ -71,6 +85,11 @@ NOISE_STAGES = ("shot", "dark", "fpn", "read")
 #: Bayer layouts (the colours of the top-left 2 x 2 block, row by row).
 CFA_PATTERNS = ("none", "RGGB", "BGGR", "GRBG", "GBRG")
 METERING = ("mean", "center_weighted", "spot")
+#: OpenCV's demosaic methods (``cv2.COLOR_Bayer*2BGR``, ``*_EA``, ``*_VNG``).
+DEMOSAIC_METHODS = ("bilinear", "edge_aware", "vng")
+#: What the ISP delivers and the JPEG encodes: one luminance plane, or a colour image with full
+#: (4:4:4) or 2 x 2 subsampled (4:2:0) chroma.
+JPEG_SUBSAMPLING = ("gray", "4:4:4", "4:2:0")
 
 
 def _num(table: str, key: str, value, *, lo=None, hi=None, lo_open=False, integer=False):
@@ -268,18 +287,36 @@ class CfaParams:
                     raise InputError(f"[cfa] {k}: expected [R, G, B], got {v!r}")
                 kw[k] = tuple(_num("cfa", f"{k}[{i}]", x, lo=lo, hi=hi, lo_open=True) for i, x in enumerate(v))
         if "demosaic" in t:
-            if t["demosaic"] not in ("bilinear", "edge_aware", "vng"):
-                raise InputError(f"[cfa] demosaic: expected 'bilinear', 'edge_aware' or 'vng', got {t['demosaic']!r}")
-            kw["demosaic"] = t["demosaic"]
+            kw["demosaic"] = check_demosaic(t["demosaic"], "[cfa] demosaic")
         return cls(**kw)
 
 
 @dataclass(frozen=True)
 class IspParams:
+    """The ISP after the readout (see the module docstring's ``[isp]`` table).
+
+    ``jpeg_subsampling``: ``"gray"``, the ISP delivers the luminance (white-balanced linear
+    channels -> BT.601 luma -> tone curve) and the JPEG codes that one plane; ``"4:4:4"`` or
+    ``"4:2:0"``, it delivers a colour image (the tone curve on each channel), the JPEG codes it
+    in YCbCr with full or 2 x 2 subsampled chroma, and the app reads the decoded image's BT.601
+    luma. ``jpeg_grid_offset_px``: image pixel ``(u, v)`` sits at ``(u + x, v + y)`` of the
+    JPEG's block grid (what moves the 8 x 8 blocks against the spots without moving the spots).
+    ``nr_sigma_px`` > 0: noise reduction of the linear image (after the demosaic, before the tone
+    curve): a Gaussian of that sigma, bilateral with range sigma ``nr_range`` (fraction of white)
+    when that is > 0. ``sharpen_amount`` > 0: an unsharp mask of the toned image's luminance,
+    ``out = in + amount (in - G_sigma * in)``.
+    """
+
     gamma: float = 2.2
     output_width: int = 0
     output_height: int = 0
     jpeg_quality: int = 0
+    jpeg_subsampling: str = "gray"
+    jpeg_grid_offset_px: tuple = (0, 0)
+    nr_sigma_px: float = 0.0
+    nr_range: float = 0.0
+    sharpen_amount: float = 0.0
+    sharpen_sigma_px: float = 1.0
     stages: tuple = ALL_STAGES
 
     @classmethod
@@ -295,12 +332,52 @@ class IspParams:
                 kw[k] = _num(T, k, t[k], lo=0, integer=True)
         if "jpeg_quality" in t:
             kw["jpeg_quality"] = _num(T, "jpeg_quality", t["jpeg_quality"], lo=0, hi=100, integer=True)
+        if "jpeg_subsampling" in t:
+            kw["jpeg_subsampling"] = check_subsampling(t["jpeg_subsampling"], "[isp] jpeg_subsampling")
+        if "jpeg_grid_offset_px" in t:
+            kw["jpeg_grid_offset_px"] = check_grid_offset(t["jpeg_grid_offset_px"], "[isp] jpeg_grid_offset_px")
+        for k, hi in (("nr_sigma_px", 20.0), ("nr_range", 1.0), ("sharpen_amount", 10.0)):
+            if k in t:
+                kw[k] = _num(T, k, t[k], lo=0, hi=hi)
+        if "sharpen_sigma_px" in t:
+            kw["sharpen_sigma_px"] = _num(T, "sharpen_sigma_px", t["sharpen_sigma_px"], lo=0, lo_open=True, hi=20.0)
         if "stages" in t:
             kw["stages"] = check_stages(t["stages"], "[isp] stages")
         p = cls(**kw)
         if (p.output_width == 0) != (p.output_height == 0):
             raise InputError("[isp] output_width and output_height must both be 0 (full resolution) or both set")
         return p
+
+
+def check_demosaic(method, name="demosaic") -> str:
+    """A demosaic method of :data:`DEMOSAIC_METHODS` (:class:`InputError` naming ``name`` otherwise)."""
+    if method not in DEMOSAIC_METHODS:
+        raise InputError(f"{name}: expected one of {', '.join(DEMOSAIC_METHODS)}, got {method!r}")
+    return str(method)
+
+
+def check_subsampling(value, name="jpeg_subsampling") -> str:
+    """A JPEG chroma sampling of :data:`JPEG_SUBSAMPLING` (:class:`InputError` naming ``name`` otherwise)."""
+    if value not in JPEG_SUBSAMPLING:
+        raise InputError(f"{name}: expected one of {', '.join(JPEG_SUBSAMPLING)}, got {value!r}")
+    return str(value)
+
+
+def check_grid_offset(value, name="jpeg_grid_offset_px") -> tuple:
+    """``(x, y)``, whole pixels 0-15: where the image's top-left pixel sits in the JPEG's block
+    grid (:class:`InputError` naming ``name`` otherwise)."""
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise InputError(f"{name}: expected [x, y], got {value!r}")
+    out = []
+    for v in value:
+        try:
+            f = float(v)
+        except (TypeError, ValueError):
+            raise InputError(f"{name}: expected whole pixels 0-15, got {value!r}") from None
+        if not (np.isfinite(f) and f.is_integer() and 0 <= f <= 15):
+            raise InputError(f"{name}: expected whole pixels 0-15, got {value!r}")
+        out.append(int(f))
+    return tuple(out)
 
 
 def check_stages(stages, name="stages") -> tuple:

@@ -13,6 +13,10 @@ effective factor: 4.05 for the Galaxy Nexus, 5.1 for the HTC Amaze 4G, not whole
   fraction, is averaged down by ``s``);
 - lens blur given in pixels (aberration, glare core and support, ghost blur) is divided by ``s``.
 
+A preview frame is the ISP's YCbCr 4:2:0 image handed to the app as it is (Android's
+``onPreviewFrame``; ``yuv420sp`` by default on OMAP4, ``OMXDefaults.cpp``): no JPEG, the app reads
+its Y plane (``[isp] jpeg_quality`` set to 0 here).
+
 ASSUMPTION: charge (or digital) binning on the sensor. Phones of 2011 reached their preview size
 by a mix of sensor binning and ISP scaling; both deliver the photons of ``s^2`` pixels per preview
 pixel, and they differ in the read noise of a pixel (summed reads here), which matters only in the
@@ -74,8 +78,12 @@ def binned_camera(camera, width: int = DEFAULT_PREVIEW_SIZE[0], height: int = DE
         if "ghosts" in glare:
             glare["ghosts"] = [[g[0], g[1], float(g[2]) / s] for g in glare["ghosts"]]
     isp = tables.get("isp")
-    if isinstance(isp, dict) and isp.get("output_width"):
-        isp["output_width"], isp["output_height"] = 0, 0  # the preview is delivered at its own size
+    if isinstance(isp, dict):
+        if isp.get("output_width"):
+            isp["output_width"], isp["output_height"] = 0, 0  # the preview is delivered at its own size
+        # a preview frame is the ISP's YCbCr 4:2:0 (yuv420sp on OMAP4 and MSM8660), not a JPEG: the
+        # app reads its Y plane (the luma of the toned colour image), so no JPEG round trip
+        isp["jpeg_quality"] = 0
     # the phone whose stream this is: the app's settings for that phone apply to it
     tables["preview"] = {"of": cam.name, "binning": int(s)}
     out = cam.scaled(width, height).replace(name=f"{cam.name}-preview-{width}x{height}", tables=tables)
