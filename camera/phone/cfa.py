@@ -142,14 +142,10 @@ def luminance(raw_dn: np.ndarray, cfa: CfaParams, black_dn: float, white_dn: flo
         Luminance as a fraction of white, in [0, 1] (a channel that white balance lifts above
         white is clipped there, as an ISP does).
     """
-    raw = np.clip(np.rint(raw_dn), 0, 65535).astype(np.uint16)
-    bgr = demosaic(raw, cfa, white_dn, method).astype(np.float32)
-    span = float(white_dn - black_dn)
-    out = np.zeros(raw.shape, np.float32)
+    bgr = linear_bgr(raw_dn, cfa, black_dn, white_dn, method)
+    out = np.zeros(bgr.shape[:2], np.float32)
     for c_bgr, c in ((2, 0), (1, 1), (0, 2)):  # BGR planes -> R, G, B
-        ch = (bgr[..., c_bgr] - black_dn) / (span * cfa.response[c])
-        np.clip(ch, 0.0, 1.0, out=ch)
-        out += np.float32(LUMA[c]) * ch
+        out += np.float32(LUMA[c]) * bgr[..., c_bgr]
     return out
 
 
