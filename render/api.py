@@ -133,9 +133,10 @@ class Renderer:
         ``roi_spp`` defaults to 64 (guided) or 4096 (path).
     spot_samples : int
         Guided samples per virtual source (:mod:`render.spots`), method ``"guided"``.
-    spot_sampler : {"sobol", "independent"}
-        How the guided samples are placed (:class:`render.spots.SpotEstimator`): stratified
-        Sobol' points (default) or independent random numbers.
+    spot_sampler : {"kronecker", "sobol", "independent"}
+        How the guided samples are placed (:class:`render.spots.SpotEstimator`): the 4-D R4
+        low-discrepancy sequence (default), padded scrambled Sobol' points, or independent random
+        numbers.
     method : {"guided", "path"}
         ``"guided"`` (default): diffuse light by Mitsuba's ``path`` integrator with the
         LEDs as point lights, the flash seen through glass and mirrors by the guided

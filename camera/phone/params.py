@@ -76,8 +76,6 @@ from svgs.errors import InputError
 
 ALL_STAGES = ("glare", "cfa", "shot", "dark", "fpn", "read", "bloom", "adc", "nr", "tone", "sharpen", "u8", "downscale",
               "chroma", "jpeg")
-#: The ISP's stages after the readout (each may change per exposure).
-ISP_STAGES = ("nr", "tone", "sharpen", "u8", "downscale", "chroma", "jpeg")
 #: Stages that act on the optical image before the exposure (fixed per :class:`camera.phone.Exposer`).
 OPTICS_STAGES = ("glare", "cfa")
 #: The sensor's noise sources (off together: a noise-free sensor).
