@@ -107,6 +107,9 @@ def register(sub) -> None:
                    "assets/labs/msfc-frl.toml: 0,0,2 for the Galaxy Nexus, fitted to Table 4's yaw; 0,0,0 otherwise)")
     p.add_argument("--budget", action="store_true",
                    help="also run the error budget: the campaign with one error source removed at a time (render trials)")
+    p.add_argument("--still-lab", action="store_true",
+                   help="a perfect lab: no gimbal or stage positioning error, exact recorded ranges, still air "
+                   "(default: the lab's sourced errors, assets/labs/msfc-frl.toml [errors]; docs/studies.md)")
     p.add_argument("--focal-error-frac", type=float, default=0.0, help="solver's focal-length error, fraction")
     p.add_argument("--pp-error-px", default="0,0", metavar="DU,DV", help="solver's principal-point error, px")
     p.add_argument("--k1-error", type=float, default=0.0, help="solver's radial distortion k1 error")
@@ -209,7 +212,8 @@ def cmd_campaign(args) -> int:
     config = make_config(args.camera, ranges_m=_ranges(args.ranges), trials_per_range=args.trials, seed=args.seed,
                          sigma_px=args.sigma_px, trial_kind=args.trial_kind, pattern=args.pattern,
                          calibration=args.calibration, calibration_error=err, merge_px=args.merge_px,
-                         exposures_per_render=args.exposures_per_render, misalignment_deg=mis, budget=args.budget)
+                         exposures_per_render=args.exposures_per_render, misalignment_deg=mis, budget=args.budget,
+                         lab_errors=not args.still_lab)
     if args.chunk_size is not None and args.chunk_size < 1:
         raise InputError(f"--chunk-size: expected a positive integer, got {args.chunk_size}")
     out = args.out or f"runs/campaign-{_safe(args.camera)}"
@@ -222,6 +226,8 @@ def cmd_campaign(args) -> int:
         argv += ["--sigma-px", repr(args.sigma_px)]
     if args.budget:
         argv += ["--budget"]
+    if args.still_lab:
+        argv += ["--still-lab"]
     if args.calibration == "exact":
         argv += ["--focal-error-frac", repr(args.focal_error_frac), "--pp-error-px", f"{du!r},{dv!r}",
                  "--k1-error", repr(args.k1_error)]

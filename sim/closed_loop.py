@@ -79,6 +79,12 @@ class Scenario:
         The phone's (roll, pitch, yaw) in its holder, deg (``mount="stand"`` only; see
         :class:`sim.stand.TestStand`). The image is made at the actual pose; the truth the
         lab knew is the commanded one (:meth:`commanded_pose`).
+    stand_error : tuple of float
+        The stand's errors at this setting (``mount="stand"`` only): the gimbal's actual roll,
+        pitch and yaw minus the commanded ones (deg), the translation stage's actual minus
+        commanded position (m) and the rail position's actual minus the one recorded (m; the
+        range the lab measured with its hand-held rangefinder). The image is made at the actual
+        pose; the truth the lab knew is the commanded one (:meth:`truth_pose`).
     lens_pp_offset_px : tuple of float
         The true lens' principal point minus the profile's ``(cx, cy)``, px: the image is
         rendered through :meth:`camera_profile`, the profile's camera with this offset.
@@ -106,6 +112,7 @@ class Scenario:
     mount: str = "target"
     stage_m: float = 0.0
     misalignment_deg: tuple = (0.0, 0.0, 0.0)
+    stand_error: tuple = (0.0, 0.0, 0.0, 0.0, 0.0)
     lens_pp_offset_px: tuple = (0.0, 0.0)
     lens_k1: float = 0.0
     camera_overrides: tuple = ()
@@ -121,6 +128,13 @@ class Scenario:
             raise InputError("misalignment_deg: expected (roll, pitch, yaw); lens_pp_offset_px: expected (du, dv)")
         if self.mount == "target" and any(self.misalignment_deg):
             raise InputError("misalignment_deg: only the test stand (mount='stand') holds the phone in a holder")
+        object.__setattr__(self, "stand_error", tuple(float(x) for x in self.stand_error))
+        se = np.asarray(self.stand_error, float)
+        if se.shape != (5,) or not np.all(np.isfinite(se)) or np.any(np.abs(se[:3]) > 5) or np.any(np.abs(se[3:]) > 1):
+            raise InputError(f"stand_error: expected (roll_deg, pitch_deg, yaw_deg, stage_m, rail_m) within +/-5 deg "
+                             f"and +/-1 m, got {self.stand_error!r}")
+        if self.mount == "target" and np.any(se):
+            raise InputError("stand_error: only the test stand (mount='stand') has a gimbal, a stage and a rail")
         if not (np.all(np.isfinite(self.lens_pp_offset_px)) and max(map(abs, self.lens_pp_offset_px)) <= 200
                 and np.isfinite(self.lens_k1) and abs(self.lens_k1) <= 1):
             raise InputError(f"lens_pp_offset_px/lens_k1: expected offsets within +/-200 px and |k1| <= 1, got "
@@ -157,21 +171,29 @@ class Scenario:
             raise InputError(f"spp/roi_spp: expected spp >= 0 and roi_spp >= 1, got {self.spp}, {self.roi_spp}")
 
     def pose(self):
-        """(R_cam_target, t_cam_target_m) of this scenario: the actual pose (misalignment included)."""
-        return self._pose(self.misalignment_deg)
+        """(R_cam_target, t_cam_target_m) of this scenario: the actual pose (the misalignment and
+        the stand's errors included)."""
+        return self.truth_pose(True, True, True)
 
     def commanded_pose(self):
         """(R_cam_target, t_cam_target_m) the lab knew: the stand's setting without the phone's
-        misalignment in its holder (equal to :meth:`pose` when there is none)."""
-        return self._pose((0.0, 0.0, 0.0))
+        misalignment in its holder and without the stand's errors (equal to :meth:`pose` when
+        there are none)."""
+        return self.truth_pose(False, False, False)
 
-    def _pose(self, misalignment_deg):
+    def truth_pose(self, misalignment: bool, stand: bool, rail: bool):
+        """(R_cam_target, t_cam_target_m) with some of the truth's errors included: the phone's
+        ``misalignment`` in its holder, the gimbal's and the stage's errors (``stand``), the
+        rail position's (``rail``). All three: :meth:`pose`; none: :meth:`commanded_pose`."""
         if self.mount == "stand":
             from sim.stand import TestStand
 
-            return TestStand(misalignment_deg=tuple(misalignment_deg)).pose(
-                self.range_m, stage_m=self.stage_m, roll_deg=self.roll_deg, pitch_deg=self.pitch_deg,
-                yaw_deg=self.yaw_deg)
+            mis = self.misalignment_deg if misalignment else (0.0, 0.0, 0.0)
+            er, ep, ey, es, _ = self.stand_error if stand else (0.0,) * 5
+            rail_m = self.stand_error[4] if rail else 0.0
+            return TestStand(misalignment_deg=tuple(mis)).pose(
+                self.range_m + rail_m, stage_m=self.stage_m + es, roll_deg=self.roll_deg + er,
+                pitch_deg=self.pitch_deg + ep, yaw_deg=self.yaw_deg + ey)
         return pose_from_scenario(self.range_m, self.target_x_m, self.target_y_m, self.roll_deg, self.pitch_deg,
                                   self.yaw_deg)
 
@@ -390,6 +412,18 @@ def solver_camera(camera: Camera, image_shape) -> Camera:
     return camera if (w, h) == (camera.width, camera.height) else camera.scaled(w, h)
 
 
+def _truth_flags(truth) -> tuple:
+    """``(misalignment, stand, rail)`` of a ``truth`` argument (see :func:`expose_and_solve`)."""
+    if isinstance(truth, str):
+        if truth == "commanded":
+            return (False, False, False)
+        if truth == "actual":
+            return (True, True, True)
+    elif isinstance(truth, tuple) and len(truth) == 3:
+        return tuple(bool(x) for x in truth)
+    raise InputError(f"truth: expected 'commanded', 'actual' or (misalignment, stand, rail), got {truth!r}")
+
+
 def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposure_s=None, iso=None,
                      solver_camera_profile: Camera | None = None, stages=None, truth: str = "commanded", isp=None,
                      demosaic=None) -> dict:
@@ -411,10 +445,12 @@ def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposu
         The geometry the solver believes (a calibration with errors); default: the truth.
     stages : sequence of str, optional
         This exposure's stages (:meth:`camera.phone.Exposer.expose`); default the exposer's.
-    truth : {"commanded", "actual"}
+    truth : {"commanded", "actual"} or tuple of 3 bool
         The pose the errors are taken against: the one the lab knew
-        (:meth:`Scenario.commanded_pose`, default) or the actual one (the phone's
-        misalignment in its holder included).
+        (:meth:`Scenario.commanded_pose`, default), the actual one (the phone's
+        misalignment in its holder and the stand's errors included), or
+        ``(misalignment, stand, rail)``: which of them the truth includes
+        (:meth:`Scenario.truth_pose`).
     isp : camera.phone.params.IspParams, optional
         This exposure's ISP instead of the profile's ``[isp]`` (:meth:`camera.phone.Exposer.expose`).
     demosaic : str, optional
@@ -431,8 +467,7 @@ def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposu
         ``exposure_s``, ``iso``, ``expose_s``, ``solve_s``; and ``_exposure`` / ``_solution``
         (objects, for callers that write images).
     """
-    if truth not in ("commanded", "actual"):
-        raise InputError(f"truth: expected 'commanded' or 'actual', got {truth!r}")
+    _truth_flags(truth)
     t0 = time.perf_counter()
     ex = exposer.expose(seed=seed, exposure_s=exposure_s, iso=iso, stages=stages, isp=isp, demosaic=demosaic)
     t1 = time.perf_counter()
@@ -448,13 +483,12 @@ def solve_exposure(frame: Frame, ex, *, threshold=None, solver_camera_profile: C
     caller has made them (:func:`svgs.pipeline.solve_image`)."""
     from svgs.pipeline import solve_image
 
-    if truth not in ("commanded", "actual"):
-        raise InputError(f"truth: expected 'commanded' or 'actual', got {truth!r}")
+    _truth_flags(truth)
     t1 = time.perf_counter()
     cam = solver_camera(solver_camera_profile or frame.camera, ex.image.shape)
     sol = solve_image(ex.image, cam, frame.scenario.pattern, threshold=threshold, blobs=blobs)
     t2 = time.perf_counter()
-    R, t = frame.scenario.commanded_pose() if truth == "commanded" else frame.scenario.pose()
+    R, t = frame.scenario.truth_pose(*_truth_flags(truth))
     truth_state = pose_to_state(R, t)
     row = {
         "ok": bool(sol),

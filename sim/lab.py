@@ -25,6 +25,11 @@ from assets import ASSETS_DIR
 #: The lab of the SVGS paper's tests.
 DEFAULT_LAB = "msfc-frl"
 LAB_KEYS = ("backdrop_distance_m", "backdrop_reflectance", "ambient_radiance_w_m2_sr")
+#: The lab's error sources (``[errors]`` of the lab file, issue 24): the gimbal's and the translation
+#: stage's positioning accuracy (each setting's error uniform within +/- it), the hand-held
+#: rangefinder's 1-sigma (the rail position the lab recorded, and the paper's focal calibration) and
+#: the air's C_n^2 (:mod:`sim.turbulence`).
+ERROR_KEYS = ("gimbal_accuracy_deg", "stage_accuracy_m", "rangefinder_sigma_m", "turbulence_cn2_m23")
 
 
 @functools.lru_cache(maxsize=8)
@@ -45,6 +50,16 @@ def _load(name: str, fitted: bool) -> tuple:
     out = {k: float(lab[k]) for k in LAB_KEYS}
     for k, v in (data.get("stand") or {}).items():
         out[f"stand.{k}"] = float(v)
+    errors = data.get("errors") or {}
+    bad = sorted(set(errors) - set(ERROR_KEYS))
+    if bad:
+        raise ProfileError(f"lab file {str(path)!r}: [errors] has unknown key(s) {', '.join(bad)} "
+                           f"(known: {', '.join(ERROR_KEYS)})")
+    for k in ERROR_KEYS:
+        v = float(errors.get(k, 0.0))
+        if not (v >= 0 and v < float("inf")):
+            raise ProfileError(f"lab file {str(path)!r}: [errors] {k} = {v!r}: expected a finite value >= 0")
+        out[f"errors.{k}"] = v
     return tuple(out.items()), tuple((data.get("fitted") or {}).keys())
 
 
@@ -55,6 +70,12 @@ def stand_misalignment_deg(camera_name: str, name: str = DEFAULT_LAB, *, fitted:
     lab = load_lab(name, fitted=fitted)
     key = f"stand.{str(camera_name).replace('-', '_')}_misalignment_yaw_deg"
     return (0.0, 0.0, float(lab.get(key, 0.0)))
+
+
+def lab_errors(name: str = DEFAULT_LAB) -> dict:
+    """The lab's error sources, :data:`ERROR_KEYS` (sourced values, none fitted; 0: absent)."""
+    lab = load_lab(name)
+    return {k: float(lab[f"errors.{k}"]) for k in ERROR_KEYS}
 
 
 def load_lab(name: str = DEFAULT_LAB, *, fitted: bool = True) -> dict:

@@ -50,10 +50,12 @@ from sim.metrics import (
 from sim.trials import (
     GEOMETRIC_PARAMETERS,
     POSE_KEYS,
+    TRUTH_KEYS,
     Parameter,
     TrialKind,
     build_scenario,
     camera_with_calibration_errors,
+    truth_flags,
     register_trial_kind,
 )
 from svgs.errors import InputError
@@ -128,7 +130,11 @@ RENDER_PARAMETERS = {
     "jpeg_grid_offset_v_px": Parameter("jpeg_grid_offset_v_px", "px", "the JPEG block grid moved down by this "
                                        "many pixels against the image, added to the profile's (0-15)", 0.0, False,
                                        lower=0.0, upper=15.0),
-    "truth_actual": GEOMETRIC_PARAMETERS["truth_actual"],
+    **{k: GEOMETRIC_PARAMETERS[k] for k in TRUTH_KEYS},
+    # the lab's air (sim.turbulence), per exposure
+    "turbulence_cn2": Parameter("turbulence_cn2", "m^-2/3", "C_n^2 of the air between the phone and the target: "
+                                "each exposure's spots moved by a frozen draw of their angles of arrival "
+                                "(sim.turbulence; 0: still air)", 0.0, False, lower=0.0, upper=1e-9),
     # the physics a sensitivity study varies (-1: the profile's value)
     "f_number": Parameter("f_number", "1", "the lens' f-number, for the render (aperture) and the PSF (-1: the "
                           "profile's)", -1.0, True, lower=-1.0, upper=16.0),
@@ -145,7 +151,7 @@ RENDER_PARAMETERS = {
 }
 
 #: Post-render switches that must be 0 or 1.
-_SWITCHES = ("stand", "sensor_noise", "glare", "quantise", "cfa", "nr", "sharpen", "chroma", "jpeg", "truth_actual")
+_SWITCHES = ("stand", "sensor_noise", "glare", "quantise", "cfa", "nr", "sharpen", "chroma", "jpeg", *TRUTH_KEYS)
 #: The error-budget switches (1: the source on, the default).
 _SOURCE_SWITCHES = ("sensor_noise", "glare", "quantise", "cfa", "nr", "sharpen", "chroma", "jpeg")
 #: The ``demosaic`` parameter's codes.
@@ -420,20 +426,68 @@ def _sensor_centroid_sigma(frame, exposer, row, cache: dict, key, spots_px) -> f
 _EXPOSURE_CACHE = 12
 
 
-def _exposure(exposer, cache: dict, key, scenario: dict, seed: int):
-    """The exposure of ``(exposer, seed, stages, setting)``, made once per render group."""
+def turbulent_points(frame, cn2_m23: float, seed: int):
+    """The frame's retro-spot samples as one exposure through the lab's air sees them: each
+    spot's samples moved by a frozen draw of its angle of arrival (:mod:`sim.turbulence`; the
+    phone's entrance pupil, the spots at the actual pose), seeded by the exposure's seed on a
+    stream of its own (the sensor noise's draw unchanged). A sample belongs to the spot whose
+    true image point is nearest.
+
+    Returns
+    -------
+    points : camera.rendered.PointFlux
+    shifts_px : ndarray, shape (N, 2)
+        Each target's image motion ``(du, dv)``, px.
+    """
+    from camera.rendered import PointFlux
+    from sim.turbulence import image_shifts_px
+    from svgs.profiles import Pattern
+
+    cam = frame.camera
+    R, t = frame.scenario.pose()
+    pat = Pattern.load(frame.scenario.pattern)
+    p_cam = pat.points_m @ R.T + t
+    optics = cam.tables.get("optics") or {}
+    aperture_m = float(optics["focal_length_m"]) / float(optics["f_number"])
+    rng = np.random.default_rng([int(seed), 0x7475726E])  # "turn": the air's own stream
+    shifts = image_shifts_px(p_cam, cam.fx, aperture_m, float(cn2_m23), rng)
+    uv = cam.project_target(pat.points_m, R, t)
+    pts = frame.points
+    near = np.argmin((pts.u_px[:, None] - uv[None, :, 0]) ** 2 + (pts.v_px[:, None] - uv[None, :, 1]) ** 2, axis=1)
+    return PointFlux(pts.u_px + shifts[near, 0], pts.v_px + shifts[near, 1], pts.rate_ph_s), shifts
+
+
+def _exposure_exposer(frame, exposers: dict, gkey, scenario: dict, seed: int):
+    """The exposer of one exposure: the render group's, or - through turbulent air - one made
+    for this exposure's moved spots (its optics redone)."""
+    import dataclasses
+
+    exposer = _exposer(frame, exposers, gkey)
+    cn2 = float(scenario.get("turbulence_cn2", 0.0))
+    if cn2 == 0 or frame.points is None:
+        return exposer
+    pts, _ = turbulent_points(frame, cn2, seed)
+    ts, glare, veil, expo, cfa = gkey
+    return dataclasses.replace(frame, points=pts).exposer(_stages({"cfa": cfa}), target_scale=ts, glare=glare,
+                                                         veiling_fraction=veil, wing_exponent=expo)
+
+
+def _exposure(frame, exposers: dict, key, scenario: dict, seed: int):
+    """The exposure of ``(render, seed, stages, setting, air)``, made once per render group."""
     import time
 
     from collections import OrderedDict
 
-    store = cache.setdefault("exposures", OrderedDict())
+    store = exposers.setdefault("exposures", OrderedDict())
     ev = scenario["exposure_compensation_ev"]
-    isp, demosaic = _isp(exposer, scenario)
-    k = (key, int(seed), _stages(scenario), scenario["exposure_s"], scenario["iso"], ev, isp, demosaic)
+    isp, demosaic = _isp(_exposer(frame, exposers, key), scenario)
+    cn2 = float(scenario.get("turbulence_cn2", 0.0))
+    k = (key, int(seed), _stages(scenario), scenario["exposure_s"], scenario["iso"], ev, isp, demosaic, cn2)
     if k in store:
         store.move_to_end(k)
         return store[k], 0.0
     t0 = time.perf_counter()
+    exposer = _exposure_exposer(frame, exposers, key, scenario, seed)
     t_s, iso = scenario["exposure_s"] or None, scenario["iso"] or None
     if ev != 0:  # exposure compensation: the time the phone would choose, times 2^EV
         t_s, iso, _ = exposer.settings(t_s, iso)
@@ -459,10 +513,10 @@ def _solve_one(scenario: dict, seed: int, frame, exposers: dict) -> dict:
     cam = frame.camera  # the true lens
     gkey = _glare_key(scenario)
     exposer = _exposer(frame, exposers, gkey)
-    ex, expose_s = _exposure(exposer, exposers, gkey, scenario, seed)
+    ex, expose_s = _exposure(frame, exposers, gkey, scenario, seed)
     row = solve_exposure(frame, ex, threshold=_threshold(scenario["threshold"]),
                          solver_camera_profile=camera_with_calibration_errors(cam, scenario),
-                         truth="actual" if scenario["truth_actual"] else "commanded")
+                         truth=truth_flags(scenario))
     row["expose_s"] = expose_s
     out = {k: None for k in RENDER_OUTPUTS}
     out.update({k: row[k] for k in ("ok", "reason", "message", "n_blobs", "residual_rms_px", "chi2", "chi2_dof",
@@ -528,12 +582,11 @@ def trial_picture(scenario: dict, seed: int) -> dict:
 
     frame, exposers = _frame(render_key(scenario))
     gkey = _glare_key(scenario)
-    exposer = _exposer(frame, exposers, gkey)
-    ex, _ = _exposure(exposer, exposers, gkey, scenario, seed)
+    ex, _ = _exposure(frame, exposers, gkey, scenario, seed)
     cam_solver = camera_with_calibration_errors(frame.camera, scenario)
     thr = _threshold(scenario["threshold"])
     row = solve_exposure(frame, ex, threshold=thr, solver_camera_profile=cam_solver,
-                         truth="actual" if scenario["truth_actual"] else "commanded")
+                         truth=truth_flags(scenario))
     return {"image": ex.image, "camera": solver_camera(cam_solver, ex.image.shape),
             "pattern": Pattern.load(frame.scenario.pattern), "threshold": thr, "row": row}
 
@@ -569,10 +622,25 @@ def render_trial(scenario: dict, seed: int) -> dict:
     return _solve_one(scenario, seed, frame, exposers)
 
 
+def _exposure_order(scenario: dict, seed: int) -> tuple:
+    """What decides a trial's exposure within its render group (:func:`_exposure`'s key, less
+    the exposer's own): trials that judge one image differently (the solver's calibration, the
+    truth) sort together, so each exposure is made once however many variants share it."""
+    return (repr(_glare_key(scenario)), int(seed), _stages(scenario), scenario["exposure_s"], scenario["iso"],
+            scenario["exposure_compensation_ev"], scenario["jpeg_quality"], scenario["jpeg_grid_offset_u_px"],
+            scenario["jpeg_grid_offset_v_px"], scenario["demosaic"], float(scenario.get("turbulence_cn2", 0.0)))
+
+
 def render_group(scenarios, seeds) -> list[dict]:
-    """Trials sharing one render key: render once, expose and solve each."""
+    """Trials sharing one render key: render once, expose and solve each (in the order that
+    shares exposures, :func:`_exposure_order`; the rows come back in the given order - a trial's
+    numbers depend only on its scenario and seed)."""
     frame, exposers = _frame(render_key(scenarios[0]))
-    return [_solve_one(s, int(k), frame, exposers) for s, k in zip(scenarios, seeds)]
+    order = sorted(range(len(scenarios)), key=lambda i: _exposure_order(scenarios[i], seeds[i]))
+    out = [None] * len(scenarios)
+    for i in order:
+        out[i] = _solve_one(scenarios[i], int(seeds[i]), frame, exposers)
+    return out
 
 
 def _warm_up():

@@ -212,14 +212,33 @@ GEOMETRIC_PARAMETERS = {
         Parameter("misalign_roll_deg", "deg", "the phone's roll in its holder on the stand (stand = 1 only)", 0.0, True,
                   lower=-10.0, upper=10.0),
         Parameter("truth_actual", "1", "0: errors against the pose the lab commanded (the stand's setting); 1: against "
-                  "the actual pose (the phone's misalignment in its holder included)", 0.0, False, lower=0.0,
+                  "the pose with the phone's misalignment in its holder included", 0.0, False, lower=0.0,
                   upper=1.0),
+        # the stand's errors at this setting (sim.closed_loop.Scenario.stand_error; the lab's, sim.lab)
+        Parameter("stand_err_roll_deg", "deg", "the gimbal's actual roll minus the commanded (stand = 1 only)", 0.0,
+                  True, lower=-5.0, upper=5.0),
+        Parameter("stand_err_pitch_deg", "deg", "the gimbal's actual pitch minus the commanded (stand = 1 only)", 0.0,
+                  True, lower=-5.0, upper=5.0),
+        Parameter("stand_err_yaw_deg", "deg", "the gimbal's actual yaw minus the commanded (stand = 1 only)", 0.0,
+                  True, lower=-5.0, upper=5.0),
+        Parameter("stand_err_stage_m", "m", "the translation stage's actual position minus the commanded (stand = 1 "
+                  "only)", 0.0, True, lower=-1.0, upper=1.0),
+        Parameter("rail_err_m", "m", "the rail position's actual minus the recorded one (the range the lab measured "
+                  "with its rangefinder; stand = 1 only)", 0.0, True, lower=-1.0, upper=1.0),
+        Parameter("truth_stand", "1", "1: errors against the pose with the gimbal's and the stage's errors "
+                  "included (they are then no error); 0: against the commanded setting", 0.0, False, lower=0.0,
+                  upper=1.0),
+        Parameter("truth_rail", "1", "1: errors against the pose with the rail position's error included; 0: "
+                  "against the recorded range", 0.0, False, lower=0.0, upper=1.0),
     )
 }
 
 #: Scenario keys of the pose (the geometric kind's render key; the render kind adds its own).
 POSE_KEYS = ("range_m", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg", "stand", "stage_m",
-             "misalign_yaw_deg", "misalign_pitch_deg", "misalign_roll_deg")
+             "misalign_yaw_deg", "misalign_pitch_deg", "misalign_roll_deg", "stand_err_roll_deg",
+             "stand_err_pitch_deg", "stand_err_yaw_deg", "stand_err_stage_m", "rail_err_m")
+#: The truth's switches: which of the truth errors the errors are taken against.
+TRUTH_KEYS = ("truth_actual", "truth_stand", "truth_rail")
 
 
 def scenario_pose_kwargs(scenario: Mapping) -> dict:
@@ -231,18 +250,25 @@ def scenario_pose_kwargs(scenario: Mapping) -> dict:
     kw["mount"] = "stand" if flag == 1.0 else "target"
     kw["stage_m"] = float(scenario.get("stage_m", 0.0))
     kw["misalignment_deg"] = tuple(float(scenario.get(f"misalign_{a}_deg", 0.0)) for a in ("roll", "pitch", "yaw"))
+    kw["stand_error"] = tuple(float(scenario.get(k, 0.0)) for k in ("stand_err_roll_deg", "stand_err_pitch_deg",
+                                                                     "stand_err_yaw_deg", "stand_err_stage_m",
+                                                                     "rail_err_m"))
     return kw
+
+
+def truth_flags(scenario: Mapping) -> tuple:
+    """``(misalignment, stand, rail)``: which truth errors a trial's truth includes
+    (:meth:`sim.closed_loop.Scenario.truth_pose`), from its :data:`TRUTH_KEYS`."""
+    return tuple(bool(scenario.get(k, 0.0)) for k in TRUTH_KEYS)
 
 
 def scenario_poses(scenario: Mapping):
     """``(R, t)`` actual and ``(R, t)`` of the truth the errors are taken against
-    (``truth_actual``), of a trial scenario (:class:`sim.closed_loop.Scenario`'s poses)."""
+    (:data:`TRUTH_KEYS`), of a trial scenario (:class:`sim.closed_loop.Scenario`'s poses)."""
     from sim.closed_loop import Scenario
 
     sc = Scenario(camera=str(scenario["camera"]), **scenario_pose_kwargs(scenario))
-    actual = sc.pose()
-    truth = actual if scenario.get("truth_actual", 0.0) else sc.commanded_pose()
-    return actual, truth
+    return sc.pose(), sc.truth_pose(*truth_flags(scenario))
 
 GEOMETRIC_OUTPUTS = (
     "ok", "reason",
@@ -437,7 +463,7 @@ def geometric_group(scenarios: list, seeds: list) -> list[dict]:
 def geometric_render_key(scenario: dict):
     """What decides the geometric "render": camera, pattern, pose (and the truth it is judged by)."""
     return (scenario["camera"], scenario["pattern"],
-            *(scenario.get(k, GEOMETRIC_PARAMETERS[k].default) for k in (*POSE_KEYS, "truth_actual")))
+            *(scenario.get(k, GEOMETRIC_PARAMETERS[k].default) for k in (*POSE_KEYS, *TRUTH_KEYS)))
 
 
 def geometric_warm_up() -> None:

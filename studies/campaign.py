@@ -71,9 +71,6 @@ PAPER_RANGES_M = {"htc-amaze-4g": (1.0, 2.0, 3.0, 4.0, 6.5), "galaxy-nexus": (5.
 #: centre, no distortion) and the real lens. Not sourced: typical of phone cameras of 2011
 #: (principal points within ~1 % of the width of the centre, mild barrel distortion).
 PAPER_CALIBRATION_SPREAD = {"pp_error_u_px": 15.0, "pp_error_v_px": 15.0, "k1_error": 0.03}
-#: ASSUMED 1-sigma error of a range measured with the paper's hand-held laser range finder to
-#: the target plane and the phone's perspective centre ("(insert accuracy)" in the paper).
-PAPER_RANGE_SIGMA_M = 0.02
 CALIBRATION_KEYS = ("focal_error_frac", "pp_error_u_px", "pp_error_v_px", "k1_error")
 
 
@@ -100,7 +97,12 @@ class CampaignConfig:
     misalignment_deg: tuple = (0.0, 0.0, 0.0)
     lens: dict = field(default_factory=dict)
     budget: bool = False
+    lab_errors: dict = field(default_factory=dict)
     calibration_info: dict = field(default_factory=dict, compare=False)
+
+    def lab_error(self, key: str) -> float:
+        """One of the lab's error sources (:data:`sim.lab.ERROR_KEYS`; 0: absent)."""
+        return float(self.lab_errors.get(key, 0.0))
 
     @property
     def poses_per_range(self) -> int:
@@ -126,6 +128,7 @@ class CampaignConfig:
             "misalignment_deg": [float(x) for x in self.misalignment_deg],
             "lens": {k: float(v) for k, v in sorted(self.lens.items())},
             "budget": bool(self.budget),
+            "lab_errors": {k: float(v) for k, v in sorted(self.lab_errors.items())},
         }
 
 
@@ -134,7 +137,7 @@ def paper_calibration_error(camera, pattern, ranges_m, sigma_px: float, seed: in
 
     Focal length: the paper's procedure - one image of the target facing the camera at each
     test range, the range measured with a hand-held laser range finder (1-sigma
-    :data:`PAPER_RANGE_SIGMA_M`, ASSUMED: the paper leaves the accuracy blank), the focal
+    :func:`sim.lab.lab_errors`' ``rangefinder_sigma_m``; the paper leaves it blank), the focal
     length fitted to the spot spacings (:func:`calibration.focal.estimate_focal`) from
     centroids with ``sigma_px`` noise. Principal point and k1: the paper assumed the image
     centre and no distortion; the real lens differs by draws from
@@ -150,6 +153,9 @@ def paper_calibration_error(camera, pattern, ranges_m, sigma_px: float, seed: in
 
     from sim.trials import _pattern
 
+    from sim.lab import lab_errors
+
+    range_sigma_m = lab_errors()["rangefinder_sigma_m"]
     pat = _pattern(pattern)
     rng = study_rng(seed, 0)
     images, measured = [], []
@@ -157,9 +163,9 @@ def paper_calibration_error(camera, pattern, ranges_m, sigma_px: float, seed: in
         R, t = pose_from_scenario(r)
         uv = camera.project_target(pat.points_m, R, t)
         images.append(uv + sigma_px * rng.standard_normal(uv.shape))
-        measured.append(r + PAPER_RANGE_SIGMA_M * rng.standard_normal())
+        measured.append(r + range_sigma_m * rng.standard_normal())
     est = estimate_focal(images, measured, camera, pat, centroid_sigma_px=max(sigma_px, 1e-3),
-                         range_sigma_m=PAPER_RANGE_SIGMA_M)
+                         range_sigma_m=max(range_sigma_m, 1e-4))
     err = {"focal_error_frac": float(est.f_px / camera.fx - 1.0)}
     for k in ("pp_error_u_px", "pp_error_v_px", "k1_error"):
         err[k] = float(rng.normal(0.0, PAPER_CALIBRATION_SPREAD[k]))
@@ -191,7 +197,7 @@ def _count_option(value, name: str) -> int:
 def make_config(camera: str, *, ranges_m=None, trials_per_range: int = 200, seed: int = 0, sigma_px: float = 0.1,
                 trial_kind: str = "render", pattern: str = "svgs-3u", calibration: str = "paper",
                 calibration_error: dict | None = None, merge_px: float = 0.0, exposures_per_render: int = 4,
-                misalignment_deg=None, budget: bool = False) -> CampaignConfig:
+                misalignment_deg=None, budget: bool = False, lab_errors: bool = True) -> CampaignConfig:
     """A validated :class:`CampaignConfig` (:class:`InputError` on bad input).
 
     Parameters
@@ -224,7 +230,13 @@ def make_config(camera: str, *, ranges_m=None, trials_per_range: int = 200, seed
         for the Galaxy Nexus, fitted to Table 4; 0 for others).
     budget : bool
         Also run the error-budget variants (render kind; :mod:`studies.error_budget`).
+    lab_errors : bool
+        The lab's error sources (default; :func:`sim.lab.lab_errors`, sourced): each stand
+        setting's gimbal and stage errors, the rail position recorded from the rangefinder
+        (whose readings also feed the paper's focal calibration) and, for the render kind, the
+        air's turbulence. False: a perfect stand, exact ranges and still air.
     """
+    from sim.lab import lab_errors as _lab_errors
     from sim.stand import TestStand
     from sim.trials import _camera
 
@@ -284,7 +296,51 @@ def make_config(camera: str, *, ranges_m=None, trials_per_range: int = 200, seed
                           seed=check_seed(seed), sigma_px=float(sigma_px), trial_kind=kind.name, pattern=pattern,
                           calibration=calibration, calibration_error=err, merge_px=float(merge_px),
                           exposures_per_render=exposures_per_render, misalignment_deg=mis, lens=lens,
-                          budget=bool(budget))
+                          budget=bool(budget), lab_errors=_campaign_lab_errors(_lab_errors(), kind.name, lab_errors))
+
+
+def _campaign_lab_errors(errors: dict, kind: str, on: bool) -> dict:
+    """The lab's error sources a campaign applies: all of them (turbulence for the render kind
+    only: the geometric kind has no spots to move), or none."""
+    if not on:
+        return {}
+    out = {k: float(v) for k, v in errors.items() if v > 0}
+    if kind != "render":
+        out.pop("turbulence_cn2_m23", None)
+    return out
+
+
+def rangefinder_readings(config: CampaignConfig) -> list[float]:
+    """The ranges the lab recorded with its hand-held rangefinder, one per test range (the rail
+    positions' truth and the paper's focal calibration; 1-sigma the lab's
+    ``rangefinder_sigma_m``, seeded: ``study_rng(seed, 2)``)."""
+    rng = study_rng(config.seed, 2)
+    sig = config.lab_error("rangefinder_sigma_m")
+    return [float(r + sig * rng.standard_normal()) for r in config.ranges_m]
+
+
+#: Design streams of the stand's errors (apart from the settings' streams).
+STAND_ERROR_STREAM = 500_000_000
+
+
+def stand_errors(config: CampaignConfig, ri: int, j: int) -> dict:
+    """Setting ``j`` of range ``ri``: the gimbal's and the stage's errors, each uniform within
+    +/- the lab's accuracy (an accuracy specification bounds the error at any position; which
+    error a position has is fixed but unknown, so across settings it is a draw), and the rail
+    position's error (the recorded range minus the true one, common to a range's settings).
+
+    Returns
+    -------
+    dict
+        ``range_m`` (the recorded range) and the scenario's ``stand_err_*`` and ``rail_err_m``.
+    """
+    g, st = config.lab_error("gimbal_accuracy_deg"), config.lab_error("stage_accuracy_m")
+    rng = design_rng(config.seed, STAND_ERROR_STREAM + ri * POSE_STRIDE + j)
+    e = rng.uniform(-1.0, 1.0, 4)
+    recorded = rangefinder_readings(config)[ri]
+    return {"range_m": recorded, "rail_err_m": float(config.ranges_m[ri] - recorded),
+            "stand_err_roll_deg": float(g * e[0]), "stand_err_pitch_deg": float(g * e[1]),
+            "stand_err_yaw_deg": float(g * e[2]), "stand_err_stage_m": float(st * e[3])}
 
 
 def rendered_paper_calibration(config: CampaignConfig, out_dir=None, progress=None) -> CampaignConfig:
@@ -294,7 +350,8 @@ def rendered_paper_calibration(config: CampaignConfig, out_dir=None, progress=No
     One image of the target facing the phone at each of the campaign's ranges, through the
     true lens (:attr:`CampaignConfig.lens`), exposed as the phone does; the spots detected and
     identified with the assumed camera (image centre, no distortion); each range as a
-    hand-held laser range finder gives it (1-sigma :data:`PAPER_RANGE_SIGMA_M`, ASSUMED; seeded);
+    hand-held laser range finder gives it (:func:`rangefinder_readings`, the readings that are also the
+    rail positions' truth);
     :func:`calibration.focal.estimate_focal` on those. Kept in ``out_dir/calibration.json``
     (a rerun reuses it when the campaign's configuration is the same).
     """
@@ -307,8 +364,9 @@ def rendered_paper_calibration(config: CampaignConfig, out_dir=None, progress=No
 
     if config.trial_kind != "render" or config.calibration != "paper":
         return config
+    sig = config.lab_error("rangefinder_sigma_m")
     key = {"camera": config.camera, "pattern": config.pattern, "ranges_m": list(config.ranges_m),
-           "seed": config.seed, "lens": config.lens, "range_sigma_m": PAPER_RANGE_SIGMA_M}
+           "seed": config.seed, "lens": config.lens, "range_sigma_m": sig}
     path = Path(out_dir) / "calibration.json" if out_dir is not None else None
     info = None
     if path is not None and path.is_file():
@@ -324,8 +382,7 @@ def rendered_paper_calibration(config: CampaignConfig, out_dir=None, progress=No
                            dist=cam.dist + np.array([lens["lens_k1"], 0.0, 0.0, 0.0, 0.0]))
         frames = focal_frames_rendered(true, cam, pat, config.ranges_m, exposures=1, seed=config.seed,
                                        progress=progress)
-        rng = study_rng(config.seed, 2)
-        measured = [float(r + PAPER_RANGE_SIGMA_M * rng.standard_normal()) for r in config.ranges_m]
+        measured = rangefinder_readings(config)
         imgs, rngs, used = [], [], []
         for k, r in enumerate(config.ranges_m):
             c = frames.centroids_px[k, 0]
@@ -336,7 +393,7 @@ def rendered_paper_calibration(config: CampaignConfig, out_dir=None, progress=No
         if not imgs:
             raise InputError("calibration: no rendered calibration frame had its four targets identified "
                              f"({frames.info}); the paper's focal-length method needs at least one")
-        est = estimate_focal(imgs, rngs, cam, pat, range_sigma_m=PAPER_RANGE_SIGMA_M)
+        est = estimate_focal(imgs, rngs, cam, pat, range_sigma_m=max(sig, 1e-4))
         info = {"f_px": float(est.f_px), "f_sigma_px": float(est.sigma_f_px),
                 "f_true_px": float(cam.fx), "focal_error_frac": float(est.f_px / cam.fx - 1.0),
                 "ranges_used_m": used, "ranges_measured_m": rngs, "frames": frames.info}
@@ -394,6 +451,8 @@ def campaign_trials(config: CampaignConfig, *, variants: bool = True) -> list:
              **{f"misalign_{a}_deg": float(v) for a, v in zip(("roll", "pitch", "yaw"), config.misalignment_deg)}}
     if kind.name == "render":
         fixed.update(config.lens)
+        if config.lab_error("turbulence_cn2_m23") > 0:
+            fixed["turbulence_cn2"] = config.lab_error("turbulence_cn2_m23")
     if "sigma_px" in kind.parameters:
         fixed["sigma_px"] = config.sigma_px
     if config.merge_px and "merge_px" in kind.parameters:
@@ -403,7 +462,8 @@ def campaign_trials(config: CampaignConfig, *, variants: bool = True) -> list:
         for k in range(n):
             i = ri * n + k
             j, e = divmod(k, K)
-            scen = build_scenario(kind, {**fixed, "range_m": r, **poses[ri][j]},
+            lab = stand_errors(config, ri, j) if config.lab_errors else {"range_m": r}
+            scen = build_scenario(kind, {**fixed, **poses[ri][j], **lab},
                                   labels={"nominal_range_m": float(r), "pose_index": j, "exposure_index": e,
                                           "variant": "baseline"})
             trials.append(Trial(i, scen, trial_seed(config.seed, i)))
@@ -1282,7 +1342,7 @@ def _budget_sections(rep, out_dir, config, summary, budget) -> None:
         "formation, the optics and the pattern's geometry give by themselves: the flash-to-lens parallax, the "
         "spots' pixel sampling); 'random centroid noise' is the geometric trial on the same settings at the "
         "centroid scatter measured on the rendered exposures (not a removal: that source alone).", "note")
-    ran = {v.name for v in applicable_variants(config.camera)}
+    ran = {v.name for v in applicable_variants(config.camera, config.lab_errors)}
     rep.bullets([f"{v.name}: {v.meaning}" + ("" if v.all_exposures else " (the first exposure of each setting)")
                  for v in VARIANTS if v.name in ran])
     cs = budget["centroids"]
@@ -1294,7 +1354,7 @@ def _budget_sections(rep, out_dir, config, summary, budget) -> None:
                       "actual pose), medians over the stand settings")
     names = [n for n in ("floor", "perfect_calibration", "no_sensor_noise", "no_glare", "no_quantisation",
                          "no_misalignment", "no_jpeg", "no_chroma_subsampling", "no_cfa", "no_noise_reduction",
-                         "no_sharpening", "geometric")
+                         "no_sharpening", "no_stand_error", "no_rail_error", "no_turbulence", "geometric")
              if n in ("floor", "geometric") or any(n in b for b in budget["attribution"])]
     for grp, comps in (("position", STATE_KEYS[:3]), ("attitude", STATE_KEYS[3:])):
         tcols = ["range (m)", "component", "RMS error"] + [SOURCE_LABELS[n] for n in names] + ["interaction"]
@@ -1410,7 +1470,7 @@ def config_from_manifest(out_dir) -> CampaignConfig:
                           calibration=m["calibration"], calibration_error=dict(m["calibration_error"]),
                           merge_px=float(m["merge_px"]), exposures_per_render=int(m["exposures_per_render"]),
                           misalignment_deg=tuple(float(x) for x in m["misalignment_deg"]), lens=dict(m["lens"]),
-                          budget=bool(m["budget"]), calibration_info=info)
+                          budget=bool(m["budget"]), lab_errors=dict(m.get("lab_errors") or {}), calibration_info=info)
 
 
 def rebuild_report(out_dir, *, command: str | None = None) -> Path:

@@ -29,6 +29,11 @@ no_noise_reduction     the ISP's noise reduction (only where the profile's ``[is
                        is > 0)
 no_sharpening          the ISP's unsharp mask (only where the profile's ``[isp] sharpen_amount``
                        is > 0)
+no_stand_error         the gimbal's and the translation stage's positioning errors (the errors
+                       taken against the pose with them; only where the lab's accuracies are > 0)
+no_rail_error          the rail position's error: the range the lab recorded from its hand-held
+                       rangefinder (the errors taken against the true range)
+no_turbulence          the lab's air turbulence (still air: the spots' image motion off)
 geometric              *only* random centroid noise: the geometric trial on the same settings at
                        the centroid scatter measured on the rendered exposures
 =====================  ==========================================================================
@@ -63,18 +68,23 @@ class Variant:
     """One error source removed: its name, what it means, the scenario values that remove it,
     whether every exposure of a setting is run (``False``: the first only), and ``applies``: a
     test on the camera's :class:`camera.phone.params.PhoneParams` (None: every camera) - a
-    variant that would change nothing for a camera (a stage its profile leaves off) is not run."""
+    variant that would change nothing for a camera (a stage its profile leaves off) is not run;
+    ``lab``: the lab's error sources (:data:`sim.lab.ERROR_KEYS`) of which one at least must be on in
+    the campaign (:attr:`studies.campaign.CampaignConfig.lab_errors`) for the variant to run."""
 
     name: str
     meaning: str
     values: dict
     all_exposures: bool = True
     applies: Callable | None = None
+    lab: tuple = ()
 
 
 _PERFECT = {"focal_error_frac": 0.0, "pp_error_u_px": 0.0, "pp_error_v_px": 0.0, "k1_error": 0.0}
 #: The image path's switches (issue 24), all off in the floor.
 _IMAGE_PATH_OFF = {"cfa": 0.0, "nr": 0.0, "sharpen": 0.0}
+#: The lab's error sources (issue 24), all off in the floor.
+_LAB_OFF = {"truth_stand": 1.0, "truth_rail": 1.0, "turbulence_cn2": 0.0}
 
 
 def _colour_420(p) -> bool:
@@ -97,8 +107,8 @@ VARIANTS = (
     Variant("no_quantisation", "no 8-bit output and no JPEG", {"quantise": 0.0}),
     Variant("no_misalignment", "no installation misalignment of the phone in its holder", {"truth_actual": 1.0}),
     Variant("all_removed", "all of these removed (the floor)",
-            {**_PERFECT, "sensor_noise": 0.0, "glare": 0.0, "quantise": 0.0, "truth_actual": 1.0, **_IMAGE_PATH_OFF},
-            False),
+            {**_PERFECT, "sensor_noise": 0.0, "glare": 0.0, "quantise": 0.0, "truth_actual": 1.0, **_IMAGE_PATH_OFF,
+             **_LAB_OFF}, False),
     # the phone's image path (issue 24); after the others, so that their trial ids stay
     Variant("no_jpeg", "no JPEG round trip (the 8-bit image the encoder got)", {"jpeg": 0.0},
             applies=lambda p: image_path_on(p) and p.isp.jpeg_quality > 0),
@@ -109,6 +119,13 @@ VARIANTS = (
     Variant("no_noise_reduction", "no noise reduction in the ISP", {"nr": 0.0},
             applies=lambda p: p.isp.nr_sigma_px > 0),
     Variant("no_sharpening", "no sharpening in the ISP", {"sharpen": 0.0}, applies=lambda p: p.isp.sharpen_amount > 0),
+    # the lab (issue 24)
+    Variant("no_stand_error", "no positioning error of the gimbal and the translation stage", {"truth_stand": 1.0},
+            lab=("gimbal_accuracy_deg", "stage_accuracy_m")),
+    Variant("no_rail_error", "no error of the recorded range (the rangefinder's reading of the rail position)",
+            {"truth_rail": 1.0}, lab=("rangefinder_sigma_m",)),
+    Variant("no_turbulence", "still air (no image motion of the spots from the lab's turbulence)",
+            {"turbulence_cn2": 0.0}, lab=("turbulence_cn2_m23",)),
 )
 VARIANT_NAMES = tuple(v.name for v in VARIANTS)
 #: The geometric trial at the measured centroid scatter (a separate store, ``DIR/budget-geometric``).
@@ -118,18 +135,23 @@ SOURCE_LABELS = {"perfect_calibration": "calibration", "no_sensor_noise": "senso
                  "no_quantisation": "8-bit/JPEG", "no_misalignment": "misalignment", "no_jpeg": "JPEG",
                  "no_chroma_subsampling": "4:2:0 chroma", "no_cfa": "Bayer mosaic/demosaic",
                  "no_noise_reduction": "ISP noise reduction", "no_sharpening": "ISP sharpening",
+                 "no_stand_error": "stand (gimbal, stage)", "no_rail_error": "recorded range (rangefinder)",
+                 "no_turbulence": "air turbulence",
                  GEOMETRIC_VARIANT: "random centroid noise (geometric)", "floor": "floor (all removed)"}
 STATISTICS = ("mean_abs", "std", "rms")
 
 
-def applicable_variants(camera) -> tuple:
-    """The variants that change something for a camera (name or :class:`svgs.Camera`): those
-    whose ``applies`` holds for its phone model."""
+def applicable_variants(camera, lab_errors: dict | None = None) -> tuple:
+    """The variants that change something for a camera (name or :class:`svgs.Camera`) in a lab:
+    those whose ``applies`` holds for its phone model and, for the lab's sources, whose source is
+    on in ``lab_errors`` (:attr:`studies.campaign.CampaignConfig.lab_errors`; None: none on)."""
     from camera.phone.params import PhoneParams
     from svgs.profiles import Camera
 
     params = PhoneParams.from_camera(Camera.load(camera))
-    return tuple(v for v in VARIANTS if v.applies is None or v.applies(params))
+    lab = lab_errors or {}
+    return tuple(v for v in VARIANTS if (v.applies is None or v.applies(params))
+                 and (not v.lab or any(float(lab.get(k, 0.0)) > 0 for k in v.lab)))
 
 
 def variant_trials(baseline: list, config) -> list:
@@ -144,7 +166,7 @@ def variant_trials(baseline: list, config) -> list:
     kind = get_trial_kind(config.trial_kind)
     N = len(baseline)
     label_keys = ("nominal_range_m", "pose_index", "exposure_index")
-    keep = {v.name for v in applicable_variants(config.camera)}
+    keep = {v.name for v in applicable_variants(config.camera, config.lab_errors)}
     from camera.phone.params import PhoneParams
     from svgs.profiles import Camera
 
@@ -324,7 +346,8 @@ HEADLINE_REASON = (
 SOURCE_IDS = {"perfect_calibration": "calibration", "no_sensor_noise": "sensor_noise", "no_glare": "glare",
               "no_quantisation": "quantisation", "no_misalignment": "misalignment", "all_removed": "all_sources",
               "no_jpeg": "jpeg", "no_chroma_subsampling": "chroma_subsampling", "no_cfa": "cfa",
-              "no_noise_reduction": "noise_reduction", "no_sharpening": "sharpening"}
+              "no_noise_reduction": "noise_reduction", "no_sharpening": "sharpening", "no_stand_error": "stand_error",
+              "no_rail_error": "rail_error", "no_turbulence": "turbulence"}
 VERDICTS = ("within_2x", "below", "above", "fitted", "no_solution")
 
 

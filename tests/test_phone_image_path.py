@@ -308,8 +308,8 @@ def test_new_stages_are_known_and_off_where_the_profile_leaves_them_off():
     assert isp.nr_sigma_px == 0 and isp.sharpen_amount == 0 and isp.jpeg_subsampling == "gray"
     for name in ("galaxy-nexus", "htc-amaze-4g"):
         p = PhoneCamera(name).params.isp
-        # the luminance coded alone until the reports are regenerated on the colour JPEG
-        assert p.jpeg_subsampling == "gray" and p.jpeg_quality == 90 and p.jpeg_grid_offset_px == (0, 0)
+        # the sourced coding: a colour JPEG at 4:2:0 (the dataclass' own default stays the luminance alone)
+        assert p.jpeg_subsampling == "4:2:0" and p.jpeg_quality == 90 and p.jpeg_grid_offset_px == (0, 0)
         assert p.nr_sigma_px == 0 and p.sharpen_amount == 0
 
 
@@ -366,19 +366,19 @@ def test_error_budget_variants_of_the_image_path():
     assert floor["cfa"] == floor["nr"] == floor["sharpen"] == floor["quantise"] == 0.0
     for n in VARIANT_NAMES:
         assert n in SOURCE_IDS and (n in SOURCE_LABELS or n == "all_removed")
-    # the profiles' defaults (the luminance JPEG, no NR, no sharpening): the budget before issue 24
+    # a phone on the luminance JPEG alone, no NR, no sharpening: the budget before issue 24
     from studies.error_budget import image_path_on
 
     image_vars = {"no_jpeg", "no_chroma_subsampling", "no_cfa", "no_noise_reduction", "no_sharpening"}
-    for name in ("galaxy-nexus", "htc-amaze-4g"):
-        assert not image_path_on(PhoneCamera(name).params)
-        assert not {v.name for v in applicable_variants(name)} & image_vars
-    # a phone on the colour JPEG: the image path's stages are variants of their own
     cam = Camera.load("galaxy-nexus")
     tables = {k: dict(v) if isinstance(v, dict) else v for k, v in cam.tables.items()}
-    tables["isp"]["jpeg_subsampling"] = "4:2:0"
-    colour = cam.replace(tables=tables)
-    assert image_path_on(PhoneCamera(colour).params)
-    ran = {v.name for v in applicable_variants(colour)}
-    assert {"no_jpeg", "no_chroma_subsampling", "no_cfa"} <= ran
+    tables["isp"]["jpeg_subsampling"] = "gray"
+    grey = cam.replace(tables=tables)
+    assert not image_path_on(PhoneCamera(grey).params)
+    assert not {v.name for v in applicable_variants(grey)} & image_vars
+    # the profiles (the sourced colour JPEG at 4:2:0): the image path's stages are variants of their own
+    for name in ("galaxy-nexus", "htc-amaze-4g"):
+        assert image_path_on(PhoneCamera(name).params)
+        ran = {v.name for v in applicable_variants(name)}
+        assert {"no_jpeg", "no_chroma_subsampling", "no_cfa"} <= ran
     assert not ran & {"no_noise_reduction", "no_sharpening"}  # the profile leaves them off: nothing to remove

@@ -149,17 +149,28 @@ def test_error_budget_end_to_end(tmp_path, capsys):
         rows = list(csv.DictReader(fh))
     variants = [r["variant"] for r in rows]
     assert variants.count("baseline") == 2 and variants.count("no_sensor_noise") == 1
-    # every variant that changes something for this camera: its profile codes the luminance JPEG
-    # with no NR or sharpening (the image path of issue 24 off), so the budget before issue 24
-    assert set(variants) == {"baseline", *(v.name for v in applicable_variants("galaxy-nexus"))}
-    assert "no_jpeg" not in variants and "no_cfa" not in variants and "no_sharpening" not in variants
+    # every variant that changes something for this camera in this lab: its profile codes a colour
+    # JPEG at 4:2:0 with no NR or sharpening; the lab's sourced errors are on
+    from sim.lab import lab_errors
+
+    lab = {k: v for k, v in lab_errors().items() if v > 0}
+    assert set(variants) == {"baseline", *(v.name for v in applicable_variants("galaxy-nexus", lab))}
+    assert {"no_jpeg", "no_chroma_subsampling", "no_cfa"} <= set(variants) and "no_sharpening" not in variants
     assert {"perfect_calibration", "no_quantisation", "all_removed"} <= set(variants)
+    assert {"no_stand_error", "no_rail_error", "no_turbulence"} <= set(variants)
     by = {(r["variant"], r["exposure_index"]): r for r in rows}
     # the misalignment: 2 deg of yaw against the commanded truth, gone against the actual pose
     assert abs(float(by[("baseline", "0")]["err_yaw_deg"]) - 2.0) < 0.3
     assert abs(float(by[("no_misalignment", "0")]["err_yaw_deg"])) < 0.3
     # same image, same seed: the variants judged differently solve the very same centroids
-    assert by[("no_misalignment", "0")]["est_x_m"] == by[("baseline", "0")]["est_x_m"]
+    for v in ("no_misalignment", "no_stand_error", "no_rail_error"):
+        assert by[(v, "0")]["est_x_m"] == by[("baseline", "0")]["est_x_m"]
+    # the truth's errors: the recorded range against the true one (the campaign's rangefinder draw)
+    b, r = by[("baseline", "0")], by[("no_rail_error", "0")]
+    assert float(b["true_z_m"]) != float(r["true_z_m"])
+    assert 0 < abs(float(b["true_z_m"]) - float(r["true_z_m"])) < 5 * lab["rangefinder_sigma_m"]
+    # still air: another image (the spots moved), the same sensor noise draw
+    assert by[("no_turbulence", "0")]["est_x_m"] != by[("baseline", "0")]["est_x_m"]
     with open(out / "budget.csv", newline="") as fh:
         budget = list(csv.DictReader(fh))
     yaw = next(b for b in budget if b["component"] == "yaw_deg" and b["statistic"] == "rms")
