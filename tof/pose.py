@@ -30,6 +30,8 @@ from svgs.errors import InputError
 #: Default convergence tolerances (metres, radians) and iteration cap of the refinement.
 REFINE_TOL = 1e-10
 REFINE_MAX_ITER = 500
+#: Stopping threshold of the paper's literal fixed-point iteration (pipeline default; see docs/tof.md).
+REFINE_TOL_PAPER_M = 1e-6
 
 
 def _check_points(p, name, n=None):
