@@ -85,6 +85,11 @@ def weighted_svd_pose(points_target_m, points_cam_m, weights=None) -> tuple[np.n
         raise InputError(f"weights: expected {p.shape[0]} finite non-negative weights")
     if is_degenerate(p, w):
         raise InputError("points_target_m: need at least 3 non-collinear points with positive weight")
+    return _kabsch(p, q, w)
+
+
+def _kabsch(p, q, w) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`weighted_svd_pose` without the input checks (the refinement's inner loop)."""
     w = w / w.sum()
     pb, qb = w @ p, w @ q
     H = (p - pb).T @ ((q - qb) * w[:, None])
@@ -174,11 +179,12 @@ def refine_line_of_sight(points_target_m, los_cam, R0, t0, *, weights=None, rang
     converged = False
     it = 0
     if method == "fixed-point":
+        weighted_svd_pose(p, p, w)  # the checks (shapes, weights, degeneracy), once
         for it in range(1, (max_iter or REFINE_MAX_ITER) + 1):
             x = p @ R.T + t
             s = np.einsum("ij,ij->i", e, x)
             q = e * ((1 - lam) * s + lam * rho)[:, None]
-            R1, t1 = weighted_svd_pose(p, q, w)
+            R1, t1 = _kabsch(p, q, w)
             dR = np.linalg.norm(R1 - R)
             dt = np.linalg.norm(t1 - t)
             R, t = R1, t1
