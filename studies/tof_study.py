@@ -419,12 +419,12 @@ def plot_sweep(path, sweep) -> None:
                          color=f"C{j + 3}", label=f"{c} ({scheme})")
     axes[0].axhline(PAPER_ACCURACY["mm"], color="k", ls=":", lw=0.8, label="paper: 2 mm")
     axes[1].axhline(PAPER_ACCURACY["deg"], color="k", ls=":", lw=0.8, label="paper: 0.13 deg")
+    axes[0].plot([5, 10], [PAPER_FIG14_Z_MM] * 2, color="k", lw=2, alpha=0.4, label="paper: z 2.5 mm beyond 5 m")
     for ax, unit in zip(axes, ("mm", "deg")):
         ax.set_xlabel("range, m")
         ax.set_ylabel(f"single-frame RMS error, {unit}")
         ax.set_yscale("log")
         ax.legend(fontsize=6, ncol=2)
-    axes[0].plot([5, 10], [PAPER_FIG14_Z_MM] * 2, color="k", lw=2, alpha=0.4, label="paper: z 2.5 mm beyond 5 m")
     fig.suptitle("Accuracy against distance (the paper's Fig. 14), target head-on: solid = the paper's literal "
                  "line-of-sight iteration (default), dashed = its converged optimum, dotted = depths blended in", fontsize=9)
     fig.tight_layout()
