@@ -11,8 +11,13 @@ Line-of-sight refinement (paper section 5.2)
     the range. Each iteration replaces the measurements by the current pose's expected
     points moved onto the observed lines of sight, ``q_i = e_i e_i^T (R_k p_i + t_k)``, and
     solves the SVD again, until the pose changes by less than a tolerance. This is the
-    paper's scheme (with ``depth_weight = 0`` it ignores the depths after the start and
-    converges to the object-space collinearity optimum). ``depth_weight`` lambda_i blends the
+    paper's scheme. With ``depth_weight = 0`` its fixed point is the object-space collinearity
+    optimum, whose range comes from the pattern's apparent size; but with the SVD's centroid
+    translation one step moves the range only by ~(r / Z)^2 of the way there (pattern radius r,
+    range Z: a ring keeps exactly ``Z^2 / (r^2 + Z^2)`` of a range error), so stopped by a
+    change threshold at long range it keeps most of the starting (measured) range. The
+    pipeline's default is this literal iteration (``REFINE_TOL_PAPER_M``, ``REFINE_MAX_ITER``);
+    ``method="gauss-newton"`` reaches the optimum itself. ``depth_weight`` lambda_i blends the
     measured range back in, ``q_i = e_i [(1 - l_i) e_i^T (R_k p_i + t_k) + l_i rho_i]``;
     the fixed point is then the minimum of ``sum_i w_i (|P_perp x_i|^2 + l_i (e_i^T x_i - rho_i)^2)``,
     i.e. maximum likelihood with ``l_i = sigma_perp_i^2 / sigma_rho_i^2`` and
