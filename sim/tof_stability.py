@@ -155,7 +155,9 @@ def run_stability(renderer, sensor, range_m: float, frames: int, *, seed: int = 
         ``fails`` (reason -> count), ``rot_err_deg`` (K,), ``integration_time_s``,
         ``saturated_pixels`` (first frame), ``max_amplitude_lsb`` (noise-free), ``noise_free``
         (the noise-free frame's centroid errors and pose error), ``render_s``, ``frames_s``,
-        ``spp``, ``rim_spp`` (the samples per pixel on the marker rims), ``reference``, ``rendered``.
+        ``spp``, ``rim_spp`` (the samples per pixel on the marker rims), ``reference``,
+        ``iterations_median`` (line-of-sight refinement iterations, median over solved frames),
+        ``rendered``.
     """
     import tof
     from svgs.frames import rotation_angle_deg
@@ -171,7 +173,7 @@ def run_stability(renderer, sensor, range_m: float, frames: int, *, seed: int = 
     clean = sensor.frame(rendered, noise=False)
     noise_free = _noise_free(renderer, rendered, clean, pipeline, R, t, pt)
     pipe = tof.TofPipeline(renderer.camera, renderer.target, **(pipeline or {}))
-    cols, rows, rot, fails = [], [], [], {}
+    cols, rows, rot, fails, iters = [], [], [], {}, []
     sat0 = None
     t0 = time.perf_counter()
     for k, fr in enumerate(sensor.frames(rendered, frames, [seed, 7])):
@@ -182,6 +184,7 @@ def run_stability(renderer, sensor, range_m: float, frames: int, *, seed: int = 
             c = pose_columns(res.R_cam_target, res.t_cam_target_m, R, pt)
             cols.append(c)
             rot.append(float(rotation_angle_deg(res.R_cam_target, R)))
+            iters.append(res.iterations)
             rows.append({"frame": k, "ok": True, "reason": None, **dict(zip(COLUMNS, c.tolist()))})
         else:
             fails[res.reason] = fails.get(res.reason, 0) + 1
@@ -196,6 +199,7 @@ def run_stability(renderer, sensor, range_m: float, frames: int, *, seed: int = 
             "render_s": render_s, "frames_s": frames_s, "frames": frames,
             "spp": rendered.truth["render"]["spp"], "rim_spp": rendered.truth["render"].get("rim_spp"),
             "reference": reference, "noise_free": noise_free,
+            "iterations_median": float(np.median(iters)) if iters else None,
             "rendered": rendered}
 
 

@@ -35,7 +35,7 @@ from . import log_filter as _log
 from . import match as _match
 from .camera import DEFAULT_CAMERA, DEFAULT_PATTERN, depth_kind, line_of_sight, load_camera, load_target
 from .ellipse import centre_correction_px, project_circle_conics
-from .pose import is_degenerate, refine_line_of_sight, weighted_svd_pose
+from .pose import REFINE_MAX_ITER, REFINE_TOL, REFINE_TOL_PAPER_M, is_degenerate, refine_line_of_sight, weighted_svd_pose
 from .temporal import PersistenceCounter, RecursiveMedianDepth
 
 STAGES = ("validate", "temporal_median", "active_set", "nlog_filter", "blobs", "persistence", "centroids",
@@ -73,6 +73,9 @@ class PipelineParams:
     use_marker_sizes: bool = True
     centre_correction: bool = True
     refine: bool = True
+    refine_method: str = "fixed-point"  # the paper's literal iteration (section 5.2); "gauss-newton": its converged optimum
+    refine_tol_m: float = REFINE_TOL_PAPER_M  # fixed point: stop when t changes < tol (m) and R < tol (rad) in one step
+    refine_max_iter: int = REFINE_MAX_ITER
     centroid_sigma_px: float = 0.05
     depth_sigma_floor_m: float = 0.002
     depth_weight: float | None = 0.0  # 0: the paper's scheme (section 5.2); None: sigma_perp^2 / sigma_rho^2 per marker
@@ -313,7 +316,10 @@ class TofPipeline:
         e_a = line_of_sight(cam, uv)
         rho_a = self._to_range(cands.depth_m[a], e_a)
         if P.refine:
-            r = refine_line_of_sight(pts, e_a, R, t, weights=1 / sig_perp[a] ** 2, range_m=rho_a, depth_weight=lam)
+            gn = P.refine_method == "gauss-newton"
+            r = refine_line_of_sight(pts, e_a, R, t, weights=1 / sig_perp[a] ** 2, range_m=rho_a, depth_weight=lam,
+                                     method=P.refine_method, tol=REFINE_TOL if gn else P.refine_tol_m,
+                                     max_iter=None if gn else P.refine_max_iter)
             R, t, iters = r.R_cam_target, r.t_cam_target_m, r.iterations
         else:
             R, t = weighted_svd_pose(pts, e_a * rho_a[:, None], 1 / obs_sigma[a] ** 2)

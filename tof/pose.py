@@ -11,8 +11,13 @@ Line-of-sight refinement (paper section 5.2)
     the range. Each iteration replaces the measurements by the current pose's expected
     points moved onto the observed lines of sight, ``q_i = e_i e_i^T (R_k p_i + t_k)``, and
     solves the SVD again, until the pose changes by less than a tolerance. This is the
-    paper's scheme (with ``depth_weight = 0`` it ignores the depths after the start and
-    converges to the object-space collinearity optimum). ``depth_weight`` lambda_i blends the
+    paper's scheme. With ``depth_weight = 0`` its fixed point is the object-space collinearity
+    optimum, whose range comes from the pattern's apparent size; but with the SVD's centroid
+    translation one step moves the range only by ~(r / Z)^2 of the way there (pattern radius r,
+    range Z: a ring keeps exactly ``Z^2 / (r^2 + Z^2)`` of a range error), so stopped by a
+    change threshold at long range it keeps most of the starting (measured) range. The
+    pipeline's default is this literal iteration (``REFINE_TOL_PAPER_M``, ``REFINE_MAX_ITER``);
+    ``method="gauss-newton"`` reaches the optimum itself. ``depth_weight`` lambda_i blends the
     measured range back in, ``q_i = e_i [(1 - l_i) e_i^T (R_k p_i + t_k) + l_i rho_i]``;
     the fixed point is then the minimum of ``sum_i w_i (|P_perp x_i|^2 + l_i (e_i^T x_i - rho_i)^2)``,
     i.e. maximum likelihood with ``l_i = sigma_perp_i^2 / sigma_rho_i^2`` and
@@ -30,6 +35,8 @@ from svgs.errors import InputError
 #: Default convergence tolerances (metres, radians) and iteration cap of the refinement.
 REFINE_TOL = 1e-10
 REFINE_MAX_ITER = 500
+#: Stopping threshold of the paper's literal fixed-point iteration (pipeline default; see docs/tof.md).
+REFINE_TOL_PAPER_M = 1e-6
 
 
 def _check_points(p, name, n=None):
@@ -83,6 +90,11 @@ def weighted_svd_pose(points_target_m, points_cam_m, weights=None) -> tuple[np.n
         raise InputError(f"weights: expected {p.shape[0]} finite non-negative weights")
     if is_degenerate(p, w):
         raise InputError("points_target_m: need at least 3 non-collinear points with positive weight")
+    return _kabsch(p, q, w)
+
+
+def _kabsch(p, q, w) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`weighted_svd_pose` without the input checks (the refinement's inner loop)."""
     w = w / w.sum()
     pb, qb = w @ p, w @ q
     H = (p - pb).T @ ((q - qb) * w[:, None])
@@ -172,11 +184,12 @@ def refine_line_of_sight(points_target_m, los_cam, R0, t0, *, weights=None, rang
     converged = False
     it = 0
     if method == "fixed-point":
+        weighted_svd_pose(p, p, w)  # the checks (shapes, weights, degeneracy), once
         for it in range(1, (max_iter or REFINE_MAX_ITER) + 1):
             x = p @ R.T + t
             s = np.einsum("ij,ij->i", e, x)
             q = e * ((1 - lam) * s + lam * rho)[:, None]
-            R1, t1 = weighted_svd_pose(p, q, w)
+            R1, t1 = _kabsch(p, q, w)
             dR = np.linalg.norm(R1 - R)
             dt = np.linalg.norm(t1 - t)
             R, t = R1, t1
