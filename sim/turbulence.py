@@ -4,7 +4,10 @@ Light from a retroreflector reaches the phone's aperture through the lab's air; 
 fluctuations (refractive-index structure constant ``C_n^2``, m^-2/3) tilt the arriving wave
 front and move the spot's image. The exposures are short and the eddies crossing a
 millimetre aperture are larger than it, so each exposure sees a frozen tilt (an upper bound:
-averaging over an exposure that is long against the aperture's crossing time only lowers it).
+averaging over an exposure that is long against the aperture's crossing time only lowers it). A
+second reason it is an upper bound: the phone's pupil (1.3-1.4 mm) is about the Fresnel scale
+sqrt(lambda L) (1.7 mm at 5 m, 4.1 mm at 30 m), where the geometric-optics formulas below overstate
+the variance by up to about 2x, and an indoor inner scale larger than the pupil lowers it further.
 
 Angle of arrival, one axis, circular aperture of diameter ``D`` (Kolmogorov turbulence; Tatarskii;
 Andrews & Phillips, *Laser Beam Propagation through Random Media*, 2nd ed., 2005, ch. 6)::

@@ -40,8 +40,11 @@ def test_campaign_design_follows_the_sensor_mount_envelope():
     trials = campaign_trials(cfg)
     assert len(trials) == 5 * 200 and [t.trial_id for t in trials] == list(range(1000))
     s = {k: np.array([t.scenario[k] for t in trials]) for k in ("roll_deg", "pitch_deg", "yaw_deg", "range_m", "stage_m",
-                                                                 "nominal_range_m", "pose_index", "stand")}
-    assert np.all(s["stand"] == 1) and np.all(s["range_m"] == s["nominal_range_m"])
+                                                                 "nominal_range_m", "pose_index", "stand",
+                                                                 "rail_err_m")}
+    # the recorded range (the rangefinder's reading) plus its error is the rail's true position
+    assert np.all(s["stand"] == 1) and np.allclose(s["range_m"] + s["rail_err_m"], s["nominal_range_m"])
+    assert 0 < np.abs(s["rail_err_m"]).max() < 0.1
     assert np.abs(s["roll_deg"]).max() <= 25 and np.abs(s["pitch_deg"]).max() <= 25
     assert np.abs(s["yaw_deg"]).max() <= 45 and np.abs(s["yaw_deg"]).max() > 43  # about the line of sight: in view
     assert np.abs(s["stage_m"]).max() <= 0.15 and np.abs(s["stage_m"]).max() > 0.14
@@ -52,7 +55,7 @@ def test_campaign_design_follows_the_sensor_mount_envelope():
     assert trials[4].scenario["roll_deg"] != trials[0].scenario["roll_deg"]
     cam, pat = Camera.load("htc-amaze-4g"), Pattern.load("svgs-3u")
     stand = TestStand()
-    assert all(targets_in_view(cam, pat, *stand.pose(t.scenario["range_m"], stage_m=t.scenario["stage_m"],
+    assert all(targets_in_view(cam, pat, *stand.pose(t.scenario["nominal_range_m"], stage_m=t.scenario["stage_m"],
                                                       roll_deg=t.scenario["roll_deg"], pitch_deg=t.scenario["pitch_deg"],
                                                       yaw_deg=t.scenario["yaw_deg"])) for t in trials[::4])
     # the design of trial i does not depend on how many trials or ranges there are
