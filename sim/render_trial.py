@@ -23,8 +23,11 @@ Scenario keys
     calibration). With ``stand = 1`` the angles turn the phone on the test stand
     (:mod:`sim.stand`); ``lens_*`` make the true lens differ from the profile (the solver's
     ``*_error`` are relative to it); ``sensor_noise``, ``glare``, ``quantise``, ``cfa``, ``nr``,
-    ``sharpen``, ``chroma``, ``jpeg`` switch error sources off and ``truth_actual`` takes the
-    errors against the actual pose (the campaign's error budget); ``demosaic``,
+    ``sharpen``, ``chroma``, ``jpeg`` switch error sources off and ``truth_actual``,
+    ``truth_stand``, ``truth_rail`` take the errors against the pose with the phone's
+    misalignment, the stand's errors (``stand_err_*``) or the rail's (``rail_err_m``) included (the
+    campaign's error budget); ``turbulence_cn2`` moves each exposure's spots through the lab's air
+    (:func:`turbulent_points`); ``demosaic``,
     ``jpeg_quality`` and ``jpeg_grid_offset_*_px`` choose the ISP's demosaic and JPEG;
     ``f_number``, ``led_offset_scale``, ``glare_*``, ``exposure_compensation_ev`` are the physics
     a sensitivity study varies. Studies add labels (``nominal_range_m``, ``pose_index``,

@@ -132,12 +132,13 @@ class CampaignConfig:
         }
 
 
-def paper_calibration_error(camera, pattern, ranges_m, sigma_px: float, seed: int) -> dict:
+def paper_calibration_error(camera, pattern, ranges_m, sigma_px: float, seed: int,
+                            range_sigma_m: float | None = None) -> dict:
     """One calibration as the paper made it, simulated (seeded, once per campaign).
 
     Focal length: the paper's procedure - one image of the target facing the camera at each
     test range, the range measured with a hand-held laser range finder (1-sigma
-    :func:`sim.lab.lab_errors`' ``rangefinder_sigma_m``; the paper leaves it blank), the focal
+    ``range_sigma_m``, default :func:`sim.lab.lab_errors`' ``rangefinder_sigma_m``; the paper leaves it blank), the focal
     length fitted to the spot spacings (:func:`calibration.focal.estimate_focal`) from
     centroids with ``sigma_px`` noise. Principal point and k1: the paper assumed the image
     centre and no distortion; the real lens differs by draws from
@@ -153,9 +154,10 @@ def paper_calibration_error(camera, pattern, ranges_m, sigma_px: float, seed: in
 
     from sim.trials import _pattern
 
-    from sim.lab import lab_errors
+    if range_sigma_m is None:
+        from sim.lab import lab_errors
 
-    range_sigma_m = lab_errors()["rangefinder_sigma_m"]
+        range_sigma_m = lab_errors()["rangefinder_sigma_m"]
     pat = _pattern(pattern)
     rng = study_rng(seed, 0)
     images, measured = [], []
@@ -284,7 +286,8 @@ def make_config(camera: str, *, ranges_m=None, trials_per_range: int = 200, seed
             err = {"focal_error_frac": 0.0, "pp_error_u_px": -lens["lens_pp_u_px"],
                    "pp_error_v_px": -lens["lens_pp_v_px"], "k1_error": -lens["lens_k1"]}
         else:
-            err = paper_calibration_error(cam, pattern, rs, float(sigma_px), check_seed(seed))
+            err = paper_calibration_error(cam, pattern, rs, float(sigma_px), check_seed(seed),
+                                          range_sigma_m=None if lab_errors else 0.0)
     for k, v in err.items():
         if k not in kind.parameters:
             if v != 0:
@@ -323,7 +326,7 @@ def rangefinder_readings(config: CampaignConfig) -> list[float]:
 STAND_ERROR_STREAM = 500_000_000
 
 
-def stand_errors(config: CampaignConfig, ri: int, j: int) -> dict:
+def stand_errors(config: CampaignConfig, ri: int, j: int, readings: list[float] | None = None) -> dict:
     """Setting ``j`` of range ``ri``: the gimbal's and the stage's errors, each uniform within
     +/- the lab's accuracy (an accuracy specification bounds the error at any position; which
     error a position has is fixed but unknown, so across settings it is a draw), and the rail
@@ -333,11 +336,12 @@ def stand_errors(config: CampaignConfig, ri: int, j: int) -> dict:
     -------
     dict
         ``range_m`` (the recorded range) and the scenario's ``stand_err_*`` and ``rail_err_m``.
+        ``readings``: :func:`rangefinder_readings` when the caller has them.
     """
     g, st = config.lab_error("gimbal_accuracy_deg"), config.lab_error("stage_accuracy_m")
     rng = design_rng(config.seed, STAND_ERROR_STREAM + ri * POSE_STRIDE + j)
     e = rng.uniform(-1.0, 1.0, 4)
-    recorded = rangefinder_readings(config)[ri]
+    recorded = (rangefinder_readings(config) if readings is None else readings)[ri]
     return {"range_m": recorded, "rail_err_m": float(config.ranges_m[ri] - recorded),
             "stand_err_roll_deg": float(g * e[0]), "stand_err_pitch_deg": float(g * e[1]),
             "stand_err_yaw_deg": float(g * e[2]), "stand_err_stage_m": float(st * e[3])}
@@ -458,11 +462,12 @@ def campaign_trials(config: CampaignConfig, *, variants: bool = True) -> list:
     if config.merge_px and "merge_px" in kind.parameters:
         fixed["merge_px"] = config.merge_px
     poses = campaign_poses(config)
+    readings = rangefinder_readings(config)
     for ri, r in enumerate(config.ranges_m):
         for k in range(n):
             i = ri * n + k
             j, e = divmod(k, K)
-            lab = stand_errors(config, ri, j) if config.lab_errors else {"range_m": r}
+            lab = stand_errors(config, ri, j, readings) if config.lab_errors else {"range_m": r}
             scen = build_scenario(kind, {**fixed, **poses[ri][j], **lab},
                                   labels={"nominal_range_m": float(r), "pose_index": j, "exposure_index": e,
                                           "variant": "baseline"})
