@@ -365,6 +365,12 @@ def _frame(key):
     return render_scenario(scen, seed=int(seed)), {}
 
 
+def rendered_frame(scenario):
+    """The rendered frame of a ``render`` scenario (:class:`sim.closed_loop.Frame`), from this
+    process's render cache: the trials of one render group share it."""
+    return _frame(render_key(scenario))[0]
+
+
 def _glare_key(scenario: dict) -> tuple:
     """What decides the exposer of a trial (after the render): ND filter, the lens' glare and the
     colour filter array."""

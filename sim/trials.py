@@ -280,18 +280,16 @@ GEOMETRIC_OUTPUTS = (
 )
 
 
-@functools.lru_cache(maxsize=16)
 def _camera(name: str):
-    from svgs.profiles import Camera
+    from svgs.profiles import load_camera
 
-    return Camera.load(name)
+    return load_camera(name)
 
 
-@functools.lru_cache(maxsize=16)
 def _pattern(name: str):
-    from svgs.profiles import Pattern
+    from svgs.profiles import load_pattern
 
-    return Pattern.load(name)
+    return load_pattern(name)
 
 
 def camera_with_calibration_errors(camera, scenario: Mapping):

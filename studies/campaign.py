@@ -152,7 +152,7 @@ def paper_calibration_error(camera, pattern, ranges_m, sigma_px: float, seed: in
     from calibration.focal import estimate_focal
     from svgs.frames import pose_from_scenario
 
-    from sim.trials import _pattern
+    from svgs.profiles import load_pattern as _pattern
 
     if range_sigma_m is None:
         from sim.lab import lab_errors
@@ -240,7 +240,7 @@ def make_config(camera: str, *, ranges_m=None, trials_per_range: int = 200, seed
     """
     from sim.lab import lab_errors as _lab_errors
     from sim.stand import TestStand
-    from sim.trials import _camera
+    from svgs.profiles import load_camera as _camera
 
     cam = _camera(camera)
     kind = get_trial_kind(trial_kind)
@@ -363,7 +363,7 @@ def rendered_paper_calibration(config: CampaignConfig, out_dir=None, progress=No
     import json
 
     from calibration.focal import estimate_focal
-    from sim.trials import _camera, _pattern
+    from svgs.profiles import load_camera as _camera, load_pattern as _pattern
     from studies.calibration.focal import focal_frames_rendered
 
     if config.trial_kind != "render" or config.calibration != "paper":
@@ -419,7 +419,7 @@ def campaign_poses(config: CampaignConfig) -> list[list[dict]]:
     the phone sees every target (:func:`sim.stand.sample_in_view`; pose ``j`` of range ``ri``
     from its own stream ``design_rng(seed, ri * POSE_STRIDE + j)``)."""
     from sim.stand import TestStand, sample_in_view
-    from sim.trials import _camera, _pattern
+    from svgs.profiles import load_camera as _camera, load_pattern as _pattern
 
     cam, pat = _camera(config.camera), _pattern(config.pattern)
     stand = TestStand(misalignment_deg=tuple(config.misalignment_deg))
@@ -571,7 +571,7 @@ def _rel(path) -> str:
 
 
 def _paper_ranges(config: CampaignConfig) -> list[float]:
-    from sim.trials import _camera
+    from svgs.profiles import load_camera as _camera
 
     phone = _camera(config.camera).name
     paper = svgs_2014_results()
@@ -634,7 +634,7 @@ def fitted_values_table(config: CampaignConfig, table: dict | None = None) -> li
     import tomllib
 
     from sim.lab import DEFAULT_LAB
-    from sim.trials import _camera
+    from svgs.profiles import load_camera as _camera
     from svgs.profiles import apply_fitted, fitted_overlay_path, read_fitted_overlay
 
     cam = _camera(config.camera)
@@ -802,7 +802,7 @@ def summarize(table: dict, config: CampaignConfig, paper: dict | None = None) ->
         geometric trials, of the solver's bound at ``sigma_px``. Units: those of the component
         (m or deg); ratios dimensionless.
     """
-    from sim.trials import _camera
+    from svgs.profiles import load_camera as _camera
 
     paper = svgs_2014_results() if paper is None else paper
     phone = _camera(config.camera).name
@@ -1024,7 +1024,7 @@ def sample_image_figure(config: CampaignConfig, trials: list, table: dict):
     from matplotlib.figure import Figure
 
     from sim.closed_loop import solve_exposure, solver_camera
-    from sim.render_trial import _frame, render_key
+    from sim.render_trial import rendered_frame
     from sim.trials import camera_with_calibration_errors
     from svgs.profiles import Pattern
 
@@ -1043,7 +1043,7 @@ def sample_image_figure(config: CampaignConfig, trials: list, table: dict):
         ax.set_yticks([])
         if t is None:
             continue
-        frame, cache = _frame(render_key(t.scenario))
+        frame = rendered_frame(t.scenario)
         ex = frame.exposer().expose(seed=int(t.seed))
         img = ex.image
         cam_img = solver_camera(frame.camera, img.shape)
@@ -1073,7 +1073,7 @@ def campaign_verdicts(config: CampaignConfig, summary: list[dict], budget: dict 
     """Every cell of Tables 2-5 judged (:func:`studies.error_budget.cell_verdicts`), the cells the
     fitted values consume (:func:`fitted_values_table`) as ``fitted``, each with its ``table``
     (``Table 2`` ... ``Table 5``)."""
-    from sim.trials import _camera
+    from svgs.profiles import load_camera as _camera
 
     from .error_budget import cell_verdicts
 

@@ -170,7 +170,7 @@ class SensitivityConfig:
 def make_config(camera: str, vary, *, fixed=None, method: str = "sobol", n: int = 256, seed: int = 0,
                 trial_kind: str = "geometric", pattern: str = "svgs-3u") -> SensitivityConfig:
     """A validated :class:`SensitivityConfig` (all checks before any work)."""
-    from sim.trials import _camera, _pattern
+    from svgs.profiles import load_camera as _camera, load_pattern as _pattern
 
     kind = get_trial_kind(trial_kind)
     if method not in ("sobol", "morris"):

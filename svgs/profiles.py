@@ -20,6 +20,7 @@ import copy
 import os
 import tomllib
 from dataclasses import dataclass, field
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -543,3 +544,37 @@ class Pattern:
 
 
 
+
+
+@functools.lru_cache(maxsize=32)
+def _cached_camera(path: str, mtime_ns: int, fitted: bool) -> "Camera":
+    return Camera.load(path, fitted=fitted)
+
+
+@functools.lru_cache(maxsize=32)
+def _cached_pattern(path: str, mtime_ns: int) -> "Pattern":
+    return Pattern.load(path)
+
+
+def load_camera(name_or_path, *, fitted: bool = True) -> Camera:
+    """The camera profile ``name_or_path``, read once per process (:meth:`Camera.load`, cached).
+
+    The cache is keyed on the resolved file and its modification time, so an edited profile
+    is read again. A :class:`Camera` is returned as is. Treat the result as read-only: it is
+    shared by every caller in the process.
+    """
+    if isinstance(name_or_path, Camera):
+        return name_or_path
+    path = _resolve(name_or_path, CAMERAS_DIR, "camera profile")
+    overlay = fitted_overlay_path(path) if fitted else None
+    stamp = path.stat().st_mtime_ns + (overlay.stat().st_mtime_ns if overlay is not None else 0)
+    return _cached_camera(str(path), stamp, bool(fitted))
+
+
+def load_pattern(name_or_path) -> Pattern:
+    """The target pattern ``name_or_path``, read once per process (:meth:`Pattern.load`, cached
+    on the resolved file and its modification time). A :class:`Pattern` is returned as is."""
+    if isinstance(name_or_path, Pattern):
+        return name_or_path
+    path = _resolve(name_or_path, PATTERNS_DIR, "target pattern")
+    return _cached_pattern(str(path), path.stat().st_mtime_ns)
