@@ -246,7 +246,7 @@ def cmd_campaign(args) -> int:
 
 def cmd_merge_range(args) -> int:
     from cli.json_out import emit, run_info, text_to_stderr
-    from studies.merge_range import _fmt, make_config, run_merge_range
+    from studies.merge_range import format_merge_range, make_config, run_merge_range
 
     spec = executor_from_args(args)
     config = make_config(args.camera, ranges_m=_ranges(args.ranges), vary=args.vary or None, exposures=args.exposures,
@@ -262,10 +262,10 @@ def cmd_merge_range(args) -> int:
         cases, eff, stats, path = run_merge_range(config, out, spec, chunk_size=args.chunk_size,
                                                   progress=not args.no_progress, command=shlex.join(argv))
         nom = cases[0]
-        print(f"{config.camera}: the spots merge at {_fmt(nom['merge_range_m'], nom['bound'])} m as profiled")
+        print(f"{config.camera}: the spots merge at {format_merge_range(nom['merge_range_m'], nom['bound'])} m as profiled")
         for e in eff:
-            print(f"  {e['parameter']:26s} {e['low']:g} -> {e['high']:g}: {_fmt(e['merge_range_low_m'], e['bound_low'])}"
-                  f" -> {_fmt(e['merge_range_high_m'], e['bound_high'])} m (span {e['span_m']:.2f} m)")
+            print(f"  {e['parameter']:26s} {e['low']:g} -> {e['high']:g}: {format_merge_range(e['merge_range_low_m'], e['bound_low'])}"
+                  f" -> {format_merge_range(e['merge_range_high_m'], e['bound_high'])} m (span {e['span_m']:.2f} m)")
         print_run_stats(stats, "report")
         print(f"results: {out}/results.csv  merge ranges: {out}/merge_ranges.csv  report: {path}")
     obj = {"camera": config.camera, "ranges_m": list(config.ranges_m), "exposures": config.exposures,

@@ -27,7 +27,6 @@ Outputs in the study directory
 
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -36,6 +35,7 @@ import numpy as np
 from svgs.errors import InputError
 
 from .seeding import check_seed, design_rng, trial_seed
+from .tail import run_rendered_study, write_dict_csv
 
 #: The remedies run when none is given.
 DEFAULT_REMEDIES = ("baseline", "exposure=0.001", "exposure=0.0002", "nd=1", "nd=2", "spacing=1.5", "spacing=2")
@@ -196,14 +196,8 @@ def write_outputs(out_dir, cfg: ExposureStudyConfig, rows: list[dict]) -> tuple[
     tt = trial_table(rows)
     ranges = list(cfg.ranges_m)
     table = summarise(tt, cfg.remedies, ranges)
-    with open(out_dir / "trials.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(tt[0]))
-        w.writeheader()
-        w.writerows(tt)
-    with open(out_dir / "summary.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(table[0]))
-        w.writeheader()
-        w.writerows(table)
+    write_dict_csv(out_dir / "trials.csv", tt)
+    write_dict_csv(out_dir / "summary.csv", table)
     # one panel per remedy beside the baseline: overlapping lines on one axis hid most of them
     n = len(table)
     ncols = min(4, n)
@@ -240,14 +234,8 @@ def run_exposure_study(cfg: ExposureStudyConfig, out_dir, spec, *, chunk_size=No
     (markdown lines, stats)
         ``stats`` is the :class:`~studies.execution.RunStats`, None if every trial was done.
     """
-    from sim.trials import get_trial_kind
-
-    from .execution import run_stored_study
-
-    kind = get_trial_kind("render")
-    trials = exposure_study_trials(cfg)
-    store, stats = run_stored_study(kind, trials, out_dir, cfg.manifest(), spec, chunk_size=chunk_size,
-                                    progress=progress, description=f"exposure study {cfg.camera}")
-    rows = store.read_rows()
-    _, lines = write_outputs(out_dir, cfg, rows)
+    (_, lines), stats = run_rendered_study(exposure_study_trials(cfg), out_dir, cfg.manifest(), spec,
+                                           lambda rows: write_outputs(out_dir, cfg, rows),
+                                           description=f"exposure study {cfg.camera}", chunk_size=chunk_size,
+                                           progress=progress)
     return lines, stats

@@ -231,7 +231,9 @@ def effects(cases: list[dict], config: MergeRangeConfig) -> list[dict]:
     return sorted(out, key=lambda e: -e["span_m"])
 
 
-def _fmt(r: float, bound: str) -> str:
+def format_merge_range(r: float, bound: str) -> str:
+    """A merge range as printed: ``< r`` / ``> r`` when it lies beyond the ranges tried (``bound``
+    ``below`` / ``above``), otherwise ``r`` in metres to 2 decimals."""
     return f"< {r:g}" if bound == "below" else f"> {r:g}" if bound == "above" else f"{r:.2f}"
 
 
@@ -245,7 +247,7 @@ def tornado_figure(eff: list[dict], config: MergeRangeConfig):
         lo, hi = e["merge_range_low_m"], e["merge_range_high_m"]
         ax.barh(k, lo - nom, left=nom, color="C0", height=0.6, label="low end" if k == 0 else None)
         ax.barh(k, hi - nom, left=nom, color="C3", height=0.6, alpha=0.8, label="high end" if k == 0 else None)
-        ax.text(min(lo, hi) - 0.05, k, f"{_fmt(lo, e['bound_low'])} | {_fmt(hi, e['bound_high'])} m", ha="right",
+        ax.text(min(lo, hi) - 0.05, k, f"{format_merge_range(lo, e['bound_low'])} | {format_merge_range(hi, e['bound_high'])} m", ha="right",
                 va="center", fontsize=7)
     ax.axvline(nom, color="k", lw=1)
     paper = PAPER_LAST_SOLVED_M.get(config.camera)
@@ -304,7 +306,7 @@ def write_report(out_dir, config: MergeRangeConfig, cases: list[dict], eff: list
     rep = Report(f"What moves the range at which the {config.camera}'s spots merge", command, versions)
     nom = cases[0]
     rep.paragraph(
-        f"The phone as profiled merges its spots at {_fmt(nom['merge_range_m'], nom['bound'])} m (the paper: solutions "
+        f"The phone as profiled merges its spots at {format_merge_range(nom['merge_range_m'], nom['bound'])} m (the paper: solutions "
         "'up to about 6.5 meter range', merged beyond). One parameter at a time, at the low and the high end of its "
         "physical range, the others as profiled; the rendered chain (Mitsuba, the phone model with its "
         f"auto-exposure, the SVGS detector's threshold), {config.exposures} exposures per render, ranges "
@@ -316,8 +318,8 @@ def write_report(out_dir, config: MergeRangeConfig, cases: list[dict], eff: list
     rep.heading("Answer")
     lines = []
     for e in eff:
-        lines.append(f"{e['parameter']} {e['low']:g} -> {e['high']:g}: merge range {_fmt(e['merge_range_low_m'], e['bound_low'])}"
-                     f" -> {_fmt(e['merge_range_high_m'], e['bound_high'])} m (span {e['span_m']:.2f} m)")
+        lines.append(f"{e['parameter']} {e['low']:g} -> {e['high']:g}: merge range {format_merge_range(e['merge_range_low_m'], e['bound_low'])}"
+                     f" -> {format_merge_range(e['merge_range_high_m'], e['bound_high'])} m (span {e['span_m']:.2f} m)")
     rep.bullets(lines)
     rep.figure(tornado_figure(eff, config), "The merge range with each parameter at its low (blue) and high (red) "
                "end, around the phone as profiled (black line); a bound at the grid's edge is written < or >.")
@@ -329,7 +331,7 @@ def write_report(out_dir, config: MergeRangeConfig, cases: list[dict], eff: list
     rep.figure(margin_figure(cases, config), "Mean merge margin over the exposures (the detector's threshold minus "
                "the darkest level on the segments between the spots; below zero the binary image joins them).")
     rep.table(["case", "merge range (m)", *[f"{r:g} m solved" for r in config.ranges_m]],
-              [[c["case"], _fmt(c["merge_range_m"], c["bound"]), *c["solved"]] for c in cases],
+              [[c["case"], format_merge_range(c["merge_range_m"], c["bound"]), *c["solved"]] for c in cases],
               text_columns=["case", "merge range (m)"], caption="Solved fraction of the exposures per range")
     rep.paragraph(
         "How to read this. The margin is measured in the delivered image's counts at the detector's own threshold, so "
@@ -351,13 +353,13 @@ def run_merge_range(config: MergeRangeConfig, out_dir, spec, *, chunk_size=None,
     """
     from sim.render_trial import RENDER
 
-    from .campaign import _log_run, run_log
+    from .campaign import log_run, run_log
     from .execution import library_versions, run_stored_study
 
     trials = merge_range_trials(config)
     store, stats = run_stored_study(RENDER, trials, out_dir, config.manifest(), spec, chunk_size=chunk_size,
                                     progress=progress, description=f"merge range {config.camera}")
-    _log_run(out_dir, "rendered trials", stats)
+    log_run(out_dir, "rendered trials", stats)
     table = store.read_table()
     cases = analyse(table, config)
     eff = effects(cases, config)

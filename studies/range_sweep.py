@@ -23,7 +23,6 @@ Outputs in the study directory
 
 from __future__ import annotations
 
-import csv
 import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -35,6 +34,7 @@ from svgs.errors import InputError
 from svgs.frames import STATE_KEYS
 
 from .seeding import check_seed, design_rng, trial_seed
+from .tail import run_rendered_study, write_dict_csv
 
 #: Pose keys of the scenario that a pose's jitter moves, with the jitter option that scales each.
 JITTER_KEYS = (("target_x_m", "jitter_m"), ("target_y_m", "jitter_m"), ("roll_deg", "jitter_deg"), ("pitch_deg", "jitter_deg"),
@@ -304,10 +304,7 @@ def write_outputs(out_dir, cfg: RangeSweepConfig, rows: list[dict]) -> tuple[lis
     out_dir = Path(out_dir)
     records = trial_records(rows)
     table = summarise(records)
-    with open(out_dir / "summary.csv", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(table[0]))
-        w.writeheader()
-        w.writerows(table)
+    write_dict_csv(out_dir / "summary.csv", table)
     with open(out_dir / "trials.jsonl", "w") as fh:
         fh.writelines(json.dumps(rec) + "\n" for rec in records)
     plot_sweep(table, out_dir / "range_sweep.png",
@@ -376,14 +373,8 @@ def run_range_sweep(cfg: RangeSweepConfig, out_dir, spec, *, chunk_size=None, pr
         The per-range summary and the :class:`~studies.execution.RunStats` (None if every
         trial was already done).
     """
-    from sim.trials import get_trial_kind
-
-    from .execution import run_stored_study
-
-    kind = get_trial_kind("render")
-    trials = range_sweep_trials(cfg)
-    store, stats = run_stored_study(kind, trials, out_dir, cfg.manifest(), spec, chunk_size=chunk_size,
-                                    progress=progress, description=f"range sweep {cfg.camera}")
-    rows = store.read_rows()
-    _, table = write_outputs(out_dir, cfg, rows)
+    (_, table), stats = run_rendered_study(range_sweep_trials(cfg), out_dir, cfg.manifest(), spec,
+                                           lambda rows: write_outputs(out_dir, cfg, rows),
+                                           description=f"range sweep {cfg.camera}", chunk_size=chunk_size,
+                                           progress=progress)
     return table, stats
