@@ -1,0 +1,163 @@
+"""Running a campaign (or resuming it) into its folder, its error budget's geometric trials, and
+rebuilding a finished campaign's report from its stored results (``python -m studies.campaign
+rebuild DIR``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..error_budget import HEADLINE_READING, MEAN_READINGS, READING_LABELS
+from .design import CampaignConfig, campaign_trials
+from .folder import config_from_manifest, finite_json, log_run, read_honest_count
+from .honest_count import misalignment_text
+from .html_report import carried_figure, write_campaign_report
+from .paper_calibration import rendered_paper_calibration
+from .statistics import summarize
+from sim.trials import get_trial_kind
+from svgs.frames import STATE_KEYS
+
+
+def run_campaign(config: CampaignConfig, out_dir, spec, *, chunk_size=None, progress: bool = True,
+                 command: str = "", out=None):
+    """Run (or resume) a campaign into ``out_dir`` and write its report.
+
+    With the paper's calibration practice on rendered trials, the focal length is first
+    estimated from rendered frames (:func:`rendered_paper_calibration`). With ``config.budget``
+    the variants run in the same store, then the geometric trial at the measured centroid
+    scatter in ``DIR/budget-geometric``.
+
+    Returns
+    -------
+    (summary, stats, report_path, config)
+        ``config`` with the calibration filled in.
+    """
+    import sys
+
+    from ..execution import check_executor, library_versions, run_stored_study
+
+    check_executor(spec)  # before the calibration renders: an unreachable cluster is bad input, not lost work
+    kind = get_trial_kind(config.trial_kind)
+    out_dir = Path(out_dir)
+    say = (lambda m: print(m, file=sys.stderr)) if progress else None
+    config = rendered_paper_calibration(config, out_dir, progress=say)
+    trials = campaign_trials(config)
+    store, stats = run_stored_study(kind, trials, out_dir, config.manifest(), spec, chunk_size=chunk_size,
+                                    progress=progress, description=f"campaign {config.camera}")
+    log_run(out_dir, "rendered trials" if kind.name == "render" else "trials", stats)
+    table = store.read_table()
+    summary = summarize(table, config)
+    budget = None
+    if config.budget:
+        budget = run_budget_geometric(config, trials, table, out_dir, progress=progress)
+    path = write_campaign_report(out_dir, config, table, summary, command=command, versions=library_versions(),
+                                 stats=stats, budget=budget, trials=trials)
+    return summary, stats, path, config
+
+
+def run_budget_geometric(config: CampaignConfig, trials: list, table: dict, out_dir, *, progress: bool = True) -> dict:
+    """The error budget of a finished rendered campaign: the measured centroids, the geometric
+    trial at their scatter (``DIR/budget-geometric``, in this process: milliseconds a trial), the
+    variants' statistics and the attribution (:mod:`studies.error_budget`)."""
+    from sim.trials import GEOMETRIC
+
+    from ..error_budget import attribute, centroid_statistics, geometric_trials, variant_statistics
+    from ..execution import ExecutorSpec, run_stored_study
+
+    cents = centroid_statistics(table, config.ranges_m)
+    base = [t for t in trials if t.scenario.get("variant") == "baseline"]
+    gtrials = geometric_trials(base, config, cents)
+    manifest = {"study": "campaign-budget-geometric", "campaign": config.manifest(),
+                "sigma_px": {f"{c['range_m']:g}": c["scatter_px"] for c in cents}}
+    gstore, gstats = run_stored_study(GEOMETRIC, gtrials, Path(out_dir) / "budget-geometric", manifest,
+                                      ExecutorSpec("inline", 0), progress=progress, description="budget: geometric")
+    log_run(out_dir, "budget: geometric trials", gstats)
+    vs = variant_statistics(table, config.ranges_m, gstore.read_table())
+    return {"centroids": cents, "variant_stats": vs, "attribution": attribute(vs, config.ranges_m)}
+
+
+def rebuild_report(out_dir, *, command: str | None = None) -> Path:
+    """Rewrite a finished campaign's report and tables from its stored results; no trial runs.
+
+    Reads ``DIR/manifest.json``, ``DIR/calibration.json``, ``DIR/results.csv`` and (with a
+    budget) ``DIR/budget-geometric/results.csv``; writes ``report.html``, ``summary.csv``,
+    ``verdicts.csv``, ``honest_count.json`` (and ``budget.csv``) and updates ``summary.json``
+    where there is one (per range the three readings of the mean error and their ratios, and
+    ``honest_count``). The sample images are not rendered: that figure is carried over from the
+    folder's earlier ``report.html``. Unlike rerunning ``svgs campaign``, this never starts a
+    trial, even when the trial code has changed since the results were made.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        A campaign folder (rebuilt in place: copy it first to keep the original).
+    command : str, optional
+        The command line for the report's provenance (default: the earlier report's, with a
+        note of the rebuild).
+
+    Returns
+    -------
+    Path
+        ``DIR/report.html``.
+    """
+    import html as _html
+    import json
+    import re
+
+    from ..error_budget import attribute, centroid_statistics, variant_statistics
+    from ..execution import library_versions
+    from ..store import read_table
+
+    out_dir = Path(out_dir)
+    config = config_from_manifest(out_dir)
+    table = read_table(out_dir / "results.csv")
+    summary = summarize(table, config)
+    budget = None
+    if config.budget:
+        gpath = out_dir / "budget-geometric" / "results.csv"
+        cents = centroid_statistics(table, config.ranges_m)
+        vs = variant_statistics(table, config.ranges_m, read_table(gpath) if gpath.is_file() else None)
+        budget = {"centroids": cents, "variant_stats": vs, "attribution": attribute(vs, config.ranges_m)}
+    old = (out_dir / "report.html").read_text(encoding="utf-8") if (out_dir / "report.html").is_file() else ""
+    if command is None:
+        m = re.search(r"Command:</p><pre>(.*?)</pre>", old, re.S)
+        command = ((_html.unescape(m.group(1)) + "\n") if m else "") + (
+            f"# report rebuilt from the stored results: python -m studies.campaign rebuild {out_dir}")
+    path = write_campaign_report(out_dir, config, table, summary, command=command, versions=library_versions(),
+                                 budget=budget, sample_figure_html=carried_figure(old, "What the phone saw"))
+    sj = out_dir / "summary.json"
+    if sj.is_file():
+        obj = json.loads(sj.read_text())
+        by = {s["range_m"]: s for s in summary}
+        for r in obj.get("ranges", []):
+            s = by.get(r["range_m"])
+            if s is None:
+                continue
+            for x in MEAN_READINGS:
+                r[f"{x}_error"] = {c: s[f"{x}_{c}"] for c in STATE_KEYS}
+            r.setdefault("ratio", {}).update({f"{x}_error": {c: s[f"ratio_{x}_{c}"] for c in STATE_KEYS}
+                                              for x in MEAN_READINGS})
+        obj["misalignment"] = misalignment_text(config)
+        obj["honest_count"] = read_honest_count(out_dir)
+        obj.setdefault("outputs", {}).update({"verdicts_csv": str(out_dir / "verdicts.csv"),
+                                              "honest_count_json": str(out_dir / "honest_count.json")})
+        sj.write_text(json.dumps(finite_json(obj), indent=1, allow_nan=False) + "\n")
+    return path
+
+
+def main(argv=None) -> int:
+    """``python -m studies.campaign rebuild DIR [DIR ...]``: :func:`rebuild_report` on each folder."""
+    import argparse
+
+    p = argparse.ArgumentParser(prog="python -m studies.campaign",
+                                description="Rebuild campaign reports from their stored results (no trial runs).")
+    sub = p.add_subparsers(dest="what", required=True)
+    r = sub.add_parser("rebuild", help="rewrite report.html, summary.csv, verdicts.csv, honest_count.json and "
+                                       "summary.json of campaign folders in place (copy them first to keep them)")
+    r.add_argument("dirs", nargs="+", metavar="DIR")
+    args = p.parse_args(argv)
+    for d in args.dirs:
+        path = rebuild_report(d)
+        counts = read_honest_count(d)["counts"]
+        print(f"{path}: " + "; ".join(f"{READING_LABELS[x]} {counts[x]['within_2x']} of {counts[x]['predicted']} "
+                                      f"within 2x" for x in MEAN_READINGS) + f" ({counts[HEADLINE_READING]['fitted']} fitted)")
+    return 0
