@@ -258,7 +258,7 @@ def test_sensor_frame_equals_the_isolated_pose_chain(small_camera):
     sensor = ApproachSensor(small_camera, seed=5, motion=False, crlb=False, keep_images=True)
     m0 = sensor.measure_on(traj, 0.0)
     m1 = sensor.measure_on(traj, 1.0)
-    rs, ns, _ = sensor._frame_seeds(1)
+    rs, ns, _ = sensor.frame_seeds(1)
     sc = traj.scenario(1.0, Scenario(camera=small_camera))
     frame = render_scenario(sc, seed=rs)
     row = expose_and_solve(frame, frame.exposer(), seed=ns, exposure_s=m1.exposure_s, iso=m1.iso, truth="actual")
@@ -278,7 +278,7 @@ def test_overlapped_render_changes_no_number(small_camera):
     ov = ApproachSensor(small_camera, seed=5, motion=True, crlb=False, keep_images=True, overlap_render=True)
     a = [seq.measure_on(traj, t) for t in times]
     b = list(ov.along(traj, times))
-    assert ov._pool is None  # along() closes its thread
+    assert not ov.renders.running  # along() closes its thread
     for ma, mb in zip(a, b):
         assert ma.ok and mb.ok
         np.testing.assert_array_equal(ma.image, mb.image)
