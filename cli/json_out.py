@@ -220,12 +220,12 @@ SCHEMAS = {
  "ranges": [{{"range_m": float, "trials": int, "solved": int, "success_rate": float,
              "failures": {{reason: int}},
              "mean_abs_error": {_STATE},   # three readings of the paper's "mean error": mean |e|,
-             "abs_mean_error": {{...}}, "rms_error": {{...}},   # |mean e| (the verdicts' headline), RMS
+             "abs_bias": {{...}}, "rms": {{...}},   # |mean e| (the verdicts' headline), RMS
              "bias": {{...}}, "std": {{...}},
              "crlb_std": {{...}},                      # median Cramer-Rao bound of the solved trials
              "paper": {{"mean_error": {{...}} | null, "std": {{...}} | null}},   # Tables 2-5; null: no row
-             "ratio": {{"mean_error": {{...}}, "std": {{...}},                    # simulated / paper
-                       "abs_mean_error": {{...}}, "rms_error": {{...}}}}}}],      # (mean_error: of mean |e|)
+             "ratio": {{"mean_abs_error": {{...}}, "std": {{...}},                # simulated / paper
+                       "abs_bias": {{...}}, "rms": {{...}}}}}}],
  "honest_count": {{...}} | null,    # DIR/honest_count.json: fitted cells and the counts under each reading
  "outputs": {{"results_csv", "summary_csv", "report", "summary_json": path}},
  {_RUN}}}""",

@@ -334,12 +334,12 @@ def campaign_json(config, summary, stats, out, report) -> dict:
     for s in summary:
         ranges.append({"range_m": s["range_m"], "trials": s["n"], "solved": s["n_ok"], "success_rate": s["success_rate"],
                        "failures": dict(sorted(s["reasons"].items())), "mean_abs_error": _state(s, "mean_abs_") or {},
-                       "abs_mean_error": _state(s, "abs_mean_") or {}, "rms_error": _state(s, "rms_") or {},
+                       "abs_bias": _state(s, "abs_mean_") or {}, "rms": _state(s, "rms_") or {},
                        "bias": _state(s, "bias_") or {}, "std": _state(s, "std_") or {},
                        "crlb_std": _state(s, "crlb_") or {},
                        "paper": {"mean_error": _state(s, "paper_mean_"), "std": _state(s, "paper_std_")},
-                       "ratio": {"mean_error": _state(s, "ratio_mean_"), "std": _state(s, "ratio_std_"),
-                                 "abs_mean_error": _state(s, "ratio_abs_mean_"), "rms_error": _state(s, "ratio_rms_")}})
+                       "ratio": {"mean_abs_error": _state(s, "ratio_mean_abs_"), "std": _state(s, "ratio_std_"),
+                                 "abs_bias": _state(s, "ratio_abs_mean_"), "rms": _state(s, "ratio_rms_")}})
     out = Path(out)
     from studies.campaign import read_honest_count
 

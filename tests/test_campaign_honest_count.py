@@ -79,7 +79,6 @@ def test_three_readings_of_the_mean_error_against_numpy(nexus_cfg):
             for x in MEAN_READINGS:
                 assert s[f"ratio_{x}_{c}"] == pytest.approx(s[f"{x}_{c}"] / TABLE4[r][i])
             assert s[f"ratio_std_{c}"] == pytest.approx(s[f"std_{c}"] / TABLE5[r][i])
-            assert s[f"ratio_mean_{c}"] == s[f"ratio_mean_abs_{c}"]  # the older key: mean |e|
 
 
 def test_the_nexus_holder_yaw_consumes_the_yaw_mean_error_cells_and_nothing_else(nexus_cfg):
@@ -219,10 +218,10 @@ def test_rebuild_report_from_the_stored_results(tmp_path):
     assert sum(r["verdict"] == "fitted" for r in rows) == 2
     with open(out / "summary.csv", newline="") as fh:
         stats = {r["statistic"] for r in csv.DictReader(fh)}
-    assert {"abs_mean_error", "mean_abs_error", "rms_error", "std"} <= stats
+    assert {"abs_bias", "mean_abs_error", "rms", "std"} <= stats
     sj = json.loads((out / "summary.json").read_text())
     assert set(sj["honest_count"]["counts"]) == set(MEAN_READINGS) and "FITTED" in sj["misalignment"]
-    assert sj["ranges"][0]["abs_mean_error"]["x_m"] == pytest.approx(summary[0]["abs_mean_x_m"])
+    assert sj["ranges"][0]["abs_bias"]["x_m"] == pytest.approx(summary[0]["abs_mean_x_m"])
     html = (out / "report.html").read_text()
     assert "The honest count" in html and "stand.galaxy_nexus_misalignment_yaw_deg" in html
     assert "report rebuilt from the stored results" in html

@@ -109,7 +109,7 @@ def test_summary_statistics_and_ratios():
     s = summarize(table, cfg)
     assert s[0]["mean_abs_x_m"] == pytest.approx(0.2) and s[0]["bias_x_m"] == pytest.approx(-0.05)
     assert s[0]["std_x_m"] == pytest.approx(np.std(e[:4], ddof=1))
-    assert s[0]["ratio_mean_x_m"] == pytest.approx(0.2 / 0.05)  # Table 4: 0.05 m at 5 m
+    assert s[0]["ratio_mean_abs_x_m"] == pytest.approx(0.2 / 0.05)  # Table 4: 0.05 m at 5 m
     assert s[1]["n_ok"] == 3 and s[1]["reasons"] == {"diverged": 1} and s[1]["std_x_m"] == 0.0
     assert s[1]["ratio_std_yaw_deg"] == pytest.approx(0.0)
 

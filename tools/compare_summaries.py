@@ -5,6 +5,10 @@ from the trials per range).
 
 Run: ``.venv/bin/python tools/compare_summaries.py OLD/summary.csv NEW/summary.csv [--trials 80]
 [--statistic std] [--markdown]``
+
+Either file may be a campaign's ``summary.csv`` made before the statistics were renamed
+(``abs_mean_error`` is now ``abs_bias``, ``rms_error`` is now ``rms``): the old names are read
+as the new ones, so an old and a new summary compare cell by cell.
 """
 
 from __future__ import annotations
@@ -14,9 +18,16 @@ import csv
 import math
 
 
+#: Statistic names of summaries made before the renaming -> their names now (the same as
+#: ``studies.campaign.RENAMED_STATISTICS``; kept here so that the tool needs nothing of the project).
+RENAMED_STATISTICS = {"abs_mean_error": "abs_bias", "rms_error": "rms"}
+
+
 def read(path):
+    """``(range_m, component, statistic) -> row`` of a ``summary.csv``, old statistic names renamed."""
     with open(path, newline="") as fh:
-        return {(float(r["range_m"]), r["component"], r["statistic"]): r for r in csv.DictReader(fh)}
+        return {(float(r["range_m"]), r["component"], RENAMED_STATISTICS.get(r["statistic"], r["statistic"])): r
+                for r in csv.DictReader(fh)}
 
 
 def main(argv=None):

@@ -76,6 +76,8 @@ from .paper_calibration import (
     rendered_paper_calibration,
 )
 from .statistics import (
+    READING_OUTPUT_NAMES,
+    RENAMED_STATISTICS,
     explain,
     summarize,
     SUMMARY_CELL_STATISTICS,
@@ -159,6 +161,8 @@ __all__ = [
     "print_summary",
     "rangefinder_readings",
     "read_honest_count",
+    "READING_OUTPUT_NAMES",
+    "RENAMED_STATISTICS",
     "rebuild_report",
     "rendered_paper_calibration",
     "REPO_ROOT",

@@ -12,7 +12,7 @@ from .folder import config_from_manifest, finite_json, log_run, read_honest_coun
 from .honest_count import misalignment_text
 from .html_report import carried_figure, write_campaign_report
 from .paper_calibration import rendered_paper_calibration
-from .statistics import summarize
+from .statistics import READING_OUTPUT_NAMES, RENAMED_STATISTICS, summarize
 from sim.trials import get_trial_kind
 from svgs.frames import STATE_KEYS
 
@@ -132,9 +132,13 @@ def rebuild_report(out_dir, *, command: str | None = None) -> Path:
             s = by.get(r["range_m"])
             if s is None:
                 continue
+            for old in RENAMED_STATISTICS:  # the names before the renaming
+                r.pop(old, None)
+                r.get("ratio", {}).pop(old, None)
+            r.get("ratio", {}).pop("mean_error", None)  # the ratio of mean |e|: now mean_abs_error
             for x in MEAN_READINGS:
-                r[f"{x}_error"] = {c: s[f"{x}_{c}"] for c in STATE_KEYS}
-            r.setdefault("ratio", {}).update({f"{x}_error": {c: s[f"ratio_{x}_{c}"] for c in STATE_KEYS}
+                r[READING_OUTPUT_NAMES[x]] = {c: s[f"{x}_{c}"] for c in STATE_KEYS}
+            r.setdefault("ratio", {}).update({READING_OUTPUT_NAMES[x]: {c: s[f"ratio_{x}_{c}"] for c in STATE_KEYS}
                                               for x in MEAN_READINGS})
         obj["misalignment"] = misalignment_text(config)
         obj["honest_count"] = read_honest_count(out_dir)

@@ -27,7 +27,7 @@ def summarize(table: dict, config: CampaignConfig, paper: dict | None = None) ->
         ``c``: the three readings of the paper's "mean error" (:data:`studies.error_budget.MEAN_READINGS`)
         ``abs_mean_<c>`` (|mean e|, the headline), ``mean_abs_<c>`` (mean |e|) and ``rms_<c>``
         (sqrt(mean e^2)), each with its ratio to the paper's mean error ``ratio_abs_mean_<c>``,
-        ``ratio_mean_abs_<c>`` (also as ``ratio_mean_<c>``, its older name), ``ratio_rms_<c>``;
+        ``ratio_mean_abs_<c>``, ``ratio_rms_<c>``;
         ``bias_<c>`` (signed mean), ``std_<c>`` (ddof = 1), ``crlb_<c>``, ``paper_mean_<c>``,
         ``paper_std_<c>``, ``ratio_std_<c>``. ``crlb_<c>`` is the median over the solved trials
         of the bound from the simulated sensor (``crlb_sensor_<c>``, rendered trials) or, for
@@ -68,7 +68,6 @@ def summarize(table: dict, config: CampaignConfig, paper: dict | None = None) ->
             row[f"paper_std_{c}"] = ps[c] if ps else float("nan")
             for x in MEAN_READINGS:
                 row[f"ratio_{x}_{c}"] = row[f"{x}_{c}"] / pm[c] if pm and pm[c] > 0 else float("nan")
-            row[f"ratio_mean_{c}"] = row[f"ratio_mean_abs_{c}"]
             row[f"ratio_std_{c}"] = row[f"std_{c}"] / ps[c] if ps and ps[c] > 0 else float("nan")
         out.append(row)
     return out
@@ -77,9 +76,16 @@ def summarize(table: dict, config: CampaignConfig, paper: dict | None = None) ->
 #: The statistics of ``summary.csv`` that are cells of the paper's tables: statistic -> (summary key prefix,
 #: the paper's key prefix, the column of :func:`studies.error_budget.cell_verdicts` that judges it under that
 #: reading; the std's one reading is its ``verdict``).
-SUMMARY_CELL_STATISTICS = {"abs_mean_error": ("abs_mean", "paper_mean", "verdict_abs_mean"),
+#: The output name of each reading of the paper's "mean error" (:data:`studies.error_budget.MEAN_READINGS`):
+#: ``summary.csv``'s statistic and ``summary.json``'s key, one name for one thing (``abs_bias``:
+#: |mean e|; ``mean_abs_error``: mean |e|; ``rms``: sqrt(mean e^2)).
+READING_OUTPUT_NAMES = {"abs_mean": "abs_bias", "mean_abs": "mean_abs_error", "rms": "rms"}
+#: ``summary.csv`` statistics and ``summary.json`` keys of campaigns made before the renaming ->
+#: their names now (``tools/compare_summaries.py`` reads both).
+RENAMED_STATISTICS = {"abs_mean_error": "abs_bias", "rms_error": "rms"}
+SUMMARY_CELL_STATISTICS = {"abs_bias": ("abs_mean", "paper_mean", "verdict_abs_mean"),
                            "mean_abs_error": ("mean_abs", "paper_mean", "verdict_mean_abs"),
-                           "rms_error": ("rms", "paper_mean", "verdict_rms"),
+                           "rms": ("rms", "paper_mean", "verdict_rms"),
                            "std": ("std", "paper_std", "verdict")}
 
 
@@ -89,8 +95,8 @@ SUMMARY_COLUMNS = ("range_m", "component", "statistic", "simulated", "paper", "r
 def summary_long_rows(summary: list[dict], verdicts: list[dict] | None = None) -> list[dict]:
     """The summary as long-form rows for ``summary.csv`` (:data:`SUMMARY_COLUMNS`).
 
-    Statistics per range and component: ``abs_mean_error`` (|mean e|, the verdicts' headline
-    reading of the paper's "mean error"), ``mean_abs_error`` (mean |e|), ``rms_error`` (each
+    Statistics per range and component: ``abs_bias`` (|mean e|, the verdicts' headline
+    reading of the paper's "mean error"), ``mean_abs_error`` (mean |e|), ``rms`` (each
     against the paper's mean error), ``std`` (against the paper's std), ``bias`` (signed mean),
     ``crlb_std``; per range ``success_rate`` (component ``all``). With ``verdicts``
     (:func:`studies.error_budget.cell_verdicts`) the paper's cells carry their verdict under
