@@ -62,7 +62,7 @@ def small_camera(tmp_path_factory):
     return str(path)
 
 
-def random_envelope_poses(n, seed, range_m=(1.0, 40.0)):
+def random_envelope_poses(n, seed, range_interval_m=(1.0, 40.0)):
     """Poses drawn over the paper's test envelope: range log-uniform, roll/pitch +/-25 deg,
     yaw +/-45 deg, lateral offsets up to +/-15 % of range. Returns (R (n,3,3), t (n,3))."""
     from svgs.frames import pose_from_scenario, sample_envelope_scenario
@@ -70,7 +70,7 @@ def random_envelope_poses(n, seed, range_m=(1.0, 40.0)):
     rng = np.random.default_rng(seed)
     Rs, ts = [], []
     for _ in range(n):
-        R, t = pose_from_scenario(**sample_envelope_scenario(rng, range_m=range_m))
+        R, t = pose_from_scenario(**sample_envelope_scenario(rng, range_interval_m=range_interval_m))
         Rs.append(R)
         ts.append(t)
     return np.array(Rs), np.array(ts)
