@@ -232,7 +232,7 @@ SCHEMAS = {
  {_RUN}}}""",
     "svgs calibrate study": """\
 {"config": {...},                  # every option of the study
- "key_numbers": {...},             # e.g. n_views_max, focal_only_err_pct
+ "key_numbers": {...},             # e.g. n_views_max, focal_only_error_pct
  "board_set": {...}, "timings_s": {part: float},
  "table4_exponents": {...}, "table4_conclusion": [str],
  "outputs": {name: path},          # report, summary, the CSV tables
