@@ -28,6 +28,7 @@ def setup():
     return cam, board, imgs, R, t
 
 
+@pytest.mark.slow
 def test_calibration_errors_against_known_truth(setup):
     cam, board, _, R, t = setup
     obj = [board.object_points()] * 12
@@ -43,6 +44,7 @@ def test_calibration_errors_against_known_truth(setup):
     assert e2["map_rms_px"] > 1.5 > e2["map_rot_rms_px"]  # a rotation absorbs the principal-point error
 
 
+@pytest.mark.slow
 def test_convergence_to_the_truth(setup):
     # acceptance on the geometric set at N = 40: fx, fy within 0.2 %, pp within 1 px,
     # mapping error (after rotation) below 0.1 px; and more views -> smaller errors
@@ -58,6 +60,7 @@ def test_convergence_to_the_truth(setup):
     assert set(cals) == {5, 40} and len(cals[40].views) == 40
 
 
+@pytest.mark.slow
 def test_bad_sets_are_clear_errors(setup):
     cam, board, imgs, _, _ = setup
     blank = np.full((480, 640), 128, np.uint8)

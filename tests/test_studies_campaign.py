@@ -127,6 +127,7 @@ def campaign_report(tmp_path_factory):
     return out, buf.getvalue()
 
 
+@pytest.mark.slow
 def test_campaign_cli_writes_tables_beside_the_paper(campaign_report):
     out, text = campaign_report
     assert "X std  /paper" in text and "report.html" in text
@@ -174,6 +175,7 @@ class _Dom(HTMLParser):
             self.headers.append(data)
 
 
+@pytest.mark.slow
 def test_report_opens_in_headless_chromium(request, tmp_path):
     exe, why = _chromium()
     if exe is None:

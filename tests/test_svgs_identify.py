@@ -116,6 +116,7 @@ def test_noise_free_points_over_the_envelope(nexus, pattern):
         assert np.allclose(res.solution.t_cam_target_m, t, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_points_with_distractors_identified_99_percent(nexus, pattern):
     """0-20 distractor points (a quarter of them near the pattern), 0.2 px centroid noise,
     random envelope poses. Bare points carry no photometry; a distractor sitting where
@@ -226,6 +227,7 @@ def _image_trials(n, seed, camera, pattern, *, dtype="uint8", colour=False, max_
     return correct, failures, np.array(errs)
 
 
+@pytest.mark.slow
 def test_images_with_distractors_identified_99_percent(nexus, pattern):
     """Acceptance: detect + identify on synthetic 5 MP frames with 0-20 distractors:
     >= 99 % correct, every failure with a reason."""
