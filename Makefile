@@ -1,11 +1,12 @@
 # Quick start: `make demo` runs a render-and-solve demo, `make test` runs the tests.
+# `make test-fast`: the tests that neither render nor are slow (markers in pyproject.toml), under a minute.
 # Each bootstraps its own virtual environment in .venv (Python 3.11+, pip).
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test venv clean bench
+.PHONY: demo test test-fast venv clean bench
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -26,6 +27,9 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest -q
+
+test-fast: $(STAMP)
+	$(PY) -m pytest -q -m "not slow and not render"
 
 bench: $(STAMP)
 	for b in benchmarks/bench_*.py; do $(PY) $$b || exit 1; done

@@ -6,41 +6,24 @@ writes the same object as ``summary.json`` in the study folder. :func:`clean` tu
 values into plain numbers and NaN or infinity into ``null``. :data:`SCHEMAS` documents each
 command's object (``docs/cli.md`` shows them; ``tools/make_cli_doc.py``).
 
-Light: imports only the standard library and numpy (a ``cli`` module is imported to build
-the parser).
+Light: imports only the standard library, numpy and :mod:`svgs.jsonable` (a ``cli`` module is
+imported to build the parser).
 """
 
 from __future__ import annotations
 
 import contextlib
 import json
-import math
 import sys
 from pathlib import Path
 
-import numpy as np
+from svgs.jsonable import to_jsonable
 
 
 def clean(obj):
-    """``obj`` with numpy values as Python ones, tuples as lists, NaN/inf as None (JSON-safe)."""
-    if isinstance(obj, dict):
-        return {str(k): clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [clean(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return clean(obj.tolist())
-    if isinstance(obj, (np.bool_, bool)):
-        return bool(obj)
-    if isinstance(obj, (np.integer, int)):
-        return int(obj)
-    if isinstance(obj, (np.floating, float)):
-        v = float(obj)
-        return v if math.isfinite(v) else None
-    if obj is None or isinstance(obj, str):
-        return obj
-    if isinstance(obj, Path):
-        return str(obj)
-    return str(obj)
+    """``obj`` with numpy values as Python ones, tuples as lists, NaN/inf as None (JSON-safe):
+    :func:`svgs.jsonable.to_jsonable` with ``nonfinite="null"``."""
+    return to_jsonable(obj, nonfinite="null")
 
 
 def dumps(obj, **kw) -> str:
@@ -249,7 +232,7 @@ SCHEMAS = {
  {_RUN}}}""",
     "svgs calibrate study": """\
 {"config": {...},                  # every option of the study
- "key_numbers": {...},             # e.g. n_views_max, focal_only_err_pct
+ "key_numbers": {...},             # e.g. n_views_max, focal_only_error_pct
  "board_set": {...}, "timings_s": {part: float},
  "table4_exponents": {...}, "table4_conclusion": [str],
  "outputs": {name: path},          # report, summary, the CSV tables

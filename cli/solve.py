@@ -15,6 +15,7 @@ import numpy as np
 from cli.exit_codes import EXIT_NO_SOLUTION, EXIT_OK
 from svgs.detect import parse_threshold
 from svgs.errors import InputError, check_finite_positive
+from svgs.jsonable import json_default  # noqa: F401  (the writers of solution.json import it from here)
 
 
 def register(sub) -> None:
@@ -70,15 +71,6 @@ def write_solution_overlay(path, image, camera, pattern, result, threshold=None,
                  f"{len(blobs)} blobs" if result else f"NO SOLUTION ({result.reason}): {len(blobs)} blobs")
     return write_overlay(path, image, blobs_px=blobs.centroid_px, targets_px=targets, reprojected_px=reproj,
                          sigma_px=sigma_px, sigma_label=sigma_label or "1-sigma", title=title)
-
-
-def json_default(o):
-    """``json.dumps`` ``default`` for numpy values: arrays as lists, scalars as numbers, else text."""
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer, np.bool_)):
-        return o.item()
-    return str(o)
 
 
 def solution_json(result) -> dict:

@@ -53,6 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from svgs.errors import InputError
+from svgs.jsonable import to_jsonable
 
 MANIFEST = "manifest.json"
 RESULTS = "results.csv"
@@ -66,20 +67,9 @@ FORMAT_VERSION = 1
 
 
 def _jsonable(obj):
-    """Turn numpy scalars/arrays and tuples into plain JSON types (for manifests)."""
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return [_jsonable(v) for v in obj.tolist()]
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, np.floating):
-        return float(obj)
-    return obj
+    """Plain JSON types for a manifest (:func:`svgs.jsonable.to_jsonable`: numpy values as Python
+    ones, tuples as lists, NaN kept; a value of another type is left for ``json`` to refuse)."""
+    return to_jsonable(obj, other=None)
 
 
 def _format(value) -> str:

@@ -211,12 +211,12 @@ def rotation_angle_deg(R_a, R_b) -> np.ndarray:
     return np.degrees(np.arctan2(s, c))
 
 
-def sample_envelope_scenario(rng, *, range_m=(1.0, 40.0), roll_deg=25.0, pitch_deg=25.0, yaw_deg=45.0,
+def sample_envelope_scenario(rng, *, range_interval_m=(1.0, 40.0), roll_deg=25.0, pitch_deg=25.0, yaw_deg=45.0,
                              lateral_fraction=0.15) -> dict:
     """One pose drawn over a test envelope (default: the paper's, "Test Setup"), as the
     keyword arguments of :func:`pose_from_scenario`.
 
-    Range log-uniform in ``range_m``; lateral offsets of the target origin uniform up to
+    Range log-uniform in ``range_interval_m``; lateral offsets of the target origin uniform up to
     +/-``lateral_fraction`` of the range; roll and pitch uniform in +/-``roll_deg``,
     +/-``pitch_deg``, yaw in +/-``yaw_deg``. Six scalar draws from ``rng``, in the order
     range, x, y, roll, pitch, yaw (the one envelope sampler of tests and benchmarks; the
@@ -225,7 +225,7 @@ def sample_envelope_scenario(rng, *, range_m=(1.0, 40.0), roll_deg=25.0, pitch_d
     Parameters
     ----------
     rng : numpy.random.Generator
-    range_m : (float, float)
+    range_interval_m : (float, float)
         Nearest and farthest range along the boresight, m.
     roll_deg, pitch_deg, yaw_deg : float
         Largest absolute attitude angles, deg.
@@ -238,7 +238,7 @@ def sample_envelope_scenario(rng, *, range_m=(1.0, 40.0), roll_deg=25.0, pitch_d
         ``range_m, target_x_m, target_y_m, roll_deg, pitch_deg, yaw_deg``: the arguments of
         :func:`pose_from_scenario`.
     """
-    r = float(np.exp(rng.uniform(np.log(range_m[0]), np.log(range_m[1]))))
+    r = float(np.exp(rng.uniform(np.log(range_interval_m[0]), np.log(range_interval_m[1]))))
     return {
         "range_m": r,
         "target_x_m": float(rng.uniform(-lateral_fraction, lateral_fraction) * r),

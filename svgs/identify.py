@@ -94,8 +94,8 @@ class Envelope:
 
     Attributes
     ----------
-    range_m : tuple of float
-        Range of the target along the boresight, metres.
+    range_interval_m : tuple of float
+        Nearest and farthest range of the target along the boresight, metres.
     roll_deg, pitch_deg, yaw_deg : float
         Largest absolute attitude angles (paper's phi, theta, psi), degrees.
     lateral_fraction : float
@@ -107,7 +107,7 @@ class Envelope:
         than ~16 deg off axis (``no_consistent_set``).
     """
 
-    range_m: tuple = (1.0, 40.0)
+    range_interval_m: tuple = (1.0, 40.0)
     roll_deg: float = 25.0
     pitch_deg: float = 25.0
     yaw_deg: float = 45.0
@@ -196,7 +196,7 @@ class _Gates:
 def _envelope_poses(env: Envelope, n: int, seed: int = 0):
     """Poses over an (inflated) envelope: random draws plus all corners. R (m,3,3), t (m,3)."""
     rng = np.random.default_rng(seed)
-    lo, hi = env.range_m[0] / GATE_MARGIN_RANGE, env.range_m[1] * GATE_MARGIN_RANGE
+    lo, hi = env.range_interval_m[0] / GATE_MARGIN_RANGE, env.range_interval_m[1] * GATE_MARGIN_RANGE
     lat = env.lateral_fraction + GATE_MARGIN_LATERAL
     am = np.array([env.roll_deg, env.pitch_deg, env.yaw_deg]) + GATE_MARGIN_DEG
     r = np.exp(rng.uniform(np.log(lo), np.log(hi), n))
@@ -329,7 +329,7 @@ def _pose_in_envelope(R, t, env: Envelope, margin_deg, margin_lateral, margin_ra
     lim = np.array([env.roll_deg, env.pitch_deg, env.yaw_deg]) + margin_deg
     ang_ok = np.all(np.abs(ang) <= lim, axis=1)
     rng = t[:, 2]
-    rng_ok = (rng >= env.range_m[0] / margin_range) & (rng <= env.range_m[1] * margin_range)
+    rng_ok = (rng >= env.range_interval_m[0] / margin_range) & (rng <= env.range_interval_m[1] * margin_range)
     lat = np.max(np.abs(t[:, :2]), axis=1) / np.maximum(rng, 1e-9)
     return ang_ok & rng_ok & (lat <= env.lateral_fraction + margin_lateral)
 

@@ -1,5 +1,12 @@
-"""Shared fixtures. Paths are relative to this file, never to the working directory."""
+"""Shared fixtures. Paths are relative to this file, never to the working directory.
 
+The markers (pyproject.toml): ``render`` - the test needs Mitsuba (it renders, or selects
+a renderer variant); ``slow`` - the test takes more than a few seconds of CPU (a study run,
+a process pool, a subprocess that imports the renderer). ``make test-fast`` runs neither;
+:func:`_mitsuba_needs_the_render_marker` fails an unmarked test that imports Mitsuba.
+"""
+
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -7,6 +14,27 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
+#: Modules only the renderer loads; a test that imports one needs the ``render`` marker.
+RENDERER_MODULES = ("mitsuba", "drjit")
+
+
+@pytest.fixture(autouse=True)
+def _mitsuba_needs_the_render_marker(request):
+    """Fail a test without the ``render`` marker that imports Mitsuba or Dr.Jit in this process.
+
+    Checked when the renderer was not loaded before the test (always so in ``make test-fast``,
+    which deselects the marked tests; in a full run, after the first marked test, an unmarked
+    one that renders is no longer seen). Renders in a subprocess or a process pool's workers
+    are not seen: mark those tests by hand."""
+    if request.node.get_closest_marker("render") is not None:
+        yield
+        return
+    before = {m for m in RENDERER_MODULES if m in sys.modules}
+    yield
+    loaded = [m for m in RENDERER_MODULES if m in sys.modules and m not in before]
+    if loaded:
+        pytest.fail(f"{request.node.nodeid} imported {', '.join(loaded)} without the 'render' marker: "
+                    "add @pytest.mark.render (it needs Mitsuba)", pytrace=False)
 
 
 @pytest.fixture(scope="session")
@@ -34,7 +62,7 @@ def small_camera(tmp_path_factory):
     return str(path)
 
 
-def random_envelope_poses(n, seed, range_m=(1.0, 40.0)):
+def random_envelope_poses(n, seed, range_interval_m=(1.0, 40.0)):
     """Poses drawn over the paper's test envelope: range log-uniform, roll/pitch +/-25 deg,
     yaw +/-45 deg, lateral offsets up to +/-15 % of range. Returns (R (n,3,3), t (n,3))."""
     from svgs.frames import pose_from_scenario, sample_envelope_scenario
@@ -42,7 +70,7 @@ def random_envelope_poses(n, seed, range_m=(1.0, 40.0)):
     rng = np.random.default_rng(seed)
     Rs, ts = [], []
     for _ in range(n):
-        R, t = pose_from_scenario(**sample_envelope_scenario(rng, range_m=range_m))
+        R, t = pose_from_scenario(**sample_envelope_scenario(rng, range_interval_m=range_interval_m))
         Rs.append(R)
         ts.append(t)
     return np.array(Rs), np.array(ts)

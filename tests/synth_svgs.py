@@ -171,11 +171,11 @@ def noise_field(shape, sigma, rng, *, tile_px: int | None = 256) -> np.ndarray:
     return cv2.repeat(tile, reps[0], reps[1])[oy:oy + H, ox:ox + W]
 
 
-def random_envelope_pose(rng=None, *, range_m=(1.0, 40.0), roll_deg=25.0, pitch_deg=25.0, yaw_deg=45.0,
+def random_envelope_pose(rng=None, *, range_interval_m=(1.0, 40.0), roll_deg=25.0, pitch_deg=25.0, yaw_deg=45.0,
                          lateral_fraction=0.15):
     """A pose drawn over the paper's test envelope.
 
-    Range log-uniform in ``range_m``; roll and pitch uniform in +/-``roll_deg``/``pitch_deg``,
+    Range log-uniform in ``range_interval_m``; roll and pitch uniform in +/-``roll_deg``/``pitch_deg``,
     yaw in +/-``yaw_deg``; lateral offsets of the target origin uniform up to
     +/-``lateral_fraction`` of the range (see :func:`svgs.frames.pose_from_scenario`).
 
@@ -186,7 +186,7 @@ def random_envelope_pose(rng=None, *, range_m=(1.0, 40.0), roll_deg=25.0, pitch_
     scenario : dict
         ``range_m, target_x_m, target_y_m, roll_deg, pitch_deg, yaw_deg``.
     """
-    sc = sample_envelope_scenario(_rng(rng), range_m=range_m, roll_deg=roll_deg, pitch_deg=pitch_deg, yaw_deg=yaw_deg,
+    sc = sample_envelope_scenario(_rng(rng), range_interval_m=range_interval_m, roll_deg=roll_deg, pitch_deg=pitch_deg, yaw_deg=yaw_deg,
                                   lateral_fraction=lateral_fraction)
     R, t = pose_from_scenario(**sc)
     return R, t, sc

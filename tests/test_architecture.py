@@ -95,3 +95,102 @@ def test_building_one_command_registers_only_its_modules():
     assert _selected(["calibrate", "focal"]) == {"cli.calibrate", "cli.calibrate_study"}
     assert _selected(["tof", "solve"]) == {"cli.tof", "cli.tof_render", "cli.tof_stability"}
     assert _selected(["--help"]) is None and _selected(["no-such-command"]) is None
+
+
+# --------------------------------------------------------------------------- private names
+def _is_private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def private_cross_package_uses(source: str, module: str, packages=PACKAGES) -> list[str]:
+    """Where the module ``module`` (dotted name; its package is the first part) uses a private
+    name (``_x``, not ``__x__``) of another of the project's ``packages``.
+
+    Found: ``from pkg.mod import _x``, ``from pkg import _mod``, ``import pkg._mod`` and
+    ``from pkg._mod import x`` (a private module), and ``pkg.mod._x`` / ``m._x`` attribute
+    access through a name an import bound to one of those packages' modules.
+
+    Returns
+    -------
+    list of str
+        ``"line N: what"`` for each use.
+    """
+    import ast
+
+    own = module.split(".")[0]
+    here = module.split(".")[:-1]  # the module's package (for a package's __init__: the package)
+    found, bound = [], {}  # bound: local name -> dotted path in a project package
+
+    def foreign(path: str) -> bool:
+        top = path.split(".")[0]
+        return top in packages and top != own
+
+    def check_path(path: str, line: int, what: str) -> None:
+        if foreign(path) and any(_is_private(p) for p in path.split(".")[1:]):
+            found.append(f"line {line}: {what}")
+
+    tree = ast.parse(source)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                check_path(a.name, node.lineno, f"import {a.name}")
+                if a.asname:
+                    bound[a.asname] = a.name
+                else:
+                    bound[a.name.split(".")[0]] = a.name.split(".")[0]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = here[: len(here) - (node.level - 1)] if node.level > 1 else here
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            for a in node.names:
+                full = f"{mod}.{a.name}"
+                check_path(full, node.lineno, f"from {mod} import {a.name}")
+                bound[a.asname or a.name] = full
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute):
+            chain, cur = [node.attr], node.value
+            while isinstance(cur, ast.Attribute):
+                chain.append(cur.attr)
+                cur = cur.value
+            if isinstance(cur, ast.Name) and cur.id in bound and _is_private(node.attr):
+                path = ".".join([bound[cur.id], *reversed(chain)])
+                if foreign(path):
+                    found.append(f"line {node.lineno}: {cur.id}.{'.'.join(reversed(chain))} ({path})")
+    return found
+
+
+def test_the_private_import_scan_finds_each_form():
+    """The scan below is not vacuous: each form of reaching into another package is found, and
+    a package's own private names, dunders and public names are not."""
+    src = (
+        "import sim.trials\n"
+        "import sim.closed_loop as cl\n"
+        "from sim import trials as tr, closed_loop\n"
+        "from sim.trials import _camera\n"           # 4: a private name
+        "import sim._private_mod\n"                  # 5: a private module
+        "from sim import _mod\n"                     # 6: a private module by from-import
+        "from sim._mod import public\n"              # 7: a name of a private module
+        "x = sim.trials._pattern('svgs-3u')\n"       # 8: attribute access through the import
+        "y = cl._helper({})\n"                       # 9: through an alias
+        "z = tr._camera, closed_loop.Scenario, sim.__name__\n"   # 10: through a from-imported module
+        "from .store import _format\n"               # own package (relative): allowed
+        "from studies.store import _parse\n"         # own package: allowed
+    )
+    got = private_cross_package_uses(src, "studies.example")
+    assert [g.split(":")[0] for g in got] == ["line 4", "line 5", "line 6", "line 7", "line 8", "line 9", "line 10"], got
+    # in sim, sim's private names are its own; studies' is not
+    assert [g.split(":")[0] for g in private_cross_package_uses(src, "sim.example")] == ["line 12"]
+
+
+def test_no_module_uses_another_packages_private_names():
+    """A package's private names (``_x``) are its own: another package imports only public ones."""
+    bad = []
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            rel = path.relative_to(ROOT).with_suffix("")
+            module = ".".join(rel.parts)  # a package's __init__ as pkg.__init__: its package is pkg
+            for use in private_cross_package_uses(path.read_text(), module):
+                bad.append(f"{rel.with_suffix('.py')} {use}")
+    assert not bad, "private names of another package:\n" + "\n".join(bad)

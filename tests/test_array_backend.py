@@ -36,6 +36,7 @@ def test_fft_convolutions_equal_scipy(shape, kshape):
     np.testing.assert_allclose(be.fft_convolve_full(a, k), fftconvolve(a, k, mode="full"), rtol=1e-10, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_phone_optics_on_the_gpu_code_path_equal_the_cpu_path():
     rng = np.random.default_rng(3)
     cpu = PhoneCamera("galaxy-nexus")

@@ -17,6 +17,7 @@ def _csv(path):
         return list(csv.DictReader(fh))
 
 
+@pytest.mark.slow
 def test_study_writes_report_csv_and_summary(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     out = tmp_path / "study"
@@ -38,7 +39,7 @@ def test_study_writes_report_csv_and_summary(tmp_path, capsys, monkeypatch):
     assert float(by[("focal +1 %", "30.0", "0.0")]["mean_z_m"]) == pytest.approx(0.3, rel=0.05)
     s = json.loads((out / "summary.json").read_text())
     assert s["config"]["geometric"] is True and s["key_numbers"]["n_views_max"] == 8
-    assert abs(s["key_numbers"]["focal_only_err_pct"]) < 1.0
+    assert abs(s["key_numbers"]["focal_only_error_pct"]) < 1.0
     conv = _csv(out / "calibration_convergence.csv")
     assert {r["n_views"] for r in conv} == {"4", "8"}
 

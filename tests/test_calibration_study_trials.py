@@ -37,6 +37,7 @@ def _run(cam, out, spec, **kw):
     return run_calibration_study(cam, out, spec=spec, chunk_size=3, **{**SMALL, **kw})
 
 
+@pytest.mark.slow
 def test_inline_and_two_processes_give_identical_rows(tmp_path, small_camera):
     a = _run(small_camera, tmp_path / "inline", ExecutorSpec("inline", 1))
     b = _run(small_camera, tmp_path / "pool", ExecutorSpec("process", 2))
@@ -51,6 +52,7 @@ def test_inline_and_two_processes_give_identical_rows(tmp_path, small_camera):
     assert set(a.run_stats) == set(PARTS) and a.run_stats["pose"].n_run == 34
 
 
+@pytest.mark.slow
 def test_rerun_resumes_and_other_parameters_are_refused(tmp_path, small_camera):
     out = tmp_path / "study"
     first = _run(small_camera, out, ExecutorSpec("inline", 1))

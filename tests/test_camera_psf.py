@@ -133,6 +133,7 @@ def test_tent_matrix_reproduces_positions():
     assert np.allclose((A * c[:, None]).sum(0)[inner], np.arange(37)[inner])
 
 
+@pytest.mark.slow
 def test_centroid_crlb_matches_the_fisher_information_of_galsims_image():
     """sim.crlb's centroid bound of an unsaturated spot against the Fisher information of
     GalSim's image of the same PSF with the same pixel noise (shot, read, quantisation):

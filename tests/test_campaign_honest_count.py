@@ -197,6 +197,7 @@ def test_a_gap_is_explained_only_by_a_source_switched_off():
         assert (w["explanation"] == "unexplained") == (w["verdict"] in ("below", "above"))
 
 
+@pytest.mark.slow
 def test_rebuild_report_from_the_stored_results(tmp_path):
     """A small geometric campaign, its outputs deleted, rebuilt from results.csv alone."""
     cfg = make_config("galaxy-nexus", ranges_m=(5.0, 10.0), trials_per_range=6, trial_kind="geometric")
@@ -229,6 +230,7 @@ def test_rebuild_report_from_the_stored_results(tmp_path):
 
 @pytest.mark.skipif(not (REPO / "docs/reports/campaign-galaxy-nexus/results.csv").is_file(),
                     reason="the committed Galaxy Nexus campaign is not in this checkout")
+@pytest.mark.slow
 def test_the_committed_nexus_campaign_counts_its_five_fitted_cells(tmp_path):
     out = tmp_path / "campaign-galaxy-nexus"
     shutil.copytree(REPO / "docs/reports/campaign-galaxy-nexus", out)

@@ -70,6 +70,7 @@ def test_every_schema_is_in_the_cli_doc():
         assert schema.rstrip() in text, name
 
 
+@pytest.mark.slow
 def test_campaign_json(tmp_path, capsys):
     out = tmp_path / "campaign"
     obj, err = _run(["campaign", "--camera", "galaxy-nexus", "--trial-kind", "geometric", "--trials", "6", "--ranges",
@@ -96,6 +97,7 @@ def test_campaign_json(tmp_path, capsys):
     assert again["ranges"] == obj["ranges"]
 
 
+@pytest.mark.slow
 def test_sensitivity_json(tmp_path, capsys):
     out = tmp_path / "sobol"
     obj, err = _run(["sensitivity", "--camera", "galaxy-nexus", "--n", "8", "--vary", "range_m=5:30", "--vary",
@@ -114,6 +116,7 @@ def test_sensitivity_json(tmp_path, capsys):
     _same_as_summary_json(obj, out)
 
 
+@pytest.mark.slow
 def test_calibrate_study_json(tmp_path, capsys):
     from test_calibration_study_cli import QUICK
 

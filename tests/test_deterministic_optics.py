@@ -48,6 +48,7 @@ BOXES = ((32, 74, 40, 82), (70, 112, 120, 162))
 
 
 @pytest.mark.parametrize("range_m", [5, 20, 40])
+@pytest.mark.slow
 def test_grid_equals_monte_carlo_expectation_mono(range_m):
     pts = _spots(SPOT_RADIUS_PX[range_m])
     psf = CorePSF.from_optics(2.4, 535.0, 1.4e-6, 0.6)
@@ -65,6 +66,7 @@ def test_grid_equals_monte_carlo_expectation_mono(range_m):
 
 
 @pytest.mark.parametrize("range_m", [5, 20, 40])
+@pytest.mark.slow
 def test_grid_equals_monte_carlo_expectation_colour(range_m):
     pts = _spots(SPOT_RADIUS_PX[range_m], seed=4)
     shape = (140, 200)
@@ -141,6 +143,7 @@ def test_support_windowed_convolution_equals_full_frame_filter():
     assert not psf.convolve(np.zeros((40, 60), np.float32)).any()
 
 
+@pytest.mark.slow
 def test_background_kept_between_frames_equals_its_sum():
     """A background given as (scale, unit) - the lab's light, kept by the camera model from
     frame to frame - gives the optical image of the summed flux (the optics are linear), and the

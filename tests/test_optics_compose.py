@@ -47,6 +47,7 @@ def test_box_binning_equals_the_whole_frame_binning(shape):
 
 @pytest.mark.parametrize("shape", [(1944, 2592), (1201, 1599), (700, 900)])
 @pytest.mark.parametrize("with_background", [False, True])
+@pytest.mark.slow
 def test_fused_composition_equals_numpy_and_cv2_resize(shape, with_background):
     H, W = shape
     rng = np.random.default_rng(1)

@@ -117,6 +117,7 @@ def test_windowed_centroid_does_not_move_toward_a_neighbours_halo():
         assert plain[0] - 50.0 > plain_min
 
 
+@pytest.mark.slow
 def test_consistency_false_alarm_rate_equals_its_level():
     """Gaussian centroid noise of the stated sigma on exact projections of the 3U pattern,
     solved by the collinearity solver: the fraction flagged inconsistent equals alpha within

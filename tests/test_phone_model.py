@@ -42,6 +42,7 @@ def photon_transfer(phone, iso, levels_ph_s, exposure_s=0.01, seed=0):
     return K, sigma_d, mu[i_sat] / K, mu.max() / K
 
 
+@pytest.mark.slow
 def test_photon_transfer_recovers_profile_parameters():
     sp = SensorParams(full_well_e=6000, read_noise_e=3.0, qe=0.5, prnu=0.01, dsnu_e=1.5, adc_bits=12,
                       black_level_dn=256, dark_current_e_s=20.0)

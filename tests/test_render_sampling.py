@@ -11,6 +11,7 @@ needs_mitsuba = pytest.mark.skipif(importlib.util.find_spec("mitsuba") is None, 
 
 
 @needs_mitsuba
+@pytest.mark.render
 def test_spp_rule_is_what_ldsampler_renders():
     # the reference is Mitsuba's own ldsampler: check_spp must record the count it renders
     from render.sampling import check_spp

@@ -77,6 +77,8 @@ def differences(rows, ref_rows, timings) -> list:
     return out
 
 
+@pytest.mark.render
+@pytest.mark.slow
 def test_rendered_campaign_same_rows_on_process_pool_and_dask(tmp_path):
     pytest.importorskip("distributed", reason="the 'dask' extra is not installed")
     from sim.render_trial import RENDER_TIMING_OUTPUTS

@@ -106,6 +106,8 @@ def rendered_campaign(tmp_path_factory):
     return out, args
 
 
+@pytest.mark.render
+@pytest.mark.slow
 def test_rendered_campaign_json_is_the_summary_and_solves_the_envelope(rendered_campaign, capsys):
     out, args = rendered_campaign
     assert main(args) == 0
@@ -137,6 +139,8 @@ def test_rendered_campaign_json_is_the_summary_and_solves_the_envelope(rendered_
     assert again["run"]["trials_run"] == 0 and again["ranges"] == obj["ranges"]
 
 
+@pytest.mark.render
+@pytest.mark.slow
 def test_error_budget_end_to_end(tmp_path, capsys):
     """One setting at 10 m, two exposures, every variant: the budget's files and report section."""
     out = tmp_path / "budget"

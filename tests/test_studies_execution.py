@@ -33,6 +33,7 @@ def _run(config, out_dir, spec, chunk_size=4):
     return read_rows(out_dir / "results.csv")
 
 
+@pytest.mark.slow
 def test_identical_numbers_inline_process_pool_and_dask(tmp_path):
     pytest.importorskip("distributed", reason="the 'dask' extra is not installed")
     config = make_config("galaxy-nexus", ranges_m=(5.0, 20.0), trials_per_range=12, seed=11, sigma_px=0.2,
@@ -52,6 +53,7 @@ KILL_AT = 100
 _KILL_CHILD = sigkill_after_rows(KILL_AT, "from cli.main import main\nsys.exit(main(sys.argv[1:]))")
 
 
+@pytest.mark.slow
 def test_sigkill_halfway_then_rerun_completes_without_duplicates(tmp_path):
     out = tmp_path / "campaign"
     args = ["campaign", "--camera", "galaxy-nexus", "--trial-kind", "geometric", "--calibration", "exact", "--trials",
@@ -110,6 +112,7 @@ def _alive(procs):
 
 
 @pytest.mark.parametrize("executor", [["--processes", "2"], ["--workers", "2"]], ids=["process-pool", "dask"])
+@pytest.mark.slow
 def test_workers_die_with_a_sigkilled_parent(tmp_path, executor):
     """SIGKILL of a campaign mid-run: every process it started (pool or Dask workers, the
     multiprocessing resource tracker) ends within a few seconds, none keeps computing."""
@@ -161,6 +164,7 @@ def _pdeathsig() -> int:
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux only")
+@pytest.mark.slow
 def test_local_workers_ask_the_kernel_for_sigkill_when_the_parent_dies():
     """The pool initializer and the LocalCluster's worker plugin set PR_SET_PDEATHSIG (the Dask
     workers also have distributed's own parent watch, so the SIGKILL test cannot tell)."""

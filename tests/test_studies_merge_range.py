@@ -52,6 +52,8 @@ def test_parameters_are_physical_and_checked_before_work():
         make_config("htc-amaze-4g", ranges_m=(8.0, 6.0))
 
 
+@pytest.mark.render
+@pytest.mark.slow
 def test_merge_range_command_on_a_small_grid(tmp_path, capsys):
     """The Amaze at 6 and 8.5 m, the veiling glare at 1 % and 8 %: as profiled the spots are apart
     at 6 m and merged at 8.5 m (the paper's 6.5-8 m), more glare merges them sooner, less later."""

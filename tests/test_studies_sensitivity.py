@@ -82,6 +82,7 @@ def test_bad_n_and_fixed_are_input_errors():
         make_config("galaxy-nexus", ["range_m=5:30", "sigma_px=0.1:0.2"], method="fast")
 
 
+@pytest.mark.slow
 def test_sobol_over_seven_parameters_ranks_them(tmp_path, capsys):
     out = tmp_path / "sobol"
     vary = ["range_m=5:30", "roll_deg=-25:25", "yaw_deg=-45:45", "sigma_px=0.05:0.3", "focal_error_frac=-0.02:0.02",

@@ -226,6 +226,7 @@ def test_a_torn_last_line_is_still_repaired_silently(tmp_path, capsys):
     assert (tmp_path / "results.csv").read_bytes().endswith(b"\n")
 
 
+@pytest.mark.slow
 def test_a_campaign_rerun_sets_a_garbage_line_aside_and_completes(tmp_path, capsys):
     from cli.main import main
 

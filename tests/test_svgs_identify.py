@@ -65,9 +65,9 @@ def test_gates_derived_from_pattern():
     # inflated envelope it samples can produce (<= that supremum); it samples all box
     # corners, so it is at least the largest corner value.
     env = PAPER_ENVELOPE
-    sup_real, _ = _max_baseline(env.range_m[0], env.lateral_fraction,
+    sup_real, _ = _max_baseline(env.range_interval_m[0], env.lateral_fraction,
                                           (env.roll_deg, env.pitch_deg, env.yaw_deg))
-    sup_infl, corner_infl = _max_baseline(env.range_m[0] / GATE_MARGIN_RANGE,
+    sup_infl, corner_infl = _max_baseline(env.range_interval_m[0] / GATE_MARGIN_RANGE,
                                           env.lateral_fraction + GATE_MARGIN_LATERAL,
                                           np.array([env.roll_deg, env.pitch_deg, env.yaw_deg]) + GATE_MARGIN_DEG)
     assert sup_real <= g.base_max
@@ -116,6 +116,7 @@ def test_noise_free_points_over_the_envelope(nexus, pattern):
         assert np.allclose(res.solution.t_cam_target_m, t, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_points_with_distractors_identified_99_percent(nexus, pattern):
     """0-20 distractor points (a quarter of them near the pattern), 0.2 px centroid noise,
     random envelope poses. Bare points carry no photometry; a distractor sitting where
@@ -139,7 +140,7 @@ def test_points_with_distractors_identified_99_percent_long(nexus, pattern):
 def test_many_blobs_capped_and_verified_few(nexus, pattern):
     """25 blobs: the candidate sets are pruned before solving; few are solved."""
     rng = np.random.default_rng(4)
-    R, t, _ = random_envelope_pose(rng, range_m=(5.0, 5.0))
+    R, t, _ = random_envelope_pose(rng, range_interval_m=(5.0, 5.0))
     uv = nexus.project_target(pattern.points_m, R, t)
     d = _distractor_points(rng, uv, 21, (nexus.width, nexus.height), 0.5)
     res = identify(np.concatenate([uv, d]), nexus, pattern)
@@ -153,7 +154,7 @@ def test_other_pattern_with_five_targets(nexus):
                   points_m=np.array([[0, 0.2, 0], [0, -0.15, 0], [0, 0, 0.06], [0.1, 0.02, 0], [-0.08, -0.05, 0.02]]))
     rng = np.random.default_rng(6)
     for _ in range(60):
-        R, t, sc = random_envelope_pose(rng, range_m=(1.0, 20.0))
+        R, t, sc = random_envelope_pose(rng, range_interval_m=(1.0, 20.0))
         uv = nexus.project_target(pat.points_m, R, t) + rng.normal(0, 0.1, (5, 2))
         pts = np.concatenate([uv, rng.uniform([0, 0], [nexus.width - 1, nexus.height - 1], (8, 2))])
         perm = rng.permutation(len(pts))
@@ -166,7 +167,7 @@ def test_mirror_image_is_not_the_pattern(nexus, pattern):
     rng = np.random.default_rng(9)
     n_rejected = 0
     for _ in range(40):
-        R, t, _ = random_envelope_pose(rng, range_m=(1.0, 10.0))
+        R, t, _ = random_envelope_pose(rng, range_interval_m=(1.0, 10.0))
         uv = nexus.project_target(pattern.points_m, R, t)
         mirrored = uv.copy()
         mirrored[:, 0] = 2 * nexus.cx - mirrored[:, 0]
@@ -191,9 +192,9 @@ def test_narrow_envelope_rejects_poses_outside_it(nexus, pattern):
 
     uv = nexus.project_target(pattern.points_m, *pose_from_scenario(30.0))
     assert identify(uv, nexus, pattern)
-    res = identify(uv, nexus, pattern, envelope=Envelope(range_m=(1.0, 5.0)))
+    res = identify(uv, nexus, pattern, envelope=Envelope(range_interval_m=(1.0, 5.0)))
     assert not res and res.reason == "no_consistent_set"
-    assert PAPER_ENVELOPE.range_m == (1.0, 40.0)
+    assert PAPER_ENVELOPE.range_interval_m == (1.0, 40.0)
 
 
 # ---------------------------------------------------------------- images (acceptance)
@@ -226,6 +227,7 @@ def _image_trials(n, seed, camera, pattern, *, dtype="uint8", colour=False, max_
     return correct, failures, np.array(errs)
 
 
+@pytest.mark.slow
 def test_images_with_distractors_identified_99_percent(nexus, pattern):
     """Acceptance: detect + identify on synthetic 5 MP frames with 0-20 distractors:
     >= 99 % correct, every failure with a reason."""

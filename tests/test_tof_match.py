@@ -16,6 +16,7 @@ def target():
     return load_target("tof-8")
 
 
+@pytest.mark.slow
 def test_matching_acceptance_1000_trials(target):
     """Acceptance: noise-free 3-D marker sets with 0-2 missing and 0-4 spurious points, random
     poses (0.7-6 m, +-25 deg tilt, any roll): the assignment is exactly right (every inlier to

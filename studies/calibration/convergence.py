@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -30,9 +32,16 @@ from .common import (
 )
 
 #: Columns of one calibration's errors (:func:`calibration_errors`), in order.
-ERROR_COLUMNS = ("fx_px", "fy_px", "cx_px", "cy_px", *DISTORTION_KEYS, "fx_err_pct", "fy_err_pct", "cx_err_px",
-                 "cy_err_px", "pp_err_px", "map_rms_px", "map_max_px", "map_rot_rms_px", "map_rot_max_px", "rms_px",
-                 "std_fx_px", "std_cx_px")
+#: The measured calibration errors use the names of the injected ones (``pp_error_u_px``,
+#: ``pp_error_v_px``: estimate minus truth, px; ``fx_error_pct``, ``fy_error_pct``: estimate /
+#: truth - 1, in %; ``pp_error_norm_px``: the norm of the principal-point error, px).
+ERROR_COLUMNS = ("fx_px", "fy_px", "cx_px", "cy_px", *DISTORTION_KEYS, "fx_error_pct", "fy_error_pct",
+                 "pp_error_u_px", "pp_error_v_px", "pp_error_norm_px", "map_rms_px", "map_max_px", "map_rot_rms_px",
+                 "map_rot_max_px", "rms_px", "std_fx_px", "std_cx_px")
+#: The columns' names before issue 25 (old -> new), read from stored results by
+#: :func:`upgrade_stored_columns`.
+RENAMED_COLUMNS = {"fx_err_pct": "fx_error_pct", "fy_err_pct": "fy_error_pct", "cx_err_px": "pp_error_u_px",
+                   "cy_err_px": "pp_error_v_px", "pp_err_px": "pp_error_norm_px"}
 
 
 @dataclass
@@ -127,8 +136,8 @@ def calibration_errors(cal, camera_true: Camera, step_px: float | None = None) -
     Returns
     -------
     dict
-        :data:`ERROR_COLUMNS`: the estimates, ``fx_err_pct``, ``fy_err_pct``, ``cx_err_px``,
-        ``cy_err_px``, ``pp_err_px``, ``map_rms_px``/``map_max_px`` (mapping error over the
+        :data:`ERROR_COLUMNS`: the estimates, ``fx_error_pct``, ``fy_error_pct``, ``pp_error_u_px``,
+        ``pp_error_v_px``, ``pp_error_norm_px``, ``map_rms_px``/``map_max_px`` (mapping error over the
         image, no alignment), ``map_rot_rms_px``/``map_rot_max_px`` (after the best rotation,
         which absorbs most of a principal-point error), ``rms_px``, ``std_fx_px``, ``std_cx_px``.
     """
@@ -139,10 +148,10 @@ def calibration_errors(cal, camera_true: Camera, step_px: float | None = None) -
     row = {
         "fx_px": cal.fx, "fy_px": cal.fy, "cx_px": cal.cx, "cy_px": cal.cy,
         **{k: float(v) for k, v in zip(DISTORTION_KEYS, cal.dist)},
-        "fx_err_pct": 100.0 * (cal.fx / camera_true.fx - 1.0),
-        "fy_err_pct": 100.0 * (cal.fy / camera_true.fy - 1.0),
-        "cx_err_px": cal.cx - camera_true.cx,
-        "cy_err_px": cal.cy - camera_true.cy,
+        "fx_error_pct": 100.0 * (cal.fx / camera_true.fx - 1.0),
+        "fy_error_pct": 100.0 * (cal.fy / camera_true.fy - 1.0),
+        "pp_error_u_px": cal.cx - camera_true.cx,
+        "pp_error_v_px": cal.cy - camera_true.cy,
         "map_rms_px": float(np.sqrt(np.mean(m0**2))),
         "map_max_px": float(m0.max()),
         "map_rot_rms_px": float(np.sqrt(np.mean(m1**2))),
@@ -150,8 +159,45 @@ def calibration_errors(cal, camera_true: Camera, step_px: float | None = None) -
         "rms_px": float(cal.rms_px),
         "std_fx_px": float(cal.std["fx"]), "std_cx_px": float(cal.std["cx"]),
     }
-    row["pp_err_px"] = float(np.hypot(row["cx_err_px"], row["cy_err_px"]))
+    row["pp_error_norm_px"] = float(np.hypot(row["pp_error_u_px"], row["pp_error_v_px"]))
     return {k: row[k] for k in ERROR_COLUMNS}
+
+
+def upgrade_stored_columns(folder) -> bool:
+    """Rename the columns of a convergence results store written before issue 25
+    (:data:`RENAMED_COLUMNS`) in ``results.csv``'s header and ``manifest.json``, so that its
+    results are read and resumed; the values are untouched.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The store's folder (``OUT/trials/convergence``); a missing or current one is left alone.
+
+    Returns
+    -------
+    bool
+        Whether anything was renamed.
+    """
+    folder = Path(folder)
+    manifest, results = folder / "manifest.json", folder / "results.csv"
+    if not manifest.is_file():
+        return False
+    stored = json.loads(manifest.read_text())
+    cols = stored.get("columns", [])
+    if not set(RENAMED_COLUMNS) & set(cols):
+        return False
+    stored["columns"] = [RENAMED_COLUMNS.get(c, c) for c in cols]
+    if results.is_file():
+        data = results.read_bytes()
+        head, sep, rest = data.partition(b"\n")
+        names = head.decode("utf-8").split(",")
+        tmp = results.with_suffix(".csv.tmp")
+        tmp.write_bytes(",".join(RENAMED_COLUMNS.get(c, c) for c in names).encode("utf-8") + sep + rest)
+        os.replace(tmp, results)
+    tmp = manifest.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(stored, indent=2, sort_keys=True) + "\n")
+    os.replace(tmp, manifest)
+    return True
 
 
 def check_views_list(detections: Detections, camera_true: Camera, views_list) -> list[int]:
@@ -277,9 +323,10 @@ def convergence_summary(rows) -> list[dict]:
 
         out.append({
             "n_views": n, "subsets": len(rs),
-            "fx_err_pct_mean_abs": agg("fx_err_pct", np.mean), "fx_err_pct_max_abs": agg("fx_err_pct", np.max),
-            "fy_err_pct_mean_abs": agg("fy_err_pct", np.mean), "fy_err_pct_max_abs": agg("fy_err_pct", np.max),
-            "pp_err_px_mean": agg("pp_err_px", np.mean), "pp_err_px_max": agg("pp_err_px", np.max),
+            "fx_error_pct_mean_abs": agg("fx_error_pct", np.mean), "fx_error_pct_max_abs": agg("fx_error_pct", np.max),
+            "fy_error_pct_mean_abs": agg("fy_error_pct", np.mean), "fy_error_pct_max_abs": agg("fy_error_pct", np.max),
+            "pp_error_norm_px_mean": agg("pp_error_norm_px", np.mean),
+            "pp_error_norm_px_max": agg("pp_error_norm_px", np.max),
             "map_rms_px_mean": agg("map_rms_px", np.mean),
             "map_rot_rms_px_mean": agg("map_rot_rms_px", np.mean), "map_rot_rms_px_max": agg("map_rot_rms_px", np.max),
             "rms_px_mean": agg("rms_px", np.mean),

@@ -118,9 +118,10 @@ def pose_errors_batch(camera_true: Camera, believed: Camera, pattern: Pattern, R
     -------
     dict of ndarray
         ``ok`` (M,), ``d_state`` (M, 6) solved minus true state (m, m, m, deg, deg, deg;
-        angles wrapped), ``pos_err_norm_m`` (M,) norm, ``rot_err_deg`` (M,) angle of the
-        relative rotation, ``in_image`` (M,).
+        angles wrapped: :func:`sim.metrics.state_error`), ``pos_err_norm_m`` (M,) norm,
+        ``rot_err_deg`` (M,) angle of the relative rotation, ``in_image`` (M,).
     """
+    from sim.metrics import state_error
     from svgs.frames import pose_to_state, rotation_angle_deg
     from svgs.solver import solve_centroids
 
@@ -134,8 +135,7 @@ def pose_errors_batch(camera_true: Camera, believed: Camera, pattern: Pattern, R
         uv = uv + np.random.default_rng(seed).normal(0.0, noise_px, uv.shape)
     sol = solve_centroids(uv, believed, pattern)
     truth = pose_to_state(R, t)
-    d = sol.state - truth
-    d[:, 3:] = np.degrees((d[:, 3:] + np.pi) % (2 * np.pi) - np.pi)
+    d = state_error(sol.state, truth)
     rot = np.full(len(R), np.nan)
     okm = np.asarray(sol.ok, bool)
     if okm.any():

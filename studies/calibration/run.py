@@ -80,14 +80,14 @@ class StudyResult:
         fe = self.focal_estimate
         return {
             "n_views_max": conv.get("n_views"),
-            "fx_err_pct_max_abs": conv.get("fx_err_pct_max_abs"),
-            "fy_err_pct_max_abs": conv.get("fy_err_pct_max_abs"),
-            "pp_err_px_max": conv.get("pp_err_px_max"),
+            "fx_error_pct_max_abs": conv.get("fx_error_pct_max_abs"),
+            "fy_error_pct_max_abs": conv.get("fy_error_pct_max_abs"),
+            "pp_error_norm_px_max": conv.get("pp_error_norm_px_max"),
             "map_rot_rms_px_max": conv.get("map_rot_rms_px_max"),
             "map_rms_px_mean": conv.get("map_rms_px_mean"),
             "rms_reprojection_px": best[0]["rms_px"] if best else None,
             "focal_only_f_px": float(fe.f_px) if fe is not None else None,
-            "focal_only_err_pct": (100.0 * (fe.f_px / self.camera_true.fx - 1.0) if fe is not None else None),
+            "focal_only_error_pct": (100.0 * (fe.f_px / self.camera_true.fx - 1.0) if fe is not None else None),
         }
 
 
@@ -271,6 +271,7 @@ class _Runner:
     def __init__(self, out: Path, manifest_: dict, spec, chunk_size, show_progress: bool):
         from studies.store import ResultStore
 
+        from .convergence import upgrade_stored_columns
         from .trials import KINDS, SCENARIO_KEYS
 
         self.spec, self.chunk_size, self.show_progress = spec, chunk_size, show_progress
@@ -278,6 +279,7 @@ class _Runner:
         self.executor = None
         self.stats = {}
         self.stores = {}
+        upgrade_stored_columns(out / "trials" / "convergence")  # stored under the names before issue 25
         for part in self.PARTS:
             cols = KINDS[part].columns(SCENARIO_KEYS[part])
             self.stores[part] = ResultStore(out / "trials" / part, manifest_, cols)
