@@ -72,15 +72,8 @@ def config_from_manifest(out_dir) -> CampaignConfig:
 
 
 def finite_json(obj):
-    """``obj`` in plain JSON types (:func:`studies.store._jsonable`) with NaN and infinite floats as
-    None (strict JSON)."""
-    from ..store import _jsonable
+    """``obj`` in plain JSON types (:func:`svgs.jsonable.to_jsonable`) with NaN and infinite floats
+    as None (strict JSON)."""
+    from svgs.jsonable import to_jsonable
 
-    def fin(o):
-        if isinstance(o, dict):
-            return {k: fin(v) for k, v in o.items()}
-        if isinstance(o, list):
-            return [fin(v) for v in o]
-        return (o if np.isfinite(o) else None) if isinstance(o, float) else o
-
-    return fin(_jsonable(obj))
+    return to_jsonable(obj, nonfinite="null", other=None)
