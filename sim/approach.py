@@ -280,7 +280,7 @@ def check_visible(trajectory: Trajectory, times_s, camera, pattern, base: Scenar
     """
     cam = Camera.load(camera)
     pat = Pattern.load(pattern)
-    base = base or Scenario(camera=cam.name, pattern=pat.name)
+    base = base or Scenario(camera=cam, pattern=pat)
     for t in np.asarray(times_s, float):
         try:
             sc = trajectory.scenario(t, base)
@@ -478,10 +478,7 @@ class ApproachSensor:
         if base.camera_overrides or any(base.lens_pp_offset_px) or base.lens_k1 or base.focus_distance_m is not None:
             raise InputError("base: camera_overrides, lens_pp_offset_px, lens_k1 and focus_distance_m belong to the "
                              "camera; give ApproachSensor the camera itself (the lens refocuses on the target)")
-        # the solver reloads the pattern from the scenario: keep what was given (a path stays a path)
-        pat_label = pattern if isinstance(pattern, str) else (self.pattern.source or self.pattern.name)
-        label = camera if isinstance(camera, str) else self.camera.name
-        self.base = base.replace(camera=label, pattern=str(pat_label))
+        self.base = base.replace(camera=self.camera, pattern=self.pattern)  # the scenario carries the objects
         params = PhoneParams.from_camera(self.camera)
         self.frame_rate_hz = None
         if frame_rate_hz is not None:
