@@ -60,8 +60,11 @@ def _scenario(args, range_m=None):
     from sim.closed_loop import DEFAULT_BACKDROP_DISTANCE_M, Scenario
 
     back = DEFAULT_BACKDROP_DISTANCE_M if args.backdrop_m is None else (None if args.backdrop_m == 0 else args.backdrop_m)
+    distance = args.range_m if range_m is None else range_m
+    # on the test stand (--mount stand) --range is the gimbal's rail position
+    where = {"rail_m": distance} if getattr(args, "mount", "target") == "stand" else {"range_m": distance}
     return Scenario(
-        camera=args.camera, pattern=args.pattern, range_m=args.range_m if range_m is None else range_m,
+        camera=args.camera, pattern=args.pattern, **where,
         target_x_m=args.target_x_m, target_y_m=args.target_y_m, roll_deg=args.roll_deg, pitch_deg=args.pitch_deg, yaw_deg=args.yaw_deg,
         backdrop_distance_m=back, ambient_radiance_w_m2_sr=resolve_ambient(args), spp=args.spp, roi_spp=args.roi_spp,
         focus_distance_m=getattr(args, "focus_m", None),
@@ -76,9 +79,9 @@ def _threshold(text):
 
 
 def _check_camera_renderable(name):
-    from svgs import Camera
+    from svgs.profiles import load_camera
 
-    cam = Camera.load(name)
+    cam = load_camera(name)
     for t in ("optics", "flash"):
         cam.table(t)  # ProfileError naming the missing table
     return cam
@@ -102,8 +105,6 @@ def write_outputs(out: Path, frame, row, crlb=None, threshold=None) -> dict:
     (out / "truth.json").write_text(json.dumps(truth, indent=1, default=json_default))
     sol = {k: v for k, v in row.items() if not k.startswith("_")}
     (out / "solution.json").write_text(json.dumps(sol, indent=1, default=json_default))
-    from svgs.profiles import Pattern
-
     from cli.solve import write_solution_overlay
 
     spots = (crlb or {}).get("per_spot_sigma_px")
@@ -116,7 +117,7 @@ def write_outputs(out: Path, frame, row, crlb=None, threshold=None) -> dict:
     from sim.closed_loop import solver_camera
 
     write_solution_overlay(out / "overlay.png", ex.image, solver_camera(frame.camera, ex.image.shape),
-                           Pattern.load(frame.scenario.pattern), result, threshold,
+                           frame.pattern, result, threshold,
                            sigma_px=spots, sigma_label="CRLB 1-sigma (the simulated sensor)" if spots else None, title=title)
     return {k: str(out / k) for k in ("flux.npy", "raw.npy", "image.png", "preview.png", "overlay.png", "truth.json",
                                        "solution.json")}
@@ -131,7 +132,7 @@ def cmd_render_and_solve(args) -> int:
     import time
 
     t0 = time.perf_counter()
-    print(f"rendering {scen.camera} at {scen.range_m:g} m (Mitsuba) ...", file=sys.stderr, flush=True)
+    print(f"rendering {scen.camera.name} at {scen.distance_m:g} m (Mitsuba) ...", file=sys.stderr, flush=True)
     frame = render_scenario(scen, seed=args.seed)
     print(f"  rendered in {time.perf_counter() - t0:.1f} s; exposing (phone camera model) and solving ...",
           file=sys.stderr, flush=True)

@@ -214,9 +214,9 @@ def _check_profile_and_envelope(args, cmd: str, ranges: dict) -> None:
         return  # the ToF commands load their profile with tof.load_camera (refuses phone profiles)
     if not isinstance(cam_name, str) or cmd in ("calibrate board",):
         return
-    from svgs.profiles import Camera, Pattern
+    from svgs.profiles import load_camera, load_pattern
 
-    cam = Camera.load(cam_name)
+    cam = load_camera(cam_name)
     if "tof" in cam.tables and "flash" not in cam.tables:
         raise InputError(f"--camera: {cam.name!r} is a time-of-flight camera profile; this command needs a phone "
                          "(SVGS) profile such as 'galaxy-nexus' (the ToF sensor's commands are 'svgs tof ...')")
@@ -224,7 +224,7 @@ def _check_profile_and_envelope(args, cmd: str, ranges: dict) -> None:
         return
     pat_name = getattr(args, "pattern", None) or "svgs-3u"
     try:
-        pat = Pattern.load(pat_name)
+        pat = load_pattern(pat_name)
     except InputError:
         return  # the command reports the pattern itself
     near, far = phone_range_envelope_m(cam, pat)

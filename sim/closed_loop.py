@@ -19,14 +19,15 @@ The data path of ``docs/design`` in one place::
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+import dataclasses
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from svgs.errors import InputError
 from sim.metrics import no_pose_errors, pose_errors
 from svgs.frames import pose_from_scenario, pose_to_state, state_dict
-from svgs.profiles import Camera, Pattern
+from svgs.profiles import Camera, Pattern, load_camera, load_pattern
 
 from sim.lab import load_lab
 
@@ -39,18 +40,35 @@ DEFAULT_BACKDROP_REFLECTANCE = _LAB["backdrop_reflectance"]
 DEFAULT_AMBIENT_RADIANCE_W_M2_SR = _LAB["ambient_radiance_w_m2_sr"]
 
 
-@dataclass(frozen=True)
+def _camera_key(camera: Camera) -> tuple:
+    """A camera by content (hashable): its geometry and tables."""
+    return (camera.name, camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy,
+            tuple(np.asarray(camera.dist, float).tolist()), repr(camera.tables))
+
+
+@dataclass(frozen=True, eq=False)
 class Scenario:
     """One simulated situation (what a test stand would set up).
 
+    The profiles travel as objects: ``camera`` and ``pattern`` may be given as names or paths
+    for convenience; they are resolved once, at construction, through the cached loaders
+    (:func:`svgs.profiles.load_camera`, :func:`svgs.profiles.load_pattern`), and the scenario
+    holds the loaded :class:`~svgs.profiles.Camera` and :class:`~svgs.profiles.Pattern`.
+
     Attributes
     ----------
-    camera : str
-        Camera profile name or path.
-    pattern : str
-        Target pattern name or path.
-    range_m : float
-        Along the boresight to the target origin, m.
+    camera : Camera
+        The camera profile (given as a Camera, a profile name or a path).
+    pattern : Pattern
+        The target pattern (given as a Pattern - e.g. :meth:`Pattern.scaled` - a name or a path).
+    range_m : float or None
+        Along the boresight to the target origin, m (``mount="target"``; default 10). None with
+        ``mount="stand"``, whose distance is :attr:`rail_m` (default 10).
+    rail_m : float or None
+        The gimbal pivot's position on the test stand's rail, m (``mount="stand"`` only, where it
+        defaults to 10; :class:`sim.stand.TestStand`). For callers that still give a stand's rail
+        position as ``range_m``, a stand scenario with ``range_m`` and no ``rail_m`` takes it as
+        ``rail_m``.
     target_x_m, target_y_m : float
         Lateral offsets of the target origin from the boresight (right, up in the paper's
         camera frame), m. Not the camera position ``x_m``, ``y_m`` of the paper state
@@ -71,7 +89,7 @@ class Scenario:
     mount : {"target", "stand"}
         What the angles turn. ``"target"`` (default): the target's attitude in front of the
         camera (:func:`svgs.frames.pose_from_scenario`). ``"stand"``: the paper's test stand -
-        the target fixed, the phone turned by the gimbal about its pivot, ``range_m`` the
+        the target fixed, the phone turned by the gimbal about its pivot, :attr:`rail_m` the
         pivot's rail position (:class:`sim.stand.TestStand`); lateral offsets must then be 0.
     stage_m : float
         The stand's translation stage along the rail, m (``mount="stand"`` only).
@@ -95,9 +113,9 @@ class Scenario:
         the renderer and the camera model both read them (:meth:`camera_profile`).
     """
 
-    camera: str = "galaxy-nexus"
-    pattern: str = "svgs-3u"
-    range_m: float = 10.0
+    camera: Camera | str = "galaxy-nexus"
+    pattern: Pattern | str = "svgs-3u"
+    range_m: float | None = None
     target_x_m: float = 0.0
     target_y_m: float = 0.0
     roll_deg: float = 0.0
@@ -116,8 +134,13 @@ class Scenario:
     lens_pp_offset_px: tuple = (0.0, 0.0)
     lens_k1: float = 0.0
     camera_overrides: tuple = ()
+    rail_m: float | None = None
+    _lens: Camera | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self):
+        object.__setattr__(self, "camera", load_camera(self.camera))
+        object.__setattr__(self, "pattern", load_pattern(self.pattern))
+        self._check_distances()
         object.__setattr__(self, "camera_overrides", tuple(tuple(x) for x in self.camera_overrides))
         for ov in self.camera_overrides:
             if len(ov) != 3 or not all(isinstance(x, str) for x in ov[:2]):
@@ -148,7 +171,7 @@ class Scenario:
             raise InputError("stage_m: only the test stand (mount='stand') has a translation stage")
         if not np.isfinite(float(self.stage_m)) or abs(float(self.stage_m)) > 1.0:
             raise InputError(f"stage_m: expected a finite stage position within +/-1 m, got {self.stage_m!r}")
-        for k in ("range_m", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg", "backdrop_reflectance",
+        for k in ("target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg", "backdrop_reflectance",
                   "ambient_radiance_w_m2_sr"):
             v = getattr(self, k)
             try:
@@ -157,8 +180,6 @@ class Scenario:
                 raise InputError(f"{k}: expected a number, got {v!r}") from None
             if not np.isfinite(fv):
                 raise InputError(f"{k}: expected a finite number, got {v!r}")
-        if self.range_m <= 0:
-            raise InputError(f"range_m: expected a positive range in metres, got {self.range_m!r}")
         if not 0 <= self.backdrop_reflectance <= 1:
             raise InputError(f"backdrop_reflectance: expected 0..1, got {self.backdrop_reflectance!r}")
         if self.ambient_radiance_w_m2_sr < 0:
@@ -169,6 +190,36 @@ class Scenario:
             raise InputError(f"backdrop_distance_m: expected a positive distance or None, got {self.backdrop_distance_m!r}")
         if (self.spp is not None and int(self.spp) < 0) or (self.roi_spp is not None and int(self.roi_spp) < 1):
             raise InputError(f"spp/roi_spp: expected spp >= 0 and roi_spp >= 1, got {self.spp}, {self.roi_spp}")
+        object.__setattr__(self, "_lens", self._true_lens())
+
+    def _check_distances(self) -> None:
+        """``range_m`` (the target) or ``rail_m`` (the stand): present, finite and positive."""
+        if self.mount == "stand" and self.rail_m is None and self.range_m is not None:
+            object.__setattr__(self, "rail_m", self.range_m)  # a stand's rail position given as range_m
+            object.__setattr__(self, "range_m", None)
+        if self.range_m is None and self.rail_m is None:  # the default distance, 10 m
+            object.__setattr__(self, "rail_m" if self.mount == "stand" else "range_m", 10.0)
+        if self.mount == "stand" and self.range_m is not None:
+            raise InputError("range_m: the boresight distance of a target scenario; the test stand's rail "
+                             "position is rail_m (give one of them)")
+        if self.mount != "stand" and self.rail_m is not None:
+            raise InputError("rail_m: only the test stand (mount='stand') has a rail; give range_m")
+        name = "rail_m" if self.mount == "stand" else "range_m"
+        v = getattr(self, name)
+        try:
+            fv = float(v)
+        except (TypeError, ValueError):
+            raise InputError(f"{name}: expected a number, got {v!r}") from None
+        if not np.isfinite(fv):
+            raise InputError(f"{name}: expected a finite number, got {v!r}")
+        if fv <= 0:
+            raise InputError(f"{name}: expected a positive distance in metres, got {v!r}")
+
+    @property
+    def distance_m(self) -> float:
+        """The nominal distance along the rail or the boresight: :attr:`rail_m` on the stand,
+        else :attr:`range_m`."""
+        return self.rail_m if self.mount == "stand" else self.range_m
 
     def pose(self):
         """(R_cam_target, t_cam_target_m) of this scenario: the actual pose (the misalignment and
@@ -192,14 +243,18 @@ class Scenario:
             er, ep, ey, es, _ = self.stand_error if stand else (0.0,) * 5
             rail_m = self.stand_error[4] if rail else 0.0
             return TestStand(misalignment_deg=tuple(mis)).pose(
-                self.range_m + rail_m, stage_m=self.stage_m + es, roll_deg=self.roll_deg + er,
+                self.rail_m + rail_m, stage_m=self.stage_m + es, roll_deg=self.roll_deg + er,
                 pitch_deg=self.pitch_deg + ep, yaw_deg=self.yaw_deg + ey)
         return pose_from_scenario(self.range_m, self.target_x_m, self.target_y_m, self.roll_deg, self.pitch_deg,
                                   self.yaw_deg)
 
     def camera_profile(self) -> Camera:
-        """The true lens: the profile's camera with :attr:`lens_pp_offset_px` and :attr:`lens_k1`."""
-        cam = Camera.load(self.camera)
+        """The true lens: the profile's camera with :attr:`camera_overrides`,
+        :attr:`lens_pp_offset_px` and :attr:`lens_k1` (made once, at construction)."""
+        return self._lens
+
+    def _true_lens(self) -> Camera:
+        cam = self.camera
         if self.camera_overrides:
             tables = {k: (dict(v) if isinstance(v, dict) else v) for k, v in cam.tables.items()}
             for table, key, value in self.camera_overrides:
@@ -211,12 +266,38 @@ class Scenario:
         return cam.replace(cx=cam.cx + du, cy=cam.cy + dv, dist=cam.dist + np.array([self.lens_k1, 0.0, 0.0, 0.0, 0.0]))
 
     def replace(self, **kw) -> "Scenario":
-        d = asdict(self)
-        d.update(kw)
-        return Scenario(**d)
+        """A copy with the fields ``kw`` changed (the profiles kept as objects)."""
+        mount = kw.get("mount", self.mount)
+        if "rail_m" not in kw and ((mount == "stand" and "range_m" in kw) or (mount == "target" and self.mount == "stand")):
+            kw["rail_m"] = None  # a new rail position given as range_m (see rail_m), or off the stand
+        return dataclasses.replace(self, **kw)
+
+    def _key(self) -> tuple:
+        """What the scenario is (its fields, the profiles by content) for ``==`` and ``hash``."""
+        d = self.to_json()
+        d["camera"] = _camera_key(self.camera)
+        d["pattern"] = (self.pattern.name, self.pattern.ids.tolist(), self.pattern.points_m.tolist(),
+                        repr(self.pattern.tables))
+        return tuple((k, repr(v)) for k, v in d.items() if k not in ("camera_source", "pattern_source"))
+
+    def __eq__(self, other):
+        if not isinstance(other, Scenario):
+            return NotImplemented
+        return self is other or self._key() == other._key()
+
+    def __hash__(self):
+        return hash(self._key())
 
     def to_json(self) -> dict:
-        return asdict(self)
+        """The fields as JSON values; the profiles by name (``camera``, ``pattern``) and by the
+        file they were read from (``camera_source``, ``pattern_source``)."""
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.init}
+        out["camera"], out["pattern"] = self.camera.name, self.pattern.name
+        out["camera_source"], out["pattern_source"] = self.camera.source, self.pattern.source
+        for k in ("misalignment_deg", "stand_error", "lens_pp_offset_px"):
+            out[k] = list(out[k])
+        out["camera_overrides"] = [list(x) for x in self.camera_overrides]
+        return out
 
 
 @dataclass
@@ -258,8 +339,14 @@ class Frame:
 
     @property
     def camera(self) -> Camera:
-        """The true camera the frame was rendered through (:meth:`Scenario.camera_profile`)."""
+        """The true camera the frame was rendered through (:meth:`Scenario.camera_profile`,
+        made once with the scenario)."""
         return self.scenario.camera_profile()
+
+    @property
+    def pattern(self) -> Pattern:
+        """The target pattern the frame was rendered with."""
+        return self.scenario.pattern
 
     def phone(self, *, glare: bool = True, veiling_fraction: float | None = None, wing_exponent: float | None = None):
         """The phone camera model; ``glare=False``: the same phone with a glare-free lens (no
@@ -335,7 +422,7 @@ def lab_flux(camera: Camera, scenario: Scenario, factor: np.ndarray | None = Non
     L = float(scenario.ambient_radiance_w_m2_sr)
     info = {"ambient_radiance_w_m2_sr": L}
     if scenario.backdrop_distance_m is not None:
-        D = scenario.range_m + scenario.backdrop_distance_m
+        D = scenario.distance_m + scenario.backdrop_distance_m
         n_led = len(flash.led_offsets_m)
         Lb = scenario.backdrop_reflectance * n_led * flash.radiant_intensity_w_sr / (np.pi * D * D)
         L += Lb
@@ -357,8 +444,7 @@ def lab_photon_factor(camera: Camera) -> np.ndarray:
     :func:`render.optics.radiance_to_photon_rate`, which varies smoothly, on a 16-px grid
     interpolated to every pixel. Read-only; the same array for the same camera (cached by the
     profile's content), so that the camera model can keep its optical image between frames."""
-    key = (camera.name, camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy,
-           tuple(np.asarray(camera.dist, float).tolist()), repr(camera.tables))
+    key = _camera_key(camera)
     hit = _LAB_FACTORS.get(key)
     if hit is None:
         if len(_LAB_FACTORS) >= 8:
@@ -389,7 +475,7 @@ def render_scenario(scenario: Scenario, *, seed: int = 0) -> Frame:
     from render import render_flux
 
     camera = scenario.camera_profile()
-    pattern = Pattern.load(scenario.pattern)
+    pattern = scenario.pattern
     R, t = scenario.pose()
     t0 = time.perf_counter()
     kw = {k: int(getattr(scenario, k)) for k in ("spp", "roi_spp") if getattr(scenario, k) is not None}

@@ -36,9 +36,10 @@ Scenario keys
 
 from __future__ import annotations
 
+import dataclasses
 import functools
-import tempfile
-from pathlib import Path
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -55,18 +56,15 @@ from sim.trials import (
     POSE_KEYS,
     TRUTH_KEYS,
     Parameter,
+    PoseScenario,
     TrialKind,
-    build_scenario,
     camera_with_calibration_errors,
-    truth_flags,
     register_trial_kind,
 )
 from svgs.errors import InputError
 from svgs.frames import STATE_KEYS
 
 _POSE = POSE_KEYS
-#: The true lens' departures from the profile (the image is rendered through it).
-_LENS = ("lens_pp_u_px", "lens_pp_v_px", "lens_k1")
 
 #: ``threshold`` values that are not levels (the parameter is numeric, so a sensitivity study can vary it):
 #: 0 the app's brightness threshold for the camera (:mod:`svgs.app`, the default), -1 Otsu's, -2 the
@@ -153,14 +151,10 @@ RENDER_PARAMETERS = {
                                           upper=4.0),
 }
 
-#: Post-render switches that must be 0 or 1.
-_SWITCHES = ("stand", "sensor_noise", "glare", "quantise", "cfa", "nr", "sharpen", "chroma", "jpeg", *TRUTH_KEYS)
 #: The error-budget switches (1: the source on, the default).
 _SOURCE_SWITCHES = ("sensor_noise", "glare", "quantise", "cfa", "nr", "sharpen", "chroma", "jpeg")
 #: The ``demosaic`` parameter's codes.
 DEMOSAIC_CODES = {0.0: None, 1.0: "bilinear", 2.0: "edge_aware", 3.0: "vng"}
-#: Render-affecting physics, in the render key after the lens.
-_PHYSICS = ("f_number", "led_offset_scale")
 
 RENDER_OUTPUTS = (
     "ok", "reason", "message", "n_blobs",
@@ -246,123 +240,212 @@ def _threshold(value: float):
     return v
 
 
-def scaled_pattern_file(pattern, factor: float, folder) -> str:
-    """Write the pattern scaled by ``factor`` about its origin as a TOML file; returns its path.
+@dataclass(frozen=True, eq=False)
+class RenderScenario(PoseScenario):
+    """A ``render`` trial's scenario (:data:`RENDER_PARAMETERS`; the row view, the pose, the
+    stand and the solver's calibration errors: :class:`sim.trials.TrialScenario`,
+    :class:`sim.trials.PoseScenario`). None: the profile's, the renderer's or the phone's own
+    value (the row holds the old sentinel: -1, or 0 for ``exposure_s``, ``iso`` and
+    ``backdrop_distance_m``).
 
-    Parameters
+    Attributes
     ----------
-    pattern : str
-        Pattern name or path.
-    factor : float
-        Scale of every target position.
-    folder : str or Path
-        Where to write ``<name>-x<factor>.toml``.
+    backdrop_distance_m : float or None
+        A grey backdrop this far behind the target (None: none).
+    ambient_radiance_w_m2_sr : float
+    spp, roi_spp : int or None
+        Samples per pixel of the full frame and the spot windows (None: the renderer's).
+    render_seed : int
+    pattern_scale, target_scale : float
+        The pattern scaled about its origin; the target's flux multiplied (an ND filter).
+    exposure_s, iso : float or None
+        Forced on the phone (None: its auto-exposure).
+    threshold : None, float, "otsu" or "auto"
+        The detector's threshold (None: the app's for the camera; row 0, -1, -2 or the level).
+    lens_pp_u_px, lens_pp_v_px, lens_k1 : float
+        The true lens' departures from the profile.
+    sensor_noise, glare, quantise, cfa, nr, sharpen, chroma, jpeg : bool
+        Error sources (True: on).
+    demosaic : str or None
+        ``"bilinear"``, ``"edge_aware"`` or ``"vng"`` (None: the profile's; row 0-3).
+    jpeg_quality : int or None
+        JPEG quality 1-100 (None: the profile's).
+    jpeg_grid_offset_u_px, jpeg_grid_offset_v_px : int
+    turbulence_cn2 : float
+    f_number : float or None
+        The lens' f-number (None: the profile's).
+    led_offset_scale : float
+    glare_veiling_fraction, glare_wing_exponent : float or None
+        The lens' glare (None: the profile's).
+    exposure_compensation_ev : float
     """
-    import tomli_w
 
-    from svgs.profiles import Pattern
+    backdrop_distance_m: float | None = DEFAULT_BACKDROP_DISTANCE_M
+    ambient_radiance_w_m2_sr: float = DEFAULT_AMBIENT_RADIANCE_W_M2_SR
+    spp: int | None = None
+    roi_spp: int | None = None
+    render_seed: int = 0
+    pattern_scale: float = 1.0
+    target_scale: float = 1.0
+    exposure_s: float | None = None
+    iso: float | None = None
+    threshold: float | str | None = None
+    lens_pp_u_px: float = 0.0
+    lens_pp_v_px: float = 0.0
+    lens_k1: float = 0.0
+    sensor_noise: bool = True
+    glare: bool = True
+    quantise: bool = True
+    cfa: bool = True
+    nr: bool = True
+    sharpen: bool = True
+    chroma: bool = True
+    jpeg: bool = True
+    demosaic: str | None = None
+    jpeg_quality: int | None = None
+    jpeg_grid_offset_u_px: int = 0
+    jpeg_grid_offset_v_px: int = 0
+    turbulence_cn2: float = 0.0
+    f_number: float | None = None
+    led_offset_scale: float = 1.0
+    glare_veiling_fraction: float | None = None
+    glare_wing_exponent: float | None = None
+    exposure_compensation_ev: float = 0.0
 
-    pat = Pattern.load(pattern)
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"{pat.name}-x{factor:g}.toml"
-    data = {"name": f"{pat.name}-x{factor:g}", **{k: v for k, v in pat.tables.items()},
-            "target": [{"id": int(i), "x_m": float(p[0] * factor), "y_m": float(p[1] * factor), "z_m": float(p[2] * factor)}
-                       for i, p in zip(pat.ids, pat.points_m)]}
-    with open(path, "wb") as fh:
-        tomli_w.dump(data, fh)
-    return str(path)
+    KIND: ClassVar[str] = "render"
+    _OPTIONAL: ClassVar[dict] = {"backdrop_distance_m": 0.0, "spp": -1.0, "roi_spp": -1.0, "exposure_s": 0.0,
+                                 "iso": 0.0, "jpeg_quality": -1.0, "f_number": -1.0, "glare_veiling_fraction": -1.0,
+                                 "glare_wing_exponent": -1.0}
+    _INTS: ClassVar[tuple] = ("spp", "roi_spp", "render_seed", "jpeg_quality", "jpeg_grid_offset_u_px",
+                              "jpeg_grid_offset_v_px")
+    _BOOLS: ClassVar[tuple] = (*TRUTH_KEYS, *_SOURCE_SWITCHES)
+
+    @classmethod
+    def _decode(cls, values: dict) -> dict:
+        values = dict(values)
+        thr, dem = values.pop("threshold"), values.pop("demosaic")
+        if dem != int(dem):
+            raise InputError(f"demosaic: expected an integer, got {dem!r}")
+        out = super()._decode(values)
+        out["threshold"], out["demosaic"] = _threshold(thr), DEMOSAIC_CODES[float(dem)]
+        return out
+
+    def _row_value(self, key: str) -> float:
+        if key == "threshold":
+            return threshold_parameter("app" if self.threshold is None else self.threshold)
+        if key == "demosaic":
+            codes = {v: k for k, v in DEMOSAIC_CODES.items()}
+            if self.demosaic not in codes:
+                raise InputError(f"demosaic: expected one of {sorted(c for c in codes if c)} or None, got "
+                                 f"{self.demosaic!r}")
+            return codes[self.demosaic]
+        return super()._row_value(key)
+
+    def _normalise(self) -> None:
+        thr = self.threshold
+        if thr is not None:  # "app", "otsu", "auto", a level or the row's code: None, a name or a level
+            object.__setattr__(self, "threshold", _threshold(threshold_parameter(thr) if isinstance(thr, str) else thr))
+        super()._normalise()
+
+    def _validate(self, row: dict) -> None:
+        super()._validate(row)
+        if self.roi_spp == 0:
+            raise InputError("roi_spp: expected >= 1 (or -1: the renderer's default), got 0")
+        if self.jpeg_quality == 0:
+            raise InputError("jpeg_quality: expected 1-100 (or -1: the profile's), got 0 (the JPEG is switched off "
+                             "with jpeg = 0)")
+        if self.f_number is not None and self.f_number < 1.0:
+            raise InputError(f"f_number: expected -1 (the profile's) or an f-number >= 1, got {self.f_number:g}")
+        if self.glare_wing_exponent is not None and self.glare_wing_exponent <= 1.0:
+            raise InputError(f"glare_wing_exponent: expected -1 (the profile's) or > 1, got "
+                             f"{self.glare_wing_exponent:g}")
+        if self.glare_veiling_fraction is not None and self.glare_veiling_fraction < 0:
+            raise InputError(f"glare_veiling_fraction: expected -1 (the profile's) or 0..0.5, got "
+                             f"{self.glare_veiling_fraction:g}")
 
 
-@functools.lru_cache(maxsize=1)
-def _pattern_dir() -> str:
-    return tempfile.mkdtemp(prefix="svgs-patterns-")
+@dataclass(frozen=True)
+class RenderKey:
+    """What decides a ``render`` trial's rendered flux (hashable; see the module docstring):
+    trials with equal keys share one render."""
+
+    camera: str
+    pattern: str
+    pattern_scale: float
+    pose: tuple
+    lens_pp_u_px: float
+    lens_pp_v_px: float
+    lens_k1: float
+    f_number: float | None
+    led_offset_scale: float
+    backdrop_distance_m: float | None
+    ambient_radiance_w_m2_sr: float
+    spp: int | None
+    roi_spp: int | None
+    render_seed: int
+
+    @classmethod
+    def of(cls, scenario: RenderScenario) -> "RenderKey":
+        return cls(**{f.name: getattr(scenario, f.name) for f in dataclasses.fields(cls) if f.name != "pose"},
+                   pose=tuple(scenario.pose_kwargs().items()))
+
+    def scenario(self):
+        """The :class:`sim.closed_loop.Scenario` to render (the pattern scaled as an object,
+        :meth:`svgs.profiles.Pattern.scaled`)."""
+        from sim.closed_loop import Scenario
+        from svgs.profiles import load_pattern
+
+        return Scenario(camera=self.camera, pattern=load_pattern(self.pattern).scaled(self.pattern_scale),
+                        **dict(self.pose), lens_pp_offset_px=(self.lens_pp_u_px, self.lens_pp_v_px),
+                        lens_k1=self.lens_k1,
+                        camera_overrides=camera_overrides(self.camera, self.f_number, self.led_offset_scale),
+                        backdrop_distance_m=self.backdrop_distance_m,
+                        ambient_radiance_w_m2_sr=self.ambient_radiance_w_m2_sr, spp=self.spp, roi_spp=self.roi_spp)
 
 
-@functools.lru_cache(maxsize=16)
-def _scaled_pattern(pattern: str, factor: float) -> str:
-    """The pattern to render: the name itself, or a scaled copy in this process's temp folder."""
-    if factor == 1.0:
-        return pattern
-    import hashlib
-
-    sub = hashlib.sha1(pattern.encode()).hexdigest()[:12]  # patterns of one name from different paths
-    return scaled_pattern_file(pattern, factor, Path(_pattern_dir()) / sub)
-
-
-def render_trial_scenario(labels: dict | None = None, **values) -> dict:
+def render_trial_scenario(labels: dict | None = None, **values) -> RenderScenario:
     """A complete, validated ``render`` scenario: defaults filled in, domains checked.
-
-    :func:`sim.trials.build_scenario` plus the integer parameters checked.
 
     Parameters
     ----------
     labels : dict, optional
         Extra keys carried into the rows unchanged (``pose_index``, ``trial``, ``remedy``...).
     **values
-        ``camera`` (required), ``pattern`` (default ``svgs-3u``) and :data:`RENDER_PARAMETERS`
-        (``threshold`` as a number; see :func:`threshold_parameter`); an unknown key is an
-        :class:`InputError`.
+        Row values: ``camera`` (required), ``pattern`` (default ``svgs-3u``) and
+        :data:`RENDER_PARAMETERS` (numbers with the row's sentinels; ``threshold`` as a number,
+        see :func:`threshold_parameter`); an unknown key is an :class:`InputError`.
+
+    Returns
+    -------
+    RenderScenario
     """
-    scen = build_scenario(RENDER, values, labels)
-    for k in _SWITCHES:
-        if scen[k] not in (0.0, 1.0):
-            raise InputError(f"{k}: expected 0 or 1, got {scen[k]!r}")
-    for k in ("spp", "roi_spp", "render_seed", "demosaic", "jpeg_quality", "jpeg_grid_offset_u_px",
-              "jpeg_grid_offset_v_px"):
-        if scen[k] != int(scen[k]):
-            raise InputError(f"{k}: expected an integer, got {scen[k]!r}")
-    if scen["roi_spp"] == 0:
-        raise InputError("roi_spp: expected >= 1 (or -1: the renderer's default), got 0")
-    if scen["jpeg_quality"] == 0:
-        raise InputError("jpeg_quality: expected 1-100 (or -1: the profile's), got 0 (the JPEG is switched off "
-                         "with jpeg = 0)")
-    if scen["f_number"] != -1 and scen["f_number"] < 1.0:
-        raise InputError(f"f_number: expected -1 (the profile's) or an f-number >= 1, got {scen['f_number']:g}")
-    if scen["glare_wing_exponent"] != -1 and scen["glare_wing_exponent"] <= 1.0:
-        raise InputError(f"glare_wing_exponent: expected -1 (the profile's) or > 1, got {scen['glare_wing_exponent']:g}")
-    if scen["glare_veiling_fraction"] != -1 and scen["glare_veiling_fraction"] < 0:
-        raise InputError(f"glare_veiling_fraction: expected -1 (the profile's) or 0..0.5, got "
-                         f"{scen['glare_veiling_fraction']:g}")
-    _threshold(scen["threshold"])  # a level >= 0, or 0 / -1 / -2 (app / otsu / auto): checked before any work
-    return scen
+    return RenderScenario.from_values(values, labels)
 
 
-def render_key(scenario: dict):
+def render_key(scenario) -> RenderKey:
     """What decides the rendered flux (see the module docstring)."""
-    return tuple(scenario[k] for k in ("camera", "pattern", "pattern_scale", *_POSE, *_LENS, *_PHYSICS,
-                                       "backdrop_distance_m", "ambient_radiance_w_m2_sr", "spp", "roi_spp",
-                                       "render_seed"))
+    return RenderKey.of(RenderScenario.from_row(scenario))
 
 
-def camera_overrides(camera: str, f_number: float, led_offset_scale: float) -> tuple:
-    """The profile values a scenario replaces (:attr:`sim.closed_loop.Scenario.camera_overrides`)."""
+def camera_overrides(camera: str, f_number: float | None, led_offset_scale: float) -> tuple:
+    """The profile values a scenario replaces (:attr:`sim.closed_loop.Scenario.camera_overrides`);
+    ``f_number`` None (or the row's -1): the profile's."""
     out = []
-    if f_number != -1:
+    if f_number is not None and f_number != -1:
         out.append(("optics", "f_number", float(f_number)))
     if led_offset_scale != 1.0:
-        from svgs.profiles import Camera
+        from svgs.profiles import load_camera
 
-        leds = (Camera.load(camera).tables.get("flash") or {}).get("led_offsets_m") or []
+        leds = (load_camera(camera).tables.get("flash") or {}).get("led_offsets_m") or []
         out.append(("flash", "led_offsets_m", [[float(x) * led_offset_scale for x in led] for led in leds]))
     return tuple((t, k, tuple(map(tuple, v)) if isinstance(v, list) else v) for t, k, v in out)
 
 
 @functools.lru_cache(maxsize=2)
-def _frame(key):
-    from sim.closed_loop import Scenario, render_scenario
-    from sim.trials import scenario_pose_kwargs
+def _frame(key: RenderKey):
+    from sim.closed_loop import render_scenario
 
-    camera, pattern, scale = key[:3]
-    pose = dict(zip(_POSE, key[3:3 + len(_POSE)]))
-    du, dv, k1, f_number, led_scale, back, amb, spp, roi_spp, seed = key[3 + len(_POSE):]
-    scen = Scenario(camera=camera, pattern=_scaled_pattern(pattern, float(scale)), **scenario_pose_kwargs(pose),
-                    lens_pp_offset_px=(du, dv), lens_k1=k1,
-                    camera_overrides=camera_overrides(camera, f_number, led_scale),
-                    backdrop_distance_m=back if back > 0 else None,
-                    ambient_radiance_w_m2_sr=amb, spp=None if spp < 0 else int(spp),
-                    roi_spp=None if roi_spp < 0 else int(roi_spp))
-    return render_scenario(scen, seed=int(seed)), {}
+    return render_scenario(key.scenario(), seed=key.render_seed), {}
 
 
 def rendered_frame(scenario):
@@ -371,12 +454,11 @@ def rendered_frame(scenario):
     return _frame(render_key(scenario))[0]
 
 
-def _glare_key(scenario: dict) -> tuple:
+def _glare_key(scenario: RenderScenario) -> tuple:
     """What decides the exposer of a trial (after the render): ND filter, the lens' glare and the
     colour filter array."""
-    v, e = scenario["glare_veiling_fraction"], scenario["glare_wing_exponent"]
-    return (float(scenario["target_scale"]), bool(scenario["glare"]), None if v == -1 else float(v),
-            None if e == -1 else float(e), bool(scenario["cfa"]))
+    return (scenario.target_scale, scenario.glare, scenario.glare_veiling_fraction, scenario.glare_wing_exponent,
+            scenario.cfa)
 
 
 def _exposer(frame, cache: dict, key: tuple):
@@ -388,9 +470,9 @@ def _exposer(frame, cache: dict, key: tuple):
     return cache[k]
 
 
-def _stages(scenario: dict) -> tuple:
+def _stages(scenario) -> tuple:
     """The exposure's stages: every stage, less those the error-budget switches turn off (absent
-    switches: on)."""
+    switches: on). ``scenario``: a mapping of row values (a scenario's row view)."""
     from camera.phone import ALL_STAGES, NOISE_STAGES
 
     off = set()
@@ -402,18 +484,17 @@ def _stages(scenario: dict) -> tuple:
     return tuple(s for s in ALL_STAGES if s not in off)
 
 
-def _isp(exposer, scenario: dict) -> tuple:
+def _isp(exposer, scenario: RenderScenario) -> tuple:
     """``(isp, demosaic)`` of a trial's exposure: the profile's ``[isp]`` with the scenario's JPEG
     quality and block-grid offset, and its demosaic (None: the profile's)."""
-    import dataclasses
-
+    scenario = RenderScenario.from_row(scenario)
     isp = exposer.phone.params.isp
-    q = int(scenario["jpeg_quality"])
+    q = scenario.jpeg_quality
     ox, oy = isp.jpeg_grid_offset_px
-    du, dv = int(scenario["jpeg_grid_offset_u_px"]), int(scenario["jpeg_grid_offset_v_px"])
-    new = dataclasses.replace(isp, jpeg_quality=isp.jpeg_quality if q == -1 else q,
+    du, dv = scenario.jpeg_grid_offset_u_px, scenario.jpeg_grid_offset_v_px
+    new = dataclasses.replace(isp, jpeg_quality=isp.jpeg_quality if q is None else q,
                               jpeg_grid_offset_px=((ox + du) % 16, (oy + dv) % 16))
-    return (isp if new == isp else new), DEMOSAIC_CODES[float(scenario["demosaic"])]
+    return (isp if new == isp else new), scenario.demosaic
 
 
 def _sensor_centroid_sigma(frame, exposer, row, cache: dict, key, spots_px) -> float | None:
@@ -450,11 +531,10 @@ def turbulent_points(frame, cn2_m23: float, seed: int):
     """
     from camera.rendered import PointFlux
     from sim.turbulence import image_shifts_px
-    from svgs.profiles import Pattern
 
     cam = frame.camera
     R, t = frame.scenario.pose()
-    pat = Pattern.load(frame.scenario.pattern)
+    pat = frame.pattern
     p_cam = pat.points_m @ R.T + t
     optics = cam.tables.get("optics") or {}
     aperture_m = float(optics["focal_length_m"]) / float(optics["f_number"])
@@ -466,13 +546,11 @@ def turbulent_points(frame, cn2_m23: float, seed: int):
     return PointFlux(pts.u_px + shifts[near, 0], pts.v_px + shifts[near, 1], pts.rate_ph_s), shifts
 
 
-def _exposure_exposer(frame, exposers: dict, gkey, scenario: dict, seed: int):
+def _exposure_exposer(frame, exposers: dict, gkey, scenario: RenderScenario, seed: int):
     """The exposer of one exposure: the render group's, or - through turbulent air - one made
     for this exposure's moved spots (its optics redone)."""
-    import dataclasses
-
     exposer = _exposer(frame, exposers, gkey)
-    cn2 = float(scenario.get("turbulence_cn2", 0.0))
+    cn2 = scenario.turbulence_cn2
     if cn2 == 0 or frame.points is None:
         return exposer
     pts, _ = turbulent_points(frame, cn2, seed)
@@ -481,23 +559,23 @@ def _exposure_exposer(frame, exposers: dict, gkey, scenario: dict, seed: int):
                                                          veiling_fraction=veil, wing_exponent=expo)
 
 
-def _exposure(frame, exposers: dict, key, scenario: dict, seed: int):
+def _exposure(frame, exposers: dict, key, scenario: RenderScenario, seed: int):
     """The exposure of ``(render, seed, stages, setting, air)``, made once per render group."""
     import time
 
     from collections import OrderedDict
 
     store = exposers.setdefault("exposures", OrderedDict())
-    ev = scenario["exposure_compensation_ev"]
+    ev = scenario.exposure_compensation_ev
     isp, demosaic = _isp(_exposer(frame, exposers, key), scenario)
-    cn2 = float(scenario.get("turbulence_cn2", 0.0))
-    k = (key, int(seed), _stages(scenario), scenario["exposure_s"], scenario["iso"], ev, isp, demosaic, cn2)
+    cn2 = scenario.turbulence_cn2
+    k = (key, int(seed), _stages(scenario), scenario.exposure_s, scenario.iso, ev, isp, demosaic, cn2)
     if k in store:
         store.move_to_end(k)
         return store[k], 0.0
     t0 = time.perf_counter()
     exposer = _exposure_exposer(frame, exposers, key, scenario, seed)
-    t_s, iso = scenario["exposure_s"] or None, scenario["iso"] or None
+    t_s, iso = scenario.exposure_s, scenario.iso
     if ev != 0:  # exposure compensation: the time the phone would choose, times 2^EV
         t_s, iso, _ = exposer.settings(t_s, iso)
         t_s *= 2.0 ** ev
@@ -509,23 +587,22 @@ def _exposure(frame, exposers: dict, key, scenario: dict, seed: int):
     return ex, dt
 
 
-def _is_baseline(scenario: dict) -> bool:
-    """Every error-budget switch at its default (the sensor bound is computed for these only)."""
-    return all(scenario[k] == RENDER_PARAMETERS[k].default for k in _SOURCE_SWITCHES)
+def _is_baseline(scenario: RenderScenario) -> bool:
+    """Every error-budget switch on (the default; the sensor bound is computed for these only)."""
+    return all(getattr(scenario, k) for k in _SOURCE_SWITCHES)
 
 
-def _solve_one(scenario: dict, seed: int, frame, exposers: dict) -> dict:
+def _solve_one(scenario: RenderScenario, seed: int, frame, exposers: dict) -> dict:
     from sim.closed_loop import solve_exposure, solver_camera
     from sim.metrics import state_m_deg
-    from svgs.profiles import Pattern
 
     cam = frame.camera  # the true lens
     gkey = _glare_key(scenario)
     exposer = _exposer(frame, exposers, gkey)
     ex, expose_s = _exposure(frame, exposers, gkey, scenario, seed)
-    row = solve_exposure(frame, ex, threshold=_threshold(scenario["threshold"]),
+    row = solve_exposure(frame, ex, threshold=scenario.threshold,
                          solver_camera_profile=camera_with_calibration_errors(cam, scenario),
-                         truth=truth_flags(scenario))
+                         truth=scenario.truth)
     row["expose_s"] = expose_s
     out = {k: None for k in RENDER_OUTPUTS}
     out.update({k: row[k] for k in ("ok", "reason", "message", "n_blobs", "residual_rms_px", "chi2", "chi2_dof",
@@ -534,7 +611,7 @@ def _solve_one(scenario: dict, seed: int, frame, exposers: dict) -> dict:
     out["exposure_s_used"], out["iso_used"] = float(row["exposure_s"]), float(row["iso"])
     out.update({f"true_{k}": v for k, v in row["truth_state"].items()})
     R, t = frame.scenario.pose()
-    pat = Pattern.load(frame.scenario.pattern)
+    pat = frame.pattern
     uv = cam.project_target(pat.points_m, R, t)
     d = np.linalg.norm(uv[:, None] - uv[None], axis=-1) + np.eye(len(uv)) * 1e12
     out["min_separation_px"] = float(d.min())
@@ -575,7 +652,7 @@ def _solve_one(scenario: dict, seed: int, frame, exposers: dict) -> dict:
     return out
 
 
-def trial_picture(scenario: dict, seed: int) -> dict:
+def trial_picture(scenario, seed: int) -> dict:
     """What one trial's sensor saw, for pictures (``overlay.png`` panels of the study reports):
     the same render, exposure and solve as :func:`render_trial` (same seeds, same numbers).
 
@@ -587,20 +664,19 @@ def trial_picture(scenario: dict, seed: int) -> dict:
         ``_solution`` included).
     """
     from sim.closed_loop import solve_exposure, solver_camera
-    from svgs.profiles import Pattern
 
-    frame, exposers = _frame(render_key(scenario))
+    scenario = RenderScenario.from_row(scenario)
+    frame, exposers = _frame(RenderKey.of(scenario))
     gkey = _glare_key(scenario)
     ex, _ = _exposure(frame, exposers, gkey, scenario, seed)
     cam_solver = camera_with_calibration_errors(frame.camera, scenario)
-    thr = _threshold(scenario["threshold"])
-    row = solve_exposure(frame, ex, threshold=thr, solver_camera_profile=cam_solver,
-                         truth=truth_flags(scenario))
+    thr = scenario.threshold
+    row = solve_exposure(frame, ex, threshold=thr, solver_camera_profile=cam_solver, truth=scenario.truth)
     return {"image": ex.image, "camera": solver_camera(cam_solver, ex.image.shape),
-            "pattern": Pattern.load(frame.scenario.pattern), "threshold": thr, "row": row}
+            "pattern": frame.pattern, "threshold": thr, "row": row}
 
 
-def render_trial(scenario: dict, seed: int) -> dict:
+def render_trial(scenario, seed: int) -> dict:
     """One rendered trial: render (or reuse this worker's last render of the same key), expose, solve.
 
     Parameters
@@ -627,24 +703,26 @@ def render_trial(scenario: dict, seed: int) -> dict:
         with every error source on only); ``exposure_s_used``,
         ``iso_used``; ``expose_s``, ``solve_s`` (wall times).
     """
-    frame, exposers = _frame(render_key(scenario))
+    scenario = RenderScenario.from_row(scenario)
+    frame, exposers = _frame(RenderKey.of(scenario))
     return _solve_one(scenario, seed, frame, exposers)
 
 
-def _exposure_order(scenario: dict, seed: int) -> tuple:
+def _exposure_order(scenario: RenderScenario, seed: int) -> tuple:
     """What decides a trial's exposure within its render group (:func:`_exposure`'s key, less
     the exposer's own): trials that judge one image differently (the solver's calibration, the
     truth) sort together, so each exposure is made once however many variants share it."""
     return (repr(_glare_key(scenario)), int(seed), _stages(scenario), scenario["exposure_s"], scenario["iso"],
             scenario["exposure_compensation_ev"], scenario["jpeg_quality"], scenario["jpeg_grid_offset_u_px"],
-            scenario["jpeg_grid_offset_v_px"], scenario["demosaic"], float(scenario.get("turbulence_cn2", 0.0)))
+            scenario["jpeg_grid_offset_v_px"], scenario["demosaic"], scenario["turbulence_cn2"])
 
 
 def render_group(scenarios, seeds) -> list[dict]:
     """Trials sharing one render key: render once, expose and solve each (in the order that
     shares exposures, :func:`_exposure_order`; the rows come back in the given order - a trial's
     numbers depend only on its scenario and seed)."""
-    frame, exposers = _frame(render_key(scenarios[0]))
+    scenarios = [RenderScenario.from_row(s) for s in scenarios]
+    frame, exposers = _frame(RenderKey.of(scenarios[0]))
     order = sorted(range(len(scenarios)), key=lambda i: _exposure_order(scenarios[i], seeds[i]))
     out = [None] * len(scenarios)
     for i in order:
@@ -669,4 +747,5 @@ RENDER = register_trial_kind(TrialKind(
     description="Mitsuba render of the target under the flash (pose, lab, pattern scale), exposures through the "
                 "phone model (forced exposure, ND filter), SVGS detector and solver (with calibration errors)",
     module=__name__,
+    scenario_type=RenderScenario,
 ))

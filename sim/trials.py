@@ -24,10 +24,11 @@ Its "render" (the projection) is grouped the same way, so the mechanism is exerc
 
 from __future__ import annotations
 
-import functools
+import dataclasses
 import importlib
-from dataclasses import dataclass, field
-from typing import Callable, Hashable, Mapping
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from typing import Callable, ClassVar, Hashable
 
 import numpy as np
 
@@ -117,6 +118,9 @@ class TrialKind:
     description : str
     module : str
         Module that registers the kind; workers import it to find the kind.
+    scenario_type : type, optional
+        The kind's typed scenario (a :class:`TrialScenario` subclass): :func:`build_scenario`
+        makes one; without it a scenario is a plain dict of row values.
     """
 
     name: str
@@ -129,6 +133,7 @@ class TrialKind:
     warm_up: Callable | None = None
     description: str = ""
     module: str = field(default="")
+    scenario_type: type | None = None
 
     @property
     def ref(self) -> tuple[str, str]:
@@ -241,55 +246,333 @@ POSE_KEYS = ("range_m", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "ya
 TRUTH_KEYS = ("truth_actual", "truth_stand", "truth_rail")
 
 
-def scenario_pose_kwargs(scenario: Mapping) -> dict:
-    """The :class:`sim.closed_loop.Scenario` pose fields of a trial scenario."""
-    flag = scenario.get("stand", 0.0)
-    if flag not in (0.0, 1.0):
-        raise InputError(f"stand: expected 0 (target turned) or 1 (phone on the stand's gimbal), got {flag!r}")
-    kw = {k: float(scenario[k]) for k in ("range_m", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg")}
-    kw["mount"] = "stand" if flag == 1.0 else "target"
-    kw["stage_m"] = float(scenario.get("stage_m", 0.0))
-    kw["misalignment_deg"] = tuple(float(scenario.get(f"misalign_{a}_deg", 0.0)) for a in ("roll", "pitch", "yaw"))
-    kw["stand_error"] = tuple(float(scenario.get(k, 0.0)) for k in ("stand_err_roll_deg", "stand_err_pitch_deg",
-                                                                     "stand_err_yaw_deg", "stand_err_stage_m",
-                                                                     "rail_err_m"))
-    return kw
+# --------------------------------------------------------------------------- typed scenarios
+#: Row columns of every study that are not scenario values (their ids, seeds, timings).
+_NON_SCENARIO = (*ID_COLUMNS, *TIMING_COLUMNS)
 
 
-def truth_flags(scenario: Mapping) -> tuple:
-    """``(misalignment, stand, rail)``: which truth errors a trial's truth includes
-    (:meth:`sim.closed_loop.Scenario.truth_pose`), from its :data:`TRUTH_KEYS`."""
-    return tuple(bool(scenario.get(k, 0.0)) for k in TRUTH_KEYS)
+@dataclass(frozen=True, eq=False)
+class TrialScenario(Mapping):
+    """A trial kind's scenario: a typed, frozen, hashable value; the base of the kinds' scenarios.
+
+    Attributes hold what a trial means (None where the profile's or the phone's own value is
+    used, ``bool`` switches, ``mount`` names the stand). The *row view* is what a results store
+    holds: :meth:`to_row` (and the read-only :class:`~collections.abc.Mapping` interface,
+    ``scenario["range_m"]``, ``scenario.get(...)``, ``dict(scenario)``, ``{**scenario}``) gives
+    the row's values - every parameter a number, with the sentinels the stores have always held
+    (e.g. ``spp = -1``: the renderer's default) so that a sensitivity study varies them and old
+    stores read back - then the ``labels`` (study keys such as ``pose_index`` or ``variant``,
+    carried into the rows unchanged). :meth:`from_row` reads a row (new or old) back.
+
+    Subclasses set ``KIND`` (the trial kind's name), declare their fields and may map
+    special columns in :meth:`_decode` / :meth:`_encode`; plain parameters have a field of the
+    same name (a float, an int in ``_INTS``, a bool in ``_BOOLS``, None for the sentinel of
+    ``_OPTIONAL``).
+
+    Attributes
+    ----------
+    camera, pattern : str
+        Profile names or paths (loaded in the worker through :func:`svgs.profiles.load_camera`
+        and :func:`svgs.profiles.load_pattern`).
+    labels : tuple of (str, object)
+        Study keys carried into the rows; give a dict to the builders.
+    """
+
+    camera: str
+    pattern: str = "svgs-3u"
+    labels: tuple = ()
+
+    KIND: ClassVar[str] = ""
+    _OPTIONAL: ClassVar[dict] = {}
+    _INTS: ClassVar[tuple] = ()
+    _BOOLS: ClassVar[tuple] = ()
+
+    def __post_init__(self):
+        labels = self.labels.items() if isinstance(self.labels, Mapping) else self.labels
+        object.__setattr__(self, "labels", tuple((str(k), v) for k, v in labels))
+        object.__setattr__(self, "camera", str(self.camera))
+        object.__setattr__(self, "pattern", str(self.pattern))
+        self._normalise()
+        row = self._encode()
+        kind = self.kind()
+        for name, p in kind.parameters.items():
+            p.check(row[name])
+        self._validate(row)
+        for k, _ in self.labels:
+            if k in row or k in ("camera", "pattern"):
+                raise InputError(f"scenario label {k!r} clashes with a parameter")
+        object.__setattr__(self, "_row", {"camera": self.camera, "pattern": self.pattern, **row, **dict(self.labels)})
+
+    # ------------------------------------------------------------------ the kind's hooks
+    @classmethod
+    def kind(cls) -> "TrialKind":
+        return get_trial_kind(cls.KIND)
+
+    def _normalise(self) -> None:
+        """Coerce the fields' types (bools, ints, floats)."""
+        for f in fields(self):
+            if f.name in ("camera", "pattern", "labels") or not f.init:
+                continue
+            v = getattr(self, f.name)
+            if v is None or isinstance(v, str):
+                continue
+            if f.name in self._BOOLS:
+                v = bool(v)
+            elif f.name in self._INTS:
+                if float(v) != int(v):
+                    raise InputError(f"{f.name}: expected an integer, got {v!r}")
+                v = int(v)
+            else:
+                v = float(v)
+            object.__setattr__(self, f.name, v)
+
+    def _validate(self, row: dict) -> None:
+        """Checks across fields (profiles exist...), after each parameter's own domain."""
+        from svgs.profiles import load_camera, load_pattern
+
+        load_camera(self.camera)  # InputError for an unknown profile, now rather than in a worker
+        load_pattern(self.pattern)
+
+    @classmethod
+    def _decode(cls, values: dict) -> dict:
+        """Field values of the row values of the kind's parameters (sentinels to None...)."""
+        out = {}
+        for k, v in values.items():
+            if k in cls._OPTIONAL and v == cls._OPTIONAL[k]:
+                out[k] = None
+            elif k in cls._BOOLS:
+                if v not in (0.0, 1.0):
+                    raise InputError(f"{k}: expected 0 or 1, got {v!r}")
+                out[k] = bool(v)
+            elif k in cls._INTS:
+                if v != int(v):
+                    raise InputError(f"{k}: expected an integer, got {v!r}")
+                out[k] = int(v)
+            else:
+                out[k] = float(v)
+        return out
+
+    def _encode(self) -> dict:
+        """Row values of the kind's parameters, in the kind's order."""
+        return {k: self._row_value(k) for k in self.kind().parameters}
+
+    def _row_value(self, key: str) -> float:
+        """The row value of one parameter (the field of that name; None: its sentinel)."""
+        v = getattr(self, key)
+        return float(self._OPTIONAL[key]) if v is None else float(v)
+
+    # ------------------------------------------------------------------ rows
+    def to_row(self) -> dict:
+        """The row view: ``camera``, ``pattern``, every parameter (numbers), the labels."""
+        return dict(self._row)
+
+    @property
+    def label_dict(self) -> dict:
+        return dict(self.labels)
+
+    @classmethod
+    def from_values(cls, values: Mapping, labels: Mapping | None = None) -> "TrialScenario":
+        """A validated scenario of row values: ``camera`` (required), ``pattern`` (default
+        ``svgs-3u``) and the kind's parameters (numbers with the row's sentinels; defaults filled
+        in); an unknown key is an :class:`InputError`."""
+        kind = cls.kind()
+        values = dict(values)
+        if "camera" not in values:
+            raise InputError(f"{kind.name} scenario: 'camera' is required")
+        camera, pattern = str(values.pop("camera")), str(values.pop("pattern", "svgs-3u"))
+        unknown = sorted(set(values) - set(kind.parameters))
+        if unknown:
+            raise InputError(f"trial kind {kind.name!r} has no parameter {', '.join(map(repr, unknown))}; "
+                             f"known: {', '.join(kind.parameters)}")
+        nums = {name: p.check(values.get(name, p.default)) for name, p in kind.parameters.items()}
+        for k in (labels or {}):
+            if k in nums or k in ("camera", "pattern"):
+                raise InputError(f"scenario label {k!r} clashes with a parameter")
+        return cls(camera=camera, pattern=pattern, labels=tuple((labels or {}).items()), **cls._decode(nums))
+
+    @classmethod
+    def from_row(cls, row: Mapping) -> "TrialScenario":
+        """The scenario of a results-store row (or of any mapping of row values): the kind's
+        parameters (missing ones - rows of older stores - at their defaults; the sentinels of the
+        old rows read as None), and as labels every other column that is not an output, an id
+        or a timing."""
+        if isinstance(row, cls):
+            return row
+        kind = cls.kind()
+        skip = {"camera", "pattern", *kind.parameters, *kind.outputs, *_NON_SCENARIO}
+        values = {k: row[k] for k in ("camera", "pattern", *kind.parameters) if k in row}
+        return cls.from_values(values, {k: v for k, v in row.items() if k not in skip})
+
+    # ------------------------------------------------------------------ the row view (Mapping)
+    def __getitem__(self, key):
+        return self._row[key]
+
+    def __iter__(self):
+        return iter(self._row)
+
+    def __len__(self):
+        return len(self._row)
+
+    def __eq__(self, other):
+        if isinstance(other, TrialScenario):
+            return type(self) is type(other) and self._row == other._row
+        if isinstance(other, Mapping):
+            return self._row == dict(other)
+        return NotImplemented
+
+    def __hash__(self):
+        return hash((type(self).__name__, repr(tuple(self._row.items()))))
+
+    def replace(self, **changes) -> "TrialScenario":
+        """A copy with fields changed (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+    # ------------------------------------------------------------------ the pose
+    def closed_loop_scenario(self, **kw):
+        """The :class:`sim.closed_loop.Scenario` of this trial's pose (the profiles through the
+        cached loaders; ``kw``: more of its fields)."""
+        from sim.closed_loop import Scenario
+
+        return Scenario(camera=self.camera, **self.pose_kwargs(), **kw)
+
+    def pose_kwargs(self) -> dict:
+        """The :class:`sim.closed_loop.Scenario` pose fields of this trial."""
+        raise NotImplementedError
 
 
-def scenario_poses(scenario: Mapping):
-    """``(R, t)`` actual and ``(R, t)`` of the truth the errors are taken against
-    (:data:`TRUTH_KEYS`), of a trial scenario (:class:`sim.closed_loop.Scenario`'s poses)."""
-    from sim.closed_loop import Scenario
+@dataclass(frozen=True, eq=False)
+class PoseScenario(TrialScenario):
+    """The pose, the stand and the solver's calibration errors, shared by the geometric and the
+    render kinds (see :data:`GEOMETRIC_PARAMETERS` for each one's meaning and unit).
 
-    sc = Scenario(camera=str(scenario["camera"]), **scenario_pose_kwargs(scenario))
-    return sc.pose(), sc.truth_pose(*truth_flags(scenario))
+    Attributes
+    ----------
+    range_m : float or None
+        The boresight distance to the target origin, m (``mount="target"``; default 10).
+    rail_m : float or None
+        The gimbal pivot's rail position, m (``mount="stand"``, required); the row's
+        ``range_m`` column holds it with ``stand = 1``.
+    mount : {"target", "stand"}
+        What the angles turn (the row's ``stand``: 0 or 1).
+    truth_actual, truth_stand, truth_rail : bool
+        Which of the truth's errors the trial's errors are taken against.
+    pp_error_u_px, pp_error_v_px, focal_error_frac, k1_error : float
+        The calibration errors injected into the solver's camera
+        (:func:`camera_with_calibration_errors`).
+    """
 
-GEOMETRIC_OUTPUTS = (
-    "ok", "reason",
-    *(f"true_{k}" for k in STATE_KEYS),
-    *(f"est_{k}" for k in STATE_KEYS),
-    *ERR_KEYS,
-    POS_ERR_NORM_M, ROT_ERR_DEG, "residual_rms_px", "min_separation_px",
-    *(f"crlb_{k}" for k in STATE_KEYS),
-)
+    range_m: float | None = None
+    rail_m: float | None = None
+    target_x_m: float = 0.0
+    target_y_m: float = 0.0
+    roll_deg: float = 0.0
+    pitch_deg: float = 0.0
+    yaw_deg: float = 0.0
+    mount: str = "target"
+    stage_m: float = 0.0
+    misalign_roll_deg: float = 0.0
+    misalign_pitch_deg: float = 0.0
+    misalign_yaw_deg: float = 0.0
+    stand_err_roll_deg: float = 0.0
+    stand_err_pitch_deg: float = 0.0
+    stand_err_yaw_deg: float = 0.0
+    stand_err_stage_m: float = 0.0
+    rail_err_m: float = 0.0
+    truth_actual: bool = False
+    truth_stand: bool = False
+    truth_rail: bool = False
+    focal_error_frac: float = 0.0
+    pp_error_u_px: float = 0.0
+    pp_error_v_px: float = 0.0
+    k1_error: float = 0.0
+
+    _BOOLS: ClassVar[tuple] = TRUTH_KEYS
+
+    def _normalise(self) -> None:
+        if self.mount not in ("target", "stand"):
+            raise InputError(f"mount: expected 'target' or 'stand', got {self.mount!r}")
+        if self.mount == "target" and self.range_m is None and self.rail_m is None:
+            object.__setattr__(self, "range_m", 10.0)
+        if self.mount == "stand" and (self.rail_m is None or self.range_m is not None):
+            raise InputError("rail_m: a stand scenario (mount='stand') gives the rail position as rail_m, not range_m")
+        if self.mount == "target" and (self.range_m is None or self.rail_m is not None):
+            raise InputError("range_m: a target scenario gives the boresight distance as range_m (rail_m: the stand's)")
+        super()._normalise()
+
+    @classmethod
+    def _decode(cls, values: dict) -> dict:
+        values = dict(values)
+        stand = values.pop("stand")
+        if stand not in (0.0, 1.0):
+            raise InputError(f"stand: expected 0 (target turned) or 1 (phone on the stand's gimbal), got {stand!r}")
+        distance = values.pop("range_m")
+        out = super()._decode(values)
+        out["mount"] = "stand" if stand == 1.0 else "target"
+        out["rail_m" if stand == 1.0 else "range_m"] = float(distance)
+        return out
+
+    def _row_value(self, key: str) -> float:
+        if key == "range_m":  # the row's range_m: the rail position on the stand
+            return float(self.distance_m)
+        if key == "stand":
+            return 1.0 if self.mount == "stand" else 0.0
+        return super()._row_value(key)
+
+    def _validate(self, row: dict) -> None:
+        super()._validate(row)
+        self.closed_loop_scenario()  # the pose fields together (lateral offsets and misalignment need the mount)
+
+    @property
+    def distance_m(self) -> float:
+        """:attr:`rail_m` on the stand, else :attr:`range_m`."""
+        return self.rail_m if self.mount == "stand" else self.range_m
+
+    def pose_kwargs(self) -> dict:
+        kw = {"rail_m": self.rail_m} if self.mount == "stand" else {"range_m": self.range_m}
+        kw.update({k: getattr(self, k) for k in ("target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg",
+                                                 "mount", "stage_m")})
+        kw["misalignment_deg"] = (self.misalign_roll_deg, self.misalign_pitch_deg, self.misalign_yaw_deg)
+        kw["stand_error"] = (self.stand_err_roll_deg, self.stand_err_pitch_deg, self.stand_err_yaw_deg,
+                             self.stand_err_stage_m, self.rail_err_m)
+        return kw
+
+    @property
+    def truth(self) -> tuple:
+        """``(misalignment, stand, rail)``: which truth errors the trial's truth includes
+        (:meth:`sim.closed_loop.Scenario.truth_pose`)."""
+        return (self.truth_actual, self.truth_stand, self.truth_rail)
+
+    def poses(self):
+        """``(R, t)`` actual and ``(R, t)`` of the truth the errors are taken against."""
+        sc = self.closed_loop_scenario()
+        return sc.pose(), sc.truth_pose(*self.truth)
 
 
-def _camera(name: str):
-    from svgs.profiles import load_camera
+@dataclass(frozen=True, eq=False)
+class GeometricScenario(PoseScenario):
+    """A ``geometric`` trial's scenario (:data:`GEOMETRIC_PARAMETERS`; see
+    :class:`TrialScenario` for the row view).
 
-    return load_camera(name)
+    Attributes
+    ----------
+    sigma_px : float
+        1-sigma Gaussian centroid noise per image axis, px.
+    merge_px : float
+        Spots closer than this in the image merge (0: never).
+    """
+
+    sigma_px: float = 0.1
+    merge_px: float = 0.0
+
+    KIND: ClassVar[str] = "geometric"
 
 
-def _pattern(name: str):
-    from svgs.profiles import load_pattern
-
-    return load_pattern(name)
+def as_scenario(kind: "TrialKind", scenario):
+    """``scenario`` as ``kind``'s typed scenario (a mapping of row values read with
+    :meth:`TrialScenario.from_row`); a kind without a type gets it back as is."""
+    if kind.scenario_type is None or isinstance(scenario, kind.scenario_type):
+        return scenario
+    return kind.scenario_type.from_row(scenario)
 
 
 def camera_with_calibration_errors(camera, scenario: Mapping):
@@ -316,34 +599,40 @@ def camera_with_calibration_errors(camera, scenario: Mapping):
     )
 
 
-def build_scenario(kind: TrialKind, values: dict, labels: dict | None = None) -> dict:
+def build_scenario(kind: TrialKind, values: dict, labels: dict | None = None):
     """A complete, validated scenario of ``kind``: defaults filled in, domains checked.
 
     Parameters
     ----------
     kind : TrialKind
     values : dict
-        Text keys (``camera`` required, ``pattern`` default ``svgs-3u``) and numeric
-        parameters of ``kind``; an unknown key is an :class:`InputError`.
+        Row values: text keys (``camera`` required, ``pattern`` default ``svgs-3u``) and
+        numeric parameters of ``kind`` (with the row's sentinels); an unknown key is an
+        :class:`InputError`.
     labels : dict, optional
         Extra keys carried into the rows unchanged (e.g. ``nominal_range_m``).
+
+    Returns
+    -------
+    TrialScenario or dict
+        The kind's typed scenario (:attr:`TrialKind.scenario_type`), else a dict of row values.
     """
+    if kind.scenario_type is not None:
+        return kind.scenario_type.from_values(values, labels)
+    from svgs.profiles import load_camera, load_pattern
+
     values = dict(values)
     if "camera" not in values:
         raise InputError(f"{kind.name} scenario: 'camera' is required")
     out = {"camera": str(values.pop("camera")), "pattern": str(values.pop("pattern", "svgs-3u"))}
-    _camera(out["camera"])  # InputError for an unknown profile, now rather than in a worker
-    _pattern(out["pattern"])
+    load_camera(out["camera"])  # InputError for an unknown profile, now rather than in a worker
+    load_pattern(out["pattern"])
     unknown = sorted(set(values) - set(kind.parameters))
     if unknown:
         raise InputError(f"trial kind {kind.name!r} has no parameter {', '.join(map(repr, unknown))}; "
                          f"known: {', '.join(kind.parameters)}")
     for name, p in kind.parameters.items():
         out[name] = p.check(values.get(name, p.default))
-    if "stand" in out:  # the pose fields together (stand and lateral offsets, misalignment without a stand)
-        from sim.closed_loop import Scenario
-
-        Scenario(camera=out["camera"], **scenario_pose_kwargs(out))
     for k, v in (labels or {}).items():
         if k in out:
             raise InputError(f"scenario label {k!r} clashes with a parameter")
@@ -351,12 +640,22 @@ def build_scenario(kind: TrialKind, values: dict, labels: dict | None = None) ->
     return out
 
 
-def geometric_scenario(labels: dict | None = None, **values) -> dict:
+def geometric_scenario(labels: dict | None = None, **values) -> GeometricScenario:
     """A complete, validated geometric scenario (see :func:`build_scenario`)."""
     return build_scenario(GEOMETRIC, values, labels)
 
 
-def _geometric_render(scenario: dict):
+GEOMETRIC_OUTPUTS = (
+    "ok", "reason",
+    *(f"true_{k}" for k in STATE_KEYS),
+    *(f"est_{k}" for k in STATE_KEYS),
+    *ERR_KEYS,
+    POS_ERR_NORM_M, ROT_ERR_DEG, "residual_rms_px", "min_separation_px",
+    *(f"crlb_{k}" for k in STATE_KEYS),
+)
+
+
+def _geometric_render(scenario: GeometricScenario):
     """The geometric "render": the pattern's true image points through the true camera.
 
     Returns
@@ -367,22 +666,24 @@ def _geometric_render(scenario: dict):
     state_true : ndarray, shape (6,)
     """
     from svgs.frames import pose_to_state
+    from svgs.profiles import load_camera, load_pattern
 
-    cam, pat = _camera(scenario["camera"]), _pattern(scenario["pattern"])
-    (R, t), (R_truth, t_truth) = scenario_poses(scenario)
+    cam, pat = load_camera(scenario.camera), load_pattern(scenario.pattern)
+    (R, t), (R_truth, t_truth) = scenario.poses()
     p_cam = pat.points_m @ R.T + t
     depth_ok = bool(np.all(p_cam[:, 2] > 0))
     uv = cam.project(p_cam)
     return uv, depth_ok, pose_to_state(R_truth, t_truth)
 
 
-def _geometric_expose_solve(scenario: dict, seed: int, rendered) -> dict:
+def _geometric_expose_solve(scenario: GeometricScenario, seed: int, rendered) -> dict:
+    from svgs.profiles import load_camera, load_pattern
     from svgs.solver import solve_centroids
 
     uv_true, depth_ok, state_true = rendered
-    cam, pat = _camera(scenario["camera"]), _pattern(scenario["pattern"])
+    cam, pat = load_camera(scenario.camera), load_pattern(scenario.pattern)
     rng = np.random.default_rng(seed)
-    uv = uv_true + scenario["sigma_px"] * rng.standard_normal(uv_true.shape)
+    uv = uv_true + scenario.sigma_px * rng.standard_normal(uv_true.shape)
     out = {k: None for k in GEOMETRIC_OUTPUTS}
     out.update({f"true_{k}": float(v) for k, v in zip(STATE_KEYS, state_m_deg(state_true))})
     d = np.linalg.norm(uv_true[:, None] - uv_true[None], axis=-1) + np.eye(len(uv_true)) * 1e12
@@ -390,7 +691,7 @@ def _geometric_expose_solve(scenario: dict, seed: int, rendered) -> dict:
     reason = None
     if not depth_ok or not np.all(cam.in_image(uv_true)):
         reason = "too_few_blobs"  # a target outside the image: the detector sees fewer than four spots
-    elif scenario["merge_px"] > 0 and d.min() < scenario["merge_px"]:
+    elif scenario.merge_px > 0 and d.min() < scenario.merge_px:
         reason = "merged_spots"
     if reason is None:
         solver_cam = camera_with_calibration_errors(cam, scenario)
@@ -404,7 +705,7 @@ def _geometric_expose_solve(scenario: dict, seed: int, rendered) -> dict:
     out["ok"] = reason is None
     out["reason"] = reason
     if reason is None:
-        out.update(estimate_outputs(sol, state_true, crlb_scale=scenario["sigma_px"]))
+        out.update(estimate_outputs(sol, state_true, crlb_scale=scenario.sigma_px))
     return out
 
 
@@ -428,14 +729,15 @@ def estimate_outputs(sol, state_true, crlb_scale: float = 1.0) -> dict:
     return out
 
 
-def geometric_trial(scenario: dict, seed: int) -> dict:
+def geometric_trial(scenario: GeometricScenario | Mapping, seed: int) -> dict:
     """One geometric trial: project, add centroid noise, solve with the solver's calibration.
 
     Parameters
     ----------
-    scenario : dict
+    scenario : GeometricScenario or mapping
         See :func:`geometric_scenario` (camera, pattern, pose, ``sigma_px``, calibration
-        errors, ``merge_px``).
+        errors, ``merge_px``); a mapping of row values is read with
+        :meth:`TrialScenario.from_row`.
     seed : int
         Seeds the centroid noise.
 
@@ -449,29 +751,45 @@ def geometric_trial(scenario: dict, seed: int) -> dict:
         (rotation angle between solved and true attitude; see :mod:`sim.metrics`), ``residual_rms_px``, ``min_separation_px`` (closest pair of true
         image points) and ``crlb_*`` (Cramer-Rao 1-sigma for ``sigma_px``, at the estimate).
     """
+    scenario = GeometricScenario.from_row(scenario)
     return _geometric_expose_solve(scenario, seed, _geometric_render(scenario))
 
 
 def geometric_group(scenarios: list, seeds: list) -> list[dict]:
     """Trials sharing one projection (same :func:`geometric_render_key`): project once."""
+    scenarios = [GeometricScenario.from_row(s) for s in scenarios]
     rendered = _geometric_render(scenarios[0])
     return [_geometric_expose_solve(s, seed, rendered) for s, seed in zip(scenarios, seeds)]
 
 
-def geometric_render_key(scenario: dict):
+@dataclass(frozen=True)
+class PoseKey:
+    """What decides a trial's geometry (hashable): the profiles, the pose fields of
+    :meth:`PoseScenario.pose_kwargs` as ``(name, value)`` pairs and the truth's switches."""
+
+    camera: str
+    pattern: str
+    pose: tuple
+    truth: tuple
+
+    @classmethod
+    def of(cls, scenario: PoseScenario) -> "PoseKey":
+        return cls(scenario.camera, scenario.pattern, tuple(scenario.pose_kwargs().items()), scenario.truth)
+
+
+def geometric_render_key(scenario) -> PoseKey:
     """What decides the geometric "render": camera, pattern, pose (and the truth it is judged by)."""
-    return (scenario["camera"], scenario["pattern"],
-            *(scenario.get(k, GEOMETRIC_PARAMETERS[k].default) for k in (*POSE_KEYS, *TRUTH_KEYS)))
+    return PoseKey.of(GeometricScenario.from_row(scenario))
 
 
 def geometric_warm_up() -> None:
     """Load the compiled solver (numba, cached on disk after the first compilation)."""
     from svgs.frames import pose_from_scenario
-    from svgs.profiles import Camera, Pattern
+    from svgs.profiles import Camera, load_pattern
     from svgs.solver import solve_centroids
 
     cam = Camera(name="warm-up", width=1000, height=1000, fx=1000.0, fy=1000.0, cx=499.5, cy=499.5)
-    pat = Pattern.load("svgs-3u")
+    pat = load_pattern("svgs-3u")
     R, t = pose_from_scenario(5.0, 0.0, 0.0, 5.0, -5.0, 10.0)
     solve_centroids(cam.project_target(pat.points_m, R, t), cam, pat)
 
@@ -485,4 +803,5 @@ GEOMETRIC = register_trial_kind(TrialKind(
     render_key=geometric_render_key,
     warm_up=geometric_warm_up,
     description="pattern projected through the camera, Gaussian centroid noise, solver with a (possibly wrong) calibration",
+    scenario_type=GeometricScenario,
 ))

@@ -44,7 +44,7 @@ import numpy as np
 
 from .errors import InputError
 from .frames import D_CAM_PHOTO, angles_from_rotation, rotation_from_angles
-from .profiles import Camera, Pattern
+from .profiles import Camera, Pattern, load_camera, load_pattern
 from .result import Failure
 
 # ------------------------------------------------------------------ defaults (one place)
@@ -387,8 +387,8 @@ def identify(
         Failure reasons: ``no_blobs``, ``too_few_blobs``, ``merged_spots``,
         ``no_consistent_set``.
     """
-    camera = Camera.load(camera)
-    pattern = Pattern.load(pattern)
+    camera = load_camera(camera)
+    pattern = load_pattern(pattern)
     _check_options(tolerance_px, max_residual_px, max_blobs, max_verify)
     pts, blobs = _as_points(blobs_or_points)
     n_t = pattern.n

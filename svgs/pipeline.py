@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .profiles import Camera, Pattern
+from .profiles import Camera, Pattern, load_camera, load_pattern
 from .result import Failure
 
 
@@ -89,7 +89,7 @@ def camera_threshold(image, camera, threshold=None):
     from .detect import app_level
 
     if threshold is None or (isinstance(threshold, str) and threshold == "app"):
-        cam = camera if isinstance(camera, Camera) else Camera.load(camera)
+        cam = load_camera(camera)
         preview = cam.tables.get("preview")
         # a phone's binned preview stream (camera.phone.preview) is the same phone and app
         name = preview.get("of", cam.name) if isinstance(preview, dict) else cam.name
@@ -153,8 +153,8 @@ def solve_image(
     from .identify import identify
     from .solver import solve_centroids
 
-    camera = Camera.load(camera)
-    pattern = Pattern.load(pattern)
+    camera = load_camera(camera)
+    pattern = load_pattern(pattern)
     if isinstance(image, (str, Path)):
         image = load_image(image)
     image = np.asarray(image)

@@ -535,6 +535,28 @@ class Pattern:
     def n(self) -> int:
         return int(self.points_m.shape[0])
 
+    def scaled(self, factor: float) -> "Pattern":
+        """This pattern scaled about its origin by ``factor`` (a wider or narrower target).
+
+        Parameters
+        ----------
+        factor : float
+            Scale of every target position (> 0).
+
+        Returns
+        -------
+        Pattern
+            Named ``<name>-x<factor>``; the same ids, tables and source; ``points_m * factor``.
+            ``factor == 1`` returns this pattern.
+        """
+        f = float(factor)
+        if not (np.isfinite(f) and f > 0):
+            raise InputError(f"pattern scale: expected a positive finite factor, got {factor!r}")
+        if f == 1.0:
+            return self
+        return Pattern(name=f"{self.name}-x{f:g}", ids=self.ids.copy(), points_m=self.points_m * f,
+                       tables=dict(self.tables), source=self.source)
+
     def point(self, target_id: int) -> np.ndarray:
         """The position of one target, shape (3,)."""
         idx = np.flatnonzero(self.ids == target_id)

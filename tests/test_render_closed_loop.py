@@ -5,7 +5,6 @@ import json
 import numpy as np
 import pytest
 
-from sim.render_trial import scaled_pattern_file
 from studies.exposure_study import parse_remedy
 from sim.closed_loop import Scenario, expose_and_solve, pose_errors, render_scenario
 from svgs import InputError, Pattern
@@ -92,14 +91,19 @@ def test_pose_errors_wrap_and_norms():
     assert e["rot_err_deg"] == pytest.approx(2.0)
 
 
-def test_remedy_parsing_and_scaled_pattern(tmp_path):
+def test_remedy_parsing_and_scaled_pattern():
     assert parse_remedy("baseline") == ("baseline", None)
     assert parse_remedy("nd=2") == ("nd", 2.0)
     for bad in ("nd", "spacing=x", "exposure=-1", "foo=1"):
         with pytest.raises(InputError):
             parse_remedy(bad)
-    p = Pattern.load(scaled_pattern_file("svgs-3u", 2.0, tmp_path))
-    np.testing.assert_allclose(p.points_m, 2.0 * Pattern.load("svgs-3u").points_m)
+    base = Pattern.load("svgs-3u")
+    p = base.scaled(2.0)  # an object, no file
+    np.testing.assert_allclose(p.points_m, 2.0 * base.points_m)
+    assert p.name == "svgs-3u-x2" and p.ids.tolist() == base.ids.tolist() and base.scaled(1.0) is base
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(InputError, match="scale"):
+            base.scaled(bad)
 
 
 def test_scenario_validation():

@@ -197,7 +197,7 @@ def test_die_with_parent_falls_back_to_a_watchdog_without_prctl(monkeypatch, cap
 
 
 def test_tasks_keep_render_groups_together():
-    scen = [{"camera": "c", "pattern": "p", "range_m": r, "target_x_m": 0.0, "target_y_m": 0.0, "roll_deg": 0.0, "pitch_deg": 0.0,
+    scen = [{"camera": "galaxy-nexus", "pattern": "svgs-3u", "range_m": r, "target_x_m": 0.0, "target_y_m": 0.0, "roll_deg": 0.0, "pitch_deg": 0.0,
              "yaw_deg": 0.0, "sigma_px": s} for r in (1.0, 2.0, 3.0) for s in (0.1, 0.2, 0.3)]
     trials = [Trial(i, s, i) for i, s in enumerate(scen[::-1])]
     tasks = make_tasks(GEOMETRIC, trials, chunk_size=2)

@@ -10,7 +10,7 @@ import numpy as np
 
 from svgs.errors import InputError, check_finite
 from svgs.frames import D_CAM_PHOTO, STATE_KEYS, angles_from_rotation, pose_to_state, state_dict
-from svgs.profiles import Camera, Pattern
+from svgs.profiles import load_camera, load_pattern
 
 from sim.closed_loop import Frame, Scenario, lab_flux, lab_photon_factor, solve_exposure
 from sim.metrics import state_error
@@ -178,18 +178,15 @@ class ApproachSensor:
                  frame_rate_hz: float | None = None, overlap_render: bool = False):
         from camera.phone import PhoneCamera, PhoneParams
 
-        self.camera = Camera.load(camera)
+        self.camera = load_camera(camera)
         for t in ("optics", "flash"):
             self.camera.table(t)
-        self.pattern = Pattern.load(pattern)
+        self.pattern = load_pattern(pattern)
         base = base or Scenario()
         if base.camera_overrides or any(base.lens_pp_offset_px) or base.lens_k1 or base.focus_distance_m is not None:
             raise InputError("base: camera_overrides, lens_pp_offset_px, lens_k1 and focus_distance_m belong to the "
                              "camera; give ApproachSensor the camera itself (the lens refocuses on the target)")
-        # the solver reloads the pattern from the scenario: keep what was given (a path stays a path)
-        pat_label = pattern if isinstance(pattern, str) else (self.pattern.source or self.pattern.name)
-        label = camera if isinstance(camera, str) else self.camera.name
-        self.base = base.replace(camera=label, pattern=str(pat_label))
+        self.base = base.replace(camera=self.camera, pattern=self.pattern)  # the scenario carries the objects
         params, self.frame_rate_hz = self._stream_params(PhoneParams.from_camera(self.camera), frame_rate_hz)
         if int(seed) < 0:
             raise InputError(f"seed: expected a non-negative integer, got {seed!r}")

@@ -11,7 +11,7 @@ import numpy as np
 
 from svgs.errors import InputError
 from svgs.frames import D_CAM_PHOTO, STATE_KEYS, state_to_pose
-from svgs.profiles import Camera, Pattern
+from svgs.profiles import load_camera, load_pattern
 
 from sim.closed_loop import Scenario
 
@@ -241,9 +241,9 @@ def check_visible(trajectory: Trajectory, times_s, camera, pattern, base: Scenar
         image (with :data:`VISIBILITY_MARGIN_PX`), shows the camera the back of the target (its
         reflectors face the target's +z), or is a stand setting the stand cannot take.
     """
-    cam = Camera.load(camera)
-    pat = Pattern.load(pattern)
-    base = base or Scenario(camera=cam.name, pattern=pat.name)
+    cam = load_camera(camera)
+    pat = load_pattern(pattern)
+    base = base or Scenario(camera=cam, pattern=pat)
     for t in np.asarray(times_s, float):
         try:
             sc = trajectory.scenario(t, base)

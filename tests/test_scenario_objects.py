@@ -1,0 +1,125 @@
+"""Scenarios as typed objects: profiles read once per process, trial scenarios that read and
+write the results store's rows (old rows with their -1/0 sentinels included)."""
+
+import numpy as np
+import pytest
+
+from svgs.errors import InputError
+from svgs.profiles import Camera
+
+
+@pytest.fixture
+def camera_reads(monkeypatch):
+    """Counts :meth:`Camera.load` calls that read a profile file (a name or a path; a Camera
+    passed in is returned as is and reads nothing), per profile."""
+    import svgs.profiles as profiles
+
+    reads: dict = {}
+    orig = Camera.load.__func__
+
+    def counting(cls, name_or_path, **kw):
+        if not isinstance(name_or_path, Camera):
+            key = str(name_or_path)  # the cached loader reads by the resolved path
+            reads[key] = reads.get(key, 0) + 1
+        return orig(cls, name_or_path, **kw)
+
+    monkeypatch.setattr(Camera, "load", classmethod(counting))
+    profiles._cached_camera.cache_clear()
+    profiles._cached_pattern.cache_clear()
+    yield reads
+    profiles._cached_camera.cache_clear()
+
+
+def test_the_closed_loop_reads_each_profile_once(camera_reads):
+    """Scenario, its true lens, the frame's camera, the solver's pipeline: one read."""
+    from sim.closed_loop import Scenario
+    from svgs.pipeline import solve_image
+    from synth_svgs import synth_frame
+
+    sc = Scenario(camera="galaxy-nexus", range_m=10.0, roll_deg=3.0, lens_pp_offset_px=(1.0, 0.0))
+    assert isinstance(sc.camera, Camera) and sc.pattern.name == "svgs-3u"
+    assert sc.camera_profile() is sc.camera_profile()  # made once, not on every access
+    assert sc.camera_profile().cx == sc.camera.cx + 1.0
+    R, t = sc.pose()
+    img = synth_frame(sc.camera, sc.pattern, R, t, seed=1).image
+    sol = solve_image(img, "galaxy-nexus", "svgs-3u")
+    assert sol and Scenario(camera="galaxy-nexus") == Scenario(camera="galaxy-nexus")
+    assert sum(camera_reads.values()) == 1, camera_reads
+
+
+@pytest.mark.render
+def test_render_and_solve_reads_the_camera_profile_once(camera_reads, tmp_path, capsys):
+    from cli.main import main
+
+    rc = main(["render-and-solve", "--camera", "galaxy-nexus", "--range", "10", "--spp", "2", "--roi-spp", "8",
+               "--seed", "1", "--json", "--out", str(tmp_path / "out")])
+    assert rc in (0, 1)
+    assert list(camera_reads.values()) == [1] and next(iter(camera_reads)).endswith("galaxy-nexus.toml"), camera_reads
+
+
+def test_stand_scenario_has_a_rail_position_not_a_range():
+    from sim.closed_loop import Scenario
+
+    s = Scenario(camera="galaxy-nexus", mount="stand", rail_m=5.0)
+    assert s.range_m is None and s.rail_m == 5.0 and s.distance_m == 5.0
+    assert Scenario(camera="galaxy-nexus", mount="stand", range_m=5.0).rail_m == 5.0  # the old spelling
+    with pytest.raises(InputError, match="rail_m"):
+        Scenario(camera="galaxy-nexus", rail_m=5.0)
+    with pytest.raises(InputError, match="range_m"):
+        Scenario(camera="galaxy-nexus", mount="stand", rail_m=5.0, range_m=5.0)
+    # the pivot on the rail at 5 m, no angles: the camera 5 m from the target along the boresight
+    assert np.allclose(s.pose()[1], Scenario(camera="galaxy-nexus", range_m=5.0).pose()[1])
+
+
+def test_geometric_scenario_is_typed_and_reads_its_rows():
+    from sim.trials import GeometricScenario, geometric_scenario
+
+    s = geometric_scenario(camera="galaxy-nexus", range_m=6.0, stand=1.0, truth_rail=1.0, sigma_px=0.3,
+                           labels={"pose_index": 4})
+    assert s.mount == "stand" and s.rail_m == 6.0 and s.range_m is None and s.truth == (False, False, True)
+    assert s["range_m"] == 6.0 and s["stand"] == 1.0 and s["pose_index"] == 4 and s.get("nope") is None
+    row = {"trial_id": 3, "seed": 9, **s, "ok": True, "est_x_m": 0.1, "wall_s": 1.0}
+    assert GeometricScenario.from_row(row) == s and hash(GeometricScenario.from_row(row)) == hash(s)
+    assert GeometricScenario(camera="galaxy-nexus").to_row() == dict(geometric_scenario(camera="galaxy-nexus"))
+    with pytest.raises(InputError, match="stand"):
+        geometric_scenario(camera="galaxy-nexus", stand=0.5)
+    with pytest.raises(InputError, match="label"):
+        geometric_scenario(camera="galaxy-nexus", labels={"sigma_px": 1})
+
+
+def test_render_scenario_reads_old_rows_with_sentinels():
+    from sim.render_trial import RenderKey, RenderScenario, render_key, render_trial_scenario
+
+    defaults = RenderScenario(camera="galaxy-nexus")
+    assert defaults.to_row() == dict(render_trial_scenario(camera="galaxy-nexus"))
+    assert (defaults.spp, defaults.exposure_s, defaults.threshold, defaults.f_number, defaults.demosaic) == \
+        (None, None, None, None, None)
+    # a row as the old code wrote it: every parameter a number, -1 / 0 meaning "the default"
+    old = dict(defaults.to_row(), spp=-1.0, roi_spp=64.0, f_number=-1.0, jpeg_quality=-1.0, glare_veiling_fraction=-1.0,
+               threshold=-1.0, exposure_s=0.0, iso=0.0, demosaic=2.0, backdrop_distance_m=0.0, variant="no_jpeg",
+               trial_id=1, seed=2, ok=False)
+    s = RenderScenario.from_row(old)
+    assert (s.spp, s.roi_spp, s.f_number, s.jpeg_quality, s.glare_veiling_fraction) == (None, 64, None, None, None)
+    assert (s.threshold, s.exposure_s, s.iso, s.demosaic, s.backdrop_distance_m) == ("otsu", None, None,
+                                                                                      "edge_aware", None)
+    assert s.label_dict == {"variant": "no_jpeg"}
+    assert {k: s[k] for k in defaults.to_row()} == {k: old[k] for k in defaults.to_row()}  # the row unchanged
+    assert isinstance(render_key(s), RenderKey) and render_key(s) == render_key(dict(s, threshold=-2.0))
+    assert render_key(s) != render_key(dict(s, pattern_scale=1.5))
+    assert RenderScenario(camera="galaxy-nexus", threshold="auto")["threshold"] == -2.0
+    assert RenderScenario(camera="galaxy-nexus", threshold=37.0)["threshold"] == 37.0
+
+
+def test_no_private_names_of_sim_used_outside_sim():
+    """Studies and the CLI use sim's public names (no sim.trials._camera, sim.render_trial._frame)."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    bad = []
+    for pkg in ("studies", "cli", "svgs", "render", "camera"):
+        for path in (root / pkg).rglob("*.py"):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("sim"):
+                    bad += [f"{path.name}: {node.module}.{a.name}" for a in node.names if a.name.startswith("_")]
+    assert not bad, bad
