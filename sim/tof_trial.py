@@ -49,8 +49,15 @@ TOF_PARAMETERS = {
 #: Output columns of a ToF trial.
 TOF_OUTPUTS = ("ok", "reason", "n_blobs", "iterations", *(f"col_{c}" for c in COLUMNS), "rot_err_deg", "saturated_pixels",
                *(f"est_{k}" for k in STATE_KEYS), *ERR_KEYS, POS_ERR_NORM_M, *RUN_INFO_KEYS)
-#: Frames per task of the study engine that keep a run of :data:`sim.tof_stability.MAX_FRAMES` in one task.
-CHUNK_FRAMES = 5000
+#: Least frames per task of the study engine (:func:`chunk_frames`).
+CHUNK_FRAMES = 250
+
+
+def chunk_frames(longest_run: int, chunk_size: int | None = None) -> int:
+    """Frames per task that keep every run whole: the engine splits a run only when it is longer
+    than 4 tasks (:func:`studies.execution.make_tasks`), and a split part replays the frames
+    before it. At least ``chunk_size`` (default :data:`CHUNK_FRAMES`)."""
+    return max(int(chunk_size or CHUNK_FRAMES), -(-int(longest_run) // 4))
 
 
 @dataclass(frozen=True)
@@ -230,4 +237,4 @@ TOF = register_trial_kind(TrialKind(
     module=__name__,
 ))
 
-__all__ = ["TOF", "TOF_OUTPUTS", "TofTrialScenario", "trial_rows", "tof_trial", "tof_group", "cached_render", "CHUNK_FRAMES"]
+__all__ = ["TOF", "TOF_OUTPUTS", "TofTrialScenario", "trial_rows", "tof_trial", "tof_group", "cached_render", "CHUNK_FRAMES", "chunk_frames"]

@@ -226,11 +226,11 @@ def run_study(cfg: TofStudyConfig, out: Path, spec=None, *, store_dir=None, chun
         The results store (default ``out / "tof-study"``); a rerun skips the stored trials, a
         changed ``cfg`` is refused.
     chunk_size : int, optional
-        Trials per task (default :data:`sim.tof_trial.CHUNK_FRAMES`: a run stays in one task).
+        Trials per task, at least (:func:`sim.tof_trial.chunk_frames`: a run stays in one task).
     """
     from sim.tof_closed_loop import load_scene, make_sensor
     from sim.trials import get_trial_kind
-    from sim.tof_trial import CHUNK_FRAMES, cached_render
+    from sim.tof_trial import cached_render, chunk_frames
 
     from .execution import ExecutorSpec, run_stored_study
 
@@ -248,7 +248,8 @@ def run_study(cfg: TofStudyConfig, out: Path, spec=None, *, store_dir=None, chun
     runs = study_runs(cfg, auto_T)
     trials = study_trials(runs)
     store, _ = run_stored_study(get_trial_kind("tof"), trials, Path(store_dir) if store_dir else out / "tof-study",
-                                cfg.manifest(), spec or ExecutorSpec("inline", 1), chunk_size=chunk_size or CHUNK_FRAMES,
+                                cfg.manifest(), spec or ExecutorSpec("inline", 1),
+                                chunk_size=chunk_frames(max(r[2].frames for r in runs), chunk_size),
                                 progress=not quiet, description="ToF study frames")
     done = runs_from_rows(runs, store.read_rows())
     res = _sections(runs, done)
