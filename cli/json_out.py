@@ -137,13 +137,13 @@ SCHEMAS = {
     "svgs tof render-and-solve": f"""\
 {_SOLUTION}, "n_frames": int,
  "truth_state": {_STATE}, {_ERRORS},
- "n_solved": int, "frame_statistics": {{"mean", "std", "min", "max", "fluctuation", "mean_error", ...}},
+ "n_solved": int, "frame_statistics": {{"mean", "std", "min", "max", "fluctuation", "bias", "mean_abs_error", "rms", ...}},
  "integration_time_s": float, "ambient_lux": float, "modulation_frequency_hz": float,
  "render_s": float, "frames_s": float, "outputs": {{file: path}}}}""",
     "svgs tof stability": """\
 {"range_m": float, "frames": int, "solved": int,
  "average", "maximum", "minimum", "fluctuation", "std", "truth":
-     {"x_mm", "y_mm", "z_mm", "pitch_deg", "yaw_deg", "roll_deg": float | null},
+     {"target_x_cam_mm", "target_y_cam_mm", "target_z_cam_mm", "roll_deg", "pitch_deg", "yaw_deg": float | null},
  "paper": {table: {statistic: {column: float}}},   # Tables 1 and 3 at 0.697 m, 2 at 5.712 m; {} elsewhere
  "ratio_to_paper": {table: {column: float}},       # our fluctuation / the paper's
  "within_2x": {table: {column: bool}},
@@ -158,7 +158,7 @@ SCHEMAS = {
 {"stability": {range_m: <svgs tof stability object>},
  "mechanisms": [{"label": str, "range_m": float, "ratio_to_paper": {table: {column: float}},
                  "fluctuation": {column: float}, "solved": int}],
- "fig14": [{"range_m": float, "solved": int, "frames": int, "mean_error", "rms_error", "std": {column: float},
+ "fig14": [{"range_m": float, "solved": int, "frames": int, "bias", "rms_error", "std": {column: float},
             "rot_err_rms_deg": float, "integration_time_s": float}],
  "failure_modes": {"flying_pixels_1m", "multipath_1m", "ambient_1m", ...}, "wall_s": float,
  "outputs": {"report", "csv", "series", "mechanisms", "fig14", "failure_modes": path}}""",

@@ -21,19 +21,11 @@ from svgs.errors import InputError, check_finite, check_finite_positive
 from svgs.frames import STATE_KEYS
 
 from cli.exit_codes import EXIT_NO_SOLUTION, EXIT_OK
+from cli.sim import POSE_ARGS
 from cli.solve import json_default
 
 #: Frames written by ``--out`` at most (gray.npy / depth.npy stacks).
 MAX_SAVED_FRAMES = 200
-
-#: (flag, dest, help). ``--x``/``--y`` set the target's lateral offset (not the camera
-#: position ``x_m``/``y_m`` of the solved state).
-POSE_ARGS = (("--x", "target_x_m", "lateral offset of the target origin from the boresight, camera right (m)"),
-             ("--y", "target_y_m", "lateral offset of the target origin from the boresight, camera up (m)"),
-             ("--roll", "roll_deg", "roll, paper x-y-z sequence (deg)"),
-             ("--pitch", "pitch_deg", "pitch (deg)"),
-             ("--yaw", "yaw_deg", "yaw (deg)"))
-
 
 def add_scene_args(p) -> None:
     """The options of the ToF commands that render: ``--camera``, ``--pattern``, ``--spp`` and
@@ -46,6 +38,10 @@ def add_scene_args(p) -> None:
     p.add_argument("--rim-spp-factor", type=int, default=None,
                    help="factor on --spp for the marker-rim pixels (power of two; default 64, i.e. 16384 samples "
                         "there; 1: the same spp everywhere)")
+
+
+#: Keys of :func:`frame_statistics`.
+FRAME_STATISTICS = ("mean", "std", "min", "max", "fluctuation", "bias", "mean_abs_error", "rms")
 
 
 def register(group) -> None:
@@ -107,7 +103,7 @@ def _check_args(args):
 
 
 def frame_statistics(states, truth_state) -> dict:
-    """Statistics of the solved states over a run.
+    """Statistics of the solved states over a run, in the state's units (m, deg).
 
     Parameters
     ----------
@@ -118,59 +114,38 @@ def frame_statistics(states, truth_state) -> dict:
     Returns
     -------
     dict
-        ``mean``, ``std``, ``min``, ``max``, ``fluctuation`` (max - min) and ``mean_error``
-        (mean - truth), each keyed by ``x_m, ..., yaw_deg``; empty dicts when K == 0.
+        ``mean``, ``std``, ``min``, ``max``, ``fluctuation`` (max - min) of the states (angles
+        unwrapped next to the truth: the truth plus :func:`sim.metrics.state_error`), ``bias``
+        (mean of the signed errors, = mean - truth), ``mean_abs_error`` and ``rms`` (of the
+        errors), each keyed by ``x_m, ..., yaw_deg``; empty dicts when K == 0.
     """
+    from sim.metrics import state_error, state_m_deg
+
     S = np.asarray(states, float).reshape(-1, 6)
-    out = {k: {} for k in ("mean", "std", "min", "max", "fluctuation", "mean_error")}
+    out = {k: {} for k in FRAME_STATISTICS}
     if S.shape[0] == 0:
         return out
-    tr = np.asarray(truth_state, float).copy()
-    S = S.copy()
-    S[:, 3:] = tr[3:] + (S[:, 3:] - tr[3:] + np.pi) % (2 * np.pi) - np.pi  # unwrap around the truth
-    conv = np.array([1, 1, 1, *([180 / np.pi] * 3)])
-    S, tr = S * conv, tr * conv
-    stats = {"mean": S.mean(0), "std": S.std(0), "min": S.min(0), "max": S.max(0),
-             "fluctuation": S.max(0) - S.min(0), "mean_error": S.mean(0) - tr}
+    err = state_error(S, truth_state)  # (K, 6) m, deg; angles wrapped
+    V = state_m_deg(truth_state) + err
+    stats = {"mean": V.mean(0), "std": V.std(0), "min": V.min(0), "max": V.max(0), "fluctuation": V.max(0) - V.min(0),
+             "bias": err.mean(0), "mean_abs_error": np.abs(err).mean(0), "rms": np.sqrt((err**2).mean(0))}
     for name, v in stats.items():
         out[name] = {k: float(x) for k, x in zip(STATE_KEYS, v)}
     return out
 
 
-def run_frames(rendered, sensor, pipe, n_frames: int, seed, truth_state, keep_frames: int = 0, progress=None):
-    """Draw ``n_frames`` noisy frames from one render and solve them in sequence.
-
-    Returns
-    -------
-    rows : list of dict
-        Per frame: ``frame, ok, reason, state (paper keys) or None, residual_rms_px, n_blobs``
-        and the :data:`sim.metrics.POSE_ERROR_KEYS` (None when unsolved).
-    last : TofSolution or Failure
-    kept : list of TofFrame
-        The first ``keep_frames`` frames.
-    states : ndarray, shape (K, 6)
-        Solved states.
-    """
-    from sim.metrics import no_pose_errors, pose_errors
-
-    rows, kept, states, last = [], [], [], None
-    for k, fr in enumerate(sensor.frames(rendered, n_frames, seed)):
-        res = pipe.process(fr.gray, fr.depth_m)
-        last = res
-        row = {"frame": k, "ok": bool(res), "reason": None if res else res.reason,
-               "n_blobs": res.n_blobs if res else res.details.get("n_blobs")}
-        if res:
-            states.append(res.state)
-            row.update({"state": res.state_dict, "residual_rms_px": float(res.residual_rms_px),
-                        **pose_errors(res.state, truth_state)})
-        else:
-            row.update({"state": None, "residual_rms_px": None, **no_pose_errors()})
+def frame_rows(results) -> list:
+    """Per frame of :func:`sim.tof_closed_loop.solve_frames`: ``frame, ok, reason, n_blobs, state``
+    (paper keys) or None, ``residual_rms_px`` and the :data:`sim.metrics.POSE_ERROR_KEYS`."""
+    rows = []
+    for r in results:
+        res = r.solution
+        row = {"frame": r.frame, "ok": bool(res), "reason": None if res else res.reason,
+               "n_blobs": res.n_blobs if res else res.details.get("n_blobs"),
+               "state": res.state_dict if res else None,
+               "residual_rms_px": float(res.residual_rms_px) if res else None, **r.errors}
         rows.append(row)
-        if k < keep_frames:
-            kept.append(fr)
-        if progress is not None:
-            progress(1)
-    return rows, last, kept, np.array(states).reshape(-1, 6)
+    return rows
 
 
 def write_preview(path, gray, depth_m) -> None:
@@ -182,43 +157,44 @@ def write_preview(path, gray, depth_m) -> None:
     cv2.imwrite(str(path), encode_u8(np.hstack([sqrt_stretch(gray), depth_stretch(depth_m)])))
 
 
+def scenario_from_args(args):
+    """The command's :class:`sim.tof_closed_loop.TofScenario` (checked: in view, profiles load)."""
+    from sim.tof_closed_loop import TofScenario, check_in_view
+
+    sc = TofScenario(camera=args.camera, pattern=args.pattern, range_m=args.range_m, target_x_m=args.target_x_m,
+                     target_y_m=args.target_y_m, roll_deg=args.roll_deg, pitch_deg=args.pitch_deg, yaw_deg=args.yaw_deg,
+                     seed=args.seed, spp=args.spp, rim_spp_factor=args.rim_spp_factor, max_bounces=args.bounces,
+                     pinhole=args.pinhole, ambient_lux=args.ambient_lux, integration_time_s=args.integration_time_s,
+                     modulation_frequency_hz=args.modulation_frequency_hz)
+    check_in_view(sc)
+    return sc
+
+
 def cmd_render_and_solve(args) -> int:
-    from svgs.frames import pose_from_scenario, pose_to_state, state_dict
-    from tof import TofPipeline, load_camera, load_target
+    from svgs.frames import state_dict
     from cli.tof import print_solution, solution_json
 
-    from render.tof.camera import check_target_in_view
-    from camera.amcw import TofSensor
     from sim.metrics import POSE_ERROR_KEYS
-
-    _check_args(args)
-    camera = load_camera(args.camera, render=True)
-    target = load_target(args.pattern)
-    R, t = pose_from_scenario(args.range_m, args.target_x_m, args.target_y_m, args.roll_deg, args.pitch_deg, args.yaw_deg)
-    check_target_in_view(camera, target, R, t)
-    sensor = TofSensor.from_camera(camera, ambient_lux=args.ambient_lux, modulation_frequency_hz=args.modulation_frequency_hz,
-                                   integration_time_s=args.integration_time_s)
-    from render.tof.camera import TofRenderer
-
-    if not args.json:
-        print(f"rendering {camera.name} / {target.pattern.name} at {args.range_m:g} m ...", file=sys.stderr)
-    t0 = time.perf_counter()
-    renderer = TofRenderer(camera, target, spp=args.spp, rim_spp_factor=args.rim_spp_factor, max_bounces=args.bounces,
-                           modulation_frequency_hz=sensor.modulation_frequency_hz, pinhole=args.pinhole)
-    rendered = renderer.render(R, t, seed=args.seed)
-    render_s = time.perf_counter() - t0
-    truth_state = pose_to_state(R, t)
-    pipe = TofPipeline(camera, target, persistence_window=args.persistence,
-                       persistence_min_count=max(1, (args.persistence + 1) // 2))
-    t0 = time.perf_counter()
-    keep = min(args.frames, MAX_SAVED_FRAMES) if args.out else 0
+    from sim.tof_closed_loop import pipeline_overrides, render, solve_frames
     from studies.progress import progress_bar
 
+    _check_args(args)
+    sc = scenario_from_args(args)
+    if not args.json:
+        print(f"rendering {sc.camera} / {sc.pattern} at {args.range_m:g} m ...", file=sys.stderr)
+    tof_render = render(sc)
+    sensor, rendered, render_s = tof_render.sensor, tof_render.rendered, tof_render.render_s
+    truth_state = tof_render.truth_state
+    t0 = time.perf_counter()
+    keep = min(args.frames, MAX_SAVED_FRAMES) if args.out else 0
     with progress_bar(args.frames, "frames", enabled=args.frames > 20 and (not args.json or sys.stderr.isatty()),
                       unit="frame") as bar:
-        rows, last, kept, states = run_frames(rendered, sensor, pipe, args.frames, [args.seed, 1], truth_state, keep,
-                                              progress=bar.update)
+        results, kept = solve_frames(tof_render, args.frames, pipeline_overrides(args.persistence), progress=bar.update,
+                                     keep_frames=keep)
     frames_s = time.perf_counter() - t0
+    rows = frame_rows(results)
+    last = results[-1].solution
+    states = np.array([r.solution.state for r in results if r.solution]).reshape(-1, 6)
     stats = frame_statistics(states, truth_state)
     T = sensor.integration_time_s or sensor.auto_integration_time(rendered)
     out = solution_json(last, args.frames)
@@ -252,9 +228,9 @@ def cmd_render_and_solve(args) -> int:
             print(f"  errors (last frame): pos_err_vec_m [{pe[0]:+.4f}, {pe[1]:+.4f}, {pe[2]:+.4f}]  "
                   f"att_err_vec_deg [{ae[0]:+.3f}, {ae[1]:+.3f}, {ae[2]:+.3f}]")
         if out["n_solved"] > 1:
-            fl, me = stats["fluctuation"], stats["mean_error"]
+            fl, me = stats["fluctuation"], stats["bias"]
             print("  over the frames: fluctuation (max - min) " + ", ".join(f"{k} {fl[k]:.4g}" for k in STATE_KEYS))
-            print("                   mean error              " + ", ".join(f"{k} {me[k]:+.4g}" for k in STATE_KEYS))
+            print("                   bias (mean error)       " + ", ".join(f"{k} {me[k]:+.4g}" for k in STATE_KEYS))
         for v in out["outputs"].values():
             print(f"wrote {v}")
     return EXIT_OK if last else EXIT_NO_SOLUTION

@@ -23,6 +23,7 @@ from svgs.errors import InputError, check_finite
 
 from cli.exit_codes import EXIT_NO_SOLUTION, EXIT_OK
 from cli.solve import json_default
+from cli.studies import add_executor_options
 from cli.tof_render import add_scene_args
 
 #: Ranges the stability run accepts (m): the paper's design range 0.27-15 m (section 2.2) within
@@ -49,8 +50,9 @@ def register(group) -> None:
         description="Render the ToF target once at --range (the paper's average pose at 0.697 and 5.712 m, "
         "head-on elsewhere), draw N noisy frames from it and run them in sequence through the ToF pipeline. "
         "Prints the average, maximum, minimum, fluctuation range (max - min) and standard deviation of each "
-        "component in the paper's axes (x_mm, y_mm, z_mm, pitch_deg, yaw_deg, roll_deg) beside the paper's "
-        "Tables 1-3. Exit 0 done, 1 no frame solved, 2 bad input.",
+        "component in the paper's order - target_x_cam_mm, target_y_cam_mm, target_z_cam_mm (the target's "
+        "reference point in the camera frame), roll_deg, pitch_deg, yaw_deg (the state's angles; the paper's "
+        "pitch, yaw, roll) - beside the paper's Tables 1-3. Exit 0 done, 1 no frame solved, 2 bad input.",
     )
     p.add_argument("--range", dest="range_m", type=float, required=True,
                    help=f"range to the target, m ({RANGE_LIMITS_M[0]}-{RANGE_LIMITS_M[1]}); 0.697 and 5.712 "
@@ -85,6 +87,9 @@ def register(group) -> None:
                    help="frames of the long run at 697 mm against Table 1's ~6000 s (default 3000; 0 skips it)")
     _common(q)
     q.add_argument("--out", default="docs/reports", help="folder of tof_stability.md and its figures (default docs/reports)")
+    q.add_argument("--store", default=None, metavar="DIR",
+                   help="the study's results store (resumable: a rerun skips the stored frames; default OUT/tof-study)")
+    add_executor_options(q)
     q.add_argument("--json", action="store_true", help="print the report's numbers as one JSON object")
     q.set_defaults(func=cmd_study)
 
@@ -102,12 +107,12 @@ def scene_options(args) -> dict:
 
 
 def check_stability_args(args):
-    """Everything checked before rendering; returns (camera, target)."""
-    from sim.tof_stability import check_frames, scenario_for_range
-    from tof import load_camera, load_target
+    """Everything checked before rendering; returns the run's :class:`sim.tof_closed_loop.TofScenario`."""
+    from sim.tof_closed_loop import check_in_view
+    from sim.tof_stability import check_frames, stability_scenario
 
     from cli.validate import check_out_dir
-    from render.tof.camera import check_target_in_view
+
 
     r = check_finite(args.range_m, "--range")
     lo, hi = RANGE_LIMITS_M
@@ -120,20 +125,18 @@ def check_stability_args(args):
         raise InputError(f"--bounces: expected 1..4, got {args.bounces}")
     if args.out:
         check_out_dir(args.out)
-    camera = load_camera(args.camera, render=True)
-    target = load_target(args.pattern)
-    sc = scenario_for_range(r)
-    check_target_in_view(camera, target, sc["R_cam_target"], sc["t_cam_target_m"])
-    return camera, target
+    sc = stability_scenario(r, camera=args.camera, pattern=args.pattern, seed=args.seed, spp=args.spp,
+                            rim_spp_factor=args.rim_spp_factor, max_bounces=args.bounces,
+                            scene_options=tuple(scene_options(args).items()), ambient_lux=args.ambient_lux)
+    check_in_view(sc)
+    return sc
 
 
 def pipeline_overrides(args) -> dict:
-    kw = {}
-    if args.persistence > 1:
-        kw.update(persistence_window=args.persistence, persistence_min_count=max(1, (args.persistence + 1) // 2))
-    if args.max_active_pixels is not None:
-        kw["max_active_pixels"] = args.max_active_pixels
-    return kw
+    """``--persistence`` and ``--max-active-pixels`` (:func:`sim.tof_closed_loop.pipeline_overrides`)."""
+    from sim.tof_closed_loop import pipeline_overrides as overrides
+
+    return overrides(args.persistence, args.max_active_pixels)
 
 
 def print_summary(s: dict, file=sys.stdout) -> None:
@@ -210,22 +213,17 @@ def plot_stability(path, run: dict, s: dict) -> None:
 
 
 def cmd_stability(args) -> int:
+    from sim.tof_closed_loop import render
     from sim.tof_stability import run_stability, summary
     from studies.progress import progress_bar
 
-    from camera.amcw import TofSensor
-    from render.tof.camera import TofRenderer
-
-    camera, target = check_stability_args(args)
-    sensor = TofSensor.from_camera(camera, ambient_lux=args.ambient_lux)
-    renderer = TofRenderer(camera, target, spp=args.spp, rim_spp_factor=args.rim_spp_factor, max_bounces=args.bounces,
-                           scene_options=scene_options(args), modulation_frequency_hz=sensor.modulation_frequency_hz)
+    sc = check_stability_args(args)
     if not args.json:
-        print(f"rendering {camera.name} / {target.pattern.name} at {args.range_m:g} m ({renderer.spp} spp, "
-              f"{renderer.spp * renderer.rim_spp_factor} on the marker rims) ...", file=sys.stderr)
+        print(f"rendering {sc.camera} / {sc.pattern} at {args.range_m:g} m ...", file=sys.stderr)
+    tof_render = render(sc)
     with progress_bar(args.frames, "frames", enabled=not args.json or sys.stderr.isatty(), unit="frame") as bar:
-        run = run_stability(renderer, sensor, args.range_m, args.frames, seed=args.seed,
-                            pipeline=pipeline_overrides(args), reference=args.reference, progress=bar.update)
+        run = run_stability(tof_render, args.range_m, args.frames, pipeline=pipeline_overrides(args),
+                            reference=args.reference, progress=bar.update)
     s = summary(run)
     if args.out:
         s["outputs"] = write_stability_outputs(Path(args.out), run, s)
@@ -239,10 +237,11 @@ def cmd_stability(args) -> int:
 
 
 def cmd_study(args) -> int:
+    from sim.tof_closed_loop import load_scene
     from sim.tof_stability import check_frames
-    from studies.tof_study import run_study
-    from tof import load_camera, load_target
+    from studies.tof_study import TofStudyConfig, run_study
 
+    from cli.studies import executor_from_args
     from cli.validate import check_out_dir
 
     longs = (("--long-frames", args.long_frames),) if args.long_frames else ()
@@ -253,13 +252,15 @@ def cmd_study(args) -> int:
         except InputError as exc:
             raise InputError(str(exc).replace("--frames", flag)) from None
     _check_common(args)
+    spec = executor_from_args(args)
     out = check_out_dir(args.out)
-    camera = load_camera(args.camera, render=True)
-    target = load_target(args.pattern)
-    res = run_study(camera, target, out, frames=args.frames, variant_frames=args.variant_frames,
-                    sweep_frames=args.sweep_frames, long_frames=args.long_frames, seed=args.seed, spp=args.spp, rim_spp_factor=args.rim_spp_factor,
-                    ambient_lux=args.ambient_lux,
-                    scene=scene_options(args), argv=sys.argv[1:], quiet=args.json)
+    load_scene(args.camera, args.pattern)  # a bad profile is refused before any work
+    cfg = TofStudyConfig(camera=args.camera, pattern=args.pattern, frames=args.frames, variant_frames=args.variant_frames,
+                         sweep_frames=args.sweep_frames, long_frames=args.long_frames, seed=args.seed, spp=args.spp,
+                         rim_spp_factor=args.rim_spp_factor, ambient_lux=args.ambient_lux,
+                         scene=tuple(scene_options(args).items()))
+    res = run_study(cfg, out, spec, store_dir=args.store, chunk_size=args.chunk_size, argv=sys.argv[1:],
+                    quiet=args.json or args.no_progress)
     if args.json:
         print(json.dumps(res, default=json_default))
     else:

@@ -1,18 +1,20 @@
 """The ToF paper's stability runs (Zhu et al. 2022, Tables 1-3) on the rendered camera.
 
-Render the target once at a pose, draw N noisy frames from that render
-(:class:`camera.amcw.TofSensor`) and run them in sequence through one
-:class:`tof.TofPipeline`; the statistics of the solved poses per component are the paper's
-(average, maximum, minimum, fluctuation range = maximum - minimum) plus the standard
-deviation. ``svgs tof stability`` (:mod:`cli.tof_stability`; also ``python -m
-cli.tof_stability``) is the command: it replaces the former ``python -m render.tof.stability``.
+Render the target once at a pose, draw N noisy frames from that render and run them in
+sequence through one :class:`tof.TofPipeline` - the frame loop of :mod:`sim.tof_closed_loop`;
+the statistics of the solved poses per component are the paper's (average, maximum, minimum,
+fluctuation range = maximum - minimum) plus the standard deviation. ``svgs tof stability``
+(:mod:`cli.tof_stability`; also ``python -m cli.tof_stability``) is the command; the ToF
+study runs the same frames as trials of the ``tof`` kind (:mod:`sim.tof_trial`).
 
-Columns (the paper's axes)
-    ``x_mm, y_mm, z_mm``: the target's reference point in the camera frame (OpenCV axes:
-    x right, y down, z along the boresight); ``pitch_deg, yaw_deg, roll_deg``: the paper's
-    names for our paper-state angles (roll, pitch, yaw) (:func:`svgs.frames.pose_to_state`)
-    - its roll is the rotation about the line of sight, the one its Table 2 has the smallest
-    scatter in, as ours.
+Columns (:data:`COLUMNS`; the paper's Tables 1-3 in its order)
+    ``target_x_cam_mm, target_y_cam_mm, target_z_cam_mm``: the target's reference point in the
+    camera frame (OpenCV axes: x right, y down, z along the boresight; not the state's
+    ``x_m, y_m, z_m``, which are the camera in the target frame); ``roll_deg, pitch_deg,
+    yaw_deg``: the paper state's angles (:func:`svgs.frames.pose_to_state`), unwrapped next to
+    the truth. The paper calls them pitch, yaw, roll (:data:`PAPER_COLUMNS`): its "pitch" is our
+    roll, the rotation about the line of sight, the one its Table 2 has the smallest scatter
+    in, as ours.
 
 Reference point (ASSUMPTION argued from the paper's numbers)
     The paper gives no target frame. Its Table 2 has a pitch fluctuation of 0.52 deg but an x
@@ -36,11 +38,13 @@ import numpy as np
 
 from svgs.errors import InputError
 
-#: The paper's column names, in its order.
-COLUMNS = ("x_mm", "y_mm", "z_mm", "pitch_deg", "yaw_deg", "roll_deg")
+#: Our columns, in the paper's order (see the module docstring).
+COLUMNS = ("target_x_cam_mm", "target_y_cam_mm", "target_z_cam_mm", "roll_deg", "pitch_deg", "yaw_deg")
+#: The paper's names of the same columns, position by position (its "pitch" is our roll).
+PAPER_COLUMNS = ("x_mm", "y_mm", "z_mm", "pitch_deg", "yaw_deg", "roll_deg")
 #: Statistics of the paper's tables (and ours), plus the standard deviation (ours only).
 STATISTICS = ("average", "maximum", "minimum", "fluctuation")
-#: The paper's average poses (Table 1 at 697 mm, Table 2 at 5712 mm): t (mm) and (pitch, yaw, roll) deg.
+#: The paper's average poses (Table 1 at 697 mm, Table 2 at 5712 mm): t (mm) and (roll, pitch, yaw) deg of our state.
 SCENARIOS = {
     697: {"tables": ("1", "3"), "t_mm": (2.193, -10.457, 697.604), "angles_deg": (-0.382, -2.653, -2.528)},
     5712: {"tables": ("2",), "t_mm": (5.097, -2.381, 5712.362), "angles_deg": (3.823, 1.324, -2.053)},
@@ -51,26 +55,38 @@ MAX_FRAMES = 20000
 REFERENCES = ("markers", "plate")
 
 
-def scenario_for_range(range_m: float) -> dict:
-    """The scenario at ``range_m``: the paper's average pose within 5 mm of its two ranges, else
-    head-on on the boresight.
+def paper_range_mm(range_m: float):
+    """The paper's range (697 or 5712, mm) within 5 mm of ``range_m``, else None."""
+    r_mm = float(range_m) * 1e3
+    return next((key for key in SCENARIOS if abs(r_mm - key) <= 5.0), None)
+
+
+def stability_scenario(range_m: float, **kw):
+    """The stability run's scenario at ``range_m``: the paper's average pose within 5 mm of its
+    two ranges, else head-on on the boresight.
+
+    Parameters
+    ----------
+    range_m : float
+    **kw
+        Other :class:`sim.tof_closed_loop.TofScenario` fields (camera, pattern, seed, spp...).
 
     Returns
     -------
-    dict
-        ``range_mm`` (int or None), ``tables`` (paper table ids, may be empty),
-        ``R_cam_target`` (3, 3), ``t_cam_target_m`` (3,).
+    sim.tof_closed_loop.TofScenario
     """
-    from svgs.frames import pose_from_scenario
+    from sim.tof_closed_loop import TofScenario
 
-    r_mm = float(range_m) * 1e3
-    for key, sc in SCENARIOS.items():
-        if abs(r_mm - key) <= 5.0:
-            R, _ = pose_from_scenario(1.0, 0.0, 0.0, *sc["angles_deg"])
-            return {"range_mm": key, "tables": sc["tables"], "R_cam_target": R,
-                    "t_cam_target_m": np.asarray(sc["t_mm"], float) * 1e-3}
-    R, t = pose_from_scenario(float(range_m))
-    return {"range_mm": None, "tables": (), "R_cam_target": R, "t_cam_target_m": np.asarray(t, float)}
+    key = paper_range_mm(range_m)
+    if key is not None:
+        return TofScenario.from_pose_mm(SCENARIOS[key]["t_mm"], SCENARIOS[key]["angles_deg"], **kw)
+    return TofScenario(range_m=float(range_m), **kw)
+
+
+def paper_tables(range_m: float) -> tuple:
+    """The paper's table ids at ``range_m`` (empty off its ranges)."""
+    key = paper_range_mm(range_m)
+    return SCENARIOS[key]["tables"] if key is not None else ()
 
 
 def reference_point_m(target, reference: str = "markers") -> np.ndarray:
@@ -80,25 +96,30 @@ def reference_point_m(target, reference: str = "markers") -> np.ndarray:
     return np.asarray(target.points_m, float).mean(0) if reference == "markers" else np.zeros(3)
 
 
-def pose_columns(R, t, R_ref=None, point_m=None) -> np.ndarray:
-    """The paper's six columns of one pose, shape (6,): the point (mm) and (pitch, yaw, roll) deg.
+def pose_columns(R, t, truth_state, state_err_m_deg=None, point_m=None) -> np.ndarray:
+    """The six :data:`COLUMNS` of one pose, shape (6,): the point (mm) and the angles (deg).
 
     Parameters
     ----------
     R, t : R_cam_target (3, 3), t_cam_target_m (3,)
-    R_ref : (3, 3), optional
-        Angles are unwrapped next to this pose's.
+        The pose whose reference point is reported.
+    truth_state : (6,)
+        The true paper state (m, rad).
+    state_err_m_deg : (6,), optional
+        :func:`sim.metrics.state_error` of the pose against the truth; the angles are the
+        truth's plus its wrapped angle errors (None: the truth's angles).
     point_m : (3,), optional
         Reported point in the target frame (default the origin).
     """
-    from svgs.frames import pose_to_state
+    from sim.metrics import state_m_deg
 
     p = np.zeros(3) if point_m is None else np.asarray(point_m, float)
     pos = np.asarray(R, float) @ p + np.asarray(t, float)
-    ang = np.degrees(pose_to_state(R, t)[3:])
-    if R_ref is not None:
-        ref = np.degrees(pose_to_state(R_ref, t)[3:])
-        ang = ref + (ang - ref + 180.0) % 360.0 - 180.0
+    err = np.zeros(3) if state_err_m_deg is None else np.asarray(state_err_m_deg, float)[3:]
+    # (truth + (err + 180)) - 180: the association these columns have had since issue 23 (the
+    # wrapped difference added before its -180), kept so the committed report does not move by
+    # 1e-14 deg; err + 180 is exact for |err| < 90 deg
+    ang = (state_m_deg(truth_state)[3:] + (err + 180.0)) - 180.0
     return np.concatenate([pos * 1e3, ang])
 
 
@@ -113,7 +134,8 @@ def statistics(cols) -> dict:
 
 
 def paper_statistics(range_mm) -> dict:
-    """The paper's tables at a range: ``{table_id: {statistic: {column: value}}}`` (empty off its ranges)."""
+    """The paper's tables at a range: ``{table_id: {statistic: {column: value}}}`` under our
+    :data:`COLUMNS` (empty off its ranges)."""
     from assets.papers import tof_2022_stability
 
     if range_mm is None:
@@ -121,101 +143,142 @@ def paper_statistics(range_mm) -> dict:
     out = {}
     for row in tof_2022_stability():
         if int(row["range_mm"]) == int(range_mm):
-            out.setdefault(row["table"], {})[row["statistic"]] = {c: float(row[c]) for c in COLUMNS}
+            out.setdefault(row["table"], {})[row["statistic"]] = {c: float(row[pc]) for c, pc in zip(COLUMNS, PAPER_COLUMNS)}
     return out
 
 
-def run_stability(renderer, sensor, range_m: float, frames: int, *, seed: int = 0, pipeline: dict | None = None,
-                  reference: str = "markers", progress=None, rendered=None) -> dict:
-    """Render once at the scenario of ``range_m``, draw ``frames`` noisy frames, solve them in sequence.
+def frame_row(result, tof_render, point_m) -> dict:
+    """One solved (or failed) frame as a row: ``frame, ok, reason, n_blobs, iterations``, the
+    :data:`COLUMNS` (None when unsolved), ``rot_err_deg`` (:mod:`sim.metrics`) and
+    ``saturated_pixels``.
 
     Parameters
     ----------
-    renderer : render.tof.camera.TofRenderer
-    sensor : camera.amcw.TofSensor
+    result : sim.tof_closed_loop.TofFrameResult
+    tof_render : sim.tof_closed_loop.TofRender
+    point_m : (3,)
+        :func:`reference_point_m`.
+    """
+    from sim.metrics import ROT_ERR_DEG
+
+    res = result.solution
+    row = {"frame": result.frame, "ok": bool(res), "reason": None if res else res.reason,
+           "n_blobs": res.n_blobs if res else res.details.get("n_blobs"),
+           "iterations": int(res.iterations) if res else None}
+    if res:
+        c = pose_columns(res.R_cam_target, res.t_cam_target_m, tof_render.truth_state, result.state_err, point_m)
+        row.update(dict(zip(COLUMNS, c.tolist())))
+    else:
+        row.update({c: None for c in COLUMNS})
+    row.update({"rot_err_deg": result.errors[ROT_ERR_DEG], "saturated_pixels": result.saturated_pixels})
+    return row
+
+
+#: Keys of :func:`run_info` (the run-level values, the same for every frame of a run).
+RUN_INFO_KEYS = ("integration_time_used_s", "max_amplitude_lsb", "spp_used", "rim_spp_used", "render_s",
+                 *(f"truth_{c}" for c in COLUMNS), "nf_ok", "nf_reason", "nf_centroid_err_rms_px",
+                 "nf_centroid_err_max_px", *(f"nf_err_{c}" for c in COLUMNS))
+
+
+def run_info(tof_render, overrides, point_m) -> dict:
+    """The run-level values of a stability run (:data:`RUN_INFO_KEYS`): the noise-free frame's
+    integration time (automatic or the sensor's) and brightest amplitude, the render's sample counts and time, the truth's
+    columns and the noise-free frame through the pipeline (``nf_*``: the centroid errors against
+    the projected face centres, px, and the pose error per column - the bias part of the
+    single-frame error)."""
+    from sim.tof_closed_loop import noise_free_frame, pipeline, solve
+
+    clean = noise_free_frame(tof_render)
+    truth = tof_render.truth_state
+    R, t = tof_render.R_cam_target, tof_render.t_cam_target_m
+    tc = pose_columns(R, t, truth, None, point_m)
+    rr = tof_render.rendered.truth["render"]
+    info = {"integration_time_used_s": float(clean.integration_time_s), "max_amplitude_lsb": float(np.max(clean.amplitude_dn)),
+            "spp_used": rr["spp"], "rim_spp_used": rr.get("rim_spp"), "render_s": float(tof_render.render_s),
+            **{f"truth_{c}": float(v) for c, v in zip(COLUMNS, tc)},
+            "nf_ok": False, "nf_reason": None, "nf_centroid_err_rms_px": None, "nf_centroid_err_max_px": None,
+            **{f"nf_err_{c}": None for c in COLUMNS}}
+    nf = solve(tof_render, 0, clean, pipeline(tof_render, overrides))
+    res = nf.solution
+    if not res:
+        info["nf_reason"] = res.reason
+        return info
+    truth_px = tof_render.rendered.truth["targets_px"]
+    e = np.array([np.hypot(*(np.asarray(res.targets_px[k]) - np.asarray(truth_px[str(k)]))) for k in sorted(res.targets_px)])
+    err = pose_columns(res.R_cam_target, res.t_cam_target_m, truth, nf.state_err, point_m) - tc
+    info.update({"nf_ok": True, "nf_centroid_err_rms_px": float(np.sqrt(np.mean(e**2))),
+                 "nf_centroid_err_max_px": float(e.max()), **{f"nf_err_{c}": float(v) for c, v in zip(COLUMNS, err)}})
+    return info
+
+
+def assemble_run(range_m: float, rows: list, info: dict, *, frames: int, reference: str, frames_s: float) -> dict:
+    """A stability run from its frame rows (:func:`frame_row`, in frame order) and its
+    :func:`run_info` - the same dict whether the frames ran here or as stored trials.
+
+    Returns
+    -------
+    dict
+        ``range_m``, ``range_mm``, ``tables``, ``truth`` (6,), ``cols`` (K, 6) of the solved
+        frames, ``frame_rows``, ``fails`` (reason -> count), ``rot_err_deg`` (K,),
+        ``integration_time_s``, ``saturated_pixels`` (first frame), ``max_amplitude_lsb``
+        (noise-free), ``noise_free``, ``render_s``, ``frames_s``, ``frames``, ``spp``,
+        ``rim_spp``, ``reference``, ``iterations_median``.
+    """
+    ok = [r for r in rows if r["ok"]]
+    fails = {}
+    for r in rows:
+        if not r["ok"]:
+            fails[r["reason"]] = fails.get(r["reason"], 0) + 1
+    if info["nf_ok"]:
+        noise_free = {"ok": True, "centroid_err_rms_px": info["nf_centroid_err_rms_px"],
+                      "centroid_err_max_px": info["nf_centroid_err_max_px"],
+                      "pose_error": {c: info[f"nf_err_{c}"] for c in COLUMNS}}
+    else:
+        noise_free = {"ok": False, "reason": info["nf_reason"]}
+    iters = [r["iterations"] for r in ok]
+    return {"range_m": float(range_m), "range_mm": paper_range_mm(range_m), "tables": list(paper_tables(range_m)),
+            "truth": np.array([info[f"truth_{c}"] for c in COLUMNS], float),
+            "cols": np.array([[r[c] for c in COLUMNS] for r in ok], float).reshape(-1, 6), "frame_rows": rows,
+            "fails": fails, "rot_err_deg": np.array([r["rot_err_deg"] for r in ok], float),
+            "integration_time_s": info["integration_time_used_s"],
+            "saturated_pixels": int(rows[0]["saturated_pixels"]) if rows else None,
+            "max_amplitude_lsb": info["max_amplitude_lsb"], "render_s": info["render_s"], "frames_s": frames_s,
+            "frames": int(frames), "spp": info["spp_used"], "rim_spp": info["rim_spp_used"], "reference": reference,
+            "noise_free": noise_free, "iterations_median": float(np.median(iters)) if iters else None}
+
+
+def run_stability(tof_render, range_m: float, frames: int, *, pipeline: dict | None = None, reference: str = "markers",
+                  progress=None) -> dict:
+    """Draw ``frames`` noisy frames from one render of the stability scenario and solve them in sequence.
+
+    Parameters
+    ----------
+    tof_render : sim.tof_closed_loop.TofRender
+        :func:`sim.tof_closed_loop.render` of :func:`stability_scenario` at ``range_m``.
     range_m : float
+        The run's nominal range (selects the paper's tables).
     frames : int
         1 .. :data:`MAX_FRAMES`.
-    seed : int
-        Seed of the render and (with ``7``) of the frames' noise.
     pipeline : dict, optional
         :class:`tof.pipeline.PipelineParams` overrides (``persistence_window``, ``max_active_pixels``...).
     reference : {"markers", "plate"}
     progress : callable, optional
         Called with 1 after each frame (a progress bar's ``update``).
-    rendered : camera.amcw.RenderedTof, optional
-        This renderer's render of the scenario at ``seed`` and the sensor's frequency, from an
-        earlier run (the ``rendered`` of its result): reused instead of rendering again.
 
     Returns
     -------
     dict
-        ``range_m``, ``scenario`` (without arrays), ``truth`` (6,), ``cols`` (K, 6) of the solved
-        frames, ``frame_rows`` (per frame: ``frame, ok, reason`` and the columns or None),
-        ``fails`` (reason -> count), ``rot_err_deg`` (K,), ``integration_time_s``,
-        ``saturated_pixels`` (first frame), ``max_amplitude_lsb`` (noise-free), ``noise_free``
-        (the noise-free frame's centroid errors and pose error), ``render_s``, ``frames_s``,
-        ``spp``, ``rim_spp`` (the samples per pixel on the marker rims), ``reference``,
-        ``iterations_median`` (line-of-sight refinement iterations, median over solved frames),
-        ``rendered``.
+        :func:`assemble_run`.
     """
-    import tof
-    from svgs.frames import rotation_angle_deg
+    from sim.tof_closed_loop import solve_frames
 
     frames = check_frames(frames)
-    sc = scenario_for_range(range_m)
-    R, t = sc["R_cam_target"], sc["t_cam_target_m"]
-    pt = reference_point_m(renderer.target, reference)
+    pt = reference_point_m(tof_render.target, reference)
+    info = run_info(tof_render, pipeline, pt)
     t0 = time.perf_counter()
-    if rendered is None:
-        rendered = renderer.render(R, t, seed=seed, modulation_frequency_hz=sensor.modulation_frequency_hz)
-    render_s = time.perf_counter() - t0
-    clean = sensor.frame(rendered, noise=False)
-    noise_free = _noise_free(renderer, rendered, clean, pipeline, R, t, pt)
-    pipe = tof.TofPipeline(renderer.camera, renderer.target, **(pipeline or {}))
-    cols, rows, rot, fails, iters = [], [], [], {}, []
-    sat0 = None
-    t0 = time.perf_counter()
-    for k, fr in enumerate(sensor.frames(rendered, frames, [seed, 7])):
-        if sat0 is None:
-            sat0 = int(fr.saturated.sum())
-        res = pipe.process(fr.gray, fr.depth_m)
-        if res:
-            c = pose_columns(res.R_cam_target, res.t_cam_target_m, R, pt)
-            cols.append(c)
-            rot.append(float(rotation_angle_deg(res.R_cam_target, R)))
-            iters.append(res.iterations)
-            rows.append({"frame": k, "ok": True, "reason": None, **dict(zip(COLUMNS, c.tolist()))})
-        else:
-            fails[res.reason] = fails.get(res.reason, 0) + 1
-            rows.append({"frame": k, "ok": False, "reason": res.reason, **{c: None for c in COLUMNS}})
-        if progress is not None:
-            progress(1)
-    frames_s = time.perf_counter() - t0
-    return {"range_m": float(range_m), "range_mm": sc["range_mm"], "tables": list(sc["tables"]),
-            "truth": pose_columns(R, t, R, pt), "cols": np.array(cols).reshape(-1, 6), "frame_rows": rows,
-            "fails": fails, "rot_err_deg": np.array(rot), "integration_time_s": float(clean.integration_time_s),
-            "saturated_pixels": sat0, "max_amplitude_lsb": float(np.max(clean.amplitude_dn)),
-            "render_s": render_s, "frames_s": frames_s, "frames": frames,
-            "spp": rendered.truth["render"]["spp"], "rim_spp": rendered.truth["render"].get("rim_spp"),
-            "reference": reference, "noise_free": noise_free,
-            "iterations_median": float(np.median(iters)) if iters else None,
-            "rendered": rendered}
-
-
-def _noise_free(renderer, rendered, clean, pipeline, R, t, pt) -> dict:
-    """The noise-free frame through the pipeline: the centroid errors against the projected face
-    centres (px) and the pose error per column (the bias part of the single-frame error)."""
-    import tof
-
-    res = tof.TofPipeline(renderer.camera, renderer.target, **(pipeline or {})).process(clean.gray, clean.depth_m)
-    if not res:
-        return {"ok": False, "reason": res.reason}
-    truth_px = rendered.truth["targets_px"]
-    e = np.array([np.hypot(*(np.asarray(res.targets_px[k]) - np.asarray(truth_px[str(k)]))) for k in sorted(res.targets_px)])
-    err = pose_columns(res.R_cam_target, res.t_cam_target_m, R, pt) - pose_columns(R, t, R, pt)
-    return {"ok": True, "centroid_err_rms_px": float(np.sqrt(np.mean(e**2))), "centroid_err_max_px": float(e.max()),
-            "pose_error": dict(zip(COLUMNS, err.tolist()))}
+    results, _ = solve_frames(tof_render, frames, pipeline, progress=progress)
+    rows = [frame_row(r, tof_render, pt) for r in results]
+    return assemble_run(range_m, rows, info, frames=frames, reference=reference, frames_s=time.perf_counter() - t0)
 
 
 def check_frames(frames) -> int:

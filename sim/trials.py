@@ -40,7 +40,7 @@ from svgs.frames import STATE_KEYS
 #: (a module that is not installed is skipped). The render-and-solve trial of the campaign,
 #: the sensitivity study, the range sweep and the exposure study registers itself from
 #: ``sim.render_trial``. Studies run the trials with :func:`studies.execution.run_task`.
-KIND_MODULES = ("sim.render_trial",)
+KIND_MODULES = ("sim.render_trial", "sim.tof_trial")
 
 #: Columns every study row has besides the scenario and the kind's outputs.
 ID_COLUMNS = ("trial_id", "seed")

@@ -11,12 +11,15 @@ from __future__ import annotations
 import csv
 import sys
 import time
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
-from sim.tof_stability import COLUMNS, run_stability, scenario_for_range, summary
+from sim.tof_stability import COLUMNS, summary
 
+#: Short names of the columns in the report's sentences.
+SHORT_NAMES = dict(zip(COLUMNS, ("x", "y", "z", "roll", "pitch", "yaw")))
 #: The paper's two ranges (m).
 PAPER_RANGES_M = (0.697, 5.712)
 #: Ranges of the Fig. 14 sweep (m).
@@ -84,123 +87,227 @@ def _fmt(v, d=3):
     return "nan" if v is None or not np.isfinite(v) else f"{v:.{d}f}"
 
 
-def run_study(camera, target, out: Path, *, frames=500, variant_frames=200, sweep_frames=40, long_frames=3000, seed=0,
-              spp=None, rim_spp_factor=None, ambient_lux=None, scene=None, argv=(), quiet=False) -> dict:
-    """Run everything and write the report; returns the numbers (JSON-serialisable).
+@dataclass(frozen=True)
+class TofStudyConfig:
+    """What the ToF study computes (its manifest); how it runs is not part of it.
 
-    ``spp`` and ``rim_spp_factor``: the renders' samples per pixel and the factor on them at the
-    marker rims (None: :class:`render.tof.camera.TofRenderer`'s defaults)."""
-    from camera.amcw import TofSensor
-    from render.tof.camera import TofRenderer
-    from studies.progress import progress_bar
+    Attributes
+    ----------
+    camera, pattern : str
+        ToF camera profile and marker target (names or paths).
+    frames, variant_frames, sweep_frames, long_frames : int
+        Frames of the stability runs, of each mechanism and stopping-rule run, per range of the
+        Fig. 14 sweep, and of the long run (0: none).
+    seed : int
+        Every run's render seed and noise stream (:mod:`sim.tof_trial`).
+    spp, rim_spp_factor : int or None
+        The renders' samples per pixel and the factor at the marker rims (None: the renderer's).
+    ambient_lux : float or None
+        The sensor's ambient light (None: the profile's).
+    scene : tuple of (str, value)
+        Scene options of every render (``marker_material``, ``sheeting``).
+    """
+
+    camera: str = "tof-epc660"
+    pattern: str = "tof-8"
+    frames: int = 500
+    variant_frames: int = 200
+    sweep_frames: int = 40
+    long_frames: int = 3000
+    seed: int = 0
+    spp: int | None = None
+    rim_spp_factor: int | None = None
+    ambient_lux: float | None = None
+    scene: tuple = ()
+
+    def manifest(self) -> dict:
+        d = asdict(self)
+        d["scene"] = dict(self.scene)
+        return {"study": "tof-study", "trial_kind": "tof", **d}
+
+    def scenario(self, range_m: float, *, scene: dict | None = None, max_bounces: int = 1, **sensor):
+        """The stability scenario at ``range_m`` with this study's render and sensor settings."""
+        from sim.tof_stability import stability_scenario
+
+        so = {**dict(self.scene), **(scene or {})}
+        kw = {"ambient_lux": self.ambient_lux, **sensor}
+        return stability_scenario(range_m, camera=self.camera, pattern=self.pattern, seed=self.seed, spp=self.spp,
+                                  rim_spp_factor=self.rim_spp_factor, max_bounces=max_bounces,
+                                  scene_options=tuple(so.items()), **kw)
+
+
+def auto_integration_times(cfg: TofStudyConfig) -> dict:
+    """The automatic integration time at the paper's two ranges (s; the baseline renders'
+    noise-free frames): the mechanism runs at a quarter of it and at the far range's."""
+    from sim.tof_closed_loop import noise_free_frame
+    from sim.tof_trial import cached_render
+
+    return {r: float(noise_free_frame(cached_render(cfg.scenario(r))).integration_time_s) for r in PAPER_RANGES_M}
+
+
+def study_runs(cfg: TofStudyConfig, auto_T: dict) -> list:
+    """Every run of the study, in trial order: ``(section, label, TofTrialScenario of frame 0, extra)``.
+
+    ``section``: ``baseline``, ``mechanism``, ``sweep``, ``stopping`` or ``long``; ``extra``:
+    the mechanism's explanation, the sweep's scheme or the stopping rule's overrides.
+    """
+    from sim.tof_trial import TofTrialScenario
+
+    def run(r, frames, label, pipeline=None, reference="markers", scenario=None):
+        sc = scenario if scenario is not None else cfg.scenario(r)
+        return TofTrialScenario(sc, float(r), int(frames), 0, tuple((pipeline or {}).items()), reference, label)
+
+    out = [("baseline", f"baseline @ {r}", run(r, cfg.frames, f"baseline @ {r}"), None) for r in PAPER_RANGES_M]
+    for label, ranges, rkw, skw, pkw, ref, why in _variants(auto_T[PAPER_RANGES_M[1]], auto_T[PAPER_RANGES_M[0]]):
+        for r in ranges:
+            sc = cfg.scenario(r, scene=rkw.get("scene_options"), max_bounces=rkw.get("max_bounces", 1), **skw)
+            name = f"mechanism {label} @ {r}"
+            out.append(("mechanism", label, run(r, cfg.variant_frames, name, pkw, ref, sc), why))
+    for scheme, pkw in SWEEP_SCHEMES:
+        for r in SWEEP_RANGES_M:
+            out.append(("sweep", scheme, run(r, cfg.sweep_frames, f"sweep {scheme} @ {r}", pkw), None))
+    for label, pkw in STOPPING_RULES:
+        if not pkw:  # the default: the baseline runs and the sweep above
+            continue
+        for r in (*PAPER_RANGES_M, *SWEEP_RANGES_M):
+            n = cfg.variant_frames if r in PAPER_RANGES_M else cfg.sweep_frames
+            out.append(("stopping", label, run(r, n, f"stopping {label} @ {r}", pkw), pkw))
+    if cfg.long_frames:
+        r = PAPER_RANGES_M[0]
+        out.append(("long", "long run", run(r, cfg.long_frames, f"long run @ {r}"), None))
+    return out
+
+
+def study_trials(runs) -> list:
+    """The study engine's trials: every frame of every run, ids in run order, each with its run's seed."""
+    from dataclasses import replace
+
+    from .execution import Trial
+
+    trials = []
+    for _, _, first, _ in runs:
+        for k in range(first.frames):
+            trials.append(Trial(len(trials), replace(first, frame=k).to_row(), int(first.scenario.seed)))
+    return trials
+
+
+def runs_from_rows(runs, rows) -> list:
+    """The stored rows back as the stability runs of :func:`sim.tof_stability.assemble_run`, one per run."""
+    from sim.tof_stability import COLUMNS, RUN_INFO_KEYS, assemble_run
+
+    by_label: dict = {}
+    for r in rows:
+        by_label.setdefault(r["run"], []).append(r)
+    out = []
+    for _, _, first, _ in runs:
+        rr = sorted(by_label[first.run], key=lambda x: x["frame"])
+        frame_rows = [{"frame": int(x["frame"]), "ok": bool(x["ok"]), "reason": x["reason"], "n_blobs": x["n_blobs"],
+                       "iterations": x["iterations"], **{c: x[f"col_{c}"] for c in COLUMNS}, "rot_err_deg": x["rot_err_deg"],
+                       "saturated_pixels": x["saturated_pixels"]} for x in rr]
+        info = {k: rr[0][k] for k in RUN_INFO_KEYS}
+        info["nf_ok"] = bool(info["nf_ok"])
+        out.append(assemble_run(first.nominal_range_m, frame_rows, info, frames=first.frames, reference=first.reference,
+                                frames_s=float(sum(x["wall_s"] for x in rr))))
+    return out
+
+
+def run_study(cfg: TofStudyConfig, out: Path, spec=None, *, store_dir=None, chunk_size=None, argv=(), quiet=False) -> dict:
+    """Run (or resume) every run as trials of the ``tof`` kind and write the report; returns the
+    numbers (JSON-serialisable).
+
+    Parameters
+    ----------
+    cfg : TofStudyConfig
+    out : str or Path
+        Folder of the report and its figures.
+    spec : studies.execution.ExecutorSpec, optional
+        How the trials run (default: in this process).
+    store_dir : str or Path, optional
+        The results store (default ``out / "tof-study"``); a rerun skips the stored trials, a
+        changed ``cfg`` is refused.
+    chunk_size : int, optional
+        Trials per task, at least (:func:`sim.tof_trial.chunk_frames`: a run stays in one task).
+    """
+    from sim.tof_closed_loop import load_scene, make_sensor
+    from sim.trials import get_trial_kind
+    from sim.tof_trial import cached_render, chunk_frames
+
+    from .execution import ExecutorSpec, run_stored_study
 
     t_start = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    sensor = TofSensor.from_camera(camera, ambient_lux=ambient_lux)
-    counts = {"spp": spp, "rim_spp_factor": rim_spp_factor}  # the sample counts of every render below
-    base = TofRenderer(camera, target, **counts, scene_options=scene or {},
-                       modulation_frequency_hz=sensor.modulation_frequency_hz)
+    camera, target = load_scene(cfg.camera, cfg.pattern)
 
     def log(msg):
         if not quiet:
             print(msg, file=sys.stderr, flush=True)
 
-    # ---- the stability runs at the paper's ranges
-    runs, sums = {}, {}
-    for r in PAPER_RANGES_M:
-        log(f"stability at {r} m, {frames} frames")
-        with progress_bar(frames, f"{r} m", enabled=not quiet, unit="frame") as bar:
-            runs[r] = run_stability(base, sensor, r, frames, seed=seed, progress=bar.update)
-        sums[r] = summary(runs[r])
-    T_far = runs[PAPER_RANGES_M[1]]["integration_time_s"]
-    T_near = runs[PAPER_RANGES_M[0]]["integration_time_s"]
-
-    # ---- mechanisms
-    variants = _variants(T_far, T_near)
-    n_var = sum(len(v[1]) for v in variants)
-    var_rows = []
-    with progress_bar(n_var * variant_frames, "mechanisms", enabled=not quiet, unit="frame") as bar:
-        for label, ranges, rkw, skw, pkw, ref, why in variants:
-            ren = base
-            if rkw:
-                so = {**(scene or {}), **rkw.get("scene_options", {})}
-                ren = TofRenderer(camera, target, **counts, scene_options=so, max_bounces=rkw.get("max_bounces", 1),
-                                  modulation_frequency_hz=sensor.modulation_frequency_hz)
-            sen = sensor.replace(**skw) if skw else sensor
-            for r in ranges:
-                reuse = runs[r]["rendered"] if ren is base and r in runs else None  # the same render
-                run = run_stability(ren, sen, r, variant_frames, seed=seed, pipeline=pkw, reference=ref,
-                                    progress=bar.update, rendered=reuse)
-                var_rows.append({"label": label, "why": why, "range_m": r, "summary": summary(run)})
-
-    # ---- Fig. 14: accuracy against distance
-    sweep = []
-    with progress_bar(len(SWEEP_SCHEMES) * len(SWEEP_RANGES_M) * sweep_frames, "Fig. 14 sweep", enabled=not quiet,
-                      unit="frame") as bar:
-        renders = {}  # one render per range, shared by the two schemes
-        for scheme, pkw in SWEEP_SCHEMES:
-            for r in SWEEP_RANGES_M:
-                run = run_stability(base, sensor, r, sweep_frames, seed=seed, pipeline=pkw, progress=bar.update,
-                                    rendered=renders.get(r))
-                renders[r] = run["rendered"]
-                sweep.append(_sweep_row(scheme, r, run, sweep_frames))
-
-    # ---- the stopping rule of the literal iteration: Tables 2, 3 and the Fig. 14 range error
-    stopping = []
-    n_rules = sum(1 for _, pkw in STOPPING_RULES if pkw)
-    with progress_bar(n_rules * (2 * variant_frames + len(SWEEP_RANGES_M) * sweep_frames), "stopping rule",
-                      enabled=not quiet, unit="frame") as bar:
-        for label, pkw in STOPPING_RULES:
-            row = {"label": label, "pipeline": pkw, "ratio_to_paper": {}, "iterations_median": {}, "fig14_z_rms_mm": {}}
-            if not pkw:  # the default: the baseline runs (frames of the stability runs) and the sweep above
-                for r, tab in zip(PAPER_RANGES_M, ("3", "2")):
-                    row["ratio_to_paper"][tab] = sums[r]["ratio_to_paper"][tab]
-                    row["iterations_median"][str(r)] = runs[r]["iterations_median"]
-                for sw in sweep:
-                    if sw["scheme"] == SWEEP_SCHEMES[0][0]:
-                        row["fig14_z_rms_mm"][str(sw["range_m"])] = sw["rms_error"]["z_mm"] if sw["rms_error"] else None
-                stopping.append(row)
-                continue
-            for r, tab in zip(PAPER_RANGES_M, ("3", "2")):
-                run = run_stability(base, sensor, r, variant_frames, seed=seed, pipeline=pkw, progress=bar.update,
-                                    rendered=runs[r]["rendered"])
-                row["ratio_to_paper"][tab] = summary(run)["ratio_to_paper"][tab]
-                row["iterations_median"][str(r)] = run["iterations_median"]
-            for r in SWEEP_RANGES_M:
-                run = run_stability(base, sensor, r, sweep_frames, seed=seed, pipeline=pkw, progress=bar.update,
-                                    rendered=renders[r])
-                row["fig14_z_rms_mm"][str(r)] = _sweep_row(label, r, run, sweep_frames)["rms_error"]["z_mm"] if run["cols"].size else None
-            stopping.append(row)
-
-    # ---- the long run at 697 mm (Table 1's ~6000 s)
-    long = None
-    if long_frames:
-        log(f"long run at {PAPER_RANGES_M[0]} m, {long_frames} frames")
-        with progress_bar(long_frames, "long run", enabled=not quiet, unit="frame") as bar:
-            lr = run_stability(base, sensor, PAPER_RANGES_M[0], long_frames, seed=seed, progress=bar.update,
-                               rendered=runs[PAPER_RANGES_M[0]]["rendered"])
-        long = _long_run(lr)
-
-    # ---- failure modes
+    log("automatic integration times at the paper's ranges (the baseline renders)")
+    auto_T = auto_integration_times(cfg)
+    runs = study_runs(cfg, auto_T)
+    trials = study_trials(runs)
+    store, _ = run_stored_study(get_trial_kind("tof"), trials, Path(store_dir) if store_dir else out / "tof-study",
+                                cfg.manifest(), spec or ExecutorSpec("inline", 1),
+                                chunk_size=chunk_frames(max(r[2].frames for r in runs), chunk_size),
+                                progress=not quiet, description="ToF study frames")
+    done = runs_from_rows(runs, store.read_rows())
+    res = _sections(runs, done)
     log("failure modes")
-    fm = failure_modes(camera, target, sensor, counts, scene or {}, seed, out / "tof_failure_modes.png")
-
-    # ---- figures and files
-    plot_series(out / "tof_stability_series.png", runs, sums)
-    plot_mechanisms(out / "tof_mechanisms.png", sums, var_rows)
-    plot_sweep(out / "tof_fig14.png", sweep)
-    csv_path = write_csv(out / "tof_stability.csv", sums, var_rows, sweep)
+    sensor = make_sensor(cfg.scenario(1.0), camera)
+    fm = failure_modes(cfg, camera, target, out / "tof_failure_modes.png")
+    runs_d, sums = res["runs"], res["sums"]
+    plot_series(out / "tof_stability_series.png", runs_d, sums)
+    plot_mechanisms(out / "tof_mechanisms.png", sums, res["var_rows"])
+    plot_sweep(out / "tof_fig14.png", res["sweep"])
+    csv_path = write_csv(out / "tof_stability.csv", sums, res["var_rows"], res["sweep"])
     wall = time.perf_counter() - t_start
-    md = write_markdown(out / "tof_stability.md", camera, target, sensor, base, sums, runs, var_rows, sweep, fm,
-                        frames, variant_frames, sweep_frames, seed, argv, wall, stopping=stopping, long=long)
-    return {"stability": {str(r): s for r, s in sums.items()}, "stopping_rule": stopping, "long_run": long,
+    base = cached_render(cfg.scenario(PAPER_RANGES_M[0])).renderer
+    md = write_markdown(out / "tof_stability.md", camera, target, sensor, base, sums, runs_d, res["var_rows"], res["sweep"],
+                        fm, cfg.frames, cfg.variant_frames, cfg.sweep_frames, cfg.seed, argv, wall,
+                        stopping=res["stopping"], long=res["long"])
+    return {"stability": {str(r): s for r, s in sums.items()}, "stopping_rule": res["stopping"], "long_run": res["long"],
             "mechanisms": [{"label": v["label"], "range_m": v["range_m"], "ratio_to_paper": v["summary"]["ratio_to_paper"],
-                            "fluctuation": v["summary"]["fluctuation"], "solved": v["summary"]["solved"]} for v in var_rows],
-            "fig14": sweep, "failure_modes": fm, "wall_s": wall,
+                            "fluctuation": v["summary"]["fluctuation"], "solved": v["summary"]["solved"]}
+                           for v in res["var_rows"]],
+            "fig14": res["sweep"], "failure_modes": fm, "wall_s": wall,
             "outputs": {"report": str(md), "csv": str(csv_path), "series": str(out / "tof_stability_series.png"),
                         "mechanisms": str(out / "tof_mechanisms.png"), "fig14": str(out / "tof_fig14.png"),
                         "failure_modes": str(out / "tof_failure_modes.png")}}
+
+
+def _sections(runs, done) -> dict:
+    """The report's sections from the finished runs (in :func:`study_runs` order)."""
+    runs_d, sums, var_rows, sweep, long = {}, {}, [], [], None
+    stopping_runs: dict = {}
+    for (section, label, first, extra), run in zip(runs, done):
+        r = first.nominal_range_m
+        if section == "baseline":
+            runs_d[r], sums[r] = run, summary(run)
+        elif section == "mechanism":
+            var_rows.append({"label": label, "why": extra, "range_m": r, "summary": summary(run)})
+        elif section == "sweep":
+            sweep.append(_sweep_row(label, r, run, first.frames))
+        elif section == "stopping":
+            stopping_runs.setdefault(label, {"pipeline": extra, "runs": {}})["runs"][r] = run
+        else:
+            long = _long_run(run)
+    stopping = []
+    for label, pkw in STOPPING_RULES:
+        row = {"label": label, "pipeline": pkw, "ratio_to_paper": {}, "iterations_median": {}, "fig14_z_rms_mm": {}}
+        for r, tab in zip(PAPER_RANGES_M, ("3", "2")):
+            run = runs_d[r] if not pkw else stopping_runs[label]["runs"][r]
+            row["ratio_to_paper"][tab] = (sums[r] if not pkw else summary(run))["ratio_to_paper"][tab]
+            row["iterations_median"][str(r)] = run["iterations_median"]
+        for r in SWEEP_RANGES_M:
+            if not pkw:
+                sw = next(s for s in sweep if s["scheme"] == SWEEP_SCHEMES[0][0] and s["range_m"] == r)
+            else:
+                run = stopping_runs[label]["runs"][r]
+                sw = _sweep_row(label, r, run, run["frames"])
+            row["fig14_z_rms_mm"][str(r)] = sw["rms_error"]["target_z_cam_mm"] if sw["rms_error"] else None
+        stopping.append(row)
+    return {"runs": runs_d, "sums": sums, "var_rows": var_rows, "sweep": sweep, "stopping": stopping, "long": long}
 
 
 def _long_run(run) -> dict:
@@ -225,7 +332,7 @@ def _sweep_row(scheme, r, run, frames) -> dict:
     err = C - tr
     ok = C.shape[0] > 0
     return {"scheme": scheme, "range_m": r, "solved": int(C.shape[0]), "frames": frames,
-            "mean_error": dict(zip(COLUMNS, err.mean(0).tolist())) if ok else None,
+            "bias": dict(zip(COLUMNS, err.mean(0).tolist())) if ok else None,
             "rms_error": dict(zip(COLUMNS, np.sqrt((err**2).mean(0)).tolist())) if ok else None,
             "std": dict(zip(COLUMNS, C.std(0).tolist())) if ok else None,
             "rot_err_rms_deg": float(np.sqrt(np.mean(run["rot_err_deg"] ** 2))) if ok else None,
@@ -245,29 +352,12 @@ def _depth_change(ra, rb) -> dict:
             "plate_depth_change_mm_p95": float(np.nanpercentile(np.abs(dd[plate]), 95))}
 
 
-def failure_modes(camera, target, sensor, counts, scene, seed, png_path) -> dict:
-    """Flying pixels at the marker rims, multipath from the plate, 10 klux: measured at 1 m and 0.697 m.
-    ``counts``: the renderers' ``spp`` and ``rim_spp_factor`` (keyword arguments)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    import tof
-    from render.tof.camera import TofRenderer
-
-    res = {}
-    sc = scenario_for_range(1.0)
-    R, t = sc["R_cam_target"], sc["t_cam_target_m"]
-    one = TofRenderer(camera, target, **counts, scene_options=scene, modulation_frequency_hz=sensor.modulation_frequency_hz)
-    two = TofRenderer(camera, target, **counts, scene_options=scene, max_bounces=2,
-                      modulation_frequency_hz=sensor.modulation_frequency_hz)
-    r1 = one.render(R, t, seed=seed)
-    r2 = two.render(R, t, seed=seed)
-    # flying pixels: noise-free phasor depth more than 5 mm from both the marker face and the plate
+def _flying_pixels(camera, target, r1) -> tuple:
+    """Rim pixels of the noise-free render ``r1`` whose phasor depth lies more than 5 mm from both
+    the marker face and the plate behind it: (mask (H, W), count per marker)."""
     d1 = r1.depth_m
     ids = [str(int(i)) for i in target.ids]
-    face_r = {k: v for k, v in r1.truth["targets_range_m"].items()}
+    face_r = {k: v for k, v in r1.truth["targets_slant_range_m"].items()}
     mixed = np.zeros(d1.shape, bool)
     H, W = d1.shape
     vv, uu = np.mgrid[0:H, 0:W]
@@ -282,37 +372,57 @@ def failure_modes(camera, target, sensor, counts, scene, seed, png_path) -> dict
         m = ring & (d1 > face_r[k] + 0.005) & (d1 < far - 0.005)
         mixed |= m
         rim_counts[k] = int(m.sum())
+    return mixed, rim_counts
+
+
+#: A bright wall standing out of the plate beside the markers (a part of the spacecraft).
+WALL = {"type": "box", "lo_m": [0.205, -0.16, 0.0], "hi_m": [0.215, 0.16, 0.30], "albedo": 0.8}
+
+
+def failure_modes(cfg, camera, target, png_path) -> dict:
+    """Flying pixels at the marker rims, multipath from the plate and from a wall, 10 klux: measured
+    at 1 m head-on (renders of :mod:`sim.tof_closed_loop` with the study's settings)."""
+    from sim.tof_closed_loop import noise_free_frame, pipeline, render, solve
+
+    res = {}
+    one, two = (render(cfg.scenario(1.0, max_bounces=b)) for b in (1, 2))
+    w1, w2 = (render(cfg.scenario(1.0, scene={"distractors": [WALL]}, max_bounces=b)) for b in (1, 2))
+    r1, r2, rw1, rw2 = one.rendered, two.rendered, w1.rendered, w2.rendered
+    mixed, rim_counts = _flying_pixels(camera, target, r1)
     res["flying_pixels_1m"] = {"count": int(mixed.sum()), "per_marker": rim_counts,
                                "note": "noise-free depth more than 5 mm from both the marker face and the plate behind it"}
     # multipath: depth change of marker and plate pixels with a second bounce
     res["multipath_1m"] = _depth_change(r1, r2)
-    # multipath from a bright wall standing out of the plate beside the markers (a part of the spacecraft)
-    wall = {"type": "box", "lo_m": [0.205, -0.16, 0.0], "hi_m": [0.215, 0.16, 0.30], "albedo": 0.8}
-    w1, w2 = (TofRenderer(camera, target, **counts, scene_options={**scene, "distractors": [wall]}, max_bounces=b,
-                          modulation_frequency_hz=sensor.modulation_frequency_hz) for b in (1, 2))
-    rw1, rw2 = w1.render(R, t, seed=seed), w2.render(R, t, seed=seed)
-    res["multipath_wall_1m"] = {**_depth_change(rw1, rw2), "wall": wall}
+    res["multipath_wall_1m"] = {**_depth_change(rw1, rw2), "wall": WALL}
+    d1 = r1.depth_m
     ddw = (rw2.depth_m - rw1.depth_m) * 1e3
     amp = np.abs(r1.phasor_radiance)
     bright = amp > 0.3 * amp.max()
     plate = np.isfinite(d1) & ~bright & (amp > 0)
-    # pose change from multipath and 10 klux (noise-free and noisy)
-    for label, ren_r, sen in (("direct", r1, sensor), ("multipath", r2, sensor), ("wall_direct", rw1, sensor),
-                              ("wall_multipath", rw2, sensor)):
-        fr = sen.frame(ren_r, noise=False)
-        sol = tof.solve_frame(fr.gray, fr.depth_m, camera, target)
-        res[f"pose_noise_free_{label}"] = ({"x_mm": float(sol.t_cam_target_m[0] * 1e3), "y_mm": float(sol.t_cam_target_m[1] * 1e3),
-                                            "z_mm": float(sol.t_cam_target_m[2] * 1e3)} if sol else {"failed": sol.reason})
+    # pose change from multipath (noise-free)
+    for label, tr in (("direct", one), ("multipath", two), ("wall_direct", w1), ("wall_multipath", w2)):
+        sol = solve(tr, 0, noise_free_frame(tr), pipeline(tr)).solution
+        res[f"pose_noise_free_{label}"] = ({f"target_{a}_cam_mm": float(sol.t_cam_target_m[i] * 1e3) for i, a in enumerate("xyz")}
+                                           if sol else {"failed": sol.reason})
     amb = {}
     for lux in (1000.0, 10000.0):
-        sen = sensor.replace(ambient_lux=lux)
-        d = np.stack([f.depth_m for f in sen.frames(r1, 30, [seed, 3])]).astype(float)
+        sen = one.sensor.replace(ambient_lux=lux)
+        d = np.stack([f.depth_m for f in sen.frames(r1, 30, [cfg.seed, 3])]).astype(float)  # per-pixel depth noise
         sel = bright & np.all(np.isfinite(d), axis=0)
         sel_plate = plate & np.all(np.isfinite(d), axis=0)
         amb[str(int(lux))] = {"marker_depth_std_mm": float(np.median(np.std(d[:, sel], axis=0)) * 1e3) if sel.any() else None,
                               "plate_depth_std_mm": float(np.median(np.std(d[:, sel_plate], axis=0)) * 1e3) if sel_plate.any() else None,
                               "plate_valid_fraction": float(np.mean(np.isfinite(d[:, plate]))) if plate.any() else None}
     res["ambient_1m"] = amb
+    _plot_failure_modes(png_path, r1, d1, mixed, ddw, amb)
+    return res
+
+
+def _plot_failure_modes(png_path, r1, d1, mixed, ddw, amb) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(1, 3, figsize=(13, 4.2))
     c6 = np.asarray(r1.truth["targets_px"]["7"])
@@ -342,7 +452,6 @@ def failure_modes(camera, target, sensor, counts, scene, seed, png_path) -> dict
     fig.tight_layout()
     fig.savefig(png_path, dpi=110)
     plt.close(fig)
-    return res
 
 
 def plot_series(path, runs, sums) -> None:
@@ -411,10 +520,10 @@ def plot_sweep(path, sweep) -> None:
         rows = [s for s in sweep if s["scheme"] == scheme]
         r = np.array([s["range_m"] for s in rows])
         ls = ("-", "--", ":")[k]
-        for j, c in enumerate(("x_mm", "y_mm", "z_mm")):
+        for j, c in enumerate(COLUMNS[:3]):
             axes[0].plot(r, [s["rms_error"][c] if s["rms_error"] else np.nan for s in rows], "o" + ls, ms=3,
                          color=f"C{j}", label=f"{c} ({scheme})")
-        for j, c in enumerate(("pitch_deg", "yaw_deg", "roll_deg")):
+        for j, c in enumerate(COLUMNS[3:]):
             axes[1].plot(r, [s["rms_error"][c] if s["rms_error"] else np.nan for s in rows], "o" + ls, ms=3,
                          color=f"C{j + 3}", label=f"{c} ({scheme})")
     axes[0].axhline(PAPER_ACCURACY["mm"], color="k", ls=":", lw=0.8, label="paper: 2 mm")
@@ -471,7 +580,7 @@ def stopping_section(stopping, sweep_frames, variant_frames) -> list[str]:
          "module's cap since issue 13); neither is in the paper, so the rows below give the sensitivity "
          f"({variant_frames} frames per paper range, {sweep_frames} per sweep range; the same renders and noise "
          "draws as above; the default's row is the baseline runs and the Fig. 14 sweep).", "",
-         "| stopping rule | iterations 0.697 / 5.712 m | T3 ratios x, y, z, pitch, yaw, roll | T2 ratios x, y, z, pitch, yaw, roll | "
+         "| stopping rule | iterations 0.697 / 5.712 m | T3 ratios x, y, z, roll, pitch, yaw | T2 ratios x, y, z, roll, pitch, yaw | "
          + " | ".join(f"z RMS {r:g} m" for r in far_r) + " |", "|---|---|---|---|" + "---|" * len(far_r)]
     for row in stopping:
         it = row["iterations_median"]
@@ -520,6 +629,11 @@ def expected_range_sigma(n: int) -> float:
 
 def write_markdown(path, camera, target, sensor, renderer, sums, runs, var_rows, sweep, fm, frames, variant_frames,
                    sweep_frames, seed, argv, wall_s, stopping=None, long=None) -> Path:
+    """``tof_stability.md``: the report, section by section from the numbers.
+
+    Longer than ~80 lines on purpose: it is the report's template, read top to bottom as the
+    report reads; its sections that compute (:func:`findings`, :func:`stopping_section`,
+    :func:`long_section`) are functions of their own."""
     ill = renderer.illumination
     sheet = renderer.geometry.materials
     L = ["# The ToF sensor re-enacted: Zhu et al. 2022, Tables 1-3 and Fig. 14", "",
@@ -536,11 +650,13 @@ def write_markdown(path, camera, target, sensor, renderer, sums, runs, var_rows,
          "Where each figure comes from: `docs/tof.md`. Pipeline: the defaults of `tof.PipelineParams` - the paper's "
          "literal line-of-sight iteration (section 5.2) from the SVD of the centroid-depth points, stopped when one step "
          "changes the pose by < 1e-6 m / 1e-6 rad or after 500 iterations (below: its sensitivity).", "",
-         "Columns: the paper's axes. x, y, z (mm) of the centroid of the eight marker faces in the camera frame "
-         "(the paper gives no target frame; its Table 2 - pitch fluctuating 0.52 deg, x only 0.19 mm - puts its "
-         "reference point within ~2 cm of that centroid along the boresight; the plate-centre variant below shows "
-         "the difference); pitch, yaw, roll (deg) = our paper-state roll, pitch, yaw (roll is the rotation about "
-         "the line of sight). Fluctuation = maximum - minimum over the run, as the paper's tables.", ""]
+         "Columns: the paper's Tables 1-3 in its order. target_x_cam_mm, target_y_cam_mm, target_z_cam_mm: the "
+         "centroid of the eight marker faces in the camera frame (OpenCV axes; not the state's x_m, y_m, z_m, the "
+         "camera in the target frame; the paper gives no target frame; its Table 2 - its pitch fluctuating 0.52 deg, "
+         "x only 0.19 mm - puts its reference point within ~2 cm of that centroid along the boresight; the "
+         "plate-centre variant below shows the difference); roll_deg, pitch_deg, yaw_deg: the paper state's angles, "
+         "which the paper calls pitch, yaw, roll (our roll is the rotation about the line of sight). Fluctuation = "
+         "maximum - minimum over the run, as the paper's tables.", ""]
     tabs = {PAPER_RANGES_M[0]: ("1", "3"), PAPER_RANGES_M[1]: ("2",)}
     for r in PAPER_RANGES_M:
         s, run = sums[r], runs[r]
@@ -601,19 +717,19 @@ def write_markdown(path, camera, target, sensor, renderer, sums, runs, var_rows,
           "|---|---|---|" + "---|" * 9]
     for s in sweep:
         e = s["rms_error"] or {}
-        zr = e.get("z_mm") / PAPER_FIG14_Z_MM if e and s["range_m"] >= 5 else None
+        zr = e.get("target_z_cam_mm") / PAPER_FIG14_Z_MM if e and s["range_m"] >= 5 else None
         L.append(f"| {s['scheme']} | {s['range_m']:g} | {s['solved']}/{s['frames']} | " + " | ".join(_fmt(e.get(c)) for c in COLUMNS)
                  + f" | {_fmt(s['rot_err_rms_deg'])} | {_ratio_cells([zr]) if zr is not None else '-'} | {s['integration_time_s'] * 1e6:.2f} |")
     L.append("")
     for scheme, _ in SWEEP_SCHEMES:
         rows = [s for s in sweep if s["scheme"] == scheme and s["rms_error"]]
-        within = [s["range_m"] for s in rows if max(s["rms_error"][c] for c in ("x_mm", "y_mm", "z_mm")) <= 2.0
+        within = [s["range_m"] for s in rows if max(s["rms_error"][c] for c in COLUMNS[:3]) <= 2.0
                   and s["rot_err_rms_deg"] <= PAPER_ACCURACY["deg"]]
-        zmax = max(rows, key=lambda s: s["rms_error"]["z_mm"]) if rows else None
+        zmax = max(rows, key=lambda s: s["rms_error"]["target_z_cam_mm"]) if rows else None
         L.append(f"- {scheme}: single frames meet the paper's headline accuracy (2 mm and 0.13 deg, every position "
                  f"component and the total rotation) at {', '.join(f'{x:g}' for x in within) or 'no'} m; the largest "
-                 f"range error is {_fmt(zmax['rms_error']['z_mm'], 1) if zmax else 'nan'} mm RMS at "
-                 f"{zmax['range_m'] if zmax else 'nan'} m (mean error {_fmt(zmax['mean_error']['z_mm'], 1) if zmax else 'nan'} mm).")
+                 f"range error is {_fmt(zmax['rms_error']['target_z_cam_mm'], 1) if zmax else 'nan'} mm RMS at "
+                 f"{zmax['range_m'] if zmax else 'nan'} m (bias {_fmt(zmax['bias']['target_z_cam_mm'], 1) if zmax else 'nan'} mm).")
     L += ["", "The paper's Fig. 14 text: beyond 5 m its range error is 2.5 mm (larger below 5 m, which it puts down to "
           "the target's calibration and installation); its pitch and yaw accuracy is not analysed (coupled by the "
           "turntable). In the converged optimum the range comes from the pattern's apparent size, so the "
@@ -681,7 +797,7 @@ def findings(sums, var_rows) -> list[str]:
         return next((v["summary"] for v in var_rows if v["label"].startswith(prefix) and v["range_m"] == r), None)
 
     def cells(sm, tab):
-        return ", ".join(f"{c.split('_')[0]} {_fmt(sm['ratio_to_paper'][tab][c], 2)}" for c in COLUMNS)
+        return ", ".join(f"{SHORT_NAMES[c]} {_fmt(sm['ratio_to_paper'][tab][c], 2)}" for c in COLUMNS)
 
     gn, ml = one("converged optimum", far), one("ML depth", far)
     if gn and ml:
@@ -698,8 +814,8 @@ def findings(sums, var_rows) -> list[str]:
                      f"{cells(sums[near], '3')}); Table 2 ratios at {far * 1e3:.0f} mm {cells(b, '2')}.")
     ref = [v for v in var_rows if v["label"].startswith("reference point") and v["range_m"] == far]
     if ref:
-        L.append(f"- **Reference point**: at the plate centre x and y fluctuate {_fmt(ref[0]['summary']['ratio_to_paper']['2']['x_mm'], 1)}x "
-                 f"and {_fmt(ref[0]['summary']['ratio_to_paper']['2']['y_mm'], 1)}x the paper's at 5.7 m - the tilt noise "
+        L.append(f"- **Reference point**: at the plate centre x and y fluctuate {_fmt(ref[0]['summary']['ratio_to_paper']['2']['target_x_cam_mm'], 1)}x "
+                 f"and {_fmt(ref[0]['summary']['ratio_to_paper']['2']['target_y_cam_mm'], 1)}x the paper's at 5.7 m - the tilt noise "
                  "times the 125 mm lever - which is why the marker centroid is reported.")
     lam = [v for v in var_rows if v["label"].startswith("Lambertian") and v["range_m"] == far]
     if lam:

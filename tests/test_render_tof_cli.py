@@ -49,6 +49,11 @@ def test_render_and_solve_json_and_outputs(capsys, tmp_path):
     assert set(js["targets_px"]) == {str(k) for k in range(1, 9)}
     assert np.linalg.norm(js["pos_err_vec_m"]) < 0.01 and np.max(np.abs(js["att_err_vec_deg"])) < 0.5
     assert js["frame_statistics"]["fluctuation"]["z_m"] < 0.01
+    fs = js["frame_statistics"]
+    assert "mean_error" not in fs  # signed: "bias"; "mean_abs_error" and "rms" of the errors beside it
+    for k in STATE_KEYS:
+        assert fs["bias"][k] == pytest.approx(fs["mean"][k] - js["truth_state"][k], abs=1e-9)
+        assert abs(fs["bias"][k]) <= fs["mean_abs_error"][k] + 1e-12 <= fs["rms"][k] + 2e-12
     for name in ("gray.npy", "depth.npy", "rendered.npz", "truth.json", "solution.json", "frames.csv", "preview.png"):
         assert (tmp_path / name).is_file(), name
     g = np.load(tmp_path / "gray.npy")

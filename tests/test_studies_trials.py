@@ -105,7 +105,7 @@ def test_one_rendered_trial_kind_for_every_study():
     )
     from sim.trials import KIND_MODULES, build_scenario, known_trial_kinds
 
-    assert KIND_MODULES == ("sim.render_trial",) and "closed-loop" not in known_trial_kinds()
+    assert KIND_MODULES == ("sim.render_trial", "sim.tof_trial") and "closed-loop" not in known_trial_kinds()
     assert get_trial_kind("render") is RENDER
     s = build_scenario(RENDER, {"camera": "galaxy-nexus", "range_m": 8.0})
     assert (s["render_seed"], s["pattern_scale"], s["target_scale"], s["spp"], s["roi_spp"], s["threshold"]) == \

@@ -16,7 +16,9 @@ if importlib.util.find_spec("mitsuba") is None:
 
 pytestmark = pytest.mark.render
 
-COLUMNS = ("x_mm", "y_mm", "z_mm", "pitch_deg", "yaw_deg", "roll_deg")
+#: Our columns, written out: the target's reference point in the camera frame and the state's angles
+#: (the paper's x, y, z, pitch, yaw, roll in its order).
+COLUMNS = ("target_x_cam_mm", "target_y_cam_mm", "target_z_cam_mm", "roll_deg", "pitch_deg", "yaw_deg")
 FAST = ["--frames", "12", "--spp", "16"]
 
 
@@ -34,10 +36,11 @@ def test_json_schema_and_the_paper_table_at_5712_mm(capsys, tmp_path):
     for k in ("average", "maximum", "minimum", "fluctuation", "std", "truth"):
         assert set(d[k]) == set(COLUMNS)
     # Table 2 of the paper, as published (assets/data/tof_2022_stability.csv)
-    assert d["paper"]["2"]["fluctuation"]["z_mm"] == pytest.approx(2.116)
-    assert d["paper"]["2"]["average"]["x_mm"] == pytest.approx(5.097)
+    assert d["paper"]["2"]["fluctuation"]["target_z_cam_mm"] == pytest.approx(2.116)
+    assert d["paper"]["2"]["average"]["target_x_cam_mm"] == pytest.approx(5.097)
+    assert d["paper"]["2"]["fluctuation"]["roll_deg"] == pytest.approx(0.52, abs=0.005)  # the paper's "pitch"
     r = d["ratio_to_paper"]["2"]
-    assert r["z_mm"] == pytest.approx(d["fluctuation"]["z_mm"] / 2.116)
+    assert r["target_z_cam_mm"] == pytest.approx(d["fluctuation"]["target_z_cam_mm"] / 2.116)
     for c in COLUMNS:
         assert d["fluctuation"][c] == pytest.approx(d["maximum"][c] - d["minimum"][c])
         assert d["within_2x"]["2"][c] == (0.5 <= r[c] <= 2.0)
@@ -50,7 +53,7 @@ def test_json_schema_and_the_paper_table_at_5712_mm(capsys, tmp_path):
 def test_the_near_range_carries_tables_1_and_3_and_other_ranges_none(capsys):
     rc, d = run_json(capsys, "--range", "0.697", "--frames", "3", "--spp", "8")
     assert rc == 0 and set(d["paper"]) == {"1", "3"}
-    assert d["paper"]["3"]["fluctuation"]["x_mm"] == pytest.approx(0.378)
+    assert d["paper"]["3"]["fluctuation"]["target_x_cam_mm"] == pytest.approx(0.378)
     rc, d = run_json(capsys, "--range", "3.0", "--frames", "3", "--spp", "8")
     assert rc == 0 and d["paper"] == {} and d["ratio_to_paper"] == {}
 

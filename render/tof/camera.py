@@ -245,7 +245,7 @@ def marker_truth(camera, target, R, t) -> dict:
     -------
     dict
         ``centres_cam_m`` (N, 3), ``centres_px`` (N, 2) (NaN behind the lens), ``in_image`` (N,)
-        bool, ``range_m`` (N,) radial.
+        bool, ``slant_range_m`` (N,): the radial distance of each face centre from the lens, m.
     """
     c = np.asarray(target.points_m, float) @ np.asarray(R, float).T + np.asarray(t, float)
     front = c[:, 2] > 1e-9
@@ -253,7 +253,7 @@ def marker_truth(camera, target, R, t) -> dict:
     if np.any(front):
         uv[front] = camera.project(c[front])
     vis = front & camera.in_image(np.nan_to_num(uv, nan=-1e9), 0.5)
-    return {"centres_cam_m": c, "centres_px": uv, "in_image": vis, "range_m": np.linalg.norm(c, axis=1)}
+    return {"centres_cam_m": c, "centres_px": uv, "in_image": vis, "slant_range_m": np.linalg.norm(c, axis=1)}
 
 
 def check_target_in_view(camera, target, R, t) -> dict:
@@ -733,7 +733,7 @@ class TofRenderer:
             "range_m": float(t[2]),
             "targets_px": {i: [float(x) for x in uv] for i, uv in zip(ids, truth_m["centres_px"])},
             "targets_in_image": {i: bool(b) for i, b in zip(ids, truth_m["in_image"])},
-            "targets_range_m": {i: float(r) for i, r in zip(ids, truth_m["range_m"])},
+            "targets_slant_range_m": {i: float(r) for i, r in zip(ids, truth_m["slant_range_m"])},
             "modulation_frequency_hz": info["f_mod"],
             "unambiguous_range_m": unambiguous_range_m(info["f_mod"]),
             "optics": self.optics.to_json(),
