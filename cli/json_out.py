@@ -158,7 +158,7 @@ SCHEMAS = {
 {"stability": {range_m: <svgs tof stability object>},
  "mechanisms": [{"label": str, "range_m": float, "ratio_to_paper": {table: {column: float}},
                  "fluctuation": {column: float}, "solved": int}],
- "fig14": [{"range_m": float, "solved": int, "frames": int, "bias", "rms_error", "std": {column: float},
+ "fig14": [{"range_m": float, "solved": int, "frames": int, "bias", "rms", "std": {column: float},
             "rot_err_rms_deg": float, "integration_time_s": float}],
  "failure_modes": {"flying_pixels_1m", "multipath_1m", "ambient_1m", ...}, "wall_s": float,
  "outputs": {"report", "csv", "series", "mechanisms", "fig14", "failure_modes": path}}""",
@@ -180,7 +180,7 @@ SCHEMAS = {
              "failures": {{reason: int}},        # unsolved trials by reason
              "blobs_median": float, "four_blobs_rate": float, "merged_rate": float,
              "exposure_s": float, "iso": float,  # medians over the trials
-             "mean_error": {_STATE},   # solved trials, estimate - truth (m, deg)
+             "bias": {_STATE},   # solved trials, mean of estimate - truth (m, deg)
              "std": {{...same keys}}}}],          # null where no trial solved
  "outputs": {{"summary_csv", "trials_jsonl", "plot", "overlays", "results_csv", "summary_json": path}},
  {_RUN}}}""",

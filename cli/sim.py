@@ -180,7 +180,7 @@ def range_sweep_json(cfg, table, stats, out: Path) -> dict:
         ranges.append({"range_m": d["range_m"], "trials": d["trials"], "solved": d["trials"] - sum(fails.values()),
                        "success_rate": d["success_rate"], "failures": fails,
                        **{k: d[k] for k in ("blobs_median", "four_blobs_rate", "merged_rate", "exposure_s", "iso")},
-                       "mean_error": {k: d[f"err_mean_{k}"] for k in STATE_KEYS},
+                       "bias": {k: d[f"err_mean_{k}"] for k in STATE_KEYS},
                        "std": {k: d[f"err_std_{k}"] for k in STATE_KEYS}})
     outputs = {"summary_csv": out / "summary.csv", "trials_jsonl": out / "trials.jsonl", "plot": out / "range_sweep.png",
                "overlays": out / "overlays.png",

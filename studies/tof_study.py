@@ -305,7 +305,7 @@ def _sections(runs, done) -> dict:
             else:
                 run = stopping_runs[label]["runs"][r]
                 sw = _sweep_row(label, r, run, run["frames"])
-            row["fig14_z_rms_mm"][str(r)] = sw["rms_error"]["target_z_cam_mm"] if sw["rms_error"] else None
+            row["fig14_z_rms_mm"][str(r)] = sw["rms"]["target_z_cam_mm"] if sw["rms"] else None
         stopping.append(row)
     return {"runs": runs_d, "sums": sums, "var_rows": var_rows, "sweep": sweep, "stopping": stopping, "long": long}
 
@@ -333,7 +333,7 @@ def _sweep_row(scheme, r, run, frames) -> dict:
     ok = C.shape[0] > 0
     return {"scheme": scheme, "range_m": r, "solved": int(C.shape[0]), "frames": frames,
             "bias": dict(zip(COLUMNS, err.mean(0).tolist())) if ok else None,
-            "rms_error": dict(zip(COLUMNS, np.sqrt((err**2).mean(0)).tolist())) if ok else None,
+            "rms": dict(zip(COLUMNS, np.sqrt((err**2).mean(0)).tolist())) if ok else None,
             "std": dict(zip(COLUMNS, C.std(0).tolist())) if ok else None,
             "rot_err_rms_deg": float(np.sqrt(np.mean(run["rot_err_deg"] ** 2))) if ok else None,
             "integration_time_s": run["integration_time_s"]}
@@ -521,10 +521,10 @@ def plot_sweep(path, sweep) -> None:
         r = np.array([s["range_m"] for s in rows])
         ls = ("-", "--", ":")[k]
         for j, c in enumerate(COLUMNS[:3]):
-            axes[0].plot(r, [s["rms_error"][c] if s["rms_error"] else np.nan for s in rows], "o" + ls, ms=3,
+            axes[0].plot(r, [s["rms"][c] if s["rms"] else np.nan for s in rows], "o" + ls, ms=3,
                          color=f"C{j}", label=f"{c} ({scheme})")
         for j, c in enumerate(COLUMNS[3:]):
-            axes[1].plot(r, [s["rms_error"][c] if s["rms_error"] else np.nan for s in rows], "o" + ls, ms=3,
+            axes[1].plot(r, [s["rms"][c] if s["rms"] else np.nan for s in rows], "o" + ls, ms=3,
                          color=f"C{j + 3}", label=f"{c} ({scheme})")
     axes[0].axhline(PAPER_ACCURACY["mm"], color="k", ls=":", lw=0.8, label="paper: 2 mm")
     axes[1].axhline(PAPER_ACCURACY["deg"], color="k", ls=":", lw=0.8, label="paper: 0.13 deg")
@@ -556,9 +556,9 @@ def write_csv(path, sums, var_rows, sweep) -> Path:
             for k in ("fluctuation", "std"):
                 w.writerow([v["label"], v["range_m"], k, *[_fmt(s[k][c], 4) for c in COLUMNS]])
         for s in sweep:
-            if s["rms_error"]:
-                w.writerow([f"fig14 sweep, {s['scheme']}", s["range_m"], "rms_error",
-                            *[_fmt(s["rms_error"][c], 4) for c in COLUMNS]])
+            if s["rms"]:
+                w.writerow([f"fig14 sweep, {s['scheme']}", s["range_m"], "rms",
+                            *[_fmt(s["rms"][c], 4) for c in COLUMNS]])
     return Path(path)
 
 
@@ -716,16 +716,16 @@ def write_markdown(path, camera, target, sensor, renderer, sums, runs, var_rows,
           "| scheme | range m | solved | " + " | ".join(f"{c} RMS" for c in COLUMNS) + " | rotation RMS deg | z RMS / paper's 2.5 mm | integration us |",
           "|---|---|---|" + "---|" * 9]
     for s in sweep:
-        e = s["rms_error"] or {}
+        e = s["rms"] or {}
         zr = e.get("target_z_cam_mm") / PAPER_FIG14_Z_MM if e and s["range_m"] >= 5 else None
         L.append(f"| {s['scheme']} | {s['range_m']:g} | {s['solved']}/{s['frames']} | " + " | ".join(_fmt(e.get(c)) for c in COLUMNS)
                  + f" | {_fmt(s['rot_err_rms_deg'])} | {_ratio_cells([zr]) if zr is not None else '-'} | {s['integration_time_s'] * 1e6:.2f} |")
     L.append("")
     for scheme, _ in SWEEP_SCHEMES:
-        rows = [s for s in sweep if s["scheme"] == scheme and s["rms_error"]]
-        within = [s["range_m"] for s in rows if max(s["rms_error"][c] for c in COLUMNS[:3]) <= 2.0
+        rows = [s for s in sweep if s["scheme"] == scheme and s["rms"]]
+        within = [s["range_m"] for s in rows if max(s["rms"][c] for c in COLUMNS[:3]) <= 2.0
                   and s["rot_err_rms_deg"] <= PAPER_ACCURACY["deg"]]
-        zmax = max(rows, key=lambda s: s["rms_error"]["target_z_cam_mm"]) if rows else None
+        zmax = max(rows, key=lambda s: s["rms"]["target_z_cam_mm"]) if rows else None
         L.append(f"- {scheme}: single frames meet the paper's headline accuracy (2 mm and 0.13 deg, every position "
                  f"component and the total rotation) at {', '.join(f'{x:g}' for x in within) or 'no'} m; the largest "
                  f"range error is {_fmt(zmax['rms_error']['target_z_cam_mm'], 1) if zmax else 'nan'} mm RMS at "

@@ -139,13 +139,13 @@ def test_range_sweep_json(small_camera, tmp_path, capsys):
     assert "range_m" in err and "wrote" in err
     assert {"camera", "ranges", "outputs", "run"} <= set(obj) and set(obj["run"]) == RUN
     (r,) = obj["ranges"]
-    assert {"range_m", "trials", "solved", "failures", "mean_error", "std"} <= set(r)
-    assert set(r["mean_error"]) == STATE and r["trials"] == 2 and obj["run"]["trials_run"] == 2
+    assert {"range_m", "trials", "solved", "failures", "bias", "std"} <= set(r)
+    assert set(r["bias"]) == STATE and r["trials"] == 2 and obj["run"]["trials_run"] == 2
     (row,) = _csv(out / "summary.csv")
     assert r["success_rate"] == float(row["success_rate"]) and r["failures"] == failures_from_text(row["failures"])
     assert r["solved"] == round(2 * float(row["success_rate"]))
     if r["solved"]:
-        assert r["mean_error"]["z_m"] == pytest.approx(float(row["err_mean_z_m"]))
+        assert r["bias"]["z_m"] == pytest.approx(float(row["err_mean_z_m"]))
     _same_as_summary_json(obj, out)
 
 
