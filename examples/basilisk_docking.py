@@ -1,0 +1,571 @@
+"""Closed-loop docking in Basilisk with the simulated SVGS: the cost of the real sensor in delta-v.
+
+A target 3U cubesat (4 kg) in a 400 km circular orbit carries the SVGS pattern on its long face,
+facing along its -y (along-track, backwards); it holds the Hill frame (x radial, y along-track,
+z orbit normal), spinning at the orbital rate. A chaser (10 kg) starts 30 m behind with the Galaxy
+Nexus on its +y face, looking at the pattern. Basilisk propagates both spacecraft (Earth's point-mass
+gravity); the chaser's thrusters are an ideal force (``extForceTorque``, at most
+:data:`MAX_FORCE_N`). The sensor is :class:`sim.basilisk_svgs.SVGSModule`: it renders, exposes and
+solves a frame at ``--sensor-rate-hz`` and releases it :data:`sim.basilisk_svgs.PROCESSING_LATENCY_S`
+later. A linear Kalman filter on Hill's (Clohessy-Wiltshire) equations takes the measurements
+(replaying the control history over the latency), and a glide-slope guidance flies the camera down
+the pattern's +z axis to 1 m. The same run with an ideal sensor (the true pose, every frame, no
+latency) gives the reference: the real sensor's cost is the difference in delta-v, time and final
+error. ``--phones htc-amaze-4g`` flies the HTC Amaze 4G, whose spots merge beyond ~6.5 m: it flies
+on the filter's prediction until the measurements start.
+
+Run (from the repository root, with ``pip install -e ".[basilisk]"``)::
+
+    python examples/basilisk_docking.py                 # both phones + ideal; figures in docs/figures
+    python examples/basilisk_docking.py --quick --out /tmp/dock   # a bounded form: 5 m, preview, ~20 frames
+
+Every random draw is seeded (``--seed``). Rendering costs 0.4-3 s a frame on a 2-core machine, so
+the sensor runs at ``--sensor-rate-hz`` (default 0.25 frames/s, one frame per 4 s) rather than the
+phone's frame rate; docs/basilisk.md gives the time a run takes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from svgs.errors import InputError  # noqa: E402
+from svgs.frames import STATE_KEYS, pose_to_state, state_to_pose  # noqa: E402
+
+from sim.basilisk_frames import (  # noqa: E402
+    Mount, chaser_from_pose, dcm_to_mrp, hill_dcm, hill_from_inertial, mrp_to_dcm,
+)
+
+# ----------------------------------------------------------------------------- the scenario
+#: Target 3U cubesat: mass (kg) and a 0.1 x 0.1 x 0.34 m box's inertia, long axis along body x (radial).
+TARGET_MASS_KG = 4.0
+TARGET_INERTIA = np.diag([4.0 / 12 * 0.02, 4.0 / 12 * (0.01 + 0.1156), 4.0 / 12 * (0.01 + 0.1156)])
+#: Chaser (ASSUMPTION: a 6U-class chaser; isotropic inertia, so it keeps its attitude in Hill's frame
+#: without attitude control).
+CHASER_MASS_KG = 10.0
+CHASER_INERTIA = np.diag([0.1, 0.1, 0.1])
+#: The thrusters' largest force, N (ASSUMPTION: cold-gas cubesat thrusters of tens of mN).
+MAX_FORCE_N = 0.05
+#: Orbit altitude above Earth's equatorial radius (Basilisk's), m; inclination, deg.
+ALTITUDE_M = 400e3
+INCLINATION_DEG = 51.6
+#: The pattern on the target's -y face: target frame x_T = x_B, y_T = z_B, z_T = -y_B (out of the face).
+PATTERN = Mount([[1, 0, 0], [0, 0, 1], [0, -1, 0]], [0.0, -0.05, 0.0])
+#: The camera on the chaser's +y face: boresight z_C = +y_B, x_C = x_B, y_C = -z_B.
+CAMERA = Mount([[1, 0, 0], [0, 0, -1], [0, 1, 0]], [0.0, 0.1, 0.0])
+#: The initial sensor pose in the paper's state: the camera at (x, y, z) m in the target frame and
+#: the paper's attitude (deg); the chaser holds this attitude in Hill's frame.
+START_STATE = (0.3, -0.2, 30.0, 2.0, -1.0, 3.0)
+#: The goal: the camera 1 m in front of the pattern on its +z axis, m.
+GOAL_Z_M = 1.0
+
+# ----------------------------------------------------------------------------- navigation
+#: Filter step (guidance and control rate), s.
+CONTROL_PERIOD_S = 1.0
+#: The filter's initial 1-sigma: position (m) and velocity (m/s) per axis (ASSUMPTION: a hand-over
+#: from a far-range relative navigation at metre level); the initial estimate is drawn from it.
+PRIOR_SIGMA_M, PRIOR_SIGMA_M_S = 0.3, 0.002
+#: White-acceleration density of the filter's process noise, m^2/s^3 (tuning: Hill's equations and
+#: an ideal force leave only the linearisation, ~1e-9 m/s^2 at 30 m).
+Q_ACCEL = 1e-10
+#: The filter measures the camera relative to the pattern from the sensor's pose, ``-t_cam_target``
+#: (its bearing is far better known than the paper's lateral position, whose errors go with the
+#: attitude's: an orbit about the target), rotated to Hill's frame with the chaser's attitude
+#: (ASSUMPTION: known, a star tracker). Its sigma: the CRLB (the frame's 6 x 6 covariance carried
+#: through) and, in quadrature, a floor for the errors the CRLB does not bound (tuning, from the
+#: range errors of docs/reports/approach-galaxy-nexus, 0.08 m at 20-30 m, 0.002 m at 5-10 m, and
+#: the bearing errors of a few preview frames at 5 m, ~3 mm), scaled by the pixel size against
+#: the full frame: (coefficient, lowest value) along the boresight (per m^2) and across it (per m).
+FLOOR_ALONG = (1.3e-4, 0.001)
+FLOOR_ACROSS = (2e-4, 0.002)
+#: The relative attitude's floor, deg: (coefficient per m^2, lowest value); scaled by the pixel
+#: size squared (preview frames at 5 m gave 1-3 deg where full frames give ~0.1 deg).
+FLOOR_ANGLE_DEG = (2e-3, 0.05)
+#: Innovation gate: a measurement whose normalised innovation squared exceeds the chi-square
+#: 99.9 % point with 3 degrees of freedom is rejected (a misidentified frame).
+NIS_GATE = 16.27
+#: Random-walk density of the relative-attitude filter, rad^2/s.
+Q_ATTITUDE = 1e-8
+
+# ----------------------------------------------------------------------------- guidance
+#: Glide slope: the closing speed is (z - goal) / TAU_S, at least V_MIN_M_S, m/s.
+TAU_S = 100.0
+V_MIN_M_S = 0.02
+#: Lateral: the desired lateral speed is -lateral / TAU_LATERAL_S.
+TAU_LATERAL_S = 40.0
+#: Velocity-tracking gain, 1/s.
+K_VELOCITY = 0.1
+#: Below GATE_RANGE_M the guidance closes only with a measurement younger than GATE_AGE_S; else it
+#: holds its range (ASSUMPTION: a typical approach rule; nothing of SVGS).
+GATE_RANGE_M, GATE_AGE_S = 5.0, 20.0
+#: Arrival: the estimated camera within this of the goal along the axis, m.
+ARRIVAL_TOL_M = 0.02
+
+
+def cw_matrices(n_rad_s: float, dt_s: float):
+    """Discrete Hill/Clohessy-Wiltshire transition over ``dt_s`` with a constant acceleration:
+    ``x+ = Phi x + Gamma a`` (x radial, y along-track, z normal; exact, by the matrix exponential)."""
+    from scipy.linalg import expm
+
+    A = np.zeros((9, 9))
+    A[0:3, 3:6] = np.eye(3)
+    A[3, 0], A[3, 4] = 3 * n_rad_s**2, 2 * n_rad_s
+    A[4, 3] = -2 * n_rad_s
+    A[5, 2] = -n_rad_s**2
+    A[3:6, 6:9] = np.eye(3)
+    E = expm(A * dt_s)
+    return E[:6, :6], E[:6, 6:9]
+
+
+def cw_acceleration(n_rad_s: float, x: np.ndarray) -> np.ndarray:
+    """The gravity-gradient and Coriolis terms of Hill's equations at state x (6,), m/s^2."""
+    return np.array([3 * n_rad_s**2 * x[0] + 2 * n_rad_s * x[4], -2 * n_rad_s * x[3], -n_rad_s**2 * x[2]])
+
+
+def measurement_floor(range_m: float, pixel_scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """The floor of the filter's measurement sigma: the camera position in the camera frame
+    (across, across, along the boresight), m, and the angles, rad; ``pixel_scale``: the full
+    frame's focal length over the camera's (1 at full resolution)."""
+    r = float(range_m)
+    along = max(FLOOR_ALONG[0] * r * r, FLOOR_ALONG[1]) * pixel_scale
+    across = max(FLOOR_ACROSS[0] * r, FLOOR_ACROSS[1]) * pixel_scale
+    ang = np.radians(max(FLOOR_ANGLE_DEG[0] * r * r, FLOOR_ANGLE_DEG[1])) * pixel_scale**2
+    return np.array([across, across, along]), np.full(3, ang)
+
+
+def _make_gnc_class():
+    from Basilisk.architecture import messaging, sysModel
+
+    from sim.basilisk_svgs import camera_position_covariance
+
+    class DockingGNC(sysModel.SysModel):
+        """Navigation (CW Kalman filter with latency replay), glide-slope guidance, ideal-force control."""
+
+        def __init__(self, svgs_output, n_rad_s, x0_hat, P0, ideal: bool, pixel_scale: float):
+            super().__init__()
+            self.targetStateInMsg = messaging.SCStatesMsgReader()
+            self.chaserStateInMsg = messaging.SCStatesMsgReader()
+            self.forceOutMsg = messaging.CmdForceInertialMsg()
+            self.svgs = svgs_output
+            self.n = float(n_rad_s)
+            self.ideal = bool(ideal)
+            self.pixel_scale = float(pixel_scale)
+            self.Phi, self.Gam = cw_matrices(self.n, CONTROL_PERIOD_S)
+            self.x0_hat, self.P0 = np.asarray(x0_hat, float), np.asarray(P0, float)
+            self.checkpoints = []  # (t, x, P): the estimate at each control time
+            self.controls = []  # (t_k, a_H) applied over [t_k, t_k + period)
+            self.all_meas = []  # (t_image, z (3,), R (3, 3), log record) of the solved frames
+            self.t0 = None
+            self._att_t = None
+            self.n_seen = 0
+            self.att = None  # (x (3,), P (3,3)) relative attitude, rad
+            self.last_ok_s = -np.inf
+            self.arrived_s = None
+            self.log = {k: [] for k in ("t_s", "x_hat", "P", "a_H", "true_rho", "true_rho_dot", "hold", "cam_true",
+                                        "cam_hat", "cam_sigma", "att_hat", "att_sigma", "att_true")}
+            self.meas_log = []  # per released frame: t_image, ok, reason, accepted, state, sigma, truth
+
+        # the chaser's camera and the pattern as offsets in Hill's frame (the target is Hill-held)
+        def _offsets(self, sigma_chaser_BN, HN):
+            HBc = HN @ mrp_to_dcm(sigma_chaser_BN).T
+            return HBc @ CAMERA.origin_body_m - PATTERN.origin_body_m
+
+        def Reset(self, CurrentSimNanos):  # noqa: N802, N803
+            self.forceOutMsg.write(messaging.CmdForceInertialMsgPayload(), CurrentSimNanos, self.moduleID)
+
+        def _propagate(self, x, P, a, dt):
+            Phi, Gam = (self.Phi, self.Gam) if abs(dt - CONTROL_PERIOD_S) < 1e-9 else cw_matrices(self.n, dt)
+            Qc = Q_ACCEL * np.block([[dt**3 / 3 * np.eye(3), dt**2 / 2 * np.eye(3)],
+                                     [dt**2 / 2 * np.eye(3), dt * np.eye(3)]])
+            return Phi @ x + Gam @ a, Phi @ P @ Phi.T + Qc
+
+        def _update(self, x, P, z, R):
+            H = np.hstack([np.eye(3), np.zeros((3, 3))])
+            S = H @ P @ H.T + R
+            nu = z - H @ x
+            if not self.ideal and float(nu @ np.linalg.solve(S, nu)) > NIS_GATE:
+                return x, P, False
+            K = P @ H.T @ np.linalg.inv(S)
+            I_KH = np.eye(6) - K @ H
+            return x + K @ nu, I_KH @ P @ I_KH.T + K @ R @ K.T, True
+
+        def _estimate(self, t_now, new):
+            """The posterior at ``t_now``: back to the last checkpoint before the oldest new
+            measurement, then forward through every measurement and the controls applied."""
+            self.all_meas = (self.all_meas + new)[-100:]
+            t_first = min((m[0] for m in new), default=t_now)
+            while len(self.checkpoints) > 1 and self.checkpoints[-1][0] >= t_first - 1e-9:
+                self.checkpoints.pop()
+            t, x, P = self.checkpoints[-1]
+            events = [(m[0], 0, m) for m in self.all_meas if m[0] > t + 1e-9]
+            events += [(c[0], 1, None) for c in self.controls if t + 1e-9 < c[0] < t_now - 1e-9]
+            events.append((t_now, 1, None))
+            for te, kind, m in sorted(events, key=lambda e: (e[0], e[1])):
+                if te > t + 1e-9:
+                    x, P = self._propagate(x, P, self._control_at(t), te - t)
+                    t = te
+                if kind == 0:
+                    x, P, ok = self._update(x, P, m[1], m[2])
+                    m[3]["accepted"] = ok
+                else:
+                    self.checkpoints.append((t, x.copy(), P.copy()))
+            self.checkpoints = self.checkpoints[-200:]
+            return x, P
+
+        def _control_at(self, t):
+            """The acceleration applied at time t (the last command at or before it)."""
+            a = np.zeros(3)
+            for t_k, a_k in self.controls:
+                if t_k <= t + 1e-9:
+                    a = a_k
+            return a
+
+        def UpdateState(self, CurrentSimNanos):  # noqa: N802, N803
+            t = CurrentSimNanos * 1e-9
+            tg, ch = self.targetStateInMsg(), self.chaserStateInMsg()
+            r_t, v_t = np.array(tg.r_BN_N), np.array(tg.v_BN_N)
+            r_c, v_c = np.array(ch.r_BN_N), np.array(ch.v_BN_N)
+            sig_c = np.array(ch.sigma_BN)
+            HN = hill_dcm(r_t, v_t)
+            d_H = self._offsets(sig_c, HN)
+            if self.t0 is None:
+                self.t0 = t
+                self.checkpoints = [(t - 1e-6, self.x0_hat, self.P0)]
+            # new measurements (released by the SVGS module since the last step)
+            new = []
+            for m in self.svgs.since(self.n_seen):
+                rec = {"t_s": m.t_image_s, "ok": m.ok, "reason": m.reason, "accepted": False, "truth": m.truth,
+                       "state": m.state, "sigma": None}
+                self.meas_log.append(rec)
+                if m.ok and m.state_vector is not None:
+                    cov6 = m.covariance if m.covariance is not None else np.zeros((6, 6))
+                    r_C, cov_C = camera_position_covariance(m.state_vector, cov6)
+                    cov_att = cov6[3:, 3:]
+                    if not self.ideal:
+                        f_pos, f_ang = measurement_floor(m.range_m, self.pixel_scale)
+                        cov_C = cov_C + np.diag(f_pos**2)
+                        cov_att = cov_att + np.diag(f_ang**2)
+                    rec["sigma"] = np.sqrt(np.concatenate([np.diag(cov_C), np.diag(cov_att)]))
+                    # z: the chaser relative to the target in Hill's frame, from -t_cam_target
+                    HC = HN @ mrp_to_dcm(m.sigma_chaser_BN).T @ CAMERA.dcm_frame_body.T
+                    z = HC @ r_C - d_H
+                    new.append((m.t_image_s, z, HC @ cov_C @ HC.T, rec))
+                    self._attitude_update(m.t_image_s, m.state_vector[3:], cov_att)
+                    self.last_ok_s = max(self.last_ok_s, m.t_image_s)
+            self.n_seen = len(self.svgs.history)
+            x, P = self._estimate(t, new)
+            # guidance in the target frame (camera position and velocity), then CW compensation
+            T = PATTERN.dcm_frame_body
+            cam = T @ (x[:3] + d_H)
+            vel = T @ x[3:]
+            range_m = float(cam[2])
+            hold = range_m < GATE_RANGE_M and (t - self.last_ok_s) > GATE_AGE_S
+            if self.arrived_s is None and range_m <= GOAL_Z_M + ARRIVAL_TOL_M:
+                self.arrived_s = t
+            v_des = np.array([-cam[0] / TAU_LATERAL_S, -cam[1] / TAU_LATERAL_S, 0.0])
+            if not hold and self.arrived_s is None:
+                v_des[2] = -max((range_m - GOAL_Z_M) / TAU_S, V_MIN_M_S)
+            a_T = K_VELOCITY * (v_des - vel)
+            a_H = T.T @ a_T - cw_acceleration(self.n, x)
+            a_max = MAX_FORCE_N / CHASER_MASS_KG
+            if np.linalg.norm(a_H) > a_max:
+                a_H *= a_max / np.linalg.norm(a_H)
+            self.controls.append((t, a_H.copy()))
+            self.controls = self.controls[-400:]
+            payload = messaging.CmdForceInertialMsgPayload()
+            payload.forceRequestInertial = (HN.T @ a_H * CHASER_MASS_KG).tolist()
+            self.forceOutMsg.write(payload, CurrentSimNanos, self.moduleID)
+            # the log: truth from the states (for the plots only; nothing above uses it but the
+            # Hill frame and the chaser's attitude, which the chaser knows from its own navigation)
+            rho, rho_dot = hill_from_inertial(r_t, v_t, r_c, v_c)
+            R_true, t_true = _true_pose(tg, ch)
+            st_true = pose_to_state(R_true, t_true)
+            L = self.log
+            L["t_s"].append(t)
+            L["x_hat"].append(x.copy())
+            L["P"].append(np.diag(P).copy())
+            L["a_H"].append(a_H.copy())
+            L["true_rho"].append(rho)
+            L["true_rho_dot"].append(rho_dot)
+            L["hold"].append(hold)
+            L["cam_true"].append(st_true[:3])
+            L["cam_hat"].append(cam)
+            L["cam_sigma"].append(np.sqrt(np.maximum(np.diag(T @ P[:3, :3] @ T.T), 0)))
+            xa, Pa = self.att if self.att is not None else (np.full(3, np.nan), np.full((3, 3), np.nan))
+            L["att_hat"].append(xa.copy())
+            L["att_sigma"].append(np.sqrt(np.abs(np.diag(Pa))))
+            L["att_true"].append(st_true[3:])
+
+        def _attitude_update(self, t_s, ang, R):
+            if self.att is None:
+                self.att = (np.asarray(ang, float).copy(), np.asarray(R, float).copy())
+                self._att_t = t_s
+                return
+            x, P = self.att
+            P = P + Q_ATTITUDE * max(t_s - self._att_t, 0.0) * np.eye(3)
+            K = P @ np.linalg.inv(P + R)
+            self.att = (x + K @ (np.asarray(ang) - x), (np.eye(3) - K) @ P)
+            self._att_t = t_s
+
+    return DockingGNC
+
+
+def _true_pose(tg, ch):
+    from sim.basilisk_frames import relative_pose
+
+    return relative_pose(np.array(ch.r_BN_N), np.array(ch.sigma_BN), np.array(tg.r_BN_N), np.array(tg.sigma_BN),
+                         CAMERA, PATTERN)
+
+
+def _sensor(phone: str | None, *, preview: bool, seed: int, rate_hz: float):
+    """The SVGS sensor of a phone (None: the ideal sensor)."""
+    from sim.basilisk_svgs import IdealSensor
+
+    if phone is None:
+        return IdealSensor()
+    from sim.approach import ApproachSensor
+
+    cam = phone
+    if preview:
+        from camera.phone.preview import binned_camera
+        from svgs.profiles import Camera
+
+        cam = binned_camera(Camera.load(phone))
+    return ApproachSensor(cam, seed=seed, keep_images=True, frame_rate_hz=rate_hz)
+
+
+def run(phone: str | None, *, start_state=START_STATE, sensor_rate_hz=0.25, preview=False, seed=0,
+        max_time_s=1200.0, latency_s=None) -> dict:
+    """One closed-loop approach. ``phone`` None: the ideal sensor (no latency). Returns the logs
+    and the summary numbers."""
+    from Basilisk.simulation import extForceTorque, spacecraft
+    from Basilisk.utilities import SimulationBaseClass, macros, orbitalMotion, simIncludeGravBody
+
+    from sim.basilisk_svgs import PROCESSING_LATENCY_S, SVGSModule
+    from svgs.profiles import Camera
+
+    ideal = phone is None
+    lat = 0.0 if ideal else (PROCESSING_LATENCY_S if latency_s is None else float(latency_s))
+    sim = SimulationBaseClass.SimBaseClass()
+    proc = sim.CreateNewProcess("proc")
+    sensor_dt = 0.25
+    proc.addTask(sim.CreateNewTask("dyn", macros.sec2nano(sensor_dt)), 30)
+    proc.addTask(sim.CreateNewTask("sensor", macros.sec2nano(sensor_dt)), 20)
+    proc.addTask(sim.CreateNewTask("gnc", macros.sec2nano(CONTROL_PERIOD_S)), 10)
+    grav = simIncludeGravBody.gravBodyFactory()
+    earth = grav.createEarth()
+    earth.isCentralBody = True
+    mu = earth.mu
+    tgt, ch = spacecraft.Spacecraft(), spacecraft.Spacecraft()
+    tgt.ModelTag, ch.ModelTag = "target", "chaser"
+    tgt.hub.mHub, ch.hub.mHub = TARGET_MASS_KG, CHASER_MASS_KG
+    tgt.hub.IHubPntBc_B = TARGET_INERTIA.tolist()
+    ch.hub.IHubPntBc_B = CHASER_INERTIA.tolist()
+    for sc in (tgt, ch):
+        grav.addBodiesTo(sc)
+    thr = extForceTorque.ExtForceTorque()
+    thr.ModelTag = "thrusters"
+    ch.addDynamicEffector(thr)
+    # target: circular orbit, body = Hill frame, spinning at the orbital rate
+    oe = orbitalMotion.ClassicElements()
+    oe.a, oe.e, oe.i = orbitalMotion.REQ_EARTH * 1e3 + ALTITUDE_M, 0.0, np.radians(INCLINATION_DEG)
+    oe.Omega, oe.omega, oe.f = 0.0, 0.0, 0.0
+    r_t, v_t = orbitalMotion.elem2rv(mu, oe)
+    n = np.sqrt(mu / oe.a**3)
+    HN = hill_dcm(r_t, v_t)
+    tgt.hub.r_CN_NInit, tgt.hub.v_CN_NInit = r_t.tolist(), v_t.tolist()
+    tgt.hub.sigma_BNInit = dcm_to_mrp(HN).reshape(3, 1).tolist()
+    tgt.hub.omega_BN_BInit = [[0.0], [0.0], [n]]
+    # chaser: the start pose (paper's state) -> inertial position and attitude; at rest in Hill
+    s = np.asarray(start_state, float)
+    R0, t0 = state_to_pose(np.concatenate([s[:3], np.radians(s[3:])]))
+    r_c, sig_c = chaser_from_pose(R0, t0, r_t, dcm_to_mrp(HN), CAMERA, PATTERN)
+    rho = HN @ (r_c - r_t)
+    w_N = HN.T @ np.array([0.0, 0.0, n])
+    v_c = v_t + np.cross(w_N, HN.T @ rho)  # at rest in the rotating Hill frame
+    ch.hub.r_CN_NInit, ch.hub.v_CN_NInit = r_c.tolist(), v_c.tolist()
+    ch.hub.sigma_BNInit = sig_c.reshape(3, 1).tolist()
+    ch.hub.omega_BN_BInit = (mrp_to_dcm(sig_c) @ w_N).reshape(3, 1).tolist()
+    for sc in (tgt, ch):
+        sim.AddModelToTask("dyn", sc, 10)
+    sim.AddModelToTask("dyn", thr, 9)
+    # the sensor
+    sensor = _sensor(phone, preview=preview, seed=seed, rate_hz=sensor_rate_hz)
+    svgs_mod = SVGSModule(sensor, CAMERA, PATTERN, frame_rate_hz=sensor_rate_hz, latency_s=lat)
+    svgs_mod.ModelTag = "svgs"
+    svgs_mod.chaserStateInMsg.subscribeTo(ch.scStateOutMsg)
+    svgs_mod.targetStateInMsg.subscribeTo(tgt.scStateOutMsg)
+    sim.AddModelToTask("sensor", svgs_mod)
+    # navigation, guidance, control; the filter starts from a seeded draw around the truth
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 27]))
+    P0 = np.diag([PRIOR_SIGMA_M**2] * 3 + [PRIOR_SIGMA_M_S**2] * 3)
+    x0 = np.concatenate([rho, np.zeros(3)]) + rng.multivariate_normal(np.zeros(6), P0)
+    fx_full = Camera.load(phone).fx if phone else 1.0
+    pixel_scale = fx_full / sensor.camera.fx if phone else 1.0
+    gnc = _make_gnc_class()(svgs_mod.measurementOutMsg, n, x0, P0, ideal, pixel_scale)
+    gnc.ModelTag = "gnc"
+    gnc.targetStateInMsg.subscribeTo(tgt.scStateOutMsg)
+    gnc.chaserStateInMsg.subscribeTo(ch.scStateOutMsg)
+    thr.cmdForceInertialInMsg.subscribeTo(gnc.forceOutMsg)
+    sim.AddModelToTask("gnc", gnc)
+    sim.InitializeSimulation()
+    wall0 = time.perf_counter()
+    t_end = 0.0
+    try:
+        while t_end < max_time_s and gnc.arrived_s is None:
+            t_end = min(t_end + 10.0, max_time_s)
+            sim.ConfigureStopTime(macros.sec2nano(t_end))
+            sim.ExecuteSimulation()
+    finally:
+        if hasattr(sensor, "close"):
+            sensor.close()
+    wall = time.perf_counter() - wall0
+    log = {k: np.asarray(v) for k, v in gnc.log.items()}
+    a = np.linalg.norm(log["a_H"], axis=1)
+    arrived = gnc.arrived_s is not None
+    i_end = int(np.argmin(np.abs(log["t_s"] - gnc.arrived_s))) if arrived else len(a) - 1
+    final_true = log["cam_true"][i_end]
+    ml = gnc.meas_log
+    summary = {
+        "sensor": phone or "ideal",
+        "preview": bool(preview and phone is not None),
+        "sensor_rate_hz": sensor_rate_hz,
+        "latency_s": lat,
+        "arrived": arrived,
+        "time_s": float(gnc.arrived_s) if arrived else None,
+        "delta_v_m_s": float(np.sum(a[: i_end + 1]) * CONTROL_PERIOD_S),
+        "final_position_error_m": [float(final_true[0]), float(final_true[1]), float(final_true[2] - GOAL_Z_M)],
+        "final_position_error_norm_m": float(np.linalg.norm(final_true - [0, 0, GOAL_Z_M])),
+        "final_navigation_error_m": (log["cam_hat"][i_end] - final_true).tolist(),
+        "frames": len(ml),
+        "frames_solved": int(sum(m["ok"] for m in ml)),
+        "frames_accepted": int(sum(m["accepted"] for m in ml)),
+        "dropouts_by_reason": {r: sum(1 for m in ml if not m["ok"] and m["reason"] == r)
+                               for r in sorted({m["reason"] for m in ml if not m["ok"]})},
+        "first_solved_range_m": next((float(m["truth"]["z_m"]) for m in ml if m["ok"]), None),
+        "hold_s": float(np.sum(log["hold"]) * CONTROL_PERIOD_S),
+        "wall_s": round(wall, 1),
+    }
+    return {"summary": summary, "log": log, "meas": ml}
+
+
+# ----------------------------------------------------------------------------- figures
+def plot(runs: dict, path: Path, title: str) -> None:
+    """True against estimated camera position and attitude in the target frame with the 1-sigma
+    bands, the measurements (dropouts marked), and the control effort, for each run."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    labels = list(runs)
+    fig = Figure(figsize=(13, 11), constrained_layout=True)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(4, len(labels), squeeze=False, sharex="col")
+    names = ("x", "y", "z")
+    colors = ("tab:blue", "tab:orange", "tab:green")
+    for j, lab in enumerate(labels):
+        r = runs[lab]
+        L, ml, s = r["log"], r["meas"], r["summary"]
+        t = L["t_s"]
+        ax = axes[0, j]
+        for i in (0, 1):  # lateral: estimate - truth with the filter's 1-sigma
+            e = L["cam_hat"][:, i] - L["cam_true"][:, i]
+            ax.plot(t, e * 100, color=colors[i], lw=1, label=f"{names[i]} estimate - truth")
+            ax.fill_between(t, -L["cam_sigma"][:, i] * 100, L["cam_sigma"][:, i] * 100, color=colors[i], alpha=0.15,
+                            lw=0)
+        ax.set_ylabel("lateral nav error, cm")
+        when = "not arrived" if s["time_s"] is None else f"arrived in {s['time_s']:.0f} s"
+        ax.set_title(f"{lab}: {when}, delta-v {s['delta_v_m_s'] * 100:.1f} cm/s", fontsize=9)
+        ax.legend(fontsize=7)
+        ax = axes[1, j]
+        ax.plot(t, L["cam_true"][:, 2], "k-", lw=1, label="true range z (m)")
+        ax.plot(t, L["cam_hat"][:, 2], "--", color=colors[2], lw=1, label="estimated z")
+        tm = np.array([m["t_s"] for m in ml])
+        ok = np.array([m["ok"] for m in ml], bool)
+        if tm.size:
+            zs = np.array([m["state"]["z_m"] if m["ok"] else np.nan for m in ml])
+            sz = np.array([m["sigma"][2] if m["sigma"] is not None else np.nan for m in ml])
+            ax.errorbar(tm[ok], zs[ok], yerr=sz[ok], fmt=".", ms=3, color="tab:purple", lw=0.8,
+                        label="measured z (1-sigma)")
+            for td in tm[~ok]:
+                ax.axvline(td, color="tab:red", alpha=0.25, lw=0.8)
+        ax.plot([], [], color="tab:red", alpha=0.5, label="dropout")
+        ax.set_yscale("log")
+        ax.set_ylabel("range along the pattern's z, m")
+        ax.legend(fontsize=7)
+        ax = axes[2, j]
+        for i, nm in enumerate(("roll", "pitch", "yaw")):
+            ax.plot(t, np.degrees(L["att_true"][:, i]), "-", color=colors[i], lw=0.8, label=f"true {nm}")
+            h, sg = np.degrees(L["att_hat"][:, i]), np.degrees(L["att_sigma"][:, i])
+            ax.plot(t, h, "--", color=colors[i], lw=1)
+            ax.fill_between(t, h - sg, h + sg, color=colors[i], alpha=0.15, lw=0)
+        ax.set_ylabel("relative attitude, deg\n(-- estimate, band 1-sigma)")
+        ax.legend(fontsize=7, ncol=3)
+        ax = axes[3, j]
+        a = L["a_H"] * CHASER_MASS_KG * 1e3
+        ax.plot(t, np.linalg.norm(a, axis=1), color="k", lw=0.8, label="|force|")
+        ax.set_ylabel("thrust, mN")
+        ax.set_xlabel("t, s")
+        ax2 = ax.twinx()
+        ax2.plot(t, np.cumsum(np.linalg.norm(L["a_H"], axis=1)) * CONTROL_PERIOD_S * 100, color="tab:red", lw=1)
+        ax2.set_ylabel("cumulative delta-v, cm/s", color="tab:red")
+    fig.suptitle(title, fontsize=10)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=80)
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--phones", default="galaxy-nexus,htc-amaze-4g",
+                    help="comma-separated phone profiles flown after the ideal sensor")
+    ap.add_argument("--sensor-rate-hz", type=float, default=None,
+                    help="frames/s of the sensor in this run (default 0.25; --quick 0.5)")
+    ap.add_argument("--preview", action="store_true", help="the phones' 640 x 480 preview stream")
+    ap.add_argument("--quick", action="store_true",
+                    help="a bounded form for the test suite: from 5 m, the preview stream, 40 s at most")
+    ap.add_argument("--max-time-s", type=float, default=None, help="simulated time limit, s (default 1200)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", default="docs/figures", help="folder for basilisk_docking*.png and .json")
+    args = ap.parse_args(argv)
+    phones = [p.strip() for p in args.phones.split(",") if p.strip()]
+    rate = args.sensor_rate_hz or (0.5 if args.quick else 0.25)
+    if not (np.isfinite(rate) and rate > 0):
+        raise InputError(f"--sensor-rate-hz: expected a positive rate, got {rate!r}")
+    start = (0.1, -0.05, 5.0, 2.0, -1.0, 3.0) if args.quick else START_STATE
+    max_time = args.max_time_s or (40.0 if args.quick else 1200.0)
+    preview = args.preview or args.quick
+    out = Path(args.out)
+    results = {}
+    for phone in [None] + phones:
+        r = run(phone, start_state=start, sensor_rate_hz=rate, preview=preview, seed=args.seed, max_time_s=max_time)
+        results[phone or "ideal"] = r
+        print(json.dumps(r["summary"]))
+    tag = "_quick" if args.quick else ""
+    for phone in phones:
+        plot({"ideal": results["ideal"], phone: results[phone]}, out / f"basilisk_docking{tag}_{phone}.png",
+             f"Basilisk docking, {start[2]:g} -> {GOAL_Z_M:g} m, sensor {rate:g} frames/s, latency "
+             f"{results[phone]['summary']['latency_s']:g} s{', preview' if preview else ''}: ideal sensor (left) "
+             f"against {phone} (right)")
+    summary = {k: v["summary"] for k, v in results.items()}
+    ideal = summary["ideal"]
+    for phone in phones:
+        s = summary[phone]
+        s["cost_vs_ideal"] = {
+            "delta_v_m_s": s["delta_v_m_s"] - ideal["delta_v_m_s"],
+            "time_s": None if s["time_s"] is None or ideal["time_s"] is None else s["time_s"] - ideal["time_s"],
+            "final_position_error_norm_m": s["final_position_error_norm_m"] - ideal["final_position_error_norm_m"],
+        }
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"basilisk_docking{tag}.json").write_text(json.dumps(summary, indent=1) + "\n")
+    print(f"wrote {out}/basilisk_docking{tag}*.png and .json")
+    return summary
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,53 @@
+"""examples/basilisk_docking.py: its Hill-equation filter model against the closed-form
+Clohessy-Wiltshire solution, and the example itself in its bounded form (``--quick``: from 5 m,
+the preview stream, 40 s at most), skipped with its reason where the basilisk extra is missing."""
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "basilisk_docking.py"
+
+
+def _example():
+    spec = importlib.util.spec_from_file_location("basilisk_docking", EXAMPLE)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_cw_transition_matches_the_closed_form():
+    ex = _example()
+    n, t = 1.13e-3, 400.0
+    Phi, Gam = ex.cw_matrices(n, t)
+    x0, y0, z0, u0, v0, w0 = 1.0, -30.0, 0.5, 0.01, -0.02, 0.003
+    s, c = np.sin(n * t), np.cos(n * t)
+    # Clohessy & Wiltshire (1960); x radial, y along-track, z normal (e.g. Vallado, 4th ed., eq. 6-66)
+    x = (4 - 3 * c) * x0 + s / n * u0 + 2 / n * (1 - c) * v0
+    y = 6 * (s - n * t) * x0 + y0 - 2 / n * (1 - c) * u0 + (4 * s - 3 * n * t) / n * v0
+    z = z0 * c + w0 / n * s
+    u = 3 * n * s * x0 + c * u0 + 2 * s * v0
+    v = 6 * n * (c - 1) * x0 - 2 * s * u0 + (4 * c - 3) * v0
+    w = -z0 * n * s + w0 * c
+    np.testing.assert_allclose(Phi @ [x0, y0, z0, u0, v0, w0], [x, y, z, u, v, w], rtol=1e-9, atol=1e-12)
+    # a constant along-track push a over t with no initial state: y = a (4 (1 - c) / n^2 - 3 t^2 / 2)
+    a = 1e-4
+    np.testing.assert_allclose((Gam @ [0, a, 0])[1], a * (4 * (1 - c) / n**2 - 1.5 * t * t), rtol=1e-9)
+
+
+@pytest.mark.render
+def test_quick_form_runs_and_writes_its_figures(tmp_path):
+    pytest.importorskip("Basilisk", reason="the basilisk extra is not installed (pip install -e \".[basilisk]\")")
+    ex = _example()
+    summary = ex.main(["--quick", "--phones", "galaxy-nexus", "--max-time-s", "16", "--out", str(tmp_path)])
+    assert (tmp_path / "basilisk_docking_quick_galaxy-nexus.png").is_file()
+    assert json.loads((tmp_path / "basilisk_docking_quick.json").read_text()) == json.loads(json.dumps(summary))
+    ideal, nexus = summary["ideal"], summary["galaxy-nexus"]
+    # the ideal sensor measures the truth: its navigation error is nil
+    assert np.max(np.abs(ideal["final_navigation_error_m"])) < 1e-3
+    # 16 s at 0.5 frames/s: frames at 0, 2, ..., 16 s, the last released after 16 s
+    assert nexus["frames"] == 8 and nexus["frames_solved"] >= 6
+    assert nexus["delta_v_m_s"] > 0 and "cost_vs_ideal" in nexus
