@@ -266,8 +266,8 @@ def merge_range_trials():
     return mr_trials(cfg)
 
 
-# --------------------------------------------------------------------------- main
-def main(argv=None) -> int:
+def _parse_args(argv):
+    """The command line: ``(args, ranges)``, the campaign ranges (m) as a tuple of float."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--ranges", default="5,15", help="campaign ranges, m (default 5,15)")
     ap.add_argument("--trials-per-range", type=int, default=8, help="rendered trials per range (default 8)")
@@ -285,59 +285,62 @@ def main(argv=None) -> int:
         ap.error("--trials-per-range must be a positive multiple of --exposures")
     if args.project_trials <= 0 or args.project_workers < 1 or not 0 < args.project_efficiency <= 1:
         ap.error("--project-trials > 0, --project-workers >= 1 and 0 < --project-efficiency <= 1")
+    return args, ranges
+
+
+def _executor_kinds(no_dask: bool) -> list:
+    """The executors to time: ``(label, mode)`` pairs, the process pool and, if importable, Dask."""
     kinds = [("process pool", "process")]
-    if not args.no_dask:
+    if not no_dask:
         try:
             import distributed  # noqa: F401
 
             kinds.append(("Dask LocalCluster", "dask-local"))
         except ModuleNotFoundError:
             print("note: dask.distributed is not installed; the process pool only")
-    t_start = time.perf_counter()
-    print(f"cores: {os.cpu_count()}; load average before: {_load()}")
-    with tempfile.TemporaryDirectory(prefix="bench-scaleout-") as tmpdir:
-        tmp = Path(tmpdir)
-        t0 = time.perf_counter()
-        config, trials = campaign(ranges, args.trials_per_range, args.exposures, tmp / "calibration")
-        n_renders = len({render_key(t.scenario) for t in trials})
-        print(f"rendered campaign {CAMERA}: ranges {', '.join(f'{r:g}' for r in ranges)} m, {len(trials)} trials, "
-              f"{n_renders} renders ({args.exposures} exposures each), calibration paper (rendered focal length "
-              f"{time.perf_counter() - t0:.1f} s, once); chunk = one render group", flush=True)
+    return kinds
 
-        res = {}
-        for label, mode in kinds:
-            for n in (1, 2):
-                r = throughput(ExecutorSpec(mode, n), config, trials, tmp)
-                res[(mode, n)] = r
-                mem = "; ".join(f"pid {p}: RSS {a:.0f} MB, peak {b:.0f} MB" for p, a, b in r["mem"]) or "n/a"
-                print(f"{label}, {n} worker(s): {r['trials_per_s']:.3f} trials/s ({len(trials)} trials in "
-                      f"{r['elapsed_s']:.1f} s; executor start + warm-up {r['start_s']:.1f} s); worker CPU "
-                      f"{r['cpu_per_trial_s']:.2f} s/trial, wall {r['wall_per_trial_s']:.2f} s/trial; the workers "
-                      f"got {r['cores']:.2f} core(s); no-op task: {r['noop_ms'][0]:.2f} ms round trip, "
-                      f"{r['noop_ms'][1]:.2f} ms each in a batch of {NOOP_BATCH}; memory: {mem}", flush=True)
-        peer = res[("process", 1)]["trials_per_s"]
-        print(f"\npeer: process pool, 1 worker, {peer:.3f} trials/s")
-        print(f"{'configuration':<28}{'trials/s':>10}{'peer':>9}{'ours/peer':>11}{'efficiency':>12}")
-        for label, mode in kinds:
-            for n in (1, 2):
-                tps = res[(mode, n)]["trials_per_s"]
-                print(f"{label + f', {n} worker(s)':<28}{tps:>10.3f}{peer:>9.3f}{tps / peer:>11.2f}"
-                      f"{tps / (n * peer):>12.2f}")
-        ref = res[("process", 1)]["rows"]
-        diffs = {k: _differences(v["rows"], ref) for k, v in res.items() if k != ("process", 1)}
-        bad = {k: d for k, d in diffs.items() if d}
-        print("rows (timings aside) identical on every executor: "
-              + ("yes" if not bad else f"NO: {', '.join(f'{m}-{n}: {d[:5]}' for (m, n), d in bad.items())}"))
 
-        print(f"\nwhere a trial's time goes (load average now {_load()}):")
-        sub = [t for t in trials if t.scenario["pose_index"] == 0]
-        b = breakdown(sub)
-        print_breakdown(f"rendered campaign, {CAMERA}, first stand setting of each range", b)
-        mr = None
-        if args.merge_range:
-            mr = breakdown(merge_range_trials())
-            print_breakdown("merge range, htc-amaze-4g, 6 and 7 m, f-number nominal/low/high, 2 exposures/render", mr)
+def _print_throughput_table(kinds, res: dict) -> float:
+    """Print the throughput of each executor against the peer (the 1-worker process pool).
 
+    Parameters
+    ----------
+    kinds : list of (str, str)
+        The timed executors' labels and modes.
+    res : dict
+        ``(mode, n_workers)`` -> :func:`throughput`'s result.
+
+    Returns
+    -------
+    float
+        The peer's throughput, trials/s.
+    """
+    peer = res[("process", 1)]["trials_per_s"]
+    print(f"\npeer: process pool, 1 worker, {peer:.3f} trials/s")
+    print(f"{'configuration':<28}{'trials/s':>10}{'peer':>9}{'ours/peer':>11}{'efficiency':>12}")
+    for label, mode in kinds:
+        for n in (1, 2):
+            tps = res[(mode, n)]["trials_per_s"]
+            print(f"{label + f', {n} worker(s)':<28}{tps:>10.3f}{peer:>9.3f}{tps / peer:>11.2f}"
+                  f"{tps / (n * peer):>12.2f}")
+    return peer
+
+
+def _print_projection(args, res: dict, peer: float, b: dict, mr) -> None:
+    """Print the projected wall time of a large study on a Dask cluster.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The command line (``project_trials``, ``project_workers``, ``project_efficiency``).
+    res : dict
+        ``(mode, n_workers)`` -> :func:`throughput`'s result.
+    peer : float
+        The 1-worker process pool's throughput, trials/s.
+    b, mr : dict
+        :func:`breakdown` of the campaign trials and of the merge-range trials (None when not timed).
+    """
     best = res[("dask-local", 2)] if ("dask-local", 2) in res else res[("process", 2)]
     eff2 = best["trials_per_s"] / (2 * peer)
     o_ms = res[("dask-local", 1)]["noop_ms"][1] if ("dask-local", 1) in res else res[("process", 1)]["noop_ms"][1]
@@ -360,6 +363,51 @@ def main(argv=None) -> int:
     print(f"  note: on an existing cluster (--scheduler) run_study keeps {cap} tasks in flight (the window of one "
           f"worker), so at most {cap} of the {P} workers are busy: the times above are {P / cap:.0f}x longer until "
           f"the window is sized from the cluster")
+
+
+# --------------------------------------------------------------------------- main
+def main(argv=None) -> int:
+    args, ranges = _parse_args(argv)
+    kinds = _executor_kinds(args.no_dask)
+    t_start = time.perf_counter()
+    print(f"cores: {os.cpu_count()}; load average before: {_load()}")
+    with tempfile.TemporaryDirectory(prefix="bench-scaleout-") as tmpdir:
+        tmp = Path(tmpdir)
+        t0 = time.perf_counter()
+        config, trials = campaign(ranges, args.trials_per_range, args.exposures, tmp / "calibration")
+        n_renders = len({render_key(t.scenario) for t in trials})
+        print(f"rendered campaign {CAMERA}: ranges {', '.join(f'{r:g}' for r in ranges)} m, {len(trials)} trials, "
+              f"{n_renders} renders ({args.exposures} exposures each), calibration paper (rendered focal length "
+              f"{time.perf_counter() - t0:.1f} s, once); chunk = one render group", flush=True)
+
+        res = {}
+        for label, mode in kinds:
+            for n in (1, 2):
+                r = throughput(ExecutorSpec(mode, n), config, trials, tmp)
+                res[(mode, n)] = r
+                mem = "; ".join(f"pid {p}: RSS {a:.0f} MB, peak {b:.0f} MB" for p, a, b in r["mem"]) or "n/a"
+                print(f"{label}, {n} worker(s): {r['trials_per_s']:.3f} trials/s ({len(trials)} trials in "
+                      f"{r['elapsed_s']:.1f} s; executor start + warm-up {r['start_s']:.1f} s); worker CPU "
+                      f"{r['cpu_per_trial_s']:.2f} s/trial, wall {r['wall_per_trial_s']:.2f} s/trial; the workers "
+                      f"got {r['cores']:.2f} core(s); no-op task: {r['noop_ms'][0]:.2f} ms round trip, "
+                      f"{r['noop_ms'][1]:.2f} ms each in a batch of {NOOP_BATCH}; memory: {mem}", flush=True)
+        peer = _print_throughput_table(kinds, res)
+        ref = res[("process", 1)]["rows"]
+        diffs = {k: _differences(v["rows"], ref) for k, v in res.items() if k != ("process", 1)}
+        bad = {k: d for k, d in diffs.items() if d}
+        print("rows (timings aside) identical on every executor: "
+              + ("yes" if not bad else f"NO: {', '.join(f'{m}-{n}: {d[:5]}' for (m, n), d in bad.items())}"))
+
+        print(f"\nwhere a trial's time goes (load average now {_load()}):")
+        sub = [t for t in trials if t.scenario["pose_index"] == 0]
+        b = breakdown(sub)
+        print_breakdown(f"rendered campaign, {CAMERA}, first stand setting of each range", b)
+        mr = None
+        if args.merge_range:
+            mr = breakdown(merge_range_trials())
+            print_breakdown("merge range, htc-amaze-4g, 6 and 7 m, f-number nominal/low/high, 2 exposures/render", mr)
+
+    _print_projection(args, res, peer, b, mr)
     print(f"load average after: {_load()}; the benchmark took {time.perf_counter() - t_start:.0f} s")
     return 0
 

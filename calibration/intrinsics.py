@@ -272,14 +272,8 @@ def calibrate(
     out, flags = _calibrate_opencv(obj, img, (w, h), pp, aspect, fix_aspect=fix_aspect,
                                    fix_principal_point=fix_principal_point, zero_tangent=zero_tangent, fix_k3=fix_k3)
     rms, K, dist, rvecs, tvecs, std_intr, _std_extr, per_view = out
-    K = np.asarray(K, float)
-    dist = np.asarray(dist, float).reshape(-1)[:5]
-    if not (np.all(np.isfinite(K)) and np.all(np.isfinite(dist)) and K[0, 0] > 0 and K[1, 1] > 0):
-        raise InputError(f"calibrate: the calibration from these {len(obj)} views diverged; use more, better spread views")
-    sd = np.asarray(std_intr, float).reshape(-1)
-    std = {k: float(v) for k, v in zip(STD_KEYS, sd[: len(STD_KEYS)])}
-    if fix_aspect:  # OpenCV estimates fy only; fx = aspect * fy
-        std["fx"] = aspect * std["fy"]
+    K, dist = _checked_intrinsics(K, dist, len(obj))
+    std = _intrinsic_std(std_intr, fix_aspect, aspect)
     constraints = _constraints(fix_aspect, aspect, fix_principal_point, pp, zero_tangent, fix_k3)
     return Calibration(
         camera_matrix=K,
@@ -297,6 +291,55 @@ def calibrate(
         flags=int(flags),
         board=board,
     )
+
+
+def _checked_intrinsics(K, dist, n_views: int) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV's camera matrix and distortion as arrays; :class:`InputError` when they diverged.
+
+    Parameters
+    ----------
+    K : array_like, shape (3, 3)
+        Camera matrix, px.
+    dist : array_like
+        Distortion coefficients (the first five are kept).
+    n_views : int
+        Views calibrated (for the message).
+
+    Returns
+    -------
+    K : ndarray, shape (3, 3)
+    dist : ndarray, shape (5,)
+        ``(k1, k2, p1, p2, k3)``.
+    """
+    K = np.asarray(K, float)
+    dist = np.asarray(dist, float).reshape(-1)[:5]
+    if not (np.all(np.isfinite(K)) and np.all(np.isfinite(dist)) and K[0, 0] > 0 and K[1, 1] > 0):
+        raise InputError(f"calibrate: the calibration from these {n_views} views diverged; use more, better spread views")
+    return K, dist
+
+
+def _intrinsic_std(std_intr, fix_aspect: bool, aspect: float) -> dict:
+    """OpenCV's standard deviations of the intrinsics, keyed by :data:`STD_KEYS`.
+
+    Parameters
+    ----------
+    std_intr : array_like
+        ``stdDeviationsIntrinsics`` of ``cv2.calibrateCameraExtended``.
+    fix_aspect : bool
+        With a fixed aspect ratio OpenCV estimates ``fy`` only; ``fx``'s is then ``aspect * fy``'s.
+    aspect : float
+        ``fx / fy``.
+
+    Returns
+    -------
+    dict
+        Key -> standard deviation (px for the focal lengths and principal point).
+    """
+    sd = np.asarray(std_intr, float).reshape(-1)
+    std = {k: float(v) for k, v in zip(STD_KEYS, sd[: len(STD_KEYS)])}
+    if fix_aspect:  # OpenCV estimates fy only; fx = aspect * fy
+        std["fx"] = aspect * std["fy"]
+    return std
 
 
 def _constraints(fix_aspect, aspect, fix_principal_point, pp, zero_tangent, fix_k3) -> dict:

@@ -164,30 +164,15 @@ def synthesize_views(
         progress(f"undistorting {W * s} x {H * s} sample rays (shared by the views) ...")
     xy = _subsample_rays(camera, s)  # (H s, W s, 2), shared by all views
     lo, hi = float(levels[0]), float(levels[1])
-    tex = None
+    tex = tex_img = None
     if board.kind == "charuco":
         # texels at most half a sub-sample at the nearest board point
         tex = board.draw(2.0 * s * max(camera.fx, camera.fy) / zmin)
         tex_img = np.where(tex.image > 127, np.float32(hi), np.float32(lo)).astype(np.float32)
-    x0, y0, x1, y1 = board.extent_m
-    q = board.quiet_zone_m
     rng = np.random.default_rng(seed)
     out = np.empty((R.shape[0], H, W), np.uint8)
     for k, (Rk, tk) in enumerate(zip(R, t)):
-        Hinv = np.linalg.inv(np.column_stack([Rk[:, 0], Rk[:, 1], tk]))  # ray -> board (X, Y, 1)
-        w = Hinv[2, 0] * xy[..., 0] + Hinv[2, 1] * xy[..., 1] + Hinv[2, 2]
-        front = w > 1e-12
-        wz = np.where(front, w, 1.0)
-        X = np.where(front, (Hinv[0, 0] * xy[..., 0] + Hinv[0, 1] * xy[..., 1] + Hinv[0, 2]) / wz, 1e6)
-        Y = np.where(front, (Hinv[1, 0] * xy[..., 0] + Hinv[1, 1] * xy[..., 1] + Hinv[1, 2]) / wz, 1e6)
-        if tex is None:
-            paper = (X >= x0 - q) & (X <= x1 + q) & (Y >= y0 - q) & (Y <= y1 + q)
-            fine = np.where(paper, np.where(ink_mask(board, X, Y), lo, hi), float(background)).astype(np.float32)
-        else:
-            mx = (tex.origin_px[0] + X * tex.px_per_m).astype(np.float32)
-            my = (tex.origin_px[1] + Y * tex.px_per_m).astype(np.float32)
-            fine = cv2.remap(tex_img, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
-                             borderValue=float(background))
+        fine = _board_samples(board, Rk, tk, xy, lo, hi, background, tex, tex_img)
         img = cv2.resize(fine, (W, H), interpolation=cv2.INTER_AREA) if s > 1 else fine
         if blur_px > 0:
             img = cv2.GaussianBlur(img, (0, 0), float(blur_px))
@@ -197,6 +182,52 @@ def synthesize_views(
         if progress is not None:
             progress(f"view {k + 1}/{R.shape[0]}")
     return out[0] if single else out
+
+
+def _board_samples(board: Board, Rk, tk, xy, lo: float, hi: float, background, tex, tex_img) -> np.ndarray:
+    """The board's grey level at each sample ray of one view (before the pixel box filter).
+
+    Parameters
+    ----------
+    board : Board
+    Rk : ndarray, shape (3, 3)
+        ``R_cam_board`` of the view.
+    tk : ndarray, shape (3,)
+        ``t_cam_board_m`` of the view, m.
+    xy : ndarray, shape (H s, W s, 2)
+        Undistorted normalised coordinates of the sample rays.
+    lo, hi : float
+        Grey level of ink and of paper.
+    background : float
+        Grey level where the ray misses the board.
+    tex : BoardImage or None
+        The drawn board (ChArUco boards), else None: the ink is evaluated analytically.
+    tex_img : ndarray of float32 or None
+        ``tex``'s image in grey levels ``lo``/``hi``.
+
+    Returns
+    -------
+    ndarray of float32, shape (H s, W s)
+    """
+    import cv2
+
+    x0, y0, x1, y1 = board.extent_m
+    q = board.quiet_zone_m
+    Hinv = np.linalg.inv(np.column_stack([Rk[:, 0], Rk[:, 1], tk]))  # ray -> board (X, Y, 1)
+    w = Hinv[2, 0] * xy[..., 0] + Hinv[2, 1] * xy[..., 1] + Hinv[2, 2]
+    front = w > 1e-12
+    wz = np.where(front, w, 1.0)
+    X = np.where(front, (Hinv[0, 0] * xy[..., 0] + Hinv[0, 1] * xy[..., 1] + Hinv[0, 2]) / wz, 1e6)
+    Y = np.where(front, (Hinv[1, 0] * xy[..., 0] + Hinv[1, 1] * xy[..., 1] + Hinv[1, 2]) / wz, 1e6)
+    if tex is None:
+        paper = (X >= x0 - q) & (X <= x1 + q) & (Y >= y0 - q) & (Y <= y1 + q)
+        fine = np.where(paper, np.where(ink_mask(board, X, Y), lo, hi), float(background)).astype(np.float32)
+    else:
+        mx = (tex.origin_px[0] + X * tex.px_per_m).astype(np.float32)
+        my = (tex.origin_px[1] + Y * tex.px_per_m).astype(np.float32)
+        fine = cv2.remap(tex_img, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
+                         borderValue=float(background))
+    return fine
 
 
 def _subsample_rays(camera: Camera, s: int) -> np.ndarray:

@@ -72,6 +72,20 @@ def executor_argv(args) -> list[str]:
 
 
 def register(sub) -> None:
+    """Add the study subcommands (``campaign``, ``sensitivity``, ``merge-range``) to ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of the ``svgs`` command.
+    """
+    _register_campaign(sub)
+    _register_sensitivity(sub)
+    _register_merge_range(sub)
+
+
+def _register_campaign(sub) -> None:
+    """Add the ``campaign`` subcommand to ``sub``."""
     p = sub.add_parser(
         "campaign",
         help="simulate the paper's MSFC test campaign and compare with its Tables 2-5",
@@ -120,6 +134,9 @@ def register(sub) -> None:
     add_executor_options(p)
     p.set_defaults(func=cmd_campaign)
 
+
+def _register_sensitivity(sub) -> None:
+    """Add the ``sensitivity`` subcommand to ``sub``."""
     s = sub.add_parser(
         "sensitivity",
         help="global sensitivity (Sobol or Morris) of pose error and success to scenario parameters",
@@ -143,6 +160,9 @@ def register(sub) -> None:
     add_executor_options(s)
     s.set_defaults(func=cmd_sensitivity)
 
+
+def _register_merge_range(sub) -> None:
+    """Add the ``merge-range`` subcommand to ``sub``."""
     m = sub.add_parser(
         "merge-range",
         help="which physical parameters move the range at which the spots merge, and by how much",

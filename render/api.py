@@ -465,24 +465,7 @@ class Renderer:
         factor = self.flux_factor()
         flux_diffuse = None
         if self.spots is not None:
-            t0 = time.perf_counter()
-            spot_img, strategies, (su, sv, sval) = self._spot_image(R, t, seed + 0x5BD1E995)
-            sl = _box_slices(_union_box(lit)) if lit else None
-            flux_diffuse = _times_factor(rad, factor, sl)
-            if len(su):
-                ui = np.floor(su + 0.5).astype(np.int64)
-                vi = np.floor(sv + 0.5).astype(np.int64)
-                # one pixel more each side: the estimator bins in float32 (a sample at a pixel
-                # border may land one pixel over from this float64 rounding)
-                sbox = (max(0, int(vi.min()) - 1), min(H, int(vi.max()) + 2), max(0, int(ui.min()) - 1),
-                        min(W, int(ui.max()) + 2))
-                ss = _box_slices(sbox)
-                rad[ss] += spot_img[ss]
-                lit.append(sbox)
-                points = PointFlux(su, sv, sval * factor[vi, ui])
-            else:
-                points = PointFlux(su, sv, sval)
-            timings["spots_s"] = time.perf_counter() - t0
+            strategies, points, flux_diffuse = self._add_spots(R, t, rad, lit, factor, seed, timings)
         t0 = time.perf_counter()
         sl = _box_slices(_union_box(lit)) if lit else None
         flux = _times_factor(rad, factor, sl)
@@ -494,6 +477,55 @@ class Renderer:
                            full_frame=full_frame, rois=rois, timings=timings, strategies=strategies)
         return RenderResult(flux=flux, truth=truth, radiance=radiance, timings_s=timings,
                             flux_diffuse=flux_diffuse, points=points)
+
+    def _add_spots(self, R, t, rad, lit: list, factor, seed: int, timings: dict):
+        """Add the guided spot estimator's image to ``rad`` (in place) and box it in ``lit``.
+
+        Parameters
+        ----------
+        R : ndarray, shape (3, 3)
+        t : ndarray, shape (3,)
+            ``R_cam_target``, ``t_cam_target_m``.
+        rad : ndarray, float32, shape (H, W)
+            The diffuse radiance; the spots' radiance is added in place.
+        lit : list of (int, int, int, int)
+            Boxes ``(y0, y1, x0, x1)`` holding the light; the spots' box is appended.
+        factor : ndarray, shape (H, W)
+            Radiance -> flux factor per pixel (:meth:`flux_factor`).
+        seed : int
+            The frame's seed.
+        timings : dict
+            ``spots_s`` is set, s.
+
+        Returns
+        -------
+        strategies : list
+            The spot estimator's strategies.
+        points : PointFlux
+            The spot samples and their flux.
+        flux_diffuse : ndarray, shape (H, W)
+            The flux of the diffuse radiance alone (before the spots were added).
+        """
+        H, W = self.camera.height, self.camera.width
+        t0 = time.perf_counter()
+        spot_img, strategies, (su, sv, sval) = self._spot_image(R, t, seed + 0x5BD1E995)
+        sl = _box_slices(_union_box(lit)) if lit else None
+        flux_diffuse = _times_factor(rad, factor, sl)
+        if len(su):
+            ui = np.floor(su + 0.5).astype(np.int64)
+            vi = np.floor(sv + 0.5).astype(np.int64)
+            # one pixel more each side: the estimator bins in float32 (a sample at a pixel
+            # border may land one pixel over from this float64 rounding)
+            sbox = (max(0, int(vi.min()) - 1), min(H, int(vi.max()) + 2), max(0, int(ui.min()) - 1),
+                    min(W, int(ui.max()) + 2))
+            ss = _box_slices(sbox)
+            rad[ss] += spot_img[ss]
+            lit.append(sbox)
+            points = PointFlux(su, sv, sval * factor[vi, ui])
+        else:
+            points = PointFlux(su, sv, sval)
+        timings["spots_s"] = time.perf_counter() - t0
+        return strategies, points, flux_diffuse
 
     # ------------------------------------------------------------------ truth
     def truth(self, R, t, targets_px, visible, spots, **render_info) -> dict:

@@ -41,21 +41,9 @@ def svgs_frame_truth(r, R, t, targets_px, visible, spots, **render_info) -> dict
     -------
     dict
     """
-    import drjit as dr
-    import mitsuba as mi
-
     cam, pat, fl, op = r.camera, r.pattern, r.flash, r.optics
     V_ref = pat.points_m @ R.T + t
-    intens, irr = {}, {}
-    for i, tid in enumerate(pat.ids):
-        I_tot, E_tot = 0.0, 0.0
-        for S in fl.led_offsets_m:
-            d = V_ref[i] - S
-            I = float(fl.intensity_w_sr(d[2] / np.linalg.norm(d)))
-            I_tot += I
-            E_tot += retro_irradiance_w_m2(I, S, V_ref[i], r.reflector, op.band_nm)
-        intens[str(tid)] = I_tot
-        irr[str(tid)] = E_tot
+    intens, irr = _flash_at_targets(r, V_ref)
     ph = fl.photometry["mean_photon_energy_j"]
     return {
         "camera": cam.name,
@@ -87,23 +75,72 @@ def svgs_frame_truth(r, R, t, targets_px, visible, spots, **render_info) -> dict
             "retro_irradiance_at_lens_predicted_w_m2": irr,
             "retro_photons_per_s_predicted": {k: v * op.aperture_area_m2 / ph for k, v in irr.items()},
         },
-        "render": {
-            "variant": r.variant.name,
-            "variant_notice": r.variant.notice,
-            "method": r.method,
-            "integrator": "path" + (" (diffuse, LED as point light) + guided spot estimator" if r.method == "guided" else " (LED as disk area emitter)"),
-            "spot_samples_per_strategy": r.spot_samples if r.method == "guided" else None,
-            "spot_sampler": r.spot_sampler if r.method == "guided" else None,
-            "spot_strategies": render_info.get("strategies", []),
-            "max_depth": int(r.options.max_depth),
-            "sampler": "ldsampler",
-            "seed": render_info["seed"],
-            "spp": render_info["spp"],
-            "roi_spp": None if render_info["full_frame"] else render_info["roi_spp"],
-            "roi_size_px": None if render_info["full_frame"] else r.roi_size_px,
-            "full_frame": render_info["full_frame"],
-            "rois": render_info["rois"],
-            "timings_s": render_info["timings"],
-            "versions": {"mitsuba": mi.__version__, "drjit": dr.__version__, "numpy": np.__version__},
-        },
+        "render": _render_record(r, render_info),
+    }
+
+
+def _flash_at_targets(r, V_ref) -> tuple[dict, dict]:
+    """The flash's intensity towards each target and the retro-reflected irradiance at the lens.
+
+    Parameters
+    ----------
+    r : render.api.Renderer
+    V_ref : ndarray, shape (N, 3)
+        The targets' reference points in the camera frame, m.
+
+    Returns
+    -------
+    intensity_w_sr : dict
+        Target id (str) -> the LEDs' summed intensity towards it, W/sr.
+    irradiance_w_m2 : dict
+        Target id (str) -> predicted retro-reflected irradiance at the lens, W/m^2 in band.
+    """
+    pat, fl, op = r.pattern, r.flash, r.optics
+    intens, irr = {}, {}
+    for i, tid in enumerate(pat.ids):
+        I_tot, E_tot = 0.0, 0.0
+        for S in fl.led_offsets_m:
+            d = V_ref[i] - S
+            I = float(fl.intensity_w_sr(d[2] / np.linalg.norm(d)))
+            I_tot += I
+            E_tot += retro_irradiance_w_m2(I, S, V_ref[i], r.reflector, op.band_nm)
+        intens[str(tid)] = I_tot
+        irr[str(tid)] = E_tot
+    return intens, irr
+
+
+def _render_record(r, render_info: dict) -> dict:
+    """The ``render`` section of the truth record: how the frame was rendered.
+
+    Parameters
+    ----------
+    r : render.api.Renderer
+    render_info : dict
+        ``seed``, ``spp``, ``roi_spp``, ``full_frame``, ``rois``, ``timings``, ``strategies``.
+
+    Returns
+    -------
+    dict
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    return {
+        "variant": r.variant.name,
+        "variant_notice": r.variant.notice,
+        "method": r.method,
+        "integrator": "path" + (" (diffuse, LED as point light) + guided spot estimator" if r.method == "guided" else " (LED as disk area emitter)"),
+        "spot_samples_per_strategy": r.spot_samples if r.method == "guided" else None,
+        "spot_sampler": r.spot_sampler if r.method == "guided" else None,
+        "spot_strategies": render_info.get("strategies", []),
+        "max_depth": int(r.options.max_depth),
+        "sampler": "ldsampler",
+        "seed": render_info["seed"],
+        "spp": render_info["spp"],
+        "roi_spp": None if render_info["full_frame"] else render_info["roi_spp"],
+        "roi_size_px": None if render_info["full_frame"] else r.roi_size_px,
+        "full_frame": render_info["full_frame"],
+        "rois": render_info["rois"],
+        "timings_s": render_info["timings"],
+        "versions": {"mitsuba": mi.__version__, "drjit": dr.__version__, "numpy": np.__version__},
     }

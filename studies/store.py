@@ -154,42 +154,12 @@ def _check_lines(lines, columns, *, first_line: int = 2, trial_ids=None, text_co
         line_no = first_line + k
         if not raw.strip():
             continue  # a blank line holds no row
-        try:
-            text = raw.decode("utf-8")
-        except UnicodeDecodeError:
-            bad.append((line_no, "not UTF-8 text", raw))
-            continue
-        try:
-            fields = next(csv.reader((text,), strict=True), [])
-        except csv.Error as exc:
-            bad.append((line_no, f"not a CSV row ({exc})", raw))
-            continue
-        if len(fields) != n:
-            bad.append((line_no, f"{len(fields)} fields where the header has {n}", raw))
-            continue
-        tid = fields[0]
-        if not tid.isascii() or not tid.isdigit():
-            bad.append((line_no, f"trial_id {tid!r} is not a non-negative integer", raw))
-            continue
-        if ids is not None and int(tid) not in ids:
-            bad.append((line_no, f"trial_id {int(tid)} is not a trial of this study ({_describe_ids(ids)})", raw))
-            continue
-        if seed_col is not None and fields[seed_col] != "" and not isinstance(_parse(fields[seed_col]), int):
-            bad.append((line_no, f"seed {fields[seed_col]!r} is not an integer", raw))
-            continue
-        rows.append((line_no, fields, raw))
-    # numeric columns must hold numbers
-    if text_columns is not None:
-        numeric = [j for j, c in enumerate(columns) if c not in set(text_columns)]
-    elif infer:
-        numeric = []
-        for j in range(1, n):
-            vals = [f[j] for _, f, _ in rows if f[j] != ""]
-            n_num = sum(_is_number(v) for v in vals)
-            if n_num > len(vals) - n_num:
-                numeric.append(j)
-    else:
-        numeric = []
+        fields, problem = _split_line(raw, n, ids, seed_col)
+        if problem is not None:
+            bad.append((line_no, problem, raw))
+        else:
+            rows.append((line_no, fields, raw))
+    numeric = _numeric_columns(columns, rows, text_columns, infer)
     typed = []
     for line_no, fields, raw in rows:
         wrong = next((j for j in numeric if fields[j] != "" and not _is_number(fields[j])), None)
@@ -197,7 +167,101 @@ def _check_lines(lines, columns, *, first_line: int = 2, trial_ids=None, text_co
             bad.append((line_no, f"{columns[wrong]} {fields[wrong]!r} is not a number", raw))
         else:
             typed.append((line_no, fields, raw))
-    # one row per trial_id
+    good = _one_row_per_trial(typed, bad)
+    bad.sort(key=lambda b: b[0])
+    return [(line_no, fields) for line_no, fields, _ in good], bad
+
+
+def _split_line(raw: bytes, n: int, ids, seed_col):
+    """Split one data line of a ``results.csv`` into its fields, or say what is wrong with it.
+
+    Parameters
+    ----------
+    raw : bytes
+        The line, without its newline (not blank).
+    n : int
+        Number of columns in the header.
+    ids : set of int or None
+        The study's trial ids (None: any non-negative id).
+    seed_col : int or None
+        Index of the ``seed`` column, if any.
+
+    Returns
+    -------
+    fields : list of str or None
+        The ``n`` fields; None when the line is malformed.
+    problem : str or None
+        What is wrong with the line; None when it is well formed.
+    """
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        return None, "not UTF-8 text"
+    try:
+        fields = next(csv.reader((text,), strict=True), [])
+    except csv.Error as exc:
+        return None, f"not a CSV row ({exc})"
+    if len(fields) != n:
+        return None, f"{len(fields)} fields where the header has {n}"
+    tid = fields[0]
+    if not tid.isascii() or not tid.isdigit():
+        return None, f"trial_id {tid!r} is not a non-negative integer"
+    if ids is not None and int(tid) not in ids:
+        return None, f"trial_id {int(tid)} is not a trial of this study ({_describe_ids(ids)})"
+    if seed_col is not None and fields[seed_col] != "" and not isinstance(_parse(fields[seed_col]), int):
+        return None, f"seed {fields[seed_col]!r} is not an integer"
+    return fields, None
+
+
+def _numeric_columns(columns, rows, text_columns, infer: bool) -> list[int]:
+    """Indices of the columns that must hold numbers (see :func:`_check_lines`).
+
+    Parameters
+    ----------
+    columns : list of str
+        The header's columns.
+    rows : list of (int, list of str, bytes)
+        Line number, fields and raw line of each row that split cleanly.
+    text_columns : collection of str or None
+        Columns that may hold text (all others are numeric).
+    infer : bool
+        Without ``text_columns``: a column is numeric when most of its non-empty values are numbers.
+
+    Returns
+    -------
+    list of int
+        Column indices, ascending.
+    """
+    if text_columns is not None:
+        return [j for j, c in enumerate(columns) if c not in set(text_columns)]
+    numeric = []
+    if infer:
+        for j in range(1, len(columns)):
+            vals = [f[j] for _, f, _ in rows if f[j] != ""]
+            n_num = sum(_is_number(v) for v in vals)
+            if n_num > len(vals) - n_num:
+                numeric.append(j)
+    return numeric
+
+
+def _one_row_per_trial(typed, bad: list) -> list:
+    """Keep one row per ``trial_id``; append repeated and conflicting rows to ``bad``.
+
+    A row that repeats an earlier one exactly is dropped; when two rows of one id differ, all
+    rows of that id are malformed.
+
+    Parameters
+    ----------
+    typed : list of (int, list of str, bytes)
+        Line number, fields and raw line of each otherwise well-formed row, in file order.
+    bad : list of (int, str, bytes)
+        Malformed rows so far; extended in place.
+
+    Returns
+    -------
+    list of (int, list of str, bytes)
+        The kept rows, in file order.
+    """
     first: dict[int, tuple[int, list]] = {}
     conflicting: set[int] = set()
     good = []
@@ -217,8 +281,7 @@ def _check_lines(lines, columns, *, first_line: int = 2, trial_ids=None, text_co
             if tid in conflicting:
                 bad.append((line_no, f"trial_id {tid} appears again later with different values", raw))
         good = [g for g in good if int(g[1][0]) not in conflicting]
-    bad.sort(key=lambda b: b[0])
-    return [(line_no, fields) for line_no, fields, _ in good], bad
+    return good
 
 
 def _diff(a: dict, b: dict, prefix: str = "") -> list[str]:

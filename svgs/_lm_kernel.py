@@ -172,6 +172,11 @@ def covariance_paper(R, t, Jw, out):
     ``Jw`` is the whitened Jacobian (px per unit of p = (t, delta)); T is the Jacobian of
     the map from the iteration's parameters to the paper's state, by central differences.
     Returns the smallest pivot of the Jacobi-scaled information matrix (0 if singular).
+
+    This function is long (~95 lines) because it is one Numba-compiled kernel: the normal
+    matrix, its Cholesky inverse, the central-difference Jacobian and the product run in
+    one compiled body on stack-sized 6x6 arrays, which is what the per-frame solver calls;
+    its steps are marked by comments.
     """
     m = Jw.shape[0]
     A = np.empty((6, 6))

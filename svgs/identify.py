@@ -416,6 +416,45 @@ def identify(
         return Identification(pts[sel], idx_all[sel], pattern.ids.copy(), n_blobs=n_all, n_pairs=n_pairs,
                               n_candidates=n_cand, n_verified=0, score=float(scores[0]))
 
+    return _verified_identification(pts, idx_all, blobs, sets, scores, camera, pattern, diag, hint, hint_d,
+                                    sigma_px=sigma_px, max_residual_px=max_residual_px, max_verify=max_verify,
+                                    envelope=envelope, pose_margin_deg=pose_margin_deg)
+
+
+def _verified_identification(pts, idx_all, blobs, sets, scores, camera, pattern, diag: dict, hint: str, hint_d: dict,
+                             *, sigma_px: float, max_residual_px: float, max_verify: int, envelope: Envelope,
+                             pose_margin_deg: float):
+    """The verifying step of :func:`identify`: solve the best candidate sets and keep the consistent one.
+
+    Parameters
+    ----------
+    pts : ndarray, shape (N, 2)
+        The considered blobs' centroids, px (brightest first).
+    idx_all : ndarray of int, shape (N,)
+        Their indices among all blobs.
+    blobs : Blobs or None
+        The detected blobs (None for bare centroids).
+    sets : ndarray of int, shape (n_sets, n_targets)
+        Candidate sets (indices into ``pts``), best geometric score first.
+    scores : ndarray, shape (n_sets,)
+        Their geometric scores.
+    camera : Camera
+    pattern : Pattern
+    diag : dict
+        ``n_blobs``, ``n_pairs``, ``n_candidates`` (before the candidates were capped).
+    hint : str
+        The merged-spot hint appended to failure messages ("" for none).
+    hint_d : dict
+        The hint's diagnostics.
+    sigma_px, max_residual_px, max_verify, envelope, pose_margin_deg
+        See :func:`identify`.
+
+    Returns
+    -------
+    Identification or Failure
+    """
+    N = pts.shape[0]
+    n_all, n_pairs, n_cand = diag["n_blobs"], diag["n_pairs"], diag["n_candidates"]
     pres, rank = _posit_rank(pts, sets, camera, pattern, max_residual_px, max_verify)
     if rank.size == 0:
         return Failure(

@@ -101,6 +101,46 @@ def render_overlay(image, *, blobs_px=(), targets_px=None, reprojected_px=None, 
     for u, v in blobs:
         if x0 <= u < x1 and y0 <= v < y1:
             cv2.circle(out, _pt(u, v, x0, y0, s), 14 << _SHIFT, BLOB_BGR, 1, cv2.LINE_AA, _SHIFT)
+    mag = _draw_sigma_ellipses(out, sigma_px, targets_px, x0, y0, s)
+    for k, (u, v) in reprojected_px.items():
+        c = _pt(u, v, x0, y0, s)
+        d = 9 << _SHIFT
+        cv2.line(out, (c[0] - d, c[1]), (c[0] + d, c[1]), REPROJ_BGR, 1, cv2.LINE_AA, _SHIFT)
+        cv2.line(out, (c[0], c[1] - d), (c[0], c[1] + d), REPROJ_BGR, 1, cv2.LINE_AA, _SHIFT)
+    for k, (u, v) in targets_px.items():
+        c = _pt(u, v, x0, y0, s)
+        org = (c[0] // (1 << _SHIFT) + 16, c[1] // (1 << _SHIFT) - 12)
+        cv2.putText(out, str(k), org, cv2.FONT_HERSHEY_SIMPLEX, 0.7, LABEL_BGR, 2, cv2.LINE_AA)
+    _inset_thumbnail(out, disp, (x0, y0, x1, y1))
+    bar = _legend_bar(out.shape[1], title, sigma_label if sigma_px else None, mag)
+    crop_txt = f"crop x {x0}-{x1} y {y0}-{y1} of {W}x{H} px, zoom {s:.2g}x"
+    cv2.putText(out, crop_txt, (8, out.shape[0] - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (200, 200, 200), 1, cv2.LINE_AA)
+    return np.vstack([bar, out])
+
+
+def _draw_sigma_ellipses(out, sigma_px, targets_px: dict, x0: int, y0: int, s: float) -> float:
+    """Draw the uncertainty ellipses about the identified targets into ``out``.
+
+    Parameters
+    ----------
+    out : ndarray of uint8, shape (h, w, 3)
+        The zoomed BGR crop; drawn into in place.
+    sigma_px : dict or None
+        Target id -> ``[sigma_u, sigma_v]`` (px).
+    targets_px : dict
+        Target id -> ``[u, v]`` (frame px): the ellipses' centres.
+    x0, y0 : int
+        Frame pixel of the crop's top-left corner.
+    s : float
+        Zoom (picture px per frame px).
+
+    Returns
+    -------
+    float
+        The magnification of the ellipses (a power of ten, 1 without ``sigma_px``).
+    """
+    import cv2
+
     mag = 1.0
     if sigma_px:
         sig = np.array([np.asarray(v, float) for v in sigma_px.values()])
@@ -113,16 +153,25 @@ def render_overlay(image, *, blobs_px=(), targets_px=None, reprojected_px=None, 
             u, v = targets_px[k]
             axes = (max(1, int(round(sv[0] * s * mag * (1 << _SHIFT)))), max(1, int(round(sv[1] * s * mag * (1 << _SHIFT)))))
             cv2.ellipse(out, _pt(u, v, x0, y0, s), axes, 0.0, 0.0, 360.0, ELLIPSE_BGR, 1, cv2.LINE_AA, _SHIFT)
-    for k, (u, v) in reprojected_px.items():
-        c = _pt(u, v, x0, y0, s)
-        d = 9 << _SHIFT
-        cv2.line(out, (c[0] - d, c[1]), (c[0] + d, c[1]), REPROJ_BGR, 1, cv2.LINE_AA, _SHIFT)
-        cv2.line(out, (c[0], c[1] - d), (c[0], c[1] + d), REPROJ_BGR, 1, cv2.LINE_AA, _SHIFT)
-    for k, (u, v) in targets_px.items():
-        c = _pt(u, v, x0, y0, s)
-        org = (c[0] // (1 << _SHIFT) + 16, c[1] // (1 << _SHIFT) - 12)
-        cv2.putText(out, str(k), org, cv2.FONT_HERSHEY_SIMPLEX, 0.7, LABEL_BGR, 2, cv2.LINE_AA)
-    # thumbnail of the full frame with the crop marked
+    return mag
+
+
+def _inset_thumbnail(out, disp, box) -> None:
+    """Paste a thumbnail of the full frame, with the crop ``box`` marked, into ``out``'s top-right corner.
+
+    Parameters
+    ----------
+    out : ndarray of uint8, shape (h, w, 3)
+        The zoomed BGR crop; drawn into in place (not when the thumbnail would not fit).
+    disp : ndarray of uint8, shape (H, W)
+        The full frame for display.
+    box : tuple of int
+        ``(x0, y0, x1, y1)``: the crop in frame px.
+    """
+    import cv2
+
+    x0, y0, x1, y1 = box
+    H, W = disp.shape
     tw = max(80, out.shape[1] // 4)
     th = max(1, int(round(H * tw / W)))
     thumb = cv2.cvtColor(cv2.resize(disp, (tw, th), interpolation=cv2.INTER_AREA), cv2.COLOR_GRAY2BGR)
@@ -132,19 +181,37 @@ def render_overlay(image, *, blobs_px=(), targets_px=None, reprojected_px=None, 
     cv2.rectangle(thumb, (0, 0), (tw - 1, th - 1), (200, 200, 200), 1)
     if th < out.shape[0] and tw < out.shape[1]:
         out[0:th, out.shape[1] - tw:] = thumb
-    # legend and title
-    bar = np.zeros((58, out.shape[1], 3), np.uint8)
+
+
+def _legend_bar(width_px: int, title: str, sigma_label, mag: float) -> np.ndarray:
+    """The title and legend bar above the overlay.
+
+    Parameters
+    ----------
+    width_px : int
+        The picture's width.
+    title : str
+    sigma_label : str or None
+        What the ellipses are; None: no ellipses drawn (no legend entry).
+    mag : float
+        The ellipses' magnification.
+
+    Returns
+    -------
+    ndarray of uint8, shape (58, width_px, 3)
+    """
+    import cv2
+
+    bar = np.zeros((58, width_px, 3), np.uint8)
     cv2.putText(bar, title[:110], (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
     legend = [("o detected blob", BLOB_BGR), ("1-4 target labels", LABEL_BGR), ("+ reprojected solution", REPROJ_BGR)]
-    if sigma_px:
+    if sigma_label is not None:
         legend.append((f"ellipse: {sigma_label} x{mag:g}", ELLIPSE_BGR))
     x = 8
     for text, col in legend:
         cv2.putText(bar, text, (x, 46), cv2.FONT_HERSHEY_SIMPLEX, 0.45, col, 1, cv2.LINE_AA)
         x += 12 + 8 * len(text)
-    crop_txt = f"crop x {x0}-{x1} y {y0}-{y1} of {W}x{H} px, zoom {s:.2g}x"
-    cv2.putText(out, crop_txt, (8, out.shape[0] - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (200, 200, 200), 1, cv2.LINE_AA)
-    return np.vstack([bar, out])
+    return bar
 
 
 def solution_marks(result, camera, pattern) -> tuple[dict, dict]:

@@ -386,16 +386,36 @@ def solve_centroids(
     if not single:
         return batch
     if not ok[0]:
-        msg = {
-            "diverged": f"no pose reproduces the centroids (RMS residual {res[0]:.3g} px after {iters[0]} iterations)",
-            "behind_camera": "the only pose that fits puts the target behind the camera",
-            "degenerate": "the centroids do not constrain all six pose parameters",
-            "behind_target": "the only pose that fits views the target from behind (a mirror image of the pattern?)",
-        }[reason[0]]
-        return Failure(reason[0], msg, {"residual_rms_px": _f(res[0]), "iterations": int(iters[0])})
+        return _frame_failure(reason[0], res[0], iters[0])
     sol = batch[0]
     sol.targets_px = {int(i): pts[0, k].tolist() for k, i in enumerate(pattern.ids)}
     return sol
+
+
+def _frame_failure(reason: str, residual_rms_px: float, iterations: int) -> Failure:
+    """The :class:`Failure` of one frame that :func:`solve_centroids` could not solve.
+
+    Parameters
+    ----------
+    reason : str
+        ``diverged``, ``behind_camera``, ``degenerate`` or ``behind_target``.
+    residual_rms_px : float
+        RMS reprojection residual of the last iterate, px.
+    iterations : int
+        Levenberg-Marquardt iterations run.
+
+    Returns
+    -------
+    Failure
+    """
+    msg = {
+        "diverged": f"no pose reproduces the centroids (RMS residual {residual_rms_px:.3g} px after {iterations} "
+                    f"iterations)",
+        "behind_camera": "the only pose that fits puts the target behind the camera",
+        "degenerate": "the centroids do not constrain all six pose parameters",
+        "behind_target": "the only pose that fits views the target from behind (a mirror image of the pattern?)",
+    }[reason]
+    return Failure(reason, msg, {"residual_rms_px": _f(residual_rms_px), "iterations": int(iterations)})
 
 
 def _solve_single(pts, camera, pattern, sigma_px, max_iter, step_tol, max_residual_px, front_side_only):

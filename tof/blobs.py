@@ -122,6 +122,50 @@ def eccentricity_from_cov(cov) -> np.ndarray:
         return np.sqrt(np.clip(1 - lmin / lmax, 0, 1))
 
 
+def _no_blobs() -> Blobs:
+    """A :class:`Blobs` with no blob (an empty active set)."""
+    return Blobs(np.zeros(0, int), np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0), np.zeros((0, 4), int),
+                 np.zeros(0), np.zeros(0), np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0, np.intp),
+                 np.zeros(0), np.zeros(0))
+
+
+def _gates(pg, pf, cnt, ecc, hg: float, hf: float, min_pixels: int, max_pixels: int, max_eccentricity: float):
+    """The hysteresis, size and eccentricity gates of :func:`find_blobs`, per connected component.
+
+    Parameters
+    ----------
+    pg, pf : ndarray, shape (n_labels,)
+        Peak gray and peak filtered intensity of each component.
+    cnt : ndarray, shape (n_labels,)
+        Pixel count of each component.
+    ecc : ndarray, shape (n_labels,)
+        Eccentricity of each component.
+    hg, hf : float
+        High thresholds on the peak gray and the peak filtered intensity.
+    min_pixels, max_pixels : int
+    max_eccentricity : float
+
+    Returns
+    -------
+    keep : ndarray of bool, shape (n_labels,)
+        Components that pass every gate.
+    gate_rej : ndarray of bool, shape (n_labels,)
+        Components above the high thresholds and ``min_pixels`` that a size or shape gate rejected.
+    rejected : dict
+        Counts of components rejected by each gate (``below_high_thresholds``, ``size``, ``eccentricity``).
+    """
+    rejected = {}
+    hyst = (pg > hg) & (pf > hf)
+    rejected["below_high_thresholds"] = int(np.sum(~hyst))
+    size_ok = (cnt >= min_pixels) & (cnt <= max_pixels)
+    shape_ok = ecc <= max_eccentricity
+    rejected["size"] = int(np.sum(hyst & ~size_ok))
+    rejected["eccentricity"] = int(np.sum(hyst & size_ok & ~shape_ok))
+    keep = hyst & size_ok & shape_ok
+    gate_rej = hyst & ~(size_ok & shape_ok) & (cnt >= min_pixels)
+    return keep, gate_rej, rejected
+
+
 def find_blobs(
     active: ActiveSet,
     filtered,
@@ -155,11 +199,8 @@ def find_blobs(
     """
     f = np.asarray(filtered, np.float32)
     H, W = active.shape
-    empty = Blobs(np.zeros(0, int), np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0), np.zeros((0, 4), int),
-                  np.zeros(0), np.zeros(0), np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0, np.intp),
-                  np.zeros(0), np.zeros(0))
     if active.n == 0:
-        return empty
+        return _no_blobs()
     hg = high_gray_rel * active.gray_max if high_gray is None else float(high_gray)
     hf = high_filtered_rel * float(max(f.max(), 0.0)) if high_filtered is None else float(high_filtered)
     mask = np.zeros((H, W), bool)
@@ -174,15 +215,7 @@ def find_blobs(
     pf = np.maximum.reduceat(f[srt], starts)
     cnt, cen, cov = _moments(lab, active.rows, active.cols, nlab)
     ecc = eccentricity_from_cov(cov)
-    rejected = {}
-    hyst = (pg > hg) & (pf > hf)
-    rejected["below_high_thresholds"] = int(np.sum(~hyst))
-    size_ok = (cnt >= min_pixels) & (cnt <= max_pixels)
-    shape_ok = ecc <= max_eccentricity
-    rejected["size"] = int(np.sum(hyst & ~size_ok))
-    rejected["eccentricity"] = int(np.sum(hyst & size_ok & ~shape_ok))
-    keep = hyst & size_ok & shape_ok
-    gate_rej = hyst & ~(size_ok & shape_ok) & (cnt >= min_pixels)
+    keep, gate_rej, rejected = _gates(pg, pf, cnt, ecc, hg, hf, min_pixels, max_pixels, max_eccentricity)
     # bounding boxes per label
     cs, rs = active.cols[srt], active.rows[srt]
     u0, u1 = np.minimum.reduceat(cs, starts), np.maximum.reduceat(cs, starts)

@@ -43,7 +43,8 @@ KEYS = ("x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg")
 GOAL_RATIO = 1.0 / 3.0
 
 
-def main(argv=None):
+def _parse_args(argv):
+    """The command line."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--spp", type=int, nargs="+", default=[64, 256], help="samples per pixel to compare")
     ap.add_argument("--seeds", type=int, default=6, help="render seeds per spp (default 6)")
@@ -53,6 +54,11 @@ def main(argv=None):
     ap.add_argument("--rim-spp-factor", type=int, default=None,
                     help="factor on --spp for the marker-rim pixels (default the renderer's; 1: uniform)")
     args = ap.parse_args(argv)
+    return args
+
+
+def main(argv=None):
+    args = _parse_args(argv)
     from camera.amcw import TofSensor
     from render.tof.camera import DEFAULT_RIM_SPP_FACTOR, TofRenderer
     from svgs.frames import pose_from_scenario
@@ -102,33 +108,58 @@ def main(argv=None):
     print(f"{'':>10}" + "".join(f"{k:>11}" for k in KEYS))
     print(f"{'sensor':>10}" + "".join(f"{v:>11.4f}" for v in s_sensor))
     for spp in args.spp:
-        rows, times = [], []
-        clean, grays = [], []
-        for s in range(args.seeds):
-            rendered, dt = render(spp, s)
-            times.append(dt)
-            grays.append(next(sensor.frames(rendered, 1, None, noise=False)).gray)
-            st = states(rendered, [0, 1], 1)
-            if len(st):
-                rows.append(st[0])
-            st = states(rendered, None, 1, noise=False)
-            if len(st):
-                clean.append(st[0])
-        s_render = np.std(np.array(rows), axis=0, ddof=1)
-        s_clean = np.std(np.array(clean), axis=0, ddof=1)
-        print(f"{'render':>6}{spp:>4d}" + "".join(f"{v:>11.4f}" for v in s_render)
-              + f"   same noise draw ({len(rows)}/{args.seeds} solved, render {np.median(times):.2f} s, "
-              f"{spp * factor} spp on the rims)")
-        print(f"{'':>10}" + "".join(f"{v:>11.4f}" for v in s_clean) + f"   noise-free frames ({len(clean)} solved)")
-        pix_render = np.std(np.array(grays), axis=0, ddof=1)[marker]
-        print(f"{'':>10}  per marker pixel (gray): render noise / sensor noise, median "
-              f"{np.median(pix_render / pix_sensor):.3f}, 90th percentile {np.percentile(pix_render / pix_sensor, 90):.3f}"
-              f" ({marker.sum()} pixels)")
-        ratio = s_clean / s_sensor
-        worst = float(np.max(ratio))
-        print(f"{'ratio':>10}" + "".join(f"{v:>11.2f}" for v in ratio)
-              + f"   noise-free / sensor, worst {worst:.2f}: {'met' if worst <= GOAL_RATIO else 'not met'} "
-              f"(goal <= {GOAL_RATIO:.2f})")
+        _report_spp(spp, args.seeds, factor, render, states, sensor, marker, pix_sensor, s_sensor)
+
+def _report_spp(spp: int, n_seeds: int, factor: int, render, states, sensor, marker, pix_sensor, s_sensor) -> None:
+    """Print the render noise at ``spp`` samples per pixel against the sensor's noise.
+
+    Parameters
+    ----------
+    spp : int
+        Samples per pixel of the renders.
+    n_seeds : int
+        Render seeds (one render each).
+    factor : int
+        The rim pixels' factor on ``spp``.
+    render : callable
+        ``render(spp, seed) -> (rendered, render_time_s)``.
+    states : callable
+        ``states(rendered, noise_seed, n, noise=True) -> ndarray, shape (n_solved, 6)``.
+    sensor : TofSensor
+    marker : ndarray of bool, shape (H, W)
+        The markers' bright pixels.
+    pix_sensor : ndarray, shape (n_marker_pixels,)
+        The sensor noise (gray) of each marker pixel.
+    s_sensor : ndarray, shape (6,)
+        The sensor noise of the state (:data:`KEYS`).
+    """
+    rows, times = [], []
+    clean, grays = [], []
+    for s in range(n_seeds):
+        rendered, dt = render(spp, s)
+        times.append(dt)
+        grays.append(next(sensor.frames(rendered, 1, None, noise=False)).gray)
+        st = states(rendered, [0, 1], 1)
+        if len(st):
+            rows.append(st[0])
+        st = states(rendered, None, 1, noise=False)
+        if len(st):
+            clean.append(st[0])
+    s_render = np.std(np.array(rows), axis=0, ddof=1)
+    s_clean = np.std(np.array(clean), axis=0, ddof=1)
+    print(f"{'render':>6}{spp:>4d}" + "".join(f"{v:>11.4f}" for v in s_render)
+          + f"   same noise draw ({len(rows)}/{n_seeds} solved, render {np.median(times):.2f} s, "
+          f"{spp * factor} spp on the rims)")
+    print(f"{'':>10}" + "".join(f"{v:>11.4f}" for v in s_clean) + f"   noise-free frames ({len(clean)} solved)")
+    pix_render = np.std(np.array(grays), axis=0, ddof=1)[marker]
+    print(f"{'':>10}  per marker pixel (gray): render noise / sensor noise, median "
+          f"{np.median(pix_render / pix_sensor):.3f}, 90th percentile {np.percentile(pix_render / pix_sensor, 90):.3f}"
+          f" ({marker.sum()} pixels)")
+    ratio = s_clean / s_sensor
+    worst = float(np.max(ratio))
+    print(f"{'ratio':>10}" + "".join(f"{v:>11.2f}" for v in ratio)
+          + f"   noise-free / sensor, worst {worst:.2f}: {'met' if worst <= GOAL_RATIO else 'not met'} "
+          f"(goal <= {GOAL_RATIO:.2f})")
 
 
 if __name__ == "__main__":

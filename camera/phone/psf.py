@@ -494,6 +494,14 @@ def splat_patches(cores, u_px, v_px, weight, shape, *, gradient: bool = False, v
     patches : list (one per core) of list of ndarray, float64, shape (h, w)
         ``[image]``, ``[image, d_du, d_dv]`` or ``[d_du, d_dv]`` of that PSF over the patch
         (inside the frame).
+
+    Notes
+    -----
+    This function is long (~90 lines) because the two convolutions of one spot (the outer
+    tail on the pixel grid, the inner kernel on the sub-pixel grid) write into one patch
+    and share its origin, box and FFT sizes; they are kept together, in the order the
+    comments mark, so the index arithmetic that places one inside the other is read in
+    one place.
     """
     import scipy.fft as sfft
 

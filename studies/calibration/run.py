@@ -415,6 +415,43 @@ def _pose_part(s: _Setup, runner: _Runner, believed: dict):
     return rows, floor
 
 
+def _run_parts(s, runner, board_set_dir, focal_cache, say, timings: dict) -> tuple:
+    """The three parts of the study in order: convergence, focal-only calibration, pose error.
+
+    Parameters
+    ----------
+    s : _Setup
+        The checked study set-up.
+    runner : _Runner
+        Runs and stores the trials.
+    board_set_dir, focal_cache : str or Path or None
+        See :func:`run_calibration_study`.
+    say : callable
+        Called with lines of progress text.
+    timings : dict
+        Wall times (s) of the parts; filled in place (``focal_s``, ``pose_s``, and the board
+        and convergence times).
+
+    Returns
+    -------
+    tuple
+        ``(set_info, conv_rows, conv, frames, focal_rows, f_est, believed, pose_rows, floor)``.
+    """
+    det, img_camera, set_info = board_detections(s, runner.folder("convergence") / "board_detections.npz",
+                                                 board_set_dir, say, timings)
+    conv_rows, conv, full_cams = _convergence_part(s, runner, det, img_camera, timings)
+    t0 = time.perf_counter()
+    frames = focal_frames(s, runner.folder("focal") / "focal_frames.npz", focal_cache, say)
+    focal_rows, f_est = _focal_part(s, runner, frames)
+    timings["focal_s"] = time.perf_counter() - t0
+    say(f"focal-only calibration: f = {f_est.f_px:.2f} px (true fx {s.camera_true.fx:.2f} px)")
+    t0 = time.perf_counter()
+    believed = believed_cameras(s, f_est, full_cams, img_camera)
+    pose_rows, floor = _pose_part(s, runner, believed)
+    timings["pose_s"] = time.perf_counter() - t0
+    return set_info, conv_rows, conv, frames, focal_rows, f_est, believed, pose_rows, floor
+
+
 # --------------------------------------------------------------------------- the study
 def run_calibration_study(camera, out_dir, *, views_list=DEFAULT_VIEWS_LIST, seed: int = 0, board: Board | None = None,
                           subsets: int = DEFAULT_SUBSETS, spp: int = 16, geometric: bool = False,
@@ -487,18 +524,8 @@ def run_calibration_study(camera, out_dir, *, views_list=DEFAULT_VIEWS_LIST, see
     runner = _Runner(out, manifest(s), spec, chunk_size, show_progress)
     timings = {}
     try:
-        det, img_camera, set_info = board_detections(s, runner.folder("convergence") / "board_detections.npz",
-                                                     board_set_dir, say, timings)
-        conv_rows, conv, full_cams = _convergence_part(s, runner, det, img_camera, timings)
-        t0 = time.perf_counter()
-        frames = focal_frames(s, runner.folder("focal") / "focal_frames.npz", focal_cache, say)
-        focal_rows, f_est = _focal_part(s, runner, frames)
-        timings["focal_s"] = time.perf_counter() - t0
-        say(f"focal-only calibration: f = {f_est.f_px:.2f} px (true fx {s.camera_true.fx:.2f} px)")
-        t0 = time.perf_counter()
-        believed = believed_cameras(s, f_est, full_cams, img_camera)
-        pose_rows, floor = _pose_part(s, runner, believed)
-        timings["pose_s"] = time.perf_counter() - t0
+        set_info, conv_rows, conv, frames, focal_rows, f_est, believed, pose_rows, floor = _run_parts(
+            s, runner, board_set_dir, focal_cache, say, timings)
     finally:
         runner.close()
     t4 = table4_comparison([r for r in pose_rows if r["case"] in floor and not (r["case"] == "exact" and r["noise_px"] == 0)],

@@ -148,18 +148,7 @@ def make_config(camera: str, *, ranges_m=None, trials_per_range: int = 200, seed
     kind = get_trial_kind(trial_kind)
     if kind.name not in ("render", "geometric"):
         raise InputError(f"--trial-kind: the campaign runs 'render' or 'geometric' trials, got {trial_kind!r}")
-    if ranges_m is None:
-        if cam.name not in PAPER_RANGES_M:
-            raise InputError(f"--ranges: camera {cam.name!r} is not one of the paper's phones "
-                             f"({', '.join(PAPER_RANGES_M)}); give the test ranges")
-        ranges_m = PAPER_RANGES_M[cam.name]
-    rs = []
-    for r in ranges_m:
-        rs.append(kind.parameters["range_m"].check(r, "--ranges"))
-    if not rs:
-        raise InputError("--ranges: no ranges given")
-    if len(set(rs)) != len(rs):
-        raise InputError(f"--ranges: repeated range in {rs}")
+    rs = _check_ranges_m(ranges_m, cam.name, kind)
     trials_per_range = _count_option(trials_per_range, "--trials")
     exposures_per_render = _count_option(exposures_per_render, "--exposures-per-render")
     if "sigma_px" in kind.parameters:
@@ -174,6 +163,80 @@ def make_config(camera: str, *, ranges_m=None, trials_per_range: int = 200, seed
     TestStand(misalignment_deg=mis)  # InputError beyond +/-10 deg
     if budget and kind.name != "render":
         raise InputError("--budget: the error budget switches sources of the rendered chain off; use --trial-kind render")
+    err, lens = _calibration_error(calibration, calibration_error, kind, cam, pattern, rs, sigma_px, seed,
+                                   lab_errors)
+    return CampaignConfig(camera=camera, ranges_m=tuple(rs), trials_per_range=trials_per_range,
+                          seed=check_seed(seed), sigma_px=float(sigma_px), trial_kind=kind.name, pattern=pattern,
+                          calibration=calibration, calibration_error=err, merge_px=float(merge_px),
+                          exposures_per_render=exposures_per_render, misalignment_deg=mis, lens=lens,
+                          budget=bool(budget), lab_errors=_campaign_lab_errors(_lab_errors(), kind.name, lab_errors))
+
+
+def _check_ranges_m(ranges_m, camera_name: str, kind) -> list[float]:
+    """The campaign's test ranges, checked against the trial kind's ``range_m`` parameter.
+
+    Parameters
+    ----------
+    ranges_m : sequence of float or None
+        Test ranges (m); None: the paper's for ``camera_name``.
+    camera_name : str
+        The loaded camera's name (to look up :data:`PAPER_RANGES_M`).
+    kind : TrialKind
+        The trial kind whose ``range_m`` parameter checks each range.
+
+    Returns
+    -------
+    list of float, shape (n_ranges,)
+        The checked ranges (m), in the given order; :class:`InputError` when empty or repeated.
+    """
+    if ranges_m is None:
+        if camera_name not in PAPER_RANGES_M:
+            raise InputError(f"--ranges: camera {camera_name!r} is not one of the paper's phones "
+                             f"({', '.join(PAPER_RANGES_M)}); give the test ranges")
+        ranges_m = PAPER_RANGES_M[camera_name]
+    rs = []
+    for r in ranges_m:
+        rs.append(kind.parameters["range_m"].check(r, "--ranges"))
+    if not rs:
+        raise InputError("--ranges: no ranges given")
+    if len(set(rs)) != len(rs):
+        raise InputError(f"--ranges: repeated range in {rs}")
+    return rs
+
+
+def _calibration_error(calibration: str, calibration_error: dict | None, kind, cam, pattern: str,
+                       rs: list, sigma_px: float, seed: int, lab_errors: bool) -> tuple[dict, dict]:
+    """The solver's calibration error and the true lens of a campaign (see :func:`make_config`).
+
+    Parameters
+    ----------
+    calibration : {"paper", "exact"}
+        ``paper``: drawn from the paper's practice (:func:`paper_lens` for the render kind,
+        :func:`paper_calibration_error` otherwise); ``exact``: ``calibration_error`` as given.
+    calibration_error : dict or None
+        Explicit errors (keys of :data:`CALIBRATION_KEYS`) for ``exact``.
+    kind : TrialKind
+        The trial kind, whose parameters check each error.
+    cam : Camera
+        The loaded camera profile.
+    pattern : str
+        Pattern profile name.
+    rs : list of float, shape (n_ranges,)
+        The checked test ranges (m).
+    sigma_px : float
+        Centroid noise (px) of the geometric kind.
+    seed : int
+        The campaign's seed (checked here).
+    lab_errors : bool
+        Whether the rangefinder's error feeds the paper's focal calibration.
+
+    Returns
+    -------
+    err : dict
+        The calibration errors the trial kind models (float values).
+    lens : dict
+        The true lens (:func:`paper_lens`) for the paper calibration of the render kind, else empty.
+    """
     err = dict(calibration_error or {})
     unknown = sorted(set(err) - set(CALIBRATION_KEYS))
     if unknown:
@@ -197,11 +260,7 @@ def make_config(camera: str, *, ranges_m=None, trials_per_range: int = 200, seed
             continue
         kind.parameters[k].check(v, k)
     err = {k: float(v) for k, v in err.items() if k in kind.parameters}
-    return CampaignConfig(camera=camera, ranges_m=tuple(rs), trials_per_range=trials_per_range,
-                          seed=check_seed(seed), sigma_px=float(sigma_px), trial_kind=kind.name, pattern=pattern,
-                          calibration=calibration, calibration_error=err, merge_px=float(merge_px),
-                          exposures_per_render=exposures_per_render, misalignment_deg=mis, lens=lens,
-                          budget=bool(budget), lab_errors=_campaign_lab_errors(_lab_errors(), kind.name, lab_errors))
+    return err, lens
 
 
 def _campaign_lab_errors(errors: dict, kind: str, on: bool) -> dict:
