@@ -23,6 +23,13 @@ POSE_ARGS = (("--x", "target_x_m", "lateral offset of the target origin from the
              ("--yaw", "yaw_deg", "yaw (deg)"))
 
 
+def state_line(state: dict) -> str:
+    """One line of a paper state (``x_m``... ``yaw_deg``) for the terminal: metres to 0.1 mm, degrees
+    to 0.001 deg."""
+    return (f"x {state['x_m']:+.4f} y {state['y_m']:+.4f} z {state['z_m']:+.4f} m   roll {state['roll_deg']:+.3f} "
+            f"pitch {state['pitch_deg']:+.3f} yaw {state['yaw_deg']:+.3f} deg")
+
+
 def add_focus_arg(p) -> None:
     """``--focus-m``, shared by ``svgs render`` and ``render-and-solve`` (one focus rule)."""
     p.add_argument("--focus-m", dest="focus_m", type=float, default=None,
@@ -152,8 +159,7 @@ def cmd_render_and_solve(args) -> int:
         print(json.dumps(out, default=json_default))
     else:
         t = row["truth_state"]
-        print(f"truth:    x {t['x_m']:+.4f} y {t['y_m']:+.4f} z {t['z_m']:+.4f} m   "
-              f"roll {t['roll_deg']:+.3f} pitch {t['pitch_deg']:+.3f} yaw {t['yaw_deg']:+.3f} deg")
+        print(f"truth:    {state_line(t)}")
         print(f"exposure: {row['exposure_s'] * 1e3:.3f} ms at ISO {row['iso']:.0f}; blobs found: {row['n_blobs']}")
         if row["ok"]:
             print_state_table(row, crlb)

@@ -21,7 +21,7 @@ from svgs.errors import InputError, check_finite, check_finite_positive
 from svgs.frames import STATE_KEYS
 
 from cli.exit_codes import EXIT_NO_SOLUTION, EXIT_OK
-from cli.sim import POSE_ARGS
+from cli.sim import POSE_ARGS, state_line
 from cli.solve import json_default
 
 #: Frames written by ``--out`` at most (gray.npy / depth.npy stacks).
@@ -216,8 +216,7 @@ def cmd_render_and_solve(args) -> int:
         print(json.dumps(out, default=json_default))
     else:
         s = out["truth_state"]
-        print(f"truth: x {s['x_m']:+.4f} y {s['y_m']:+.4f} z {s['z_m']:+.4f} m   roll {s['roll_deg']:+.3f} "
-              f"pitch {s['pitch_deg']:+.3f} yaw {s['yaw_deg']:+.3f} deg")
+        print(f"truth: {state_line(s)}")
         rr = rendered.truth["render"]
         print(f"render {render_s:.2f} s ({rr['spp']} spp, {rr['rim_spp']} on {rr['rim_pixels']} marker-rim pixels); "
               f"{args.frames} frame(s) at "

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from svgs.errors import InputError
+from svgs.errors import InputError, check_finite
 from sim.metrics import no_pose_errors, pose_errors
 from svgs.frames import pose_from_scenario, pose_to_state, state_dict
 from svgs.profiles import Camera, Pattern, load_camera, load_pattern
@@ -173,13 +173,7 @@ class Scenario:
             raise InputError(f"stage_m: expected a finite stage position within +/-1 m, got {self.stage_m!r}")
         for k in ("target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg", "backdrop_reflectance",
                   "ambient_radiance_w_m2_sr"):
-            v = getattr(self, k)
-            try:
-                fv = float(v)
-            except (TypeError, ValueError):
-                raise InputError(f"{k}: expected a number, got {v!r}") from None
-            if not np.isfinite(fv):
-                raise InputError(f"{k}: expected a finite number, got {v!r}")
+            check_finite(getattr(self, k), k)
         if not 0 <= self.backdrop_reflectance <= 1:
             raise InputError(f"backdrop_reflectance: expected 0..1, got {self.backdrop_reflectance!r}")
         if self.ambient_radiance_w_m2_sr < 0:

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim.metrics import no_pose_errors, pose_errors, state_error
-from svgs.errors import InputError
+from svgs.errors import InputError, check_finite
 from svgs.frames import pose_from_scenario, pose_to_state
 
 #: Second entry of the noise stream's seed ``[seed, NOISE_STREAM]`` (the stability runs' since
@@ -115,13 +115,7 @@ class TofScenario:
                 raise InputError(f"scene_options: expected ({'|'.join(SCENE_KEYS)}, value) pairs, got {it!r}")
         object.__setattr__(self, "scene_options", tuple(tuple(it) for it in items))
         for k in ("range_m", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg"):
-            v = getattr(self, k)
-            try:
-                fv = float(v)
-            except (TypeError, ValueError):
-                raise InputError(f"{k}: expected a number, got {v!r}") from None
-            if not np.isfinite(fv):
-                raise InputError(f"{k}: expected a finite number, got {v!r}")
+            check_finite(getattr(self, k), k)
         if self.range_m <= 0:
             raise InputError(f"range_m: expected a positive distance in metres, got {self.range_m!r}")
         if isinstance(self.seed, bool) or int(self.seed) != self.seed or self.seed < 0:

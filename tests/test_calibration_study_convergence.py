@@ -91,8 +91,9 @@ def test_parse_number_list():
 
 
 def test_results_stored_under_the_old_column_names_are_read(tmp_path):
-    """The committed study's convergence store (written with cx_err_px, fx_err_pct, ...) opens
-    under the new names (pp_error_u_px, fx_error_pct, ...) with the same values, and resumes."""
+    """A convergence store written by the old code (the committed study's store with the header and
+    the manifest's columns as they were before the rename: cx_err_px, fx_err_pct, ...) opens under
+    the new names (pp_error_u_px, fx_error_pct, ...) with the same values, and resumes."""
     import json
     import shutil
 
@@ -105,6 +106,13 @@ def test_results_stored_under_the_old_column_names_are_read(tmp_path):
     folder.mkdir()
     for name in ("manifest.json", "results.csv"):
         shutil.copy(src / name, folder / name)
+    back = {v: k for k, v in RENAMED_COLUMNS.items()}  # the old code's names
+    lines = (folder / "results.csv").read_text().split("\n")
+    lines[0] = ",".join(back.get(c, c) for c in lines[0].split(","))
+    (folder / "results.csv").write_text("\n".join(lines))
+    man = json.loads((folder / "manifest.json").read_text())
+    man["columns"] = [back.get(c, c) for c in man["columns"]]
+    (folder / "manifest.json").write_text(json.dumps(man, indent=2))
     old = read_rows(folder / "results.csv")
     assert set(RENAMED_COLUMNS) <= set(old[0])
     assert upgrade_stored_columns(folder) and not upgrade_stored_columns(folder)  # once

@@ -415,6 +415,22 @@ def _pose_part(s: _Setup, runner: _Runner, believed: dict):
     return rows, floor
 
 
+def _stored_timings(out: Path, rebuild_timings: dict) -> dict:
+    """The timings of the run that computed the stored trials, when this one computed none (a
+    report rebuilt from its stores): the previous ``summary.json``'s ``timings_s`` with this
+    rebuild's total as ``rebuild_s``. Without a previous summary, this run's own timings."""
+    import json
+
+    try:
+        previous = json.loads((out / "summary.json").read_text()).get("timings_s") or {}
+    except (OSError, ValueError, AttributeError):
+        previous = {}
+    if not previous:
+        return rebuild_timings
+    return {**{k: float(v) for k, v in previous.items() if k != "rebuild_s"},
+            "rebuild_s": float(sum(rebuild_timings.values()))}
+
+
 def _run_parts(s, runner, board_set_dir, focal_cache, say, timings: dict) -> tuple:
     """The three parts of the study in order: convergence, focal-only calibration, pose error.
 
@@ -533,5 +549,7 @@ def run_calibration_study(camera, out_dir, *, views_list=DEFAULT_VIEWS_LIST, see
     from .focal import centroid_noise
 
     cams = {k: cam_json(c) for k, c in {**believed, "true": s.camera_true, "nominal": s.nominal}.items()}
+    if not runner.stats:
+        timings = _stored_timings(out, timings)
     return StudyResult(s.config, s.nominal, s.camera_true, set_info, conv_rows, conv, frames, centroid_noise(frames),
                        focal_rows, f_est, pose_rows, t4, cams, timings, runner.stats)
