@@ -141,6 +141,11 @@ def measurement_floor(range_m: float, pixel_scale: float) -> tuple[np.ndarray, n
 
 
 def _make_gnc_class():
+    """The GNC flight-software module, a ``SysModel`` subclass: navigation (a Clohessy-Wiltshire
+    Kalman filter replaying late measurements), glide-slope guidance and ideal-force control.
+
+    This function is long (~175 lines) because it defines the class, whose Basilisk base class can
+    only be imported lazily (Basilisk is an optional extra); each method is short."""
     from Basilisk.architecture import messaging, sysModel
 
     from sim.basilisk_svgs import camera_position_covariance
@@ -427,6 +432,13 @@ def run(phone: str | None, *, start_state=START_STATE, sensor_rate_hz=0.25, prev
         if hasattr(sensor, "close"):
             sensor.close()
     wall = time.perf_counter() - wall0
+    return _run_summary(gnc, phone, preview, sensor_rate_hz, lat, wall)
+
+
+def _run_summary(gnc, phone, preview, sensor_rate_hz, latency_s, wall_s) -> dict:
+    """The logs of one finished run as arrays, and its summary numbers (arrival time, delta-v,
+    final errors, frames solved and accepted, dropouts by reason)."""
+    lat, wall = latency_s, wall_s
     log = {k: np.asarray(v) for k, v in gnc.log.items()}
     a = np.linalg.norm(log["a_H"], axis=1)
     arrived = gnc.arrived_s is not None
