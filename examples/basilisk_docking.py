@@ -17,7 +17,7 @@ on the filter's prediction until the measurements start.
 Run (from the repository root, with ``pip install -e ".[basilisk]"``)::
 
     python examples/basilisk_docking.py                 # both phones + ideal; figures in docs/figures
-    python examples/basilisk_docking.py --quick --out /tmp/dock   # a bounded form: 5 m, preview, ~20 frames
+    python examples/basilisk_docking.py --quick --out out/dock   # a bounded form: 5 m, preview, ~20 frames
 
 Every random draw is seeded (``--seed``). Rendering costs 0.4-3 s a frame on a 2-core machine, so
 the sensor runs at ``--sensor-rate-hz`` (default 0.25 frames/s, one frame per 4 s) rather than the
