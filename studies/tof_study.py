@@ -632,11 +632,24 @@ def expected_range_sigma(n: int) -> float:
 
 def write_markdown(path, camera, target, sensor, renderer, sums, runs, var_rows, sweep, fm, frames, variant_frames,
                    sweep_frames, seed, argv, timing, stopping=None, long=None) -> Path:
-    """``tof_stability.md``: the report, section by section from the numbers.
+    """``tof_stability.md``: the report, section by section from the numbers (each section a
+    function of its own, in the order the report reads)."""
+    L = _header_lines(camera, target, sensor, renderer, seed, argv, timing)
+    L += _stability_lines(sums, runs, frames, seed)
+    L += _mechanism_lines(sums, var_rows, variant_frames)
+    L += findings(sums, var_rows)
+    L += stopping_section(stopping or [], sweep_frames, variant_frames)
+    L += long_section(long, PAPER_RANGES_M[0])
+    L += _sweep_lines(sweep, sweep_frames)
+    L += _failure_lines(fm)
+    Path(path).write_text("\n".join(L))
+    return Path(path)
 
-    Longer than ~80 lines on purpose: it is the report's template, read top to bottom as the
-    report reads; its sections that compute (:func:`findings`, :func:`stopping_section`,
-    :func:`long_section`) are functions of their own."""
+
+
+
+def _header_lines(camera, target, sensor, renderer, seed, argv, timing) -> list[str]:
+    """The report's title, provenance, the simulated sensor and target, and the columns."""
     ill = renderer.illumination
     sheet = renderer.geometry.materials
     L = ["# The ToF sensor re-enacted: Zhu et al. 2022, Tables 1-3 and Fig. 14", "",
@@ -662,6 +675,12 @@ def write_markdown(path, camera, target, sensor, renderer, sums, runs, var_rows,
          "plate-centre variant below shows the difference); roll_deg, pitch_deg, yaw_deg: the paper state's angles, "
          "which the paper calls pitch, yaw, roll (our roll is the rotation about the line of sight). Fluctuation = "
          "maximum - minimum over the run, as the paper's tables.", ""]
+    return L
+
+
+def _stability_lines(sums, runs, frames, seed) -> list[str]:
+    """One section per paper range: the stability table against Tables 1-3 and single-frame accuracy."""
+    L = []
     tabs = {PAPER_RANGES_M[0]: ("1", "3"), PAPER_RANGES_M[1]: ("2",)}
     for r in PAPER_RANGES_M:
         s, run = sums[r], runs[r]
@@ -697,6 +716,12 @@ def write_markdown(path, camera, target, sensor, renderer, sums, runs, var_rows,
                   + ("position within 2 mm" if ok_pos else "position NOT within 2 mm") + ", "
                   + ("rotation within 0.13 deg." if ok_rot else "rotation NOT within 0.13 deg.") + nf_txt]
         L.append("")
+    return L
+
+
+def _mechanism_lines(sums, var_rows, variant_frames) -> list[str]:
+    """The mechanisms table: each one-change rerun's fluctuation over the paper's."""
+    L = []
     L += ["![stability series](tof_stability_series.png)", "",
           "## What moves the figures (the mechanisms, measured)", "",
           f"Each row reruns the stability run with one change ({variant_frames} frames); the numbers are the "
@@ -713,9 +738,12 @@ def write_markdown(path, camera, target, sensor, renderer, sums, runs, var_rows,
             ("**" + _fmt(x, 2) + "**") if x is not None and 0.5 <= x <= 2 else _fmt(x, 2)
             for x in s["ratio_to_paper"][tab].values()) + f" | {s['solved']}/{s['frames']} |")
     L += ["", "![mechanisms](tof_mechanisms.png)", ""]
-    L += findings(sums, var_rows)
-    L += stopping_section(stopping or [], sweep_frames, variant_frames)
-    L += long_section(long, PAPER_RANGES_M[0])
+    return L
+
+
+def _sweep_lines(sweep, sweep_frames) -> list[str]:
+    """Accuracy against distance (the paper's Fig. 14): the table, one finding per scheme and the discussion."""
+    L = []
     L += ["## Accuracy against distance (the paper's Fig. 14)", "",
           f"Target head-on at 1-10 m, {sweep_frames} frames per range; RMS error of single frames against the truth.", "",
           "| scheme | range m | solved | " + " | ".join(f"{c} RMS" for c in COLUMNS) + " | rotation RMS deg | z RMS / paper's 2.5 mm | integration us |",
@@ -745,6 +773,12 @@ def write_markdown(path, camera, target, sensor, renderer, sums, runs, var_rows,
           "but brings the depth noise into the tilt.", "",
           "![Fig. 14 sweep](tof_fig14.png)", "",
           "## Failure modes", ""]
+    return L
+
+
+def _failure_lines(fm) -> list[str]:
+    """Failure modes at 1 m: flying pixels, multipath (plate, wall), ambient light."""
+    L = []
     fp, mp, amb = fm["flying_pixels_1m"], fm["multipath_1m"], fm["ambient_1m"]
     L += [f"- **Flying pixels** at the marker rims (1 m, noise-free): {fp['count']} pixels whose phasor depth lies "
           "between the marker face and the plate behind it (per marker: "
@@ -769,9 +803,7 @@ def write_markdown(path, camera, target, sensor, renderer, sums, runs, var_rows,
           f"{_fmt(amb['10000']['plate_depth_std_mm'], 1)} mm (valid fraction {_fmt(amb['1000']['plate_valid_fraction'], 2)} and "
           f"{_fmt(amb['10000']['plate_valid_fraction'], 2)}). The stability runs at 10 klux are in the mechanism table.", "",
           "![failure modes](tof_failure_modes.png)", ""]
-    Path(path).write_text("\n".join(L))
-    return Path(path)
-
+    return L
 
 def findings(sums, var_rows) -> list[str]:
     """The measured conclusions, from the numbers (no hard-coded verdicts)."""

@@ -194,3 +194,49 @@ def test_no_module_uses_another_packages_private_names():
             for use in private_cross_package_uses(path.read_text(), module):
                 bad.append(f"{rel.with_suffix('.py')} {use}")
     assert not bad, "private names of another package:\n" + "\n".join(bad)
+
+
+#: A function whose code (its docstring not counted) is longer than this many lines says why in
+#: its docstring, in the form "This function is long (~N lines) because ...".
+MAX_FUNCTION_LINES = 90
+_REASON = r"\blong \(~?\d+ lines\) because\b"
+
+
+def long_functions(source: str, limit: int = MAX_FUNCTION_LINES) -> list[str]:
+    """``"name (N lines)"`` of every function in ``source`` whose code (docstring excluded) is
+    longer than ``limit`` lines and whose docstring gives no reason (see :data:`_REASON`)."""
+    import ast
+    import re
+
+    out = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            n = node.end_lineno - node.lineno + 1
+            first = node.body[0]
+            if isinstance(first, ast.Expr) and isinstance(getattr(first, "value", None), ast.Constant) \
+                    and isinstance(first.value.value, str):
+                n -= first.end_lineno - first.lineno + 1
+            if n > limit and not re.search(_REASON, ast.get_docstring(node) or "", re.IGNORECASE):
+                out.append(f"{node.name} ({n} lines)")
+    return out
+
+
+def test_long_function_check_can_fail():
+    body = "\n".join(f"    x{i} = {i}" for i in range(100))
+    assert long_functions(f"def f():\n{body}\n") == ["f (101 lines)"]
+    assert long_functions(f'def f():\n    """This function is long (~100 lines) because ..."""\n{body}\n') == []
+    assert long_functions(f"def f():\n{body}\n", limit=200) == []
+    assert long_functions(f'def f():\n    """Slow at long range; lines of sight."""\n{body}\n') == ["f (101 lines)"]
+    doc = '    """Doc.\n' + "\n" * 30 + '    """\n'
+    short = "\n".join(f"    x{i} = {i}" for i in range(80))
+    assert long_functions(f"def f():\n{doc}{short}\n") == []  # the docstring does not count
+
+
+def test_no_function_is_long_without_a_reason():
+    """No function over ~90 lines without a reason in its docstring (the project's packages,
+    tools, examples and benchmarks)."""
+    bad = []
+    for folder in (*PACKAGES, "tools", "examples", "benchmarks"):
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            bad += [f"{path.relative_to(ROOT)}: {f}" for f in long_functions(path.read_text())]
+    assert not bad, "functions over %d lines without a reason in the docstring:\n" % MAX_FUNCTION_LINES + "\n".join(bad)
