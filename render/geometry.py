@@ -36,15 +36,13 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from svgs.errors import InputError, check_finite, check_finite_positive
+from svgs.profile_schema import REFLECTOR_MODELS, check_reflector_table
 
 from .constants import DEFAULT_MAX_DEPTH, DEFAULT_MESH_SEGMENTS, nbk7_index
 
-#: Named reflector models (``[reflector] model`` in a pattern file).
-REFLECTOR_MODELS = {
-    # Edmund Optics mounted N-BK7 corner cube, 12.7 mm (the paper, "Test Setup").
-    "edmund-nbk7-12.7mm": dict(kind="solid", diameter_m=0.0127, height_m=0.0095),
-    "hollow-12.7mm": dict(kind="hollow", diameter_m=0.0127, height_m=0.0095),
-}
+#: Named reflector models (``[reflector] model`` in a pattern file): :data:`REFLECTOR_MODELS`,
+#: defined in :mod:`svgs.profile_schema` so that :meth:`svgs.Pattern.load` refuses an unknown
+#: model at load.
 
 
 @dataclass(frozen=True)
@@ -156,7 +154,11 @@ class Reflector:
             return spec
         base = dict(REFLECTOR_MODELS["edmund-nbk7-12.7mm"], model="edmund-nbk7-12.7mm")
         ptab = (pattern.tables.get("reflector") if pattern is not None else None) or {}
-        if ptab.get("model") in REFLECTOR_MODELS:
+        try:  # an unknown model is refused, never replaced by the default (a pattern built in code)
+            ptab = check_reflector_table(ptab)
+        except InputError as exc:
+            raise InputError(f"pattern {pattern.name!r}: {exc}") from None
+        if "model" in ptab:
             base = dict(REFLECTOR_MODELS[ptab["model"]], model=ptab["model"])
         if "diameter_m" in ptab:
             base["diameter_m"] = float(ptab["diameter_m"])

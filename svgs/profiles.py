@@ -26,6 +26,15 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError, ProfileError, check_finite, check_finite_positive
+from .profile_schema import (
+    DISTINCT_TARGETS_M,
+    INTRINSICS_KEYS,
+    PATTERN_KEYS,
+    check_camera_tables,
+    check_reflector_table,
+    check_table,
+    check_target,
+)
 
 ASSETS_DIR = Path(__file__).resolve().parent.parent / "assets"
 CAMERAS_DIR = ASSETS_DIR / "cameras"
@@ -81,6 +90,9 @@ def _read_toml(path: Path, kind: str) -> dict:
         return copy.deepcopy(hit)
     except tomllib.TOMLDecodeError as exc:
         raise ProfileError(f"{kind} file {str(path)!r} is not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ProfileError(f"{kind} file {str(path)!r} is not UTF-8 text (TOML files are): byte "
+                           f"0x{exc.object[exc.start]:02x} at offset {exc.start}") from None
     except OSError as exc:
         raise ProfileError(f"{kind} file {str(path)!r} cannot be read: {exc}") from None
 
@@ -271,14 +283,27 @@ class Camera:
 
     @classmethod
     def from_dict(cls, data: dict, source: str = "", default_name: str = "camera") -> "Camera":
-        """Build a camera from the TOML structure (see :meth:`to_dict`)."""
+        """Build a camera from the TOML structure (see :meth:`to_dict`).
+
+        Every value of the tables :mod:`svgs.profile_schema` knows is checked here, before any
+        use (type, physical range, choices, unknown keys): :class:`ProfileError` naming the
+        file (``source``), ``[table] key`` and the allowed range.
+        """
         name = str(data.get("name", default_name))
+        where = f"camera profile {source!r}" if source else f"camera {name!r}"
         intr = data.get("intrinsics")
         if not isinstance(intr, dict):
-            raise ProfileError(f"camera {name!r} ({source or 'dict'}): missing [intrinsics] table")
+            raise ProfileError(f"{where}: missing [intrinsics] table")
         missing = [k for k in ("width", "height", "fx", "fy", "cx", "cy") if k not in intr]
         if missing:
-            raise ProfileError(f"camera {name!r}: [intrinsics] lacks {', '.join(missing)}")
+            raise ProfileError(f"{where}: [intrinsics] lacks {', '.join(missing)}")
+        try:
+            check_table("intrinsics", intr, INTRINSICS_KEYS)
+            check_camera_tables(data)
+        except ProfileError:
+            raise
+        except InputError as exc:
+            raise ProfileError(f"{where}: {exc}") from None
         dist_t = data.get("distortion", {}) or {}
         if not isinstance(dist_t, dict):
             raise ProfileError(f"camera {name!r}: [distortion] must be a table")
@@ -494,18 +519,26 @@ class Pattern:
     def __post_init__(self):
         ids = np.asarray(self.ids)
         pts = np.asarray(self.points_m, float)
+        where = f"target pattern {self.source!r}" if self.source else f"pattern {self.name!r}"
         if pts.ndim != 2 or pts.shape[1] != 3 or pts.shape[0] != ids.shape[0]:
-            raise ProfileError(f"pattern {self.name!r}: expected N ids and N x 3 points, got {ids.shape} and {pts.shape}")
+            raise ProfileError(f"{where}: expected N ids and N x 3 points, got {ids.shape} and {pts.shape}")
         if pts.shape[0] < 4:
-            raise ProfileError(f"pattern {self.name!r}: needs at least 4 targets, got {pts.shape[0]}")
+            raise ProfileError(f"{where}: needs at least 4 targets, got {pts.shape[0]}")
         if not np.all(np.isfinite(pts)):
-            raise ProfileError(f"pattern {self.name!r}: target coordinates must be finite")
+            raise ProfileError(f"{where}: target coordinates must be finite")
         if len(set(ids.tolist())) != len(ids):
-            raise ProfileError(f"pattern {self.name!r}: target ids must be unique, got {ids.tolist()}")
+            raise ProfileError(f"{where}: target ids must be unique, got {ids.tolist()}")
+        gap = np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=-1)
+        np.fill_diagonal(gap, np.inf)
+        i, j = np.unravel_index(np.argmin(gap), gap.shape)
+        if gap[i, j] < DISTINCT_TARGETS_M:
+            raise ProfileError(f"{where}: targets {ids[i]} and {ids[j]} share one position "
+                               f"({', '.join(f'{v:g}' for v in pts[i])}) m: target positions must be at least "
+                               f"{DISTINCT_TARGETS_M:g} m apart")
         c = pts - pts.mean(0)
         sv = np.linalg.svd(c, compute_uv=False)
         if sv[1] < 1e-6 * max(sv[0], 1e-12):
-            raise ProfileError(f"pattern {self.name!r}: targets are collinear; a pose cannot be solved from them")
+            raise ProfileError(f"{where}: targets are collinear; a pose cannot be solved from them")
         object.__setattr__(self, "ids", ids.astype(int))
         object.__setattr__(self, "points_m", pts)
 
@@ -517,16 +550,21 @@ class Pattern:
         path = _resolve(name_or_path, PATTERNS_DIR, "target pattern")
         data = _read_toml(path, "target pattern")
         name = str(data.get("name", path.stem))
+        where = f"target pattern {str(path)!r}"
         targets = data.get("target")
         if not isinstance(targets, list) or not targets:
-            raise ProfileError(f"pattern {name!r} ({path}): expected [[target]] tables with id, x_m, y_m, z_m")
-        ids, pts = [], []
-        for i, t in enumerate(targets):
-            missing = [k for k in ("id", "x_m", "y_m", "z_m") if k not in t]
-            if missing:
-                raise ProfileError(f"pattern {name!r}: target #{i + 1} lacks {', '.join(missing)}")
-            ids.append(int(t["id"]))
-            pts.append([_wrap(check_finite, t[k], f"pattern {name!r}: target {t['id']}.{k}") for k in ("x_m", "y_m", "z_m")])
+            raise ProfileError(f"{where}: expected [[target]] tables with id, x_m, y_m, z_m")
+        try:  # every value checked at load (svgs.profile_schema): nothing unknown is ignored
+            extra = set(data) - set(PATTERN_KEYS)
+            if extra:
+                raise InputError(f"unknown table(s) or key(s) {sorted(extra)}; known: {', '.join(PATTERN_KEYS)}")
+            if "reflector" in data:
+                check_reflector_table(data["reflector"])
+            checked = [check_target(t, i) for i, t in enumerate(targets)]
+        except InputError as exc:
+            raise ProfileError(f"{where}: {exc}") from None
+        ids = [c["id"] for c in checked]
+        pts = [[c[k] for k in ("x_m", "y_m", "z_m")] for c in checked]
         order = np.argsort(ids)
         tables = {k: v for k, v in data.items() if k not in ("name", "target")}
         return cls(name=name, ids=np.asarray(ids)[order], points_m=np.asarray(pts)[order], tables=tables, source=str(path))

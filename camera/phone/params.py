@@ -68,49 +68,28 @@ naming ``table.key``.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, fields
-
-import numpy as np
+from dataclasses import asdict, dataclass, field
 
 from svgs.errors import InputError
+from svgs.profile_schema import (  # the allowed values live in svgs, where Camera.load checks them at load
+    ALL_STAGES,
+    CFA_PATTERNS,
+    DEMOSAIC_METHODS,
+    JPEG_SUBSAMPLING,
+    METERING,
+    PHONE_TABLES,
+    Stages,
+    check_table,
+)
 
-ALL_STAGES = ("glare", "cfa", "shot", "dark", "fpn", "read", "bloom", "adc", "nr", "tone", "sharpen", "u8", "downscale",
-              "chroma", "jpeg")
 #: Stages that act on the optical image before the exposure (fixed per :class:`camera.phone.Exposer`).
 OPTICS_STAGES = ("glare", "cfa")
 #: The sensor's noise sources (off together: a noise-free sensor).
 NOISE_STAGES = ("shot", "dark", "fpn", "read")
-#: Bayer layouts (the colours of the top-left 2 x 2 block, row by row).
-CFA_PATTERNS = ("none", "RGGB", "BGGR", "GRBG", "GBRG")
-METERING = ("mean", "center_weighted", "spot")
-#: OpenCV's demosaic methods (``cv2.COLOR_Bayer*2BGR``, ``*_EA``, ``*_VNG``).
-DEMOSAIC_METHODS = ("bilinear", "edge_aware", "vng")
-#: What the ISP delivers and the JPEG encodes: one luminance plane, or a colour image with full
-#: (4:4:4) or 2 x 2 subsampled (4:2:0) chroma.
-JPEG_SUBSAMPLING = ("gray", "4:4:4", "4:2:0")
 
-
-def _num(table: str, key: str, value, *, lo=None, hi=None, lo_open=False, integer=False):
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"[{table}] {key}: expected a number, got {value!r}") from None
-    if not np.isfinite(v):
-        raise InputError(f"[{table}] {key}: expected a finite number, got {value!r}")
-    if integer and not float(v).is_integer():
-        raise InputError(f"[{table}] {key}: expected a whole number, got {value!r}")
-    if lo is not None and (v < lo or (lo_open and v == lo)):
-        raise InputError(f"[{table}] {key}: must be {'>' if lo_open else '>='} {lo}, got {value!r}")
-    if hi is not None and v > hi:
-        raise InputError(f"[{table}] {key}: must be <= {hi}, got {value!r}")
-    return int(v) if integer else v
-
-
-def _unknown(table: str, given: dict, cls) -> None:
-    names = {f.name for f in fields(cls)}
-    extra = set(given) - names
-    if extra:
-        raise InputError(f"[{table}]: unknown key(s) {sorted(extra)}; known: {sorted(names)}")
+__all__ = ["ALL_STAGES", "CFA_PATTERNS", "DEMOSAIC_METHODS", "JPEG_SUBSAMPLING", "METERING", "OPTICS_STAGES",
+           "NOISE_STAGES", "SensorParams", "GlareParams", "ExposureParams", "CfaParams", "IspParams", "PhoneParams",
+           "check_demosaic", "check_subsampling", "check_grid_offset", "check_stages"]
 
 
 @dataclass(frozen=True)
@@ -140,34 +119,10 @@ class SensorParams:
 
     @classmethod
     def from_table(cls, t: dict | None, *, allow_sensor_keys=("pixel_pitch_m",)) -> "SensorParams":
-        t = dict(t or {})
-        _unknown("sensor", t, cls)
-        kw = {}
-        T = "sensor"
-        if "pixel_pitch_m" in t:
-            kw["pixel_pitch_m"] = _num(T, "pixel_pitch_m", t["pixel_pitch_m"], lo=0, lo_open=True)
-        if "qe" in t:
-            kw["qe"] = _num(T, "qe", t["qe"], lo=0, lo_open=True, hi=1)
-        for k in ("full_well_e", "base_iso"):
-            if k in t:
-                kw[k] = _num(T, k, t[k], lo=0, lo_open=True)
-        for k in ("read_noise_e", "dark_current_e_s", "dsnu_e", "prnu", "black_level_dn", "readout_time_s"):
-            if k in t:
-                kw[k] = _num(T, k, t[k], lo=0)
-        if "adc_bits" in t:
-            kw["adc_bits"] = _num(T, "adc_bits", t["adc_bits"], lo=1, hi=16, integer=True)
-        if "anti_blooming_drain" in t:
-            kw["anti_blooming_drain"] = _num(T, "anti_blooming_drain", t["anti_blooming_drain"], lo=0, hi=1)
-        if "bloom_direction" in t:
-            if t["bloom_direction"] not in ("isotropic", "column"):
-                raise InputError(f"[sensor] bloom_direction: expected 'isotropic' or 'column', got {t['bloom_direction']!r}")
-            kw["bloom_direction"] = t["bloom_direction"]
-        if "serial" in t:
-            kw["serial"] = _num(T, "serial", t["serial"], lo=0, integer=True)
-        p = cls(**kw)
-        if p.black_level_dn >= p.white_dn:
-            raise InputError(f"[sensor] black_level_dn ({p.black_level_dn}) must be below the ADC white level ({p.white_dn})")
-        return p
+        """The ``[sensor]`` table checked (:data:`svgs.profile_schema.PHONE_TABLES`: type, range,
+        choices, unknown keys refused; :class:`InputError` naming ``[sensor] key``); missing keys
+        take the defaults above."""
+        return cls(**check_table("sensor", t))
 
 
 @dataclass(frozen=True)
@@ -181,30 +136,10 @@ class GlareParams:
 
     @classmethod
     def from_table(cls, t: dict | None) -> "GlareParams":
-        t = dict(t or {})
-        _unknown("glare", t, cls)
-        T = "glare"
-        kw = {}
-        if "aberration_sigma_px" in t:
-            kw["aberration_sigma_px"] = _num(T, "aberration_sigma_px", t["aberration_sigma_px"], lo=0)
-        if "veiling_fraction" in t:
-            kw["veiling_fraction"] = _num(T, "veiling_fraction", t["veiling_fraction"], lo=0, hi=0.999)
-        if "wing_exponent" in t:
-            kw["wing_exponent"] = _num(T, "wing_exponent", t["wing_exponent"], lo=1.0, lo_open=True, hi=10)
-        if "wing_core_px" in t:
-            kw["wing_core_px"] = _num(T, "wing_core_px", t["wing_core_px"], lo=0, lo_open=True)
-        if "wing_radius_px" in t:
-            kw["wing_radius_px"] = _num(T, "wing_radius_px", t["wing_radius_px"], lo=1)
-        if "ghosts" in t:
-            gh = []
-            for i, g in enumerate(t["ghosts"] or []):
-                if not isinstance(g, (list, tuple)) or len(g) != 3:
-                    raise InputError(f"[glare] ghosts[{i}]: expected [fraction, scale, blur_px], got {g!r}")
-                gh.append((_num(T, f"ghosts[{i}].fraction", g[0], lo=0, hi=0.5),
-                           _num(T, f"ghosts[{i}].scale", g[1]),
-                           _num(T, f"ghosts[{i}].blur_px", g[2], lo=0)))
-            kw["ghosts"] = tuple(gh)
-        return cls(**kw)
+        """The ``[glare]`` table checked (:data:`svgs.profile_schema.PHONE_TABLES`: type, range,
+        choices, unknown keys refused; :class:`InputError` naming ``[glare] key``); missing keys
+        take the defaults above."""
+        return cls(**check_table("glare", t))
 
 
 @dataclass(frozen=True)
@@ -222,31 +157,10 @@ class ExposureParams:
 
     @classmethod
     def from_table(cls, t: dict | None) -> "ExposureParams":
-        t = dict(t or {})
-        _unknown("exposure", t, cls)
-        T = "exposure"
-        kw = {}
-        if "mode" in t:
-            if t["mode"] not in ("auto", "manual"):
-                raise InputError(f"[exposure] mode: expected 'auto' or 'manual', got {t['mode']!r}")
-            kw["mode"] = t["mode"]
-        if "metering" in t:
-            if t["metering"] not in METERING:
-                raise InputError(f"[exposure] metering: expected one of {METERING}, got {t['metering']!r}")
-            kw["metering"] = t["metering"]
-        if "target_level" in t:
-            kw["target_level"] = _num(T, "target_level", t["target_level"], lo=0, lo_open=True, hi=1)
-        if "compensation_ev" in t:
-            kw["compensation_ev"] = _num(T, "compensation_ev", t["compensation_ev"], lo=-10, hi=10)
-        for k in ("min_exposure_s", "max_exposure_s", "exposure_s", "min_iso", "max_iso", "iso"):
-            if k in t:
-                kw[k] = _num(T, k, t[k], lo=0, lo_open=True)
-        p = cls(**kw)
-        if p.min_exposure_s > p.max_exposure_s:
-            raise InputError(f"[exposure] min_exposure_s ({p.min_exposure_s}) exceeds max_exposure_s ({p.max_exposure_s})")
-        if p.min_iso > p.max_iso:
-            raise InputError(f"[exposure] min_iso ({p.min_iso}) exceeds max_iso ({p.max_iso})")
-        return p
+        """The ``[exposure]`` table checked (:data:`svgs.profile_schema.PHONE_TABLES`: type, range,
+        choices, unknown keys refused; :class:`InputError` naming ``[exposure] key``); missing keys
+        take the defaults above."""
+        return cls(**check_table("exposure", t))
 
 
 @dataclass(frozen=True)
@@ -271,22 +185,10 @@ class CfaParams:
 
     @classmethod
     def from_table(cls, t: dict | None) -> "CfaParams":
-        t = dict(t or {})
-        _unknown("cfa", t, cls)
-        kw = {}
-        if "pattern" in t:
-            if t["pattern"] not in CFA_PATTERNS:
-                raise InputError(f"[cfa] pattern: expected one of {CFA_PATTERNS}, got {t['pattern']!r}")
-            kw["pattern"] = t["pattern"]
-        for k, lo, hi in (("response", 0.0, 1.0), ("wavelength_nm", 300.0, 1100.0)):
-            if k in t:
-                v = t[k]
-                if not isinstance(v, (list, tuple)) or len(v) != 3:
-                    raise InputError(f"[cfa] {k}: expected [R, G, B], got {v!r}")
-                kw[k] = tuple(_num("cfa", f"{k}[{i}]", x, lo=lo, hi=hi, lo_open=True) for i, x in enumerate(v))
-        if "demosaic" in t:
-            kw["demosaic"] = check_demosaic(t["demosaic"], "[cfa] demosaic")
-        return cls(**kw)
+        """The ``[cfa]`` table checked (:data:`svgs.profile_schema.PHONE_TABLES`: type, range,
+        choices, unknown keys refused; :class:`InputError` naming ``[cfa] key``); missing keys
+        take the defaults above."""
+        return cls(**check_table("cfa", t))
 
 
 @dataclass(frozen=True)
@@ -319,75 +221,30 @@ class IspParams:
 
     @classmethod
     def from_table(cls, t: dict | None) -> "IspParams":
-        t = dict(t or {})
-        _unknown("isp", t, cls)
-        T = "isp"
-        kw = {}
-        if "gamma" in t:
-            kw["gamma"] = _num(T, "gamma", t["gamma"], lo=0, hi=10)
-        for k in ("output_width", "output_height"):
-            if k in t:
-                kw[k] = _num(T, k, t[k], lo=0, integer=True)
-        if "jpeg_quality" in t:
-            kw["jpeg_quality"] = _num(T, "jpeg_quality", t["jpeg_quality"], lo=0, hi=100, integer=True)
-        if "jpeg_subsampling" in t:
-            kw["jpeg_subsampling"] = check_subsampling(t["jpeg_subsampling"], "[isp] jpeg_subsampling")
-        if "jpeg_grid_offset_px" in t:
-            kw["jpeg_grid_offset_px"] = check_grid_offset(t["jpeg_grid_offset_px"], "[isp] jpeg_grid_offset_px")
-        for k, hi in (("nr_sigma_px", 20.0), ("nr_range", 1.0), ("sharpen_amount", 10.0)):
-            if k in t:
-                kw[k] = _num(T, k, t[k], lo=0, hi=hi)
-        if "sharpen_sigma_px" in t:
-            kw["sharpen_sigma_px"] = _num(T, "sharpen_sigma_px", t["sharpen_sigma_px"], lo=0, lo_open=True, hi=20.0)
-        if "stages" in t:
-            kw["stages"] = check_stages(t["stages"], "[isp] stages")
-        p = cls(**kw)
-        if (p.output_width == 0) != (p.output_height == 0):
-            raise InputError("[isp] output_width and output_height must both be 0 (full resolution) or both set")
-        return p
-
+        """The ``[isp]`` table checked (:data:`svgs.profile_schema.PHONE_TABLES`: type, range,
+        choices, unknown keys refused; :class:`InputError` naming ``[isp] key``); missing keys
+        take the defaults above."""
+        return cls(**check_table("isp", t))
 
 def check_demosaic(method, name="demosaic") -> str:
     """A demosaic method of :data:`DEMOSAIC_METHODS` (:class:`InputError` naming ``name`` otherwise)."""
-    if method not in DEMOSAIC_METHODS:
-        raise InputError(f"{name}: expected one of {', '.join(DEMOSAIC_METHODS)}, got {method!r}")
-    return str(method)
+    return PHONE_TABLES["cfa"]["demosaic"].check(method, name)
 
 
 def check_subsampling(value, name="jpeg_subsampling") -> str:
     """A JPEG chroma sampling of :data:`JPEG_SUBSAMPLING` (:class:`InputError` naming ``name`` otherwise)."""
-    if value not in JPEG_SUBSAMPLING:
-        raise InputError(f"{name}: expected one of {', '.join(JPEG_SUBSAMPLING)}, got {value!r}")
-    return str(value)
+    return PHONE_TABLES["isp"]["jpeg_subsampling"].check(value, name)
 
 
 def check_grid_offset(value, name="jpeg_grid_offset_px") -> tuple:
     """``(x, y)``, whole pixels 0-15: where the image's top-left pixel sits in the JPEG's block
     grid (:class:`InputError` naming ``name`` otherwise)."""
-    if not isinstance(value, (list, tuple)) or len(value) != 2:
-        raise InputError(f"{name}: expected [x, y], got {value!r}")
-    out = []
-    for v in value:
-        try:
-            f = float(v)
-        except (TypeError, ValueError):
-            raise InputError(f"{name}: expected whole pixels 0-15, got {value!r}") from None
-        if not (np.isfinite(f) and f.is_integer() and 0 <= f <= 15):
-            raise InputError(f"{name}: expected whole pixels 0-15, got {value!r}")
-        out.append(int(f))
-    return tuple(out)
+    return PHONE_TABLES["isp"]["jpeg_grid_offset_px"].check(value, name)
 
 
 def check_stages(stages, name="stages") -> tuple:
-    """Validate a list of pipeline stage names."""
-    if isinstance(stages, str):
-        stages = [s for s in stages.split(",") if s]
-    out = []
-    for s in stages:
-        if s not in ALL_STAGES:
-            raise InputError(f"{name}: unknown stage {s!r}; known stages: {', '.join(ALL_STAGES)}")
-        out.append(s)
-    return tuple(out)
+    """Validate a list of pipeline stage names (or a comma-separated string of them)."""
+    return Stages().check(stages, name)
 
 
 @dataclass(frozen=True)
@@ -406,9 +263,9 @@ class PhoneParams:
     def from_camera(cls, camera) -> "PhoneParams":
         """Read the tables of a :class:`svgs.Camera` (missing tables take the defaults)."""
         tabs = camera.tables
-        optics = tabs.get("optics", {}) or {}
-        f_number = _num("optics", "f_number", optics.get("f_number", 2.4), lo=0, lo_open=True)
-        band = tuple(optics.get("band_nm", (400.0, 700.0)))
+        optics = check_table("optics", tabs.get("optics"))
+        f_number = optics.get("f_number", 2.4)
+        band = optics.get("band_nm", (400.0, 700.0))
         return cls(
             sensor=SensorParams.from_table(tabs.get("sensor")),
             glare=GlareParams.from_table(tabs.get("glare")),
