@@ -62,15 +62,16 @@ Tables (all optional; a missing key takes the documented default, marked ASSUMPT
     stages = ["glare", "cfa", "shot", "dark", "fpn", "read", "bloom", "adc", "nr", "tone", "sharpen", "u8",
               "downscale", "chroma", "jpeg"]
 
-Every value is validated where it enters; a bad one raises :class:`svgs.errors.InputError`
-naming ``table.key``.
+Every value is validated against :data:`svgs.profile_schema.PHONE_TABLES` (type, physical range,
+choices; an unknown key is refused), when the profile is loaded (:meth:`svgs.Camera.load`, before
+any render) and again where a table enters here; a bad one raises :class:`svgs.errors.InputError`
+naming ``[table] key`` and the allowed range.
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
-from svgs.errors import InputError
 from svgs.profile_schema import (  # the allowed values live in svgs, where Camera.load checks them at load
     ALL_STAGES,
     CFA_PATTERNS,
