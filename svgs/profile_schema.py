@@ -283,7 +283,9 @@ PHONE_DEFAULTS = {"sensor": {"adc_bits": 10, "black_level_dn": 64.0},
                                "max_iso": 800.0}}
 
 #: Top-level keys and tables a camera profile may have.
-CAMERA_KEYS = ("name", "description", "intrinsics", "distortion", "sources", "fitted",
+#: ``calibration`` (what :mod:`calibration` estimated) and ``preview`` (a preview stream's
+#: record, :mod:`camera.phone.preview`) are written by this project's own tools.
+CAMERA_KEYS = ("name", "description", "intrinsics", "distortion", "sources", "fitted", "calibration", "preview",
                *PHONE_TABLES, *RENDER_TABLES, "tof", "noise", "illumination")
 
 #: Pattern tables and keys.
