@@ -101,8 +101,10 @@ def _assert_refused(rc, elapsed_s, cap, file, words):
 @pytest.fixture(autouse=True)
 def _warm():
     """Import what ``render-and-solve`` imports first, so the time measured is the check's."""
-    import cli.sim  # noqa: F401
-    import sim.closed_loop  # noqa: F401
+    import importlib
+
+    for module in ("cli.sim", "sim.closed_loop"):
+        importlib.import_module(module)
 
 
 @pytest.mark.parametrize("path, value, words", BAD_CAMERA, ids=[f"{'.'.join(map(str, p))}={v!r}" for p, v, _ in BAD_CAMERA])
