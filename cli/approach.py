@@ -44,17 +44,18 @@ def register(sub) -> None:
     )
     p.add_argument("--camera", default="galaxy-nexus", help="phone camera profile name or .toml path (default galaxy-nexus)")
     p.add_argument("--pattern", default="svgs-3u", help="target pattern name or .toml path (default svgs-3u)")
-    p.add_argument("--trajectory", default=None, metavar="FILE.csv", help="trajectory file (instead of --from/--to/--duration)")
-    p.add_argument("--from", dest="from_m", type=float, default=None, help="straight approach: start range, m")
-    p.add_argument("--to", dest="to_m", type=float, default=None, help="straight approach: end range, m")
-    p.add_argument("--duration", dest="duration_s", type=float, default=None, help="straight approach: duration, s")
+    p.add_argument("--trajectory", default=None, metavar="FILE.csv", help="trajectory file (instead of --from/--to/--duration; default: none)")
+    p.add_argument("--from", dest="from_m", type=float, default=None, help="straight approach: start range, m (no default; with --to, --duration)")
+    p.add_argument("--to", dest="to_m", type=float, default=None, help="straight approach: end range, m (no default; with --from, --duration)")
+    p.add_argument("--duration", dest="duration_s", type=float, default=None, help="straight approach: duration, s (no default; with --from, --to)")
     p.add_argument("--lateral", default="0,0", metavar="X,Y",
                    help="straight approach: the target's lateral offset at the start, m (right, up; nulled linearly "
                         "by the end; default 0,0)")
     p.add_argument("--attitude", default="0,0,0", metavar="ROLL,PITCH,YAW",
                    help="straight approach: the target's attitude at the start, deg (the paper's angles; nulled "
                         "linearly; default 0,0,0)")
-    p.add_argument("--fps", type=float, required=True, help="frames per second of the sensor")
+    p.add_argument("--fps", type=float, required=True, help="frames per second of the sensor, Hz; the run renders duration x fps frames, ~0.4-0.9 s each at full "
+                        "resolution, ~0.2-0.3 s with --preview")
     p.add_argument("--seed", type=int, default=0, help="seed of every render and noise draw (default 0)")
     p.add_argument("--preview", action="store_true",
                    help="image through the phone's 640 x 480 preview stream (binned sensor) instead of full resolution")

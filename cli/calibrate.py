@@ -48,7 +48,7 @@ def _add_focal(sub) -> None:
                    help="do not let the pattern rotate in the image plane (default: a free roll per image)")
     p.add_argument("--threshold", default=None, help="blob threshold: 'app' (the app's brightness threshold for the camera, assets/app/svgs-app.toml; the default), a level in image counts, 'auto' or 'otsu'")
     p.add_argument("--name", default=None, help="name written into the profile (default: the camera's)")
-    p.add_argument("--out", default=None, metavar="PROFILE.toml", help="write the camera profile with the new focal length")
+    p.add_argument("--out", default=None, metavar="PROFILE.toml", help="write the camera profile with the new focal length (default: none, only printed)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=cmd_focal)
 
@@ -112,18 +112,19 @@ def _add_board(sub) -> None:
     p.add_argument("--dictionary", default=DEFAULT_DICTIONARY, help=f"ChArUco ArUco dictionary (default {DEFAULT_DICTIONARY})")
     p.add_argument("--legacy", action="store_true", help="ChArUco board made by OpenCV < 4.6 (even row count)")
     p.add_argument("--fix-aspect", action="store_true", help="keep fx / fy fixed (at --aspect-ratio, default 1)")
-    p.add_argument("--aspect-ratio", type=float, default=1.0, help="fx / fy with --fix-aspect (default 1)")
+    p.add_argument("--aspect-ratio", type=float, default=1.0, help="fx / fy, a dimensionless ratio, with --fix-aspect (default 1)")
     p.add_argument("--fix-principal-point", action="store_true",
                    help="keep the principal point at the image centre ((W-1)/2, (H-1)/2), or at --principal-point")
     p.add_argument("--principal-point", type=float, nargs=2, metavar=("CX", "CY"), default=None,
-                   help="fix the principal point here, px (implies --fix-principal-point)")
+                   help="fix the principal point here, px (implies --fix-principal-point; default: the image centre)")
     p.add_argument("--zero-tangent", action="store_true", help="p1 = p2 = 0")
     p.add_argument("--fix-k3", action="store_true", help="k3 = 0 (few or near-frontal views)")
     p.add_argument("--min-views", type=int, default=MIN_VIEWS, help=f"fewest views with the board (default {MIN_VIEWS})")
     p.add_argument("--camera", default=None,
-                   help="base camera profile: keep its other tables (sensor, optics...); its size must match")
+                   help="base camera profile: keep its other tables (sensor, optics...); its size must match (default: none, "
+                        "a profile of the intrinsics alone)")
     p.add_argument("--name", default=None, help="profile name (default: the base camera's, or 'calibrated')")
-    p.add_argument("--out", default=None, metavar="CAMERA.toml", help="write the calibrated camera profile")
+    p.add_argument("--out", default=None, metavar="CAMERA.toml", help="write the calibrated camera profile (default: none, only printed)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=cmd_board)
 

@@ -65,8 +65,9 @@ def _camera(args):
 
 def _size_options(p) -> None:
     p.add_argument("--width", type=int, default=None, metavar="W",
-                   help="render at this width instead of the profile's (same field of view; with --height)")
-    p.add_argument("--height", type=int, default=None, metavar="H", help="render at this height (with --width)")
+                   help="render at this width, px, instead of the profile's (same field of view; with --height; default: the "
+                        "profile's)")
+    p.add_argument("--height", type=int, default=None, metavar="H", help="render at this height, px (with --width; default: the profile's)")
 
 
 def _positive_int(v, name):
@@ -180,9 +181,12 @@ def _add_study(sub) -> None:
                    help=f"poses per range in the pose study (default {DEFAULT_POSES_PER_RANGE})")
     p.add_argument("--pattern", default="svgs-3u", help="target pattern (default svgs-3u)")
     p.add_argument("--geometric", action="store_true",
-                   help="no Mitsuba: geometric board images and projected centroids (seconds; for quick looks)")
+                   help="no Mitsuba: geometric board images and projected centroids; still minutes with the "
+                        "defaults (each of the 40 full-size board views took 5-10 s on a busy 2-core machine); a "
+                        "smaller --views-list and --width/--height make a quick look")
     p.add_argument("--cache", default=None, metavar="DIR",
-                   help="keep the rendered board set and focal frames here, and reuse them on a rerun")
+                   help="keep the rendered board set and focal frames here, and reuse them on a rerun (default: none, "
+                        "rendered again each run)")
     _size_options(p)
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout (the summary goes to stderr): "
                    "DIR/summary.json")

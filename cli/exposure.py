@@ -78,11 +78,12 @@ def register(sub) -> None:
                        "trials.csv, remedies.png and summary.json; trials are stored as they finish (results.csv, manifest.json), so "
                        "rerunning the same command resumes.")
     p.add_argument("--camera", required=True, help="camera profile (needs [optics] and [flash])")
-    p.add_argument("--ranges", default="2,4,6.5,8,10,15,20,30", help="comma-separated ranges, m")
+    p.add_argument("--ranges", default="2,4,6.5,8,10,15,20,30", help="comma-separated ranges, m (default %(default)s)")
     p.add_argument("--remedy", action="append", default=None,
                    help="baseline | exposure=SECONDS | nd=OD | spacing=FACTOR (repeat; default: a standard set)")
-    p.add_argument("--trials", type=int, default=5, help="noise draws per range and remedy (default 5)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--trials", type=int, default=5, help="noise draws per range and remedy (default 5; each range and remedy costs one render, ~1-4 s, and "
+                   "each draw an exposure, ~0.15-0.35 s)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the renders and the noise draws (default 0)")
     p.add_argument("--out", default=None, help="output folder (default exposure-study-CAMERA); rerun with the "
                    "same options to resume an interrupted study")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout (the table goes to stderr); "

@@ -7,18 +7,27 @@ it is given, and imports nothing heavy at module level: the handlers import the 
 studies or calibration code when they run, so ``svgs solve`` on a photo loads only
 :mod:`svgs` (checked by ``tests/test_architecture.py``).
 
-Exit codes (:mod:`cli.exit_codes`): 0 solved / done, 1 no solution (the reason is printed),
-2 bad input or usage, 130 interrupted.
+Exit codes (:mod:`cli.exit_codes`): 0 solved / done, 1 no solution or a simulated physical
+failure (:class:`svgs.errors.SimulationFailure`; the reason is printed), 2 bad input or usage,
+130 interrupted.
+
+Errors: one line on stderr, ``svgs <command> [<subcommand>]: error: <message>`` - the prefix
+names the command that was run (``svgs calibrate focal``), for argparse's usage errors as for
+an :class:`~svgs.errors.InputError`; ``svgs <command>: no solution (<reason>): <message>`` for a
+simulated failure. With ``--json`` the same message also goes to stdout as exactly one JSON
+object, ``{"ok": false, "error": "..."}`` (exit 2), or ``{"ok": false, "reason": "...",
+"error": "..."}`` for a simulated failure (exit 1).
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import json
 import sys
 
-from cli.exit_codes import EXIT_BAD_INPUT, EXIT_INTERRUPTED
-from svgs.errors import InputError
+from cli.exit_codes import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_NO_SOLUTION
+from svgs.errors import InputError, SimulationFailure
 
 #: Command groups: name -> (help, description, dest, metavar).
 GROUPS = {
@@ -65,9 +74,25 @@ def _selected(argv) -> set[str] | None:
     return mods or None
 
 
+class UsageError(Exception):
+    """An argparse usage error, raised (instead of exiting) by :class:`Parser` so that
+    :func:`main` can report it with ``--json``; ``parser`` is the (sub)parser that failed."""
+
+    def __init__(self, parser: argparse.ArgumentParser, message: str):
+        super().__init__(message)
+        self.parser = parser
+
+
+class Parser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose usage errors raise :class:`UsageError` (its subparsers too)."""
+
+    def error(self, message):
+        raise UsageError(self, message)
+
+
 def build_parser(argv=None) -> argparse.ArgumentParser:
     """The ``svgs`` parser: every registered command, or only those that ``argv`` invokes."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="svgs",
         description="Smartphone Video Guidance Sensor simulator: render, expose, detect, solve.",
     )
@@ -90,14 +115,54 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
     return parser
 
 
+def leaf_parser(parser: argparse.ArgumentParser, args) -> argparse.ArgumentParser:
+    """The (sub)parser of the command that ``args`` ran (``svgs calibrate focal``'s parser)."""
+    p = parser
+    for key in ("command", "calibrate_command", "tof_command"):
+        name = getattr(args, key, None)
+        if not name:
+            continue
+        sub = next((a for a in p._actions if isinstance(a, argparse._SubParsersAction)), None)
+        if sub is None or name not in sub.choices:
+            break
+        p = sub.choices[name]
+    return p
+
+
+def report_error(prog: str, message: str, as_json: bool, reason: str | None = None) -> None:
+    """One line on stderr, ``PROG: error: MESSAGE`` (bad input) or ``PROG: no solution (REASON):
+    MESSAGE`` (a simulated failure); with ``as_json`` also one JSON object on stdout,
+    ``{"ok": false, "error": MESSAGE}`` (plus ``"reason"`` for a simulated failure)."""
+    line = " ".join(str(message).split())  # one line, whatever the message held
+    head = "error" if reason is None else f"no solution ({reason})"
+    print(f"{prog}: {head}: {line}", file=sys.stderr, flush=True)
+    if as_json:
+        obj = {"ok": False, **({"reason": reason} if reason is not None else {}), "error": line}
+        print(json.dumps(obj), file=sys.stdout, flush=True)
+
+
+def _parse(parser: argparse.ArgumentParser, argv: list):
+    """``parser.parse_args(argv)``, but an unrecognised argument is reported by the sub-command's parser."""
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        leaf_parser(parser, args).error(f"unrecognized arguments: {' '.join(extra)}")
+    return args
+
+
 def main(argv=None) -> int:
     """Run the CLI; returns the exit code (also used by tests in-process)."""
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv)
     try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # argparse: usage errors exit 2, --help exits 0
+        args = _parse(parser, argv)
+    except UsageError as exc:  # usage errors: exit 2, named by the sub-command's parser
+        exc.parser.print_usage(sys.stderr)
+        report_error(exc.parser.prog, str(exc), "--json" in argv)
+        return EXIT_BAD_INPUT
+    except SystemExit as exc:  # --help, --version: exit 0
         return int(exc.code or 0)
+    prog = leaf_parser(parser, args).prog  # "svgs calibrate focal"
+    as_json = bool(getattr(args, "json", False))
     try:
         from cli.validate import check_args
 
@@ -110,10 +175,13 @@ def main(argv=None) -> int:
                       file=sys.stderr, flush=True)
         return int(args.func(args))
     except InputError as exc:
-        print(f"svgs {args.command}: error: {exc}", file=sys.stderr)
+        report_error(prog, str(exc), as_json)
         return EXIT_BAD_INPUT
+    except SimulationFailure as exc:  # valid input, the simulated physics measured nothing: no solution
+        report_error(prog, str(exc), as_json, reason=exc.reason)
+        return EXIT_NO_SOLUTION
     except KeyboardInterrupt:
-        print(f"svgs {args.command}: interrupted", file=sys.stderr)
+        print(f"{prog}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except BrokenPipeError:  # output piped into a program that stopped reading (e.g. head)
         sys.stderr.close()

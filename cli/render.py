@@ -32,14 +32,14 @@ def register(sub) -> None:
     p.add_argument("--pattern", default="svgs-3u", help="target pattern name or .toml path (default: svgs-3u)")
     p.add_argument("--range", dest="range_m", type=float, required=True, help="range along the boresight, m")
     p.add_argument("--x", dest="target_x_m", type=float, default=0.0,
-                   help="lateral offset of the target origin from the boresight, camera right, m")
+                   help="lateral offset of the target origin from the boresight, camera right, m (default 0)")
     p.add_argument("--y", dest="target_y_m", type=float, default=0.0,
-                   help="lateral offset of the target origin from the boresight, camera up, m")
-    p.add_argument("--roll", type=float, default=0.0, help="roll (phi), deg")
-    p.add_argument("--pitch", type=float, default=0.0, help="pitch (theta), deg")
-    p.add_argument("--yaw", type=float, default=0.0, help="yaw (psi), deg")
+                   help="lateral offset of the target origin from the boresight, camera up, m (default 0)")
+    p.add_argument("--roll", type=float, default=0.0, help="roll (phi), deg (default 0)")
+    p.add_argument("--pitch", type=float, default=0.0, help="pitch (theta), deg (default 0)")
+    p.add_argument("--yaw", type=float, default=0.0, help="yaw (psi), deg (default 0)")
     p.add_argument("--spp", type=int, default=None, help="samples per pixel of the background (default 4)")
-    p.add_argument("--roi-spp", type=int, default=None, help="samples per pixel in the windows around the spots (default 64 guided, 4096 path)")
+    p.add_argument("--roi-spp", type=int, default=None, help="samples per pixel in the windows around the spots (default 64 with --method guided, 4096 with path)")
     p.add_argument("--spot-samples", type=int, default=None, help="guided samples per spot strategy (default 16384, placed by the 4-D R4 sequence)")
     p.add_argument("--reflector", default=None, help="'solid', 'hollow' or a model name (default: the pattern's)")
     p.add_argument("--body", default=None, choices=("plate", "3u", "none"), help="target body (default plate)")
@@ -54,7 +54,7 @@ def register(sub) -> None:
     p.add_argument("--exposure-s", type=float, default=None, help="exposure time of image.png (default: the phone's)")
     p.add_argument("--iso", type=float, default=None, help="ISO of image.png (default: the phone's)")
     p.add_argument("--no-expose", action="store_true", help="write only the flux (no raw.npy / image.png)")
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, help="output folder (created if missing)")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=cmd_render)
 
@@ -65,7 +65,7 @@ def register(sub) -> None:
         "Dr.Jit loads (LLVM 15 aborts Dr.Jit 1.5: it must not be used), library versions and whether each "
         "is usable. Exit 0 when a renderer is usable (scalar counts, with a warning).",
     )
-    d.add_argument("--variant", default=None, help="try this variant or backend (as SVGS_MI_VARIANT)")
+    d.add_argument("--variant", default=None, help="try this Mitsuba variant or backend, as SVGS_MI_VARIANT does (default: SVGS_MI_VARIANT, else the best available)")
     d.add_argument("--json", action="store_true", help="print one JSON object")
     d.set_defaults(func=cmd_doctor)
 

@@ -16,11 +16,11 @@ from cli.solve import json_default
 
 #: (flag, dest, help). ``--x``/``--y`` set the target's lateral offset (Scenario.target_x_m,
 #: target_y_m), not the camera position ``x_m``/``y_m`` of the solved state.
-POSE_ARGS = (("--x", "target_x_m", "lateral offset of the target origin from the boresight, camera right (m)"),
-             ("--y", "target_y_m", "lateral offset of the target origin from the boresight, camera up (m)"),
-             ("--roll", "roll_deg", "roll, paper x-y-z sequence (deg)"),
-             ("--pitch", "pitch_deg", "pitch (deg)"),
-             ("--yaw", "yaw_deg", "yaw (deg)"))
+POSE_ARGS = (("--x", "target_x_m", "lateral offset of the target origin from the boresight, camera right (m; default 0)"),
+             ("--y", "target_y_m", "lateral offset of the target origin from the boresight, camera up (m; default 0)"),
+             ("--roll", "roll_deg", "roll, paper x-y-z sequence (deg; default 0)"),
+             ("--pitch", "pitch_deg", "pitch (deg; default 0)"),
+             ("--yaw", "yaw_deg", "yaw (deg; default 0)"))
 
 
 def state_line(state: dict) -> str:
@@ -51,16 +51,16 @@ def _scene_args(p, with_range=True):
         p.add_argument("--range", dest="range_m", type=float, required=True, help="range along the boresight to the target origin (m)")
     for flag, dest, text in POSE_ARGS:
         p.add_argument(flag, dest=dest, type=float, default=0.0, help=text)
-    p.add_argument("--spp", type=int, default=None, help="samples per pixel, full frame (default: the renderer's)")
-    p.add_argument("--roi-spp", type=int, default=None, help="samples per pixel in the spot windows (default: the renderer's)")
+    p.add_argument("--spp", type=int, default=None, help="samples per pixel, full frame (default 4; the background is dark and diffuse)")
+    p.add_argument("--roi-spp", type=int, default=None, help="samples per pixel in the windows around the spots (default 64, the guided method's)")
     p.add_argument("--backdrop-m", type=float, default=None,
                    help="distance of a grey backdrop behind the target (m; default 3; 0 = none)")
     add_ambient_arg(p)
     add_focus_arg(p)
     p.add_argument("--threshold", default=None, help="detector threshold: 'app' (the app's brightness threshold for the camera, assets/app/svgs-app.toml; the default), a level in image counts, 'auto' or 'otsu'")
-    p.add_argument("--exposure-s", type=float, default=None, help="override the phone's exposure time (s)")
-    p.add_argument("--iso", type=float, default=None, help="override the phone's ISO")
-    p.add_argument("--seed", type=int, default=0, help="random seed (render and noise); same seed, same numbers")
+    p.add_argument("--exposure-s", type=float, default=None, help="exposure time, s (default: the phone's automatic exposure)")
+    p.add_argument("--iso", type=float, default=None, help="ISO, ISO 12232 arithmetic speed (default: the phone's automatic ISO)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (render and noise); same seed, same numbers (default 0)")
 
 
 def _scenario(args, range_m=None):
@@ -238,8 +238,8 @@ def register(sub) -> None:
                    "about its pivot - roll and pitch tilt it about its horizontal and vertical axes, yaw turns it about "
                    "the line of sight, as the paper names the attitude; --range is the rail position, no --x/--y)")
     p.add_argument("--stage-m", dest="stage_m", type=float, default=0.0,
-                   help="the stand's translation stage along the rail, m (+/-0.15 on the paper's stand; --mount stand)")
-    p.add_argument("--out", default=None, help="write flux.npy, raw.npy, image.png, preview.png, truth.json, solution.json here")
+                   help="the stand's translation stage along the rail, m (+/-0.15 on the paper's stand; --mount stand; default 0)")
+    p.add_argument("--out", default=None, help="write flux.npy, raw.npy, image.png, preview.png, truth.json, solution.json here (default: none, nothing written)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_render_and_solve)
 
@@ -250,11 +250,12 @@ def register(sub) -> None:
                        "trials.jsonl, range_sweep.png and summary.json. Trials are stored as they finish (results.csv, "
                        "manifest.json): rerunning the same command resumes; other options are refused.")
     _scene_args(p, with_range=False)
-    p.add_argument("--ranges", required=True, help="comma-separated ranges in metres, e.g. 1,2,4,6.5,8,10")
+    p.add_argument("--ranges", required=True, help="comma-separated ranges in metres, e.g. 1,2,4,6.5,8,10; each costs one render per pose (~1-4 s) "
+                   "plus --trials exposures (~0.15-0.35 s each)")
     p.add_argument("--trials", type=int, default=20, help="exposures (noise draws) per rendered pose (default 20)")
     p.add_argument("--poses", type=int, default=1, help="rendered poses per range; beyond the first they are jittered (default 1)")
-    p.add_argument("--jitter-deg", type=float, default=1.0, help="attitude jitter of the extra poses, deg (1 sigma)")
-    p.add_argument("--jitter-m", type=float, default=0.01, help="lateral jitter of the extra poses, m (1 sigma)")
+    p.add_argument("--jitter-deg", type=float, default=1.0, help="attitude jitter of the extra poses, deg (1 sigma; default %(default)s)")
+    p.add_argument("--jitter-m", type=float, default=0.01, help="lateral jitter of the extra poses, m (1 sigma; default %(default)s)")
     p.add_argument("--out", default=None, help="output folder (default range-sweep-CAMERA); rerun with the same "
                    "options to resume an interrupted sweep")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout (the table goes to stderr); "

@@ -40,7 +40,7 @@ def register(sub) -> None:
                         "assets/app/svgs-app.toml)")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="write overlay.png (what the detector found and where the solution puts the targets) and "
-                        "solution.json here")
+                        "solution.json here (default: none, nothing written)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=cmd_solve)
 

@@ -40,11 +40,11 @@ def add_executor_options(p) -> None:
     g = p.add_argument_group("where the trials run (choose one; default: a local process pool, one process per core)")
     x = g.add_mutually_exclusive_group()
     x.add_argument("--processes", type=int, default=None, metavar="N",
-                   help="local process pool of N processes (0: run in this process)")
+                   help="local process pool of N processes (0: run in this process; default: one per core)")
     x.add_argument("--workers", type=int, default=None, metavar="N",
-                   help="start a Dask LocalCluster of N worker processes (needs the 'dask' extra)")
+                   help="start a Dask LocalCluster of N worker processes (needs the 'dask' extra; default: none)")
     x.add_argument("--scheduler", default=None, metavar="ADDR",
-                   help="run on an existing Dask cluster, e.g. tcp://10.0.0.5:8786 (needs the 'dask' extra)")
+                   help="run on an existing Dask cluster, e.g. tcp://10.0.0.5:8786 (needs the 'dask' extra; default: none)")
     g.add_argument("--chunk-size", type=int, default=None, metavar="N",
                    help="trials per task (default 16); trials sharing a render stay together")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
@@ -100,7 +100,8 @@ def _register_campaign(sub) -> None:
         "images and, with --budget, the error budget.",
     )
     p.add_argument("--camera", required=True, help="camera profile (htc-amaze-4g, galaxy-nexus, or a .toml path)")
-    p.add_argument("--trials", type=int, default=200, metavar="N", help="trials per range (default 200)")
+    p.add_argument("--trials", type=int, default=200, metavar="N", help="trials per range (default 200); a rendered trial costs ~1-2 s of one core (docs/performance.md), "
+                   "a geometric one ~1 ms")
     p.add_argument("--exposures-per-render", type=int, default=4, metavar="K",
                    help="exposures (noise draws) of each rendered stand setting (default 4): trials/K settings per range")
     p.add_argument("--ranges", default=None, metavar="R1,R2,...",
@@ -124,11 +125,11 @@ def _register_campaign(sub) -> None:
     p.add_argument("--still-lab", action="store_true",
                    help="a perfect lab: no gimbal or stage positioning error, exact recorded ranges, still air "
                    "(default: the lab's sourced errors, assets/labs/msfc-frl.toml [errors]; docs/studies.md)")
-    p.add_argument("--focal-error-frac", type=float, default=0.0, help="solver's focal-length error, fraction")
-    p.add_argument("--pp-error-px", default="0,0", metavar="DU,DV", help="solver's principal-point error, px")
-    p.add_argument("--k1-error", type=float, default=0.0, help="solver's radial distortion k1 error")
+    p.add_argument("--focal-error-frac", type=float, default=0.0, help="solver's focal-length error, a fraction of f (default 0: exact)")
+    p.add_argument("--pp-error-px", default="0,0", metavar="DU,DV", help="solver's principal-point error, px (default 0,0)")
+    p.add_argument("--k1-error", type=float, default=0.0, help="solver's radial distortion k1 error, dimensionless (normalised image coordinates; default 0)")
     p.add_argument("--merge-px", type=float, default=0.0,
-                   help="spots closer than this many px merge (geometric trial; 0: never)")
+                   help="spots closer than this many px merge (geometric trial; default 0: never)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout (the table goes to stderr); "
                    "the same object is written to DIR/summary.json")
     add_executor_options(p)
@@ -146,15 +147,22 @@ def _register_sensitivity(sub) -> None:
     )
     s.add_argument("--camera", required=True, help="camera profile")
     s.add_argument("--vary", action="append", default=[], metavar="PARAM=LOW:HIGH",
-                   help="a varied parameter (repeat); see docs/studies.md for the names")
-    s.add_argument("--fixed", action="append", default=[], metavar="PARAM=VALUE", help="hold a parameter at VALUE")
-    s.add_argument("--method", choices=("sobol", "morris"), default="sobol")
+                   help="a varied parameter, uniform in LOW:HIGH in the parameter's unit (repeat; at least one; default: none); "
+                        "see docs/studies.md for the names and units")
+    s.add_argument("--fixed", action="append", default=[], metavar="PARAM=VALUE",
+                   help="hold a parameter at VALUE, in its unit (repeat; default: the trial kind's nominal values)")
+    s.add_argument("--method", choices=("sobol", "morris"), default="sobol",
+                   help="sobol: first-order and total indices (n (d + 2) trials); morris: elementary effects, mu* "
+                        "(n (d + 1) trials, cheaper for screening); default %(default)s")
     s.add_argument("--n", type=int, default=256,
-                   help="base samples (Sobol: a power of two, n (d + 2) trials) or trajectories (Morris: n (d + 1))")
+                   help="base samples (Sobol: a power of two, n (d + 2) trials) or trajectories (Morris: n (d + 1)); default "
+                        "%(default)s. A geometric trial costs ~1 ms, a rendered one ~1-4 s of one core")
     s.add_argument("--out", default=None, metavar="DIR", help="study directory (default runs/sensitivity-CAMERA)")
-    s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--trial-kind", default="geometric")
-    s.add_argument("--pattern", default="svgs-3u")
+    s.add_argument("--seed", type=int, default=0, help="study seed: the sample design and every trial's draws (default 0)")
+    s.add_argument("--trial-kind", default="geometric",
+                   help="trial kind: geometric (projected centroids with noise, ~1 ms a trial), render (the rendered "
+                        "chain, ~1-4 s a trial) or tof; default %(default)s")
+    s.add_argument("--pattern", default="svgs-3u", help="target pattern name or .toml path (default %(default)s)")
     s.add_argument("--json", action="store_true", help="print one JSON object on stdout (the rankings go to stderr); "
                    "the same object is written to DIR/summary.json")
     add_executor_options(s)
@@ -179,10 +187,11 @@ def _register_merge_range(sub) -> None:
     m.add_argument("--vary", action="append", default=[], metavar="NAME[=LOW:HIGH]",
                    help="a physical parameter and its range (default: all, each over its documented range; see "
                    "docs/studies.md)")
-    m.add_argument("--exposures", type=int, default=2, metavar="K", help="exposures per render (default 2)")
+    m.add_argument("--exposures", type=int, default=2, metavar="K", help="exposures per render (default 2); each case costs one render per range (~1-4 s) and an exposure "
+                   "~0.35 s")
     m.add_argument("--out", default=None, metavar="DIR", help="study directory (default runs/merge-range-CAMERA)")
-    m.add_argument("--seed", type=int, default=0)
-    m.add_argument("--pattern", default="svgs-3u")
+    m.add_argument("--seed", type=int, default=0, help="seed of the renders and the noise (default 0)")
+    m.add_argument("--pattern", default="svgs-3u", help="target pattern name or .toml path (default %(default)s)")
     m.add_argument("--json", action="store_true", help="print one JSON object on stdout; also DIR/summary.json")
     add_executor_options(m)
     m.set_defaults(func=cmd_merge_range)

@@ -74,7 +74,7 @@ def register(group) -> None:
     p.add_argument("--pinhole", action="store_true", help="no defocus blur (trace through the lens centre)")
     p.add_argument("--out", default=None,
                    help=f"write gray.npy, depth.npy (first {MAX_SAVED_FRAMES} frames), rendered.npz, frames.csv, "
-                        "truth.json, solution.json and preview.png here")
+                        "truth.json, solution.json and preview.png here (default: none, nothing written)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=cmd_render_and_solve)
 

@@ -57,7 +57,7 @@ def register(group) -> None:
     p.add_argument("--range", dest="range_m", type=float, required=True,
                    help=f"range to the target, m ({RANGE_LIMITS_M[0]}-{RANGE_LIMITS_M[1]}); 0.697 and 5.712 "
                         "are the paper's")
-    p.add_argument("--frames", type=int, default=200, help="noisy frames (default 200; at most 20000)")
+    p.add_argument("--frames", type=int, default=200, help="noisy frames (default 200; at most 20000, ~50 ms each)")
     _common(p)
     p.add_argument("--persistence", type=int, default=1, metavar="W",
                    help="the pipeline's persistence window: frames averaged (paper section 3.4; default 1)")
@@ -67,7 +67,7 @@ def register(group) -> None:
     p.add_argument("--reference", choices=("markers", "plate"), default="markers",
                    help="point reported as x, y, z: the marker faces' centroid (default) or the plate centre")
     p.add_argument("--bounces", type=int, default=1, help="1 = direct returns (default), 2-4 = with multipath")
-    p.add_argument("--out", default=None, help="write frames.csv, summary.json and stability.png here")
+    p.add_argument("--out", default=None, help="write frames.csv, summary.json and stability.png here (default: none, nothing written)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=cmd_stability)
 

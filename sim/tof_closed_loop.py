@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim.metrics import no_pose_errors, pose_errors, state_error
-from svgs.errors import InputError, check_finite
+from svgs.errors import InputError, SimulationFailure, check_finite
 from svgs.frames import pose_from_scenario, pose_to_state
 
 #: Second entry of the noise stream's seed ``[seed, NOISE_STREAM]`` (the stability runs' since
@@ -288,8 +288,39 @@ class TofFrameResult:
     saturated_pixels: int
 
 
+def check_measurable(tof_render: TofRender, frame_index: int, tof_frame) -> None:
+    """Raise :class:`svgs.errors.SimulationFailure` when the simulated frame has no valid depth pixel.
+
+    A frame with no valid depth is a physical failure of the simulation (every pixel saturated,
+    or no return above the amplitude threshold), not bad input: ``tof.pipeline`` would refuse it
+    as an input image. The message gives the saturated fraction, the ambient light and the
+    integration time.
+    """
+    d = np.asarray(tof_frame.depth_m)
+    with np.errstate(invalid="ignore"):
+        if np.any(np.isfinite(d) & (d > 0)):
+            return
+    n_sat, n = int(np.count_nonzero(tof_frame.saturated)), int(d.size)
+    sensor = tof_render.sensor
+    light = f"{sensor.ambient_lux:g} lux ambient, {tof_frame.integration_time_s * 1e3:.4g} ms integration"
+    if n_sat:
+        why = (f"{n_sat} of {n} pixels saturated ({n_sat / n:.0%}) and the rest are below the "
+               f"{sensor.min_amplitude_dn:g} LSB amplitude threshold ({light})")
+    else:
+        why = f"no pixel's return reaches the {sensor.min_amplitude_dn:g} LSB amplitude threshold ({light})"
+    raise SimulationFailure(f"simulated frame {frame_index}: no pixel has a valid depth: {why}",
+                            "saturated" if n_sat else "no_signal")
+
+
 def solve(tof_render: TofRender, frame_index: int, tof_frame, pipe) -> TofFrameResult:
-    """One frame through ``pipe`` (stateful: call in frame order), with its errors."""
+    """One frame through ``pipe`` (stateful: call in frame order), with its errors.
+
+    Raises
+    ------
+    svgs.errors.SimulationFailure
+        The simulated frame has no valid depth pixel (:func:`check_measurable`).
+    """
+    check_measurable(tof_render, frame_index, tof_frame)
     res = pipe.process(tof_frame.gray, tof_frame.depth_m)
     truth = tof_render.truth_state
     if res:

@@ -1,10 +1,12 @@
-"""Exceptions for bad input.
+"""Exceptions for bad input and for simulated physical failures.
 
 Bad input (a missing file, a profile with a NaN, a degenerate point set) raises
 :class:`InputError`, a :class:`ValueError` whose message names the input and what was
 wrong. The CLI maps it to exit code 2. Failures of *estimation* (no consistent set of
 blobs, a diverged solve) are not exceptions: they are falsy result objects, see
-:mod:`svgs.result`.
+:mod:`svgs.result`. A *simulated* sensor that measures nothing at all (every pixel
+saturated by the light it was given) raises :class:`SimulationFailure`: the input was
+valid, the physics failed; the CLI maps it to exit code 1 (no solution) with its reason.
 """
 
 from __future__ import annotations
@@ -16,6 +18,26 @@ class InputError(ValueError):
 
 class ProfileError(InputError):
     """A camera profile or target pattern that cannot be used."""
+
+
+class SimulationFailure(RuntimeError):
+    """A simulated physical failure: valid input, but the simulated sensor measured nothing usable.
+
+    Not bad input (that is :class:`InputError`, exit 2): the scene and the sensor were what the
+    user asked for, and the physics left nothing to measure (e.g. the ambient light saturated
+    every pixel). The CLI prints the message and exits 1, as for an unsolved pose.
+
+    Parameters
+    ----------
+    message : str
+        What failed and why, for people (the numbers that made it fail).
+    reason : str
+        A short machine-readable code (``"saturated"``, ``"no_signal"``).
+    """
+
+    def __init__(self, message: str, reason: str):
+        super().__init__(message)
+        self.reason = str(reason)
 
 
 def check_finite_positive(value, name: str, *, allow_zero: bool = False) -> float:

@@ -44,7 +44,10 @@ def _render() -> str:
     parser.prog = "svgs"
     out = ["# Command reference", "",
            "Generated from the commands' own help by `tools/make_cli_doc.py`; do not edit by hand.", "",
-           "Exit codes everywhere: 0 done/solved, 1 no solution (the reason is printed), 2 bad input or usage.", "",
+           ("Exit codes everywhere: 0 done/solved, 1 no solution or a simulated physical failure (the simulated "
+            "sensor measured nothing, e.g. every pixel saturated; the reason is printed), 2 bad input or usage. An "
+            "error is one line on stderr that names the command: `svgs calibrate focal: error: ...` (exit 2), "
+            "`svgs tof stability: no solution (saturated): ...` (exit 1)."), "",
            ("Every argument is checked before any work starts (`cli/validate.py`): output locations (a writable "
             "folder, or a file where the metavar says `.toml`), seeds (>= 0), counts (>= 1), finite numbers, "
             "positive and non-negative physical quantities, ranges (positive, distinct, inside the sensor's "
@@ -54,7 +57,9 @@ def _render() -> str:
            ("`--json`: every command that takes it prints exactly one JSON object on stdout (tables, status lines "
            "and progress bars go to stderr). Its object is shown after the command's help (`cli/json_out.py`); "
            "the study commands (range-sweep, exposure-study, campaign, sensitivity, calibrate study) write NaN as "
-           "`null` and also write the object to their folder's `summary.json`."), ""]
+           "`null` and also write the object to their folder's `summary.json`. A refused run (exit 2) prints "
+           "`{\"ok\": false, \"error\": \"...\"}` instead, a simulated physical failure (exit 1) "
+           "`{\"ok\": false, \"reason\": \"...\", \"error\": \"...\"}`; the message is also on stderr."), ""]
     for name, p in _walk(parser, "svgs"):
         out += [f"## `{name}`", "", "```", p.format_help().rstrip(), "```", ""]
         if name in SCHEMAS:
