@@ -27,6 +27,7 @@ import json
 import sys
 
 from cli.exit_codes import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_NO_SOLUTION
+from cli.signals import interruptible
 from svgs.errors import InputError, SimulationFailure
 
 #: Command groups: name -> (help, description, dest, metavar).
@@ -173,6 +174,7 @@ def main(argv=None) -> int:
             if not kernels_cached():  # a fresh install that skipped `make`: say why the first call waits
                 print("compiling the solver and camera kernels (first run only, ~20 s; cached for later runs) ...",
                       file=sys.stderr, flush=True)
+        args.func = interruptible(args)  # Ctrl-C and SIGTERM: one line, exit 130 / 143 (cli.signals)
         return int(args.func(args))
     except InputError as exc:
         report_error(prog, str(exc), as_json)

@@ -16,6 +16,15 @@ unreachable scheduler are :class:`~svgs.errors.InputError`\\ s raised by
 Workers die with their parent: a local pool's or LocalCluster's worker processes end when the
 process that started them dies, even by SIGKILL (:func:`die_with_parent`).
 
+Interrupts: Ctrl-C (``KeyboardInterrupt``, or a subclass such as the CLI's SIGTERM exception)
+stops a study at once. In this process (``--processes 0``) the trials run render group by render
+group and each group's rows are stored as it finishes; an interrupt lets the group under way
+finish (a few trials, or one render and its exposures: a second Ctrl-C abandons it), stores it
+and stops, so no group starts after the interrupt. On a pool the rows of every finished task
+are stored, then the workers are terminated (they ignore SIGINT themselves: Ctrl-C in a
+terminal reaches the whole process group). The interrupt is re-raised with :class:`StoredProgress` attached as its
+``svgs_stored`` attribute (:func:`stored_progress`): how many trials the store holds.
+
 Results do not depend on the executor: each trial carries its own seed
 (:mod:`studies.seeding`) and trials never share random state. Trials are packed into tasks
 (chunks of ``chunk_size`` trials, trials sharing a render key kept together) to amortise the
@@ -182,8 +191,23 @@ def run_task(kind_ref: tuple[str, str], items: list) -> list[dict]:
     """
     kind = _kind(kind_ref)
     _warm(kind)
-    rows = []
-    # consecutive items with the same render key form one group
+    return [row for rows in _group_rows(kind, items) for row in rows]
+
+
+def _group_rows(kind: TrialKind, items: list):
+    """Run the trials of one task render group by render group, yielding each group's rows.
+
+    Parameters
+    ----------
+    kind : TrialKind
+    items : list of (trial_id, scenario, seed)
+
+    Yields
+    ------
+    list of dict
+        The rows of one group of consecutive items sharing a render key (one row per trial
+        when the kind has no ``run_group``), as :func:`run_task` returns them.
+    """
     groups: list[list] = []
     for it in items:
         key = kind.render_key(it[1]) if (kind.render_key and kind.run_group) else None
@@ -198,9 +222,8 @@ def run_task(kind_ref: tuple[str, str], items: list) -> list[dict]:
         else:
             outs = [kind.run_trial(g[1], g[2]) for g in grp]
         dt, dc = (time.perf_counter() - t0) / len(grp), (time.process_time() - c0) / len(grp)
-        for (tid, scen, seed), out in zip(grp, outs):
-            rows.append({"trial_id": int(tid), "seed": int(seed), **scen, **out, "wall_s": dt, "cpu_s": dc})
-    return rows
+        yield [{"trial_id": int(tid), "seed": int(seed), **scen, **out, "wall_s": dt, "cpu_s": dc}
+               for (tid, scen, seed), out in zip(grp, outs)]
 
 
 def _kind(kind_ref: tuple[str, str]) -> TrialKind:
@@ -285,7 +308,9 @@ def die_with_parent(parent_pid: int) -> str:
 
 
 def _init_pool_worker(parent_pid: int, kind_ref: tuple[str, str] | None) -> None:
-    """Process-pool initializer: die with the parent, then warm the trial kind up."""
+    """Process-pool initializer: ignore SIGINT (the parent stops the pool), die with the parent,
+    then warm the trial kind up."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     die_with_parent(parent_pid)
     if kind_ref is not None:
         warm_up_worker(kind_ref)
@@ -309,15 +334,37 @@ def _die_with_parent_plugin(parent_pid: int):
 
 
 class InlineExecutor(Executor):
-    """Runs each task at submission, in this process (no parallelism; for debugging)."""
+    """Runs each task at submission, in this process (no parallelism; for debugging).
+
+    An exception of the task is handed to the caller through the future; an interrupt
+    (``KeyboardInterrupt``, ``SystemExit``) is not a result and propagates at once.
+    :func:`run_study` does not submit to it: it runs the tasks itself, group by group.
+    """
 
     def submit(self, fn, /, *args, **kwargs):
         fut = Future()
         try:
             fut.set_result(fn(*args, **kwargs))
-        except BaseException as exc:  # noqa: BLE001 - handed to the caller through the future
+        except Exception as exc:  # noqa: BLE001 - handed to the caller through the future
             fut.set_exception(exc)
         return fut
+
+
+#: Seconds to wait for each terminated pool worker to end.
+STOP_JOIN_S = 5.0
+
+
+def _stop_pool(ex: ProcessPoolExecutor) -> None:
+    """Stop a process pool now: cancel the queued tasks, terminate (SIGTERM) the workers and
+    wait for them, so the pool's queues and semaphores are released before this process exits
+    (no "leaked semaphore" warning from the resource tracker)."""
+    procs = list((getattr(ex, "_processes", None) or {}).values())  # no public API before Python 3.14
+    ex.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        if p.is_alive():
+            p.terminate()
+    for p in procs:
+        p.join(STOP_JOIN_S)
 
 
 @contextlib.contextmanager
@@ -339,7 +386,11 @@ def open_executor(spec: ExecutorSpec, kind: TrialKind | None = None):
         with ProcessPoolExecutor(max_workers=spec.n_workers, mp_context=multiprocessing.get_context("spawn"),
                                  initializer=_init_pool_worker,
                                  initargs=(os.getpid(), kind.ref if kind is not None else None)) as ex:
-            yield ex
+            try:
+                yield ex
+            except BaseException:  # an interrupt or a failed trial: the tasks under way are not waited for
+                _stop_pool(ex)
+                raise
         return
     from distributed import Client, LocalCluster
 
@@ -427,6 +478,155 @@ class RunStats:
         return self.n_run / self.elapsed_s if self.elapsed_s > 0 else float("nan")
 
 
+@dataclass(frozen=True)
+class StoredProgress:
+    """What an interrupted study keeps: attached by :func:`run_study` to the interrupt it
+    re-raises, as the attribute ``svgs_stored`` (read it with :func:`stored_progress`).
+
+    Attributes
+    ----------
+    n_stored : int
+        Trials of the study whose rows are in the store.
+    n_trials : int
+        Trials of the study.
+    out_dir : str
+        The study's store directory.
+    """
+
+    n_stored: int
+    n_trials: int
+    out_dir: str
+
+    def describe(self) -> str:
+        """One sentence: how many trials are stored where, and that a rerun resumes."""
+        return (f"{self.n_stored} of {self.n_trials} trials are stored in {self.out_dir}; "
+                "rerun the same command to resume")
+
+
+def stored_progress(exc: BaseException) -> StoredProgress | None:
+    """The :class:`StoredProgress` attached to an interrupt by :func:`run_study`, or None."""
+    return getattr(exc, "svgs_stored", None)
+
+
+@contextlib.contextmanager
+def _signals_held(escalate: bool = False):
+    """Hold SIGINT and SIGTERM during the block and act on the first one that arrived right after it.
+
+    Rows are written inside such a block, so a batch is stored whole (never torn, never written
+    but uncounted); in this process a render group is also computed inside one, so an
+    interrupt lets the group under way finish and be stored, and is then raised before the
+    next group starts. Only Python-level handlers are held, and only in the main thread (the
+    only one that runs them); a signal whose action is the default or ignore is left alone.
+
+    Parameters
+    ----------
+    escalate : bool
+        A second signal during the block is acted on at once (Ctrl-C twice: stop now, the
+        group under way is lost).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    held = {}
+
+    def hold(signum, frame):
+        caught.append(signum)
+        if escalate and len(caught) > 1:
+            held[signum](signum, frame)
+
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        handler = signal.getsignal(signum)
+        if callable(handler):
+            held[signum] = handler
+            signal.signal(signum, hold)
+    try:
+        yield
+    finally:
+        for signum, handler in held.items():
+            signal.signal(signum, handler)
+    if caught:  # the block ended normally: the first signal decides
+        held[caught[0]](caught[0], None)
+
+
+def _interrupt_in(exc: BaseException) -> KeyboardInterrupt | None:
+    """The interrupt that caused ``exc``, if any: an interrupt raised inside a callback from
+    compiled code (a Numba kernel) comes back as a ``SystemError`` caused by it."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
+def _store_rows(store, rows: list, bar) -> None:
+    with _signals_held():
+        store.append(rows)
+    bar.update(len(rows))
+
+
+def _run_inline(kind: TrialKind, tasks: list, store, bar) -> None:
+    """Run ``tasks`` in this process, storing each render group's rows as it finishes.
+
+    Ctrl-C or SIGTERM during a group lets it finish (a few trials, or one render and its
+    exposures), stores its rows and then propagates: no group starts after it. A second
+    signal stops the group under way. A failing trial raises after every finished group
+    was stored.
+    """
+    _warm(kind)
+    for items in tasks:
+        groups = _group_rows(kind, items)
+        while True:
+            with _signals_held(escalate=True):
+                try:
+                    rows = next(groups, None)
+                except SystemError as exc:
+                    interrupt = _interrupt_in(exc)
+                    if interrupt is None:
+                        raise
+                    raise interrupt from None
+                if rows is None:
+                    break
+                store.append(rows)
+            bar.update(len(rows))
+
+
+def _run_on_executor(kind: TrialKind, tasks: list, store, executor: Executor, bar, window) -> None:
+    """Feed ``tasks`` to ``executor``, at most ``window()`` in flight; store rows as tasks finish.
+
+    A failing trial raises after the rows of every finished task are stored; so does an
+    interrupt, which also cancels the tasks not yet started and stops a process pool's workers.
+    """
+    todo = list(reversed(tasks))
+    in_flight: set = set()
+    try:
+        while todo or in_flight:
+            limit = window() if todo else 0
+            while todo and len(in_flight) < limit:
+                in_flight.add(executor.submit(run_task, kind.ref, todo.pop()))
+            finished, in_flight = wait(in_flight, return_when=FIRST_COMPLETED)
+            error = None
+            for fut in finished:
+                if fut.exception() is not None:  # a bug in a trial: keep every finished row, then raise
+                    error = error or fut.exception()
+                    continue
+                _store_rows(store, fut.result(), bar)
+            if error is not None:
+                raise error
+    except BaseException as exc:
+        for fut in in_flight:
+            fut.cancel()
+        with _signals_held():  # tasks that finished while the loop was stopping: keep their rows
+            for fut in in_flight:
+                if fut.done() and not fut.cancelled() and fut.exception() is None:
+                    store.append(fut.result())
+        if isinstance(exc, KeyboardInterrupt) and isinstance(executor, ProcessPoolExecutor):
+            _stop_pool(executor)  # whoever opened the pool: the tasks under way are not waited for
+        raise
+
+
 def run_study(kind: TrialKind, trials: list[Trial], store, executor: Executor, *, chunk_size: int = DEFAULT_CHUNK_SIZE,
               n_workers: int = 1, progress: bool = True, description: str = "trials", spec: ExecutorSpec | None = None
               ) -> RunStats:
@@ -452,6 +652,14 @@ def run_study(kind: TrialKind, trials: list[Trial], store, executor: Executor, *
     Returns
     -------
     RunStats
+
+    Raises
+    ------
+    KeyboardInterrupt
+        Interrupted (Ctrl-C, or a subclass such as SIGTERM's in the CLI): every finished row is
+        stored first; the exception carries a :class:`StoredProgress` (:func:`stored_progress`).
+        On an :class:`InlineExecutor` the trials run group by group in this process and no task
+        starts after the interrupt.
     """
     from .progress import progress_bar
 
@@ -468,29 +676,16 @@ def run_study(kind: TrialKind, trials: list[Trial], store, executor: Executor, *
     def window() -> int:
         return max(2, TASKS_PER_WORKER * max(1, slots() if slots is not None else n_workers))
 
-    with progress_bar(len(pending), description, enabled=progress) as bar:
-        todo = list(reversed(tasks))
-        in_flight = set()
-        try:
-            while todo or in_flight:
-                limit = window() if todo else 0
-                while todo and len(in_flight) < limit:
-                    in_flight.add(executor.submit(run_task, kind.ref, todo.pop()))
-                finished, in_flight = wait(in_flight, return_when=FIRST_COMPLETED)
-                error = None
-                for fut in finished:
-                    if fut.exception() is not None:  # a bug in a trial: keep every finished row, then raise
-                        error = error or fut.exception()
-                        continue
-                    rows = fut.result()
-                    store.append(rows)
-                    bar.update(len(rows))
-                if error is not None:
-                    raise error
-        except BaseException:
-            for fut in in_flight:
-                fut.cancel()
-            raise
+    try:
+        with progress_bar(len(pending), description, enabled=progress) as bar:
+            if isinstance(executor, InlineExecutor):
+                _run_inline(kind, tasks, store, bar)
+            else:
+                _run_on_executor(kind, tasks, store, executor, bar, window)
+    except KeyboardInterrupt as exc:  # Ctrl-C, or a subclass (the CLI's SIGTERM): say what is kept
+        if getattr(exc, "svgs_stored", None) is None:
+            exc.svgs_stored = StoredProgress(len(set(ids) & store.done_ids), len(ids), str(store.dir))
+        raise
     return RunStats(len(trials), len(trials) - len(pending), len(pending), len(tasks), n_groups,
                     time.perf_counter() - t0, spec.describe() if spec else type(executor).__name__)
 

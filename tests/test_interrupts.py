@@ -1,0 +1,258 @@
+"""Ctrl-C and SIGTERM: a study stops at once, keeps every finished row, says so in one line and
+resumes to the uninterrupted result.
+
+The acceptance tests signal a real ``svgs campaign`` (geometric trials, a few seconds of work)
+in a subprocess once its store holds rows: SIGINT to an in-process run (``--processes 0``),
+SIGTERM to a process-pool run. The others check the study loop and the CLI wrapper in this
+process, with a trial kind that signals its own process at a known trial (no timing window).
+"""
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from cli.exit_codes import EXIT_INTERRUPTED
+from cli.main import main
+from cli.signals import EXIT_TERMINATED, Terminated, interruptible
+from sim.trials import TrialKind, register_trial_kind
+from studies.execution import InlineExecutor, StoredProgress, Trial, run_study, stored_progress
+from studies.store import ResultStore, read_rows
+
+REPO = Path(__file__).resolve().parents[1]
+#: The acceptance bound: seconds from the signal to the end of the process.
+EXIT_WITHIN_S = 1.0
+#: Rows the store holds before the signal is sent.
+ROWS_BEFORE_SIGNAL = 100
+#: The same campaign for every run below: 2 x 1500 geometric trials (several seconds of work).
+CAMPAIGN = ["campaign", "--camera", "galaxy-nexus", "--trial-kind", "geometric", "--calibration", "exact",
+            "--trials", "1500", "--ranges", "5,15", "--seed", "7", "--no-progress"]
+N_TRIALS = 3000
+#: The CLI in a child whose SIGINT raises KeyboardInterrupt even when the test runner was
+#: started with SIGINT ignored (a background job): the child of ``python -m cli.main``.
+_CLI_CHILD = ("import signal, sys\nsignal.signal(signal.SIGINT, signal.default_int_handler)\n"
+              "from cli.main import main\nsys.exit(main(sys.argv[1:]))")
+_STORED = re.compile(r"(\d+) of (\d+) trials are stored in (.+); rerun the same command to resume$")
+
+
+def _numbers(rows):
+    """Rows without the timing columns (the only ones allowed to differ between runs)."""
+    return [{k: v for k, v in r.items() if k not in ("wall_s", "cpu_s")} for r in rows]
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory):
+    """The rows of the campaign run without interruption (in this process, no pool)."""
+    out = tmp_path_factory.mktemp("uninterrupted") / "campaign"
+    assert main([*CAMPAIGN, "--out", str(out), "--processes", "0"]) == 0
+    rows = read_rows(out / "results.csv")
+    assert len(rows) == N_TRIALS
+    return _numbers(rows)
+
+
+def _count_rows(results: Path) -> int:
+    try:
+        return max(0, results.read_bytes().count(b"\n") - 1)
+    except FileNotFoundError:
+        return 0
+
+
+def _signal_mid_run(out: Path, signum: int, executor: list):
+    """Start the campaign in a child, send ``signum`` once its store holds rows.
+
+    Returns
+    -------
+    rows_before : list of dict
+        The stored rows just before the signal.
+    proc : subprocess.Popen
+        The ended child.
+    exit_s : float
+        Seconds from the signal to the end of the child.
+    stderr : str
+    workers : list of psutil.Process
+        The child's processes seen before the signal (empty without psutil).
+    """
+    proc = subprocess.Popen([sys.executable, "-c", _CLI_CHILD, *CAMPAIGN, "--out", str(out), *executor],
+                            cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
+                            text=True)
+    err: list[str] = []
+    reader = threading.Thread(target=lambda: err.append(proc.stderr.read()), daemon=True)
+    reader.start()
+    workers = []
+    try:
+        results = out / "results.csv"
+        deadline = time.monotonic() + 180  # start-up on a loaded machine; not a speed test
+        while _count_rows(results) < ROWS_BEFORE_SIGNAL and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert proc.poll() is None, f"the campaign ended before the signal: {''.join(err)[-2000:]!r}"
+        assert _count_rows(results) >= ROWS_BEFORE_SIGNAL, "no rows stored within the deadline"
+        try:
+            import psutil
+
+            workers = psutil.Process(proc.pid).children(recursive=True)
+        except ImportError:
+            pass
+        rows_before = read_rows(results)
+        t0 = time.perf_counter()
+        os.kill(proc.pid, signum)
+        proc.wait(timeout=30)
+        exit_s = time.perf_counter() - t0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    reader.join(timeout=30)  # the pipe closes when every process that holds it has ended
+    proc.stderr.close()
+    return rows_before, proc, exit_s, "".join(err), workers
+
+
+def _check_stopped(out, rows_before, proc, exit_s, stderr, code, what):
+    """Exit code, time, one line naming the stored count, every row stored before kept."""
+    assert proc.returncode == code, stderr[-3000:]
+    assert exit_s < EXIT_WITHIN_S, f"{exit_s:.2f} s from the signal to the exit"
+    assert "Traceback" not in stderr and "leaked" not in stderr, stderr[-3000:]
+    last = stderr.strip().splitlines()[-1]
+    assert last.startswith(f"svgs campaign: {what}; "), stderr[-3000:]
+    m = _STORED.search(last)
+    assert m and int(m.group(2)) == N_TRIALS and m.group(3) == str(out), last
+    rows_after = read_rows(out / "results.csv")
+    assert int(m.group(1)) == len(rows_after) < N_TRIALS  # the line says what the store holds
+    by_id = {r["trial_id"]: r for r in rows_after}
+    assert all(by_id.get(r["trial_id"]) == r for r in rows_before), "a row stored before the signal was lost"
+    assert not (out / "report.html").exists()
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_an_in_process_campaign_within_a_second_and_resumes(tmp_path, uninterrupted):
+    out = tmp_path / "campaign"
+    rows_before, proc, exit_s, stderr, _ = _signal_mid_run(out, signal.SIGINT, ["--processes", "0"])
+    _check_stopped(out, rows_before, proc, exit_s, stderr, EXIT_INTERRUPTED, "interrupted")
+
+    assert main([*CAMPAIGN, "--out", str(out), "--processes", "0"]) == 0  # the same command: resumes
+    rows = read_rows(out / "results.csv")
+    assert _numbers(rows) == uninterrupted
+    assert (out / "results.csv").read_text().count("\n") == N_TRIALS + 1  # no row written twice
+
+
+@pytest.mark.slow
+def test_sigterm_stops_a_process_pool_campaign_without_leaks_and_resumes(tmp_path, uninterrupted):
+    out = tmp_path / "campaign"
+    rows_before, proc, exit_s, stderr, workers = _signal_mid_run(out, signal.SIGTERM, ["--processes", "2"])
+    _check_stopped(out, rows_before, proc, exit_s, stderr, EXIT_TERMINATED, "terminated (SIGTERM)")
+    for w in workers:  # the pool's workers were terminated, not left computing
+        try:
+            assert not w.is_running() or w.status() == "zombie", w.cmdline()
+        except Exception as exc:  # noqa: BLE001 - psutil.NoSuchProcess: gone, as it should be
+            assert type(exc).__name__ == "NoSuchProcess", exc
+
+    assert main([*CAMPAIGN, "--out", str(out), "--processes", "0"]) == 0
+    assert _numbers(read_rows(out / "results.csv")) == uninterrupted
+
+
+# --------------------------------------------------------------------------- in this process
+#: Trial id at which the test trial kind signals its own process, and how often.
+_SIGNAL_AT = {"trial": 3, "times": 1, "signum": int(signal.SIGINT)}
+
+
+def _self_signalling(scenario, seed):
+    if scenario["i"] == _SIGNAL_AT["trial"]:
+        for _ in range(_SIGNAL_AT["times"]):
+            os.kill(os.getpid(), _SIGNAL_AT["signum"])
+            time.sleep(0.01)  # the handler runs in the main thread between bytecodes
+    return {"y": 2.0 * scenario["i"]}
+
+
+_KIND = register_trial_kind(TrialKind("test-self-signal", _self_signalling, ("y",), {}, text_keys=()))
+
+
+def _run_self_signalling(tmp_path, n=8, chunk_size=16, **signal_at):
+    _SIGNAL_AT.update({"trial": 3, "times": 1, "signum": int(signal.SIGINT), **signal_at})
+    trials = [Trial(i, {"i": i}, 0) for i in range(n)]
+    store = ResultStore(tmp_path, {}, _KIND.columns(["i"]), trial_ids=range(n))
+    with store:
+        with pytest.raises(KeyboardInterrupt) as info:
+            run_study(_KIND, trials, store, InlineExecutor(), chunk_size=chunk_size, progress=False)
+    return info.value, read_rows(store.results_path)
+
+
+def test_ctrl_c_in_process_finishes_the_trial_keeps_its_row_and_starts_no_other(tmp_path):
+    """One task of 8 trials: the interrupt during trial 3 lets it finish and be stored, then stops."""
+    exc, rows = _run_self_signalling(tmp_path)
+    assert type(exc) is KeyboardInterrupt
+    assert [r["trial_id"] for r in rows] == [0, 1, 2, 3]
+    assert [r["y"] for r in rows] == [0.0, 2.0, 4.0, 6.0]
+    assert stored_progress(exc) == StoredProgress(4, 8, str(tmp_path))
+    assert stored_progress(exc).describe() == (f"4 of 8 trials are stored in {tmp_path}; "
+                                               "rerun the same command to resume")
+
+
+def test_a_second_ctrl_c_abandons_the_trial_under_way(tmp_path):
+    exc, rows = _run_self_signalling(tmp_path, times=2)
+    assert type(exc) is KeyboardInterrupt
+    assert [r["trial_id"] for r in rows] == [0, 1, 2]
+    assert stored_progress(exc).n_stored == 3
+
+
+def test_sigterm_in_process_is_held_like_ctrl_c(tmp_path):
+    """Under the CLI's SIGTERM handler: the trial finishes, is stored, and Terminated propagates."""
+    def raise_terminated(signum, frame):
+        raise Terminated()
+
+    previous = signal.signal(signal.SIGTERM, raise_terminated)
+    try:
+        exc, rows = _run_self_signalling(tmp_path, signum=int(signal.SIGTERM), chunk_size=2)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert isinstance(exc, Terminated)
+    assert [r["trial_id"] for r in rows] == [0, 1, 2, 3]
+    assert stored_progress(exc) == StoredProgress(4, 8, str(tmp_path))
+
+
+def _args(func, **extra):
+    from argparse import Namespace
+
+    return Namespace(command="campaign", func=func, **extra)
+
+
+def test_the_cli_wrapper_turns_sigterm_into_one_line_and_exit_143(capsys):
+    before = signal.getsignal(signal.SIGTERM)
+
+    def command(args):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)  # interrupted by the handler
+        return 0
+
+    t0 = time.perf_counter()
+    assert interruptible(_args(command))(None) == EXIT_TERMINATED == 143
+    assert time.perf_counter() - t0 < EXIT_WITHIN_S
+    assert capsys.readouterr().err == "svgs campaign: terminated (SIGTERM)\n"
+    assert signal.getsignal(signal.SIGTERM) == before  # put back for the caller
+
+
+def test_the_cli_wrapper_says_what_an_interrupted_study_stored(capsys):
+    def command(args):
+        exc = KeyboardInterrupt()
+        exc.svgs_stored = StoredProgress(12, 40, "runs/x")
+        raise exc
+
+    args = _args(command, calibrate_command="study")
+    assert interruptible(args)(args) == EXIT_INTERRUPTED == 130
+    assert capsys.readouterr().err == ("svgs campaign study: interrupted; 12 of 40 trials are stored in runs/x; "
+                                       "rerun the same command to resume\n")
+
+
+def test_an_ignored_sigterm_stays_ignored():
+    previous = signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    try:
+        seen = []
+        interruptible(_args(lambda a: seen.append(signal.getsignal(signal.SIGTERM)) or 0))(None)
+        assert seen == [signal.SIG_IGN]
+        assert signal.getsignal(signal.SIGTERM) == signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGTERM, previous)
