@@ -200,7 +200,7 @@ def cmd_study(args) -> int:
     import json
 
     from cli.json_out import emit, run_info, text_to_stderr
-    from cli.studies import executor_from_args, print_run_stats
+    from cli.studies import executor_from_args, print_run_stats, warn_processes
     from studies.calibration import (
         parse_number_list,
         run_calibration_study,
@@ -229,6 +229,7 @@ def cmd_study(args) -> int:
             raise InputError(f"--cache {str(cache)!r} exists and is not a folder")
         cache.mkdir(parents=True, exist_ok=True)
     spec = executor_from_args(args)
+    warn_processes(spec)
     say = lambda s: print(s, file=sys.stderr)
     res = run_calibration_study(
         cam, out, views_list=views, seed=args.seed, board=board, subsets=subsets, spp=spp, geometric=args.geometric,

@@ -50,7 +50,7 @@ def exposure_study_json(cfg, stats, out: Path) -> dict:
 def cmd_exposure_study(args) -> int:
     from cli.json_out import emit, text_to_stderr
     from cli.sim import _check_camera_renderable, _parse_ranges
-    from cli.studies import executor_from_args, print_run_stats
+    from cli.studies import announce_plan, executor_from_args, print_run_stats
     from studies.exposure_study import make_config, run_exposure_study
 
     _check_camera_renderable(args.camera)
@@ -60,6 +60,8 @@ def cmd_exposure_study(args) -> int:
         raise InputError(f"--trials must be >= 1, got {args.trials}")
     cfg = make_config(args.camera, ranges, args.remedy, trials=args.trials, seed=args.seed)
     out = Path(args.out or f"exposure-study-{Path(str(args.camera)).stem}")
+    if announce_plan(args, "render", cfg.n_trials, len(cfg.ranges_m) * len(cfg.remedies), spec):
+        return 0
     with text_to_stderr(args.json):
         lines, stats = run_exposure_study(cfg, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress)
         print("\n".join(lines))
@@ -88,5 +90,5 @@ def register(sub) -> None:
                    "same options to resume an interrupted study")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout (the table goes to stderr); "
                    "the same object is written to summary.json")
-    add_executor_options(p)
+    add_executor_options(p, plan_only=True)
     p.set_defaults(func=cmd_exposure_study)

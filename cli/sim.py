@@ -197,7 +197,7 @@ def range_sweep_json(cfg, table, stats, out: Path) -> dict:
 
 def cmd_range_sweep(args) -> int:
     from cli.json_out import emit, text_to_stderr
-    from cli.studies import executor_from_args, print_run_stats
+    from cli.studies import announce_plan, executor_from_args, print_run_stats
     from sim.closed_loop import DEFAULT_BACKDROP_DISTANCE_M
     from studies.range_sweep import format_table, make_config, run_range_sweep
 
@@ -214,6 +214,8 @@ def cmd_range_sweep(args) -> int:
     cfg = make_config(args.camera, ranges, trials=args.trials, poses=args.poses, jitter_deg=args.jitter_deg,
                       jitter_m=args.jitter_m, seed=args.seed, **scene)
     out = Path(args.out or f"range-sweep-{Path(str(args.camera)).stem}")
+    if announce_plan(args, "render", cfg.n_trials, len(cfg.ranges_m) * cfg.poses, spec):
+        return 0
     with text_to_stderr(args.json):
         table, stats = run_range_sweep(cfg, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress)
         print("\n".join(format_table(table)))
@@ -260,7 +262,7 @@ def register(sub) -> None:
                    "options to resume an interrupted sweep")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout (the table goes to stderr); "
                    "the same object is written to summary.json")
-    add_executor_options(p)
+    add_executor_options(p, plan_only=True)
     p.set_defaults(func=cmd_range_sweep)
 
 

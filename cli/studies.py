@@ -34,9 +34,10 @@ def print_run_stats(stats, rebuilt: str = "outputs", label: str = "") -> None:
           f"{stats.executor}); {stats.n_already_done} were already done")
 
 
-def add_executor_options(p) -> None:
+def add_executor_options(p, *, plan_only: bool = False) -> None:
     """The executor options of every study command (``--processes``/``--workers``/``--scheduler``,
-    ``--chunk-size``, ``--no-progress``); read them back with :func:`executor_from_args`."""
+    ``--chunk-size``, ``--no-progress``); read them back with :func:`executor_from_args`. With
+    ``plan_only``, also ``--plan-only`` (the handler calls :func:`announce_plan`)."""
     g = p.add_argument_group("where the trials run (choose one; default: a local process pool, one process per core)")
     x = g.add_mutually_exclusive_group()
     x.add_argument("--processes", type=int, default=None, metavar="N",
@@ -48,6 +49,48 @@ def add_executor_options(p) -> None:
     g.add_argument("--chunk-size", type=int, default=None, metavar="N",
                    help="trials per task (default 16); trials sharing a render stay together")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    if plan_only:
+        p.add_argument("--plan-only", action="store_true",
+                       help="print the study's plan (trials, renders, estimated time) on stderr and exit: nothing "
+                       "runs and nothing is written")
+
+
+def announce_plan(args, kind: str, n_trials: int, n_renders: int, spec, *, note: str = "") -> bool:
+    """Print a study's plan on stderr before any work (:func:`studies.execution.plan_study`:
+    trials, renders, the estimate from the cost table, a warning above an hour and when
+    ``--processes``/``--workers`` exceeds the cores).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The command's options (``--plan-only`` where the command has it).
+    kind : str
+        Trial kind.
+    n_trials, n_renders : int
+        The study's trials and renders (distinct render keys), from its configuration.
+    spec : studies.execution.ExecutorSpec
+    note : str
+        Said after the counts.
+
+    Returns
+    -------
+    bool
+        True when ``--plan-only`` was given: the handler returns 0 without running.
+    """
+    from studies.execution import plan_study
+
+    for line in plan_study(kind, n_trials, n_renders, spec, note=note).lines():
+        print(line, file=sys.stderr, flush=True)
+    return bool(getattr(args, "plan_only", False))
+
+
+def warn_processes(spec) -> None:
+    """Print the plan's warning when ``--processes``/``--workers`` exceeds the cores (for a
+    study without a count-based plan)."""
+    from studies.execution import plan_study
+
+    for line in plan_study("render", 0, 0, spec).warnings():
+        print(line, file=sys.stderr, flush=True)
 
 
 def executor_from_args(args):
@@ -132,7 +175,7 @@ def _register_campaign(sub) -> None:
                    help="spots closer than this many px merge (geometric trial; default 0: never)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout (the table goes to stderr); "
                    "the same object is written to DIR/summary.json")
-    add_executor_options(p)
+    add_executor_options(p, plan_only=True)
     p.set_defaults(func=cmd_campaign)
 
 
@@ -165,7 +208,7 @@ def _register_sensitivity(sub) -> None:
     s.add_argument("--pattern", default="svgs-3u", help="target pattern name or .toml path (default %(default)s)")
     s.add_argument("--json", action="store_true", help="print one JSON object on stdout (the rankings go to stderr); "
                    "the same object is written to DIR/summary.json")
-    add_executor_options(s)
+    add_executor_options(s, plan_only=True)
     s.set_defaults(func=cmd_sensitivity)
 
 
@@ -193,7 +236,7 @@ def _register_merge_range(sub) -> None:
     m.add_argument("--seed", type=int, default=0, help="seed of the renders and the noise (default 0)")
     m.add_argument("--pattern", default="svgs-3u", help="target pattern name or .toml path (default %(default)s)")
     m.add_argument("--json", action="store_true", help="print one JSON object on stdout; also DIR/summary.json")
-    add_executor_options(m)
+    add_executor_options(m, plan_only=True)
     m.set_defaults(func=cmd_merge_range)
 
 
@@ -263,6 +306,14 @@ def cmd_campaign(args) -> int:
     if args.merge_px:
         argv += ["--merge-px", repr(args.merge_px)]
     argv += executor_argv(args)
+    k = len(config.ranges_m)
+    if announce_plan(args, config.trial_kind, k * config.trials_per_range,
+                     k * config.poses_per_range if config.trial_kind == "render" else 0, spec,
+                     note="; ".join(n for n, on in (
+                         ("without the error budget's variants", config.budget),
+                         ("the rendered focal calibration first",
+                          config.trial_kind == "render" and config.calibration == "paper")) if on)):
+        return 0
     with text_to_stderr(args.json):
         summary, stats, path, config = run_campaign(config, out, spec, chunk_size=args.chunk_size,
                                                     progress=not args.no_progress, command=shlex.join(argv))
@@ -287,6 +338,10 @@ def cmd_merge_range(args) -> int:
         argv += ["--vary", f"{p}={lo:g}:{hi:g}"]
     argv += ["--exposures", str(config.exposures), "--out", str(out), "--seed", str(config.seed),
              "--pattern", config.pattern] + executor_argv(args)
+    n_cases = len(config.cases())
+    if announce_plan(args, "render", n_cases * len(config.ranges_m) * config.exposures,
+                     n_cases * len(config.ranges_m), spec):
+        return 0
     with text_to_stderr(args.json):
         cases, eff, stats, path = run_merge_range(config, out, spec, chunk_size=args.chunk_size,
                                                   progress=not args.no_progress, command=shlex.join(argv))
@@ -327,8 +382,13 @@ def cmd_sensitivity(args) -> int:
         argv += ["--fixed", v]
     argv += ["--method", args.method, "--n", str(args.n), "--out", out, "--seed", str(args.seed),
              "--trial-kind", args.trial_kind, "--pattern", args.pattern] + executor_argv(args)
+    renders = config.n_trials if config.trial_kind == "render" and any(v.needs_render for v in config.varied) else (
+        1 if config.trial_kind == "render" else 0)
+    if announce_plan(args, config.trial_kind, config.n_trials, renders, spec,
+                     note=f"{args.method} over {len(config.varied)} parameter(s)"
+                     + ("; renders at most" if renders > 1 else "")):
+        return 0
     with text_to_stderr(args.json):
-        print(f"{args.method}: {config.n_trials} trials over {len(config.varied)} parameters", file=sys.stderr)
         result, stats, path, n_groups = run_sensitivity(config, out, spec, chunk_size=args.chunk_size,
                                                         progress=not args.no_progress, command=shlex.join(argv))
         label = "ST" if args.method == "sobol" else "mu*"

@@ -241,7 +241,7 @@ def cmd_study(args) -> int:
     from sim.tof_stability import check_frames
     from studies.tof_study import TofStudyConfig, run_study
 
-    from cli.studies import executor_from_args
+    from cli.studies import executor_from_args, warn_processes
     from cli.validate import check_out_dir
 
     longs = (("--long-frames", args.long_frames),) if args.long_frames else ()
@@ -253,6 +253,7 @@ def cmd_study(args) -> int:
             raise InputError(str(exc).replace("--frames", flag)) from None
     _check_common(args)
     spec = executor_from_args(args)
+    warn_processes(spec)
     out = check_out_dir(args.out)
     load_scene(args.camera, args.pattern)  # a bad profile is refused before any work
     cfg = TofStudyConfig(camera=args.camera, pattern=args.pattern, frames=args.frames, variant_frames=args.variant_frames,
