@@ -125,7 +125,8 @@ def write_outputs(out: Path, frame, row, crlb=None, threshold=None) -> dict:
 
     write_solution_overlay(out / "overlay.png", ex.image, solver_camera(frame.camera, ex.image.shape),
                            frame.pattern, result, threshold,
-                           sigma_px=spots, sigma_label="CRLB 1-sigma (the simulated sensor)" if spots else None, title=title)
+                           sigma_px=spots, sigma_label="CRLB 1-sigma (the simulated sensor)" if spots else None, title=title,
+                           notes=error_notes(row, crlb, frame.truth, frame.pattern))
     return {k: str(out / k) for k in ("flux.npy", "raw.npy", "image.png", "preview.png", "overlay.png", "truth.json",
                                        "solution.json")}
 
@@ -163,6 +164,9 @@ def cmd_render_and_solve(args) -> int:
         print(f"exposure: {row['exposure_s'] * 1e3:.3f} ms at ISO {row['iso']:.0f}; blobs found: {row['n_blobs']}")
         if row["ok"]:
             print_state_table(row, crlb)
+            note = bound_line(row, crlb, frame.truth, frame.pattern)
+            if note:
+                print(note)
         else:
             print(f"NO SOLUTION ({row['reason']}): {row['message']}")
         for k, v in paths.items():
@@ -299,3 +303,44 @@ def print_state_table(row, crlb) -> None:
     if row.get("p_value") is not None:
         print(f"consistency: chi2 {row['chi2']:.3g} with {row['chi2_dof']} degrees of freedom, p = {row['p_value']:.2g} "
               "(against the app's stated centroid accuracy, svgs.app; below its alpha the frame is 'inconsistent')")
+
+
+def state_errors(row) -> dict:
+    """State key -> error (estimate - truth) of a solved row: metres and degrees."""
+    from svgs.frames import STATE_KEYS
+
+    return dict(zip(STATE_KEYS, list(row["pos_err_vec_m"]) + list(row["att_err_vec_deg"])))
+
+
+def bound_line(row, crlb, truth: dict, pattern) -> str | None:
+    """One line when an error of a solved frame is far above its CRLB
+    (:data:`studies.diagnosis.FAR_ABOVE_BOUND`), with the likely why: the head-on glint when the
+    renderer sampled a front-face glint for this frame, else a bias the bound does not hold.
+    None when every error is within it (or the bound is unknown)."""
+    from studies.diagnosis import bound_note, glint_targets_of_truth
+
+    if not row.get("ok") or not (crlb or {}).get("crlb_std"):
+        return None
+    return bound_note(state_errors(row), crlb["crlb_std"], glint_targets_of_truth(truth, pattern))
+
+
+def error_notes(row, crlb, truth: dict, pattern) -> list[str]:
+    """The overlay's text panel: per state component the truth, the error against it and
+    error/CRLB (tab-separated cells), and :func:`bound_line`; empty for a failure."""
+    from svgs.frames import STATE_KEYS
+
+    if not row.get("ok"):
+        return []
+    bound = (crlb or {}).get("crlb_std") or {}
+    err = state_errors(row)
+    lines = ["\t".join(("component", "truth", "error", "CRLB 1-sigma", "error/CRLB"))]
+    for k in STATE_KEYS:
+        f = "{:+.4f}" if k.endswith("_m") else "{:+.3f}"
+        b = bound.get(k)
+        lines.append("\t".join((k, f.format(row["truth_state"][k]), f.format(err[k]),
+                                 "-" if b is None else f.format(b).lstrip("+"),
+                                 f"{err[k] / b:+.1f}" if b else "-")))
+    note = bound_line(row, crlb, truth, pattern)
+    if note:
+        lines.append(note)
+    return lines

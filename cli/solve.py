@@ -46,13 +46,13 @@ def register(sub) -> None:
 
 
 def write_solution_overlay(path, image, camera, pattern, result, threshold=None, sigma_px=None,
-                           sigma_label: str | None = None, title: str | None = None, blobs=None) -> str:
+                           sigma_label: str | None = None, title: str | None = None, blobs=None, notes=()) -> str:
     """``overlay.png`` of one solved (or unsolved) image: every blob the detector found, the
     identified targets' labels, the solution's reprojection and each point's 1-sigma ellipse.
 
     ``sigma_px`` (target id -> [su, sv]) defaults to the centroid scatter the image's own
     background noise gives (:func:`svgs.overlay.centroid_sigma_from_image`); ``blobs`` are the
-    image's detections when the caller has them."""
+    image's detections when the caller has them; ``notes``: lines of a text panel below it."""
     from svgs.detect import detect_blobs, to_gray
     from svgs.overlay import centroid_sigma_from_image, solution_marks, write_overlay
 
@@ -70,7 +70,7 @@ def write_solution_overlay(path, image, camera, pattern, result, threshold=None,
         title = (f"SOLVED: range {result.t_cam_target_m[2]:.3f} m, residual {result.residual_rms_px:.3f} px RMS, "
                  f"{len(blobs)} blobs" if result else f"NO SOLUTION ({result.reason}): {len(blobs)} blobs")
     return write_overlay(path, image, blobs_px=blobs.centroid_px, targets_px=targets, reprojected_px=reproj,
-                         sigma_px=sigma_px, sigma_label=sigma_label or "1-sigma", title=title)
+                         sigma_px=sigma_px, sigma_label=sigma_label or "1-sigma", title=title, notes=notes)
 
 
 def solution_json(result) -> dict:

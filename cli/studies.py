@@ -30,7 +30,7 @@ def print_run_stats(stats, rebuilt: str = "outputs", label: str = "") -> None:
     if stats is None:
         print(f"{pre}all trials were already done; {rebuilt} rebuilt from the stored results")
         return
-    print(f"{pre}ran {stats.n_run} trial(s) in {stats.elapsed_s:.1f} s ({stats.trials_per_s:.3g} trials/s, "
+    print(f"{pre}ran {stats.n_run} trial(s) in {stats.elapsed_s:.1f} s ({stats.rate_text}, "
           f"{stats.executor}); {stats.n_already_done} were already done")
 
 

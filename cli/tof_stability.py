@@ -86,7 +86,10 @@ def register(group) -> None:
     q.add_argument("--long-frames", type=int, default=3000,
                    help="frames of the long run at 697 mm against Table 1's ~6000 s (default 3000; 0 skips it)")
     _common(q)
-    q.add_argument("--out", default="docs/reports", help="folder of tof_stability.md and its figures (default docs/reports)")
+    q.add_argument("--out", default=None,
+                   help=f"folder of tof_stability.md and its figures (default {DEFAULT_STUDY_OUT}, or {DEFAULT_STUDY_OUT}-2, "
+                   "-3... when it holds a finished report: a rerun never overwrites one unless --out names it; the "
+                   "committed report: --out docs/reports)")
     q.add_argument("--store", default=None, metavar="DIR",
                    help="the study's results store (resumable: a rerun skips the stored frames; default OUT/tof-study)")
     add_executor_options(q)
@@ -236,6 +239,27 @@ def cmd_stability(args) -> int:
     return EXIT_OK if s["solved"] else EXIT_NO_SOLUTION
 
 
+#: ``svgs tof study``'s folder when ``--out`` is not given (never docs/reports: the committed report
+#: is rewritten only when asked for).
+DEFAULT_STUDY_OUT = "tof-study"
+#: The file whose presence marks a finished study.
+STUDY_REPORT = "tof_stability.md"
+
+
+def default_study_out(base: str = DEFAULT_STUDY_OUT, *, say: bool = True) -> str:
+    """``base``, or the first of ``base-2``, ``base-3``... that holds no finished report
+    (:data:`STUDY_REPORT`): an unfinished one is resumed, a finished one is kept. Says on
+    stderr when it picks a new name."""
+    k, name = 1, base
+    while (Path(name) / STUDY_REPORT).exists():
+        k += 1
+        name = f"{base}-{k}"
+    if say and name != base:
+        print(f"svgs tof study: {base}/ holds a finished report ({STUDY_REPORT}); writing to {name}/ instead "
+              f"(--out {base} rewrites it)", file=sys.stderr)
+    return name
+
+
 def cmd_study(args) -> int:
     from sim.tof_closed_loop import load_scene
     from sim.tof_stability import check_frames
@@ -254,7 +278,7 @@ def cmd_study(args) -> int:
     _check_common(args)
     spec = executor_from_args(args)
     warn_processes(spec)
-    out = check_out_dir(args.out)
+    out = check_out_dir(args.out if args.out is not None else default_study_out())
     load_scene(args.camera, args.pattern)  # a bad profile is refused before any work
     cfg = TofStudyConfig(camera=args.camera, pattern=args.pattern, frames=args.frames, variant_frames=args.variant_frames,
                          sweep_frames=args.sweep_frames, long_frames=args.long_frames, seed=args.seed, spp=args.spp,

@@ -32,7 +32,8 @@ from sim.approach import MEASUREMENT_COLUMNS, TIMING_KEYS, ApproachSensor, Traje
 from studies.progress import progress_bar
 from studies.store import ResultStore
 
-#: Range bins of the summary's RMS errors, m (edges; each bin is (lo, hi], the last one open above).
+#: Range bins of the summary's RMS errors, m (edges; each bin is [lo, hi), labelled so, the last one
+#: open above: a frame at 5.0 m is in [5, 10), not in [2, 5)).
 RANGE_BIN_EDGES_M = (0.0, 2.0, 5.0, 10.0, 15.0, 20.0, 30.0, 40.0)
 #: Size of a video frame, px (width, height): each frame's overlay, letterboxed.
 VIDEO_SIZE_PX = (960, 720)
@@ -205,7 +206,7 @@ def summarise(rows: list[dict], cfg: dict) -> dict:
     bins = []
     edges = list(RANGE_BIN_EDGES_M) + [math.inf]
     for lo, hi in zip(edges[:-1], edges[1:]):
-        inbin = [r for r in rows if lo < float(r["range_m"]) <= hi]  # (lo, hi]: a 30 m start is in 20-30
+        inbin = [r for r in rows if lo <= float(r["range_m"]) < hi]  # [lo, hi): a 30 m start is in [30, 40)
         if not inbin:
             continue
         sol = [r for r in inbin if int(r["ok"]) == 1]
@@ -236,8 +237,80 @@ def summarise(rows: list[dict], cfg: dict) -> dict:
         "trajectory": cfg["trajectory"]["source"], "frames": n, "solved": len(ok),
         "solved_fraction": len(ok) / n if n else 0.0, "failures": reasons,
         "solved_range_m": [min(solved_ranges), max(solved_ranges)] if solved_ranges else None,
-        "rms_by_range": bins, "timing": timing,
+        "rms_by_range": bins, "far_above_bound": far_above_bound(rows, cfg), "timing": timing,
     }
+
+
+def bin_label(lo: float, hi) -> str:
+    """A range bin of :data:`RANGE_BIN_EDGES_M` as written in the report: ``[2, 5)``, ``[40, inf)``."""
+    return f"[{lo:g}, {'inf' if hi is None else f'{hi:g}'})"
+
+
+def far_above_bound(rows: list[dict], cfg: dict, factor: float | None = None) -> dict:
+    """The solved frames with an error far above its CRLB, and whether the head-on glint explains them.
+
+    Parameters
+    ----------
+    rows : list of dict
+        The stored frames (:data:`sim.approach.MEASUREMENT_COLUMNS`).
+    cfg : dict
+        The approach's config (its camera and pattern: the glint's geometry).
+    factor : float, optional
+        "Far above": ``|error| >= factor x CRLB`` (default :data:`studies.diagnosis.FAR_ABOVE_BOUND`).
+
+    Returns
+    -------
+    dict
+        ``factor``; ``frames``: the frame numbers; ``glint_frames``: those of them at which a cube's
+        front-face glint reaches the lens (:func:`studies.diagnosis.front_glint_targets`);
+        ``worst``: ``{"frame", "range_m", "component", "ratio"}`` of the largest ratio, or None.
+    """
+    from studies.diagnosis import FAR_ABOVE_BOUND, bound_ratios, far_above, glint_targets_of_state
+
+    factor = FAR_ABOVE_BOUND if factor is None else float(factor)
+    frames, glint, worst = [], [], None
+    cam = None
+    for r in sorted(rows, key=lambda r: int(r["frame"])):
+        if int(r["ok"]) != 1:
+            continue
+        big = far_above(bound_ratios({k: _num(_float(r.get(f"err_{k}"))) for k in STATE_KEYS},
+                                     {k: _num(_float(r.get(f"crlb_{k}"))) for k in STATE_KEYS}), factor)
+        if not big:
+            continue
+        f = int(r["frame"])
+        frames.append(f)
+        k, ratio = next(iter(big.items()))
+        if worst is None or ratio > worst["ratio"]:
+            worst = {"frame": f, "range_m": float(r["range_m"]), "component": k, "ratio": float(ratio)}
+        cam = sensor_camera(cfg) if cam is None else cam
+        if glint_targets_of_state(cam, cfg["pattern"], {k: float(r[f"true_{k}"]) for k in STATE_KEYS}):
+            glint.append(f)
+    return {"factor": factor, "frames": frames, "glint_frames": glint, "worst": worst}
+
+
+def _float(v):
+    """A stored cell as a float (None for an empty one)."""
+    return None if v is None or v == "" else float(v)
+
+
+def bound_line(s: dict) -> str | None:
+    """The report's one line on errors far above their bound (None when there are none)."""
+    from studies.diagnosis import cause_text
+
+    fb = s.get("far_above_bound") or {}
+    n = len(fb.get("frames") or ())
+    if not n:
+        return None
+    w, g = fb["worst"], len(fb["glint_frames"])
+    line = (f"**{n} of {s['solved']} solved frames have an error >= {fb['factor']:g}x its CRLB** (worst: "
+            f"{w['component']} {w['ratio']:.0f}x at {w['range_m']:.2f} m, frame {w['frame']}): ")
+    if g == n:
+        return line + cause_text(glint=True) + "."
+    if g == 0:
+        return line + cause_text(glint=False) + "."
+    return (line + f"{g} of them (frames {', '.join(map(str, fb['glint_frames']))}) "
+            + cause_text(glint=True).replace("likely ", "likely at ", 1) + "; the other " + str(n - g) + ": "
+            + cause_text(glint=False) + ".")
 
 
 def write_outputs(rows: list[dict], cfg: dict, out: Path) -> dict:
@@ -303,7 +376,10 @@ def write_report(s: dict, path: Path, command: str | None) -> Path:
         for k in STATE_KEYS:
             e, c = b[f"rms_err_{k}"], b[f"rms_crlb_{k}"]
             cells.append("-" if e is None else f"{e:.4g}" + ("" if c is None else f" ({c:.2g})"))
-        lines.append(f"| {lo:g}-{'' if hi is None else f'{hi:g}'} | {b['frames']} | {b['solved']} | " + " | ".join(cells) + " |")
+        lines.append(f"| {bin_label(lo, hi)} | {b['frames']} | {b['solved']} | " + " | ".join(cells) + " |")
+    note = bound_line(s)
+    if note:
+        lines += ["", note]
     t = s["timing"]
     lines += ["", "Mean time per frame on the machine that ran it: " + ", ".join(
         f"{k[5:-2]} {t[k]:.2f} s" for k in t if k.startswith("mean_") and k != "mean_frame_s" and t[k] is not None)
@@ -319,7 +395,12 @@ def write_report(s: dict, path: Path, command: str | None) -> Path:
 
 
 def plot_approach(rows: list[dict], cfg: dict, path: Path) -> Path:
-    """Errors against time (left) and range (right), +-1-sigma CRLB bands, dropouts marked."""
+    """Errors against time (left) and range (middle), +-1-sigma CRLB bands, dropouts marked; and
+    |error| / CRLB against range on a log scale (right), with 1 and the "far above"
+    line (:data:`studies.diagnosis.FAR_ABOVE_BOUND`): the bound stays visible beside errors a
+    hundred times larger, and the frames at the head-on glint are marked."""
+    from studies.diagnosis import FAR_ABOVE_BOUND
+
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -327,9 +408,11 @@ def plot_approach(rows: list[dict], cfg: dict, path: Path) -> Path:
     t = np.array([float(r["t_s"]) for r in rows])
     rng = np.array([float(r["range_m"]) for r in rows])
     ok = np.array([int(r["ok"]) == 1 for r in rows])
-    fig = Figure(figsize=(12, 14), constrained_layout=True)
+    glint = set(far_above_bound(rows, cfg)["glint_frames"])
+    at_glint = np.array([int(r["frame"]) in glint for r in rows])
+    fig = Figure(figsize=(17, 14), constrained_layout=True)
     FigureCanvasAgg(fig)
-    axes = fig.subplots(len(STATE_KEYS), 2, sharex="col")
+    axes = fig.subplots(len(STATE_KEYS), 3, sharex="col")
     for i, k in enumerate(STATE_KEYS):
         e = np.array([float(r[f"err_{k}"]) if ok[j] else np.nan for j, r in enumerate(rows)])
         c = np.array([float(r[f"crlb_{k}"]) if ok[j] and _num(r[f"crlb_{k}"]) is not None else np.nan
@@ -351,10 +434,30 @@ def plot_approach(rows: list[dict], cfg: dict, path: Path) -> Path:
                 ax.set_title(("against time" if col == 0 else "against range")
                              + f" ({int((~ok).sum())} dropouts in red)")
                 ax.legend(loc="best", fontsize=8)
+        ax = axes[i, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.abs(e) / c
+        good = np.isfinite(ratio) & (ratio > 0)
+        ax.set_yscale("log")
+        ax.axhspan(1e-12, 1.0, color="tab:green", alpha=0.3, lw=0, label="within 1-sigma CRLB")
+        ax.axhline(FAR_ABOVE_BOUND, color="tab:red", lw=0.8, ls="--", label=f"{FAR_ABOVE_BOUND:g}x: a bias, not noise")
+        ax.semilogy(rng[good & ~at_glint], ratio[good & ~at_glint], ".", ms=4, color="tab:blue", label="|error| / CRLB")
+        if (good & at_glint).any():
+            ax.semilogy(rng[good & at_glint], ratio[good & at_glint], "x", ms=5, color="tab:orange",
+                        label="at the head-on glint")
+        top = float(np.nanmax(ratio[good])) if good.any() else FAR_ABOVE_BOUND
+        bottom = float(np.nanmin(ratio[good])) if good.any() else 0.1
+        ax.set_ylim(min(0.1, bottom / 2), max(2 * FAR_ABOVE_BOUND, 2 * top))
+        ax.set_ylabel(k.replace("_deg", "").replace("_m", "") + " |error| / CRLB")
+        if i == 0:
+            ax.set_title("error in units of its bound (log)")
+            ax.legend(loc="best", fontsize=8)
     axes[-1, 0].set_xlabel("t, s")
     axes[-1, 1].set_xlabel("range, m")
+    axes[-1, 2].set_xlabel("range, m")
     if rng.size and rng[0] > rng[-1]:
         axes[-1, 1].invert_xaxis()
+        axes[-1, 2].invert_xaxis()
     fig.suptitle(f"svgs approach: {cfg['camera']}{' (preview)' if cfg['preview'] else ''}, {len(rows)} frames at "
                  f"{cfg['fps']:g} fps, {int(ok.sum())} solved\n{cfg['trajectory']['source']}", fontsize=10)
     fig.savefig(path, dpi=80)

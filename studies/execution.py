@@ -477,6 +477,14 @@ class RunStats:
     def trials_per_s(self) -> float:
         return self.n_run / self.elapsed_s if self.elapsed_s > 0 else float("nan")
 
+    @property
+    def rate_text(self) -> str:
+        """The throughput for a person: ``"23.4 trials/s"``, or ``"12 s/trial"`` below one a second."""
+        if self.n_run <= 0 or not self.elapsed_s > 0:
+            return "no trial run"
+        r = self.n_run / self.elapsed_s
+        return f"{r:.3g} trials/s" if r >= 1.0 else f"{1.0 / r:.3g} s/trial"
+
 
 @dataclass(frozen=True)
 class StoredProgress:

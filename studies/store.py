@@ -440,6 +440,16 @@ class ResultStore:
             os.close(fd)
             _fsync_dir(self.dir)
         data = path.read_bytes()
+        if b"\r\n" in data:  # saved with Windows line endings (an editor): rewritten with \n, rows kept
+            data = data.replace(b"\r\n", b"\n")
+            tmp = path.with_suffix(".csv.tmp")
+            with open(tmp, "wb") as fh:
+                fh.write(data)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)
+            _fsync_dir(self.dir)
+            _warn(f"{path}: Windows line endings (CRLF) rewritten as \\n; its rows are kept")
         if not data.endswith(b"\n"):  # a torn final write: drop the partial line
             keep = data.rfind(b"\n") + 1
             with open(path, "r+b") as fh:
@@ -591,7 +601,8 @@ def read_rows(path, columns=None, *, trial_ids=None, text_columns=None) -> list[
         data = path.read_bytes()
     except OSError as exc:
         raise InputError(f"results file {str(path)!r} cannot be read: {exc}") from None
-    lines = data.split(b"\n")[:-1]  # the part after the last newline is a torn write: ignored
+    # the part after the last newline is a torn write: ignored; Windows line endings are read as \n
+    lines = data.replace(b"\r\n", b"\n").split(b"\n")[:-1]
     if not lines:
         return []
     try:

@@ -54,7 +54,7 @@ def crop_box(points_px, shape, margin_px: float = 40.0) -> tuple[int, int, int, 
 
 
 def render_overlay(image, *, blobs_px=(), targets_px=None, reprojected_px=None, sigma_px=None,
-                   sigma_label: str = "1-sigma", title: str = "", size_px: int = 900) -> np.ndarray:
+                   sigma_label: str = "1-sigma", title: str = "", size_px: int = 900, notes=()) -> np.ndarray:
     """The overlay picture.
 
     Parameters
@@ -75,6 +75,9 @@ def render_overlay(image, *, blobs_px=(), targets_px=None, reprojected_px=None, 
     title : str
     size_px : int
         Longer side of the zoomed crop.
+    notes : sequence of str
+        Lines of a text panel below the picture (e.g. the error against the truth and
+        error/CRLB per component); none: no panel.
 
     Returns
     -------
@@ -115,7 +118,71 @@ def render_overlay(image, *, blobs_px=(), targets_px=None, reprojected_px=None, 
     bar = _legend_bar(out.shape[1], title, sigma_label if sigma_px else None, mag)
     crop_txt = f"crop x {x0}-{x1} y {y0}-{y1} of {W}x{H} px, zoom {s:.2g}x"
     cv2.putText(out, crop_txt, (8, out.shape[0] - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (200, 200, 200), 1, cv2.LINE_AA)
-    return np.vstack([bar, out])
+    parts = [bar, out]
+    if notes:
+        parts.append(_notes_panel(out.shape[1], notes))
+    return np.vstack(parts)
+
+
+#: Text panel: line height (px), font, font scale.
+_NOTE_LINE_PX = 18
+_NOTE_FONT = 1  # cv2.FONT_HERSHEY_PLAIN
+_NOTE_SCALE = 1.0
+
+
+def _notes_panel(width_px: int, notes) -> np.ndarray:
+    """A black panel with the notes: the tab-separated cells of a line set in aligned columns (a
+    table), a line without tabs wrapped at spaces to the picture's width.
+
+    Parameters
+    ----------
+    width_px : int
+        The picture's width.
+    notes : sequence of str
+
+    Returns
+    -------
+    ndarray of uint8, shape (18 n_lines + 10, width_px, 3)
+    """
+    import cv2
+
+    rows = []
+    for n in notes:
+        cells = str(n).split("\t")
+        rows += [cells] if len(cells) > 1 else [[w] for w in _wrap(cells[0], width_px - 16)]
+    widths: dict = {}
+    for r in rows:
+        if len(r) > 1:
+            for j, cell in enumerate(r):
+                w = cv2.getTextSize(cell, _NOTE_FONT, _NOTE_SCALE, 1)[0][0]
+                widths[j] = max(widths.get(j, 0), w)
+    panel = np.zeros((_NOTE_LINE_PX * len(rows) + 10, width_px, 3), np.uint8)
+    for i, r in enumerate(rows):
+        x = 8
+        for j, cell in enumerate(r):
+            w = cv2.getTextSize(cell, _NOTE_FONT, _NOTE_SCALE, 1)[0][0]
+            # numbers right-aligned in their column, the first column left-aligned
+            dx = widths.get(j, w) - w if (len(r) > 1 and j > 0) else 0
+            cv2.putText(panel, cell, (x + dx, _NOTE_LINE_PX * (i + 1)), _NOTE_FONT, _NOTE_SCALE, (255, 255, 255), 1,
+                        cv2.LINE_AA)
+            x += widths.get(j, w) + 16
+    return panel
+
+
+def _wrap(text: str, width_px: int) -> list[str]:
+    """``text`` broken at spaces into lines no wider than ``width_px`` in the panel's font (a
+    single word wider than that stays whole)."""
+    import cv2
+
+    lines, cur = [], ""
+    for word in text.split(" "):
+        trial = word if not cur else cur + " " + word
+        if cur and cv2.getTextSize(trial, _NOTE_FONT, _NOTE_SCALE, 1)[0][0] > width_px:
+            lines.append(cur)
+            cur = word
+        else:
+            cur = trial
+    return lines + [cur]
 
 
 def _draw_sigma_ellipses(out, sigma_px, targets_px: dict, x0: int, y0: int, s: float) -> float:
