@@ -71,6 +71,42 @@ def to_gray8(image) -> np.ndarray:
     return np.clip(np.round(f / hi * 255.0), 0, 255).astype(np.uint8)
 
 
+class DistinctViews:
+    """Refuses a view seen before: the same picture given twice (under two names or one) would
+    count as two independent measurements and shrink the uncertainty as if it were.
+
+    Views are compared by a SHA-256 of their pixels (shape, type and values), so a copy of a
+    file under another name is caught, and a re-encoded photo (other pixels) is not.
+
+    Parameters
+    ----------
+    option : str
+        The option or argument the views came from, for the message (``"--image"``).
+    """
+
+    def __init__(self, option: str):
+        self.option = option
+        self._seen = {}
+
+    def add(self, image, name: str) -> None:
+        """Record one view; :class:`InputError` naming both if its pixels were seen before.
+
+        Parameters
+        ----------
+        image : ndarray, shape (H, W) or (H, W, C)
+        name : str
+        """
+        import hashlib
+
+        a = np.ascontiguousarray(image)
+        h = hashlib.sha256(f"{a.shape}{a.dtype.str}".encode() + a.tobytes()).hexdigest()
+        if h in self._seen:
+            raise InputError(f"{self.option}: {self._seen[h]} and {name} are the same picture (identical pixels, "
+                             f"sha256 {h[:12]}); one view counted twice would pass for two measurements and shrink "
+                             "the uncertainty: give each view once")
+        self._seen[h] = str(name)
+
+
 def detect_board(image, board: Board):
     """Find the board's features in one image.
 
@@ -186,4 +222,4 @@ def detect_views(grays, names, board):
     return obj, img, used, skipped
 
 
-__all__ = ["MIN_CHARUCO_CORNERS", "BoardDetection", "to_gray8", "detect_board", "detect_views"]
+__all__ = ["MIN_CHARUCO_CORNERS", "BoardDetection", "DistinctViews", "to_gray8", "detect_board", "detect_views"]

@@ -516,6 +516,8 @@ def estimate_focal_from_images(
 
     from svgs.pipeline import camera_threshold
 
+    from .detection import DistinctViews
+
     camera = Camera.load(camera)
     pattern = Pattern.load(pattern)
     images = list(images)
@@ -524,6 +526,7 @@ def estimate_focal_from_images(
         raise InputError(f"estimate_focal: {len(images)} images but {rng.shape[0]} ranges (give one --range per --image)")
     names = [Path(im).name if isinstance(im, (str, Path)) else f"image {k + 1}" for k, im in enumerate(images)]
     cents, used_r, used_n, skipped = [], [], [], []
+    distinct = DistinctViews("--image")
     for im, r, n in zip(images, rng, names):
         arr = load_image(im) if isinstance(im, (str, Path)) else np.asarray(im)
         check_image_matches_camera(arr, camera, name=n)
@@ -532,6 +535,7 @@ def estimate_focal_from_images(
         if not ident:
             skipped.append((n, f"{ident.reason}: {ident.message}"))
             continue
+        distinct.add(arr, str(im) if isinstance(im, (str, Path)) else n)  # a used view given twice would count twice
         cents.append(np.asarray(ident.points_px, float))
         used_r.append(float(r))
         used_n.append(n)

@@ -22,13 +22,18 @@ from svgs.errors import InputError, check_finite_positive
 from svgs.profiles import DISTORTION_KEYS, Camera
 
 from .boards import Board
-from .detection import detect_views, to_gray8
+from .detection import DistinctViews, detect_views, to_gray8
 
 #: Fewest usable views :func:`calibrate` accepts by default (Zhang's method needs 3 for
 #: the five pinhole parameters without constraints).
 MIN_VIEWS = 3
 #: Names of the standard deviations reported (OpenCV's ``stdDeviationsIntrinsics`` order).
 STD_KEYS = ("fx", "fy", "cx", "cy") + DISTORTION_KEYS
+
+
+#: How far fx / fy may be from 1 before :attr:`Calibration.warnings` says the pixels are not square
+#: (phone sensors have square pixels; calibrations of real phones give fx / fy within a few 0.1 %).
+NON_SQUARE_ASPECT = 0.05
 
 
 @dataclass
@@ -98,6 +103,11 @@ class Calibration:
         if out:
             out.append("add views (tilted boards, covering the image corners) or constrain the model "
                        "(--fix-aspect, --fix-principal-point, --zero-tangent, --fix-k3)")
+        aspect = self.fx / self.fy
+        if abs(aspect - 1.0) > NON_SQUARE_ASPECT:
+            out.append(f"the pixels come out non-square: fx {self.fx:.1f} px, fy {self.fy:.1f} px (fx/fy {aspect:.3g}); "
+                       "a phone's pixels are square, so the images were likely resized to another shape (render-board "
+                       "--width/--height not in the profile's proportion) or the board is misdescribed")
         return out
 
     @property
@@ -504,6 +514,10 @@ def calibrate_images(images, board: Board, *, names=None, min_views: int = MIN_V
         raise InputError(f"calibration images differ in size ({groups}); all views must come from one camera mode")
     (w, h), = sizes.keys()
     obj, img, used, skipped = detect_views(grays, names, board)
+    distinct, used_set = DistinctViews("images"), set(used)  # a used view given twice would count twice
+    for g, n in zip(grays, names):
+        if n in used_set:
+            distinct.add(g, n)
     if len(used) < max(int(min_views), 1):
         lst = "; ".join(f"{n} ({f.message})" for n, f in skipped[:10]) + (" ..." if len(skipped) > 10 else "")
         hint = {

@@ -177,6 +177,8 @@ def cmd_board(args) -> int:
     if args.json:
         d = cal.to_json()
         d["out"] = out_path
+        for w in d["warnings"]:  # the summary (with them) is not printed: say them on stderr
+            print(f"svgs calibrate board: warning: {w}", file=sys.stderr)
         print(json.dumps(d))
     else:
         print(cal.summary())

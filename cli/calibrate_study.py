@@ -59,8 +59,41 @@ def _camera(args):
     if args.width is not None:
         if args.width < 16 or args.height < 16:
             raise InputError(f"--width/--height: expected at least 16 px, got {args.width} x {args.height}")
-        cam = cam.scaled(args.width, args.height).replace(name=f"{cam.name}-{args.width}x{args.height}")
+        scaled = cam.scaled(args.width, args.height).replace(name=f"{cam.name}-{args.width}x{args.height}")
+        warn_non_square(cam, scaled, f"svgs calibrate {getattr(args, 'calibrate_command', '') or 'render-board'}")
+        cam = scaled
     return cam
+
+
+#: Relative change of the pixel aspect (fx / fy) that --width/--height may make without a warning
+#: (rounding a size to whole pixels changes it by well under 1 %).
+ASPECT_TOLERANCE = 0.01
+
+
+def warn_non_square(camera, scaled, prog: str, file=None) -> bool:
+    """Say on stderr (one line) when a resize changes the pixel aspect ratio fx / fy.
+
+    Parameters
+    ----------
+    camera, scaled : svgs.Camera
+        The profile and the profile resized to ``--width x --height``.
+    prog : str
+        The command, for the line's prefix.
+
+    Returns
+    -------
+    bool
+        Whether the warning was printed (the aspect moved by more than :data:`ASPECT_TOLERANCE`).
+    """
+    before, after = camera.fx / camera.fy, scaled.fx / scaled.fy
+    if abs(after / before - 1.0) <= ASPECT_TOLERANCE:
+        return False
+    h_square = camera.height * scaled.width / camera.width
+    print(f"{prog}: warning: --width/--height {scaled.width} x {scaled.height} px does not keep the profile's "
+          f"{camera.width} x {camera.height} px shape: the pixels become non-square (fx {scaled.fx:.1f} px, fy "
+          f"{scaled.fy:.1f} px, fx/fy {after:.3g} instead of {before:.3g}); for square pixels give --height "
+          f"{h_square:.0f} with --width {scaled.width}", file=sys.stderr if file is None else file, flush=True)
+    return True
 
 
 def _size_options(p) -> None:

@@ -93,7 +93,9 @@ def cmd_render(args) -> int:
     roi_spp = args.roi_spp if args.roi_spp is not None else (DEFAULT_ROI_SPP if args.method == "guided" else DEFAULT_ROI_SPP_PATH)
     r = Renderer(camera, pattern, reflector=args.reflector, scene_options=opts, spp=spp, roi_spp=roi_spp,
                  spot_samples=args.spot_samples or DEFAULT_SPOT_SAMPLES, method=args.method)
-    if r.variant.notice:
+    from render.variant import is_fallback
+
+    if r.variant.notice and not is_fallback(r.variant.requested, r.variant.name):  # a fallback: said by select_variant
         print(f"svgs render: note: {r.variant.notice}", file=sys.stderr)
     res = r.render(R, t, seed=args.seed, full_frame=args.full_frame)
     res.truth["command"] = {k: v for k, v in vars(args).items() if k != "func"}

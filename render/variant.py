@@ -280,7 +280,8 @@ def _fallback(prefix, cuda_ok, llvm_ok, llvm_why, fix):
     if cuda_ok:
         return VARIANT_FOR_BACKEND["cuda"], "cuda", prefix
     if llvm_ok:
-        return VARIANT_FOR_BACKEND["llvm"], "llvm", prefix
+        name = VARIANT_FOR_BACKEND["llvm"]
+        return name, "llvm", f"{prefix}; rendering with {name} on the CPU instead" if prefix else ""
     return "scalar_rgb", "scalar", f"{lead}{llvm_why}; falling back to scalar_rgb (slow: expect minutes per frame); {fix}"
 
 
@@ -343,12 +344,56 @@ def select_variant(prefer: str | None = None) -> VariantInfo:
     if note:
         notices.append(note)
     mi.set_variant(name)
+    if is_fallback(requested, name):  # not silent: every command that renders says it, once
+        print(f"svgs: note: {fallback_line(requested, name, notice=note)}", file=sys.stderr, flush=True)
     _SELECTED = VariantInfo(
         name=name, backend=backend, llvm_path=chosen_path if backend == "llvm" else chosen_path,
         llvm_version=llvm_version, notice="; ".join(n for n in notices if n), requested=requested,
         candidates=tuple((p, v) for p, v, _ in candidates),
     )
     return _SELECTED
+
+
+def is_fallback(requested: str | None, name: str) -> bool:
+    """Whether variant ``name`` is not what was asked: an explicit request (a backend or a
+    variant) that could not be met, or the slow scalar variant chosen automatically.
+
+    Parameters
+    ----------
+    requested : str or None
+        The request (argument or ``SVGS_MI_VARIANT``); None = automatic.
+    name : str
+        The variant chosen.
+
+    Returns
+    -------
+    bool
+    """
+    if not requested:
+        return name.startswith("scalar")
+    req = requested.strip().lower()
+    return name != req and name != VARIANT_FOR_BACKEND.get(req)
+
+
+def fallback_line(requested: str | None, name: str, notice: str = "") -> str:
+    """The one line that says a fallback (:func:`is_fallback`): what was asked, what is used, why.
+
+    Parameters
+    ----------
+    requested : str or None
+    name : str
+        The variant chosen.
+    notice : str
+        The reason (:func:`decide`'s notice).
+
+    Returns
+    -------
+    str
+    """
+    asked = (f"{ENV_VARIANT}={requested}" if requested and os.environ.get(ENV_VARIANT) == requested
+             else f"variant {requested!r} requested" if requested else "automatic variant choice")
+    why = " ".join(notice.split()) or f"rendering with {name} instead"
+    return f"{asked}: {why}"
 
 
 def _has_backend(dr, which: str) -> bool:

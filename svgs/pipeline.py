@@ -5,6 +5,7 @@ threshold -> blob extraction -> target identification -> collinearity solve.
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -14,12 +15,110 @@ from .profiles import Camera, Pattern, load_camera, load_pattern
 from .result import Failure
 
 
-def load_image(path) -> np.ndarray:
-    """Read an image file as stored (8- or 16-bit, grey or colour).
+#: EXIF ``Orientation`` tag (0x0112) values: what the viewer does to the stored pixels to show
+#: the picture upright (EXIF 2.32, section 4.6.4 A).
+EXIF_ORIENTATIONS = {
+    1: "upright",
+    2: "mirrored left-right",
+    3: "rotated 180 deg",
+    4: "mirrored top-bottom",
+    5: "transposed: mirrored left-right, then rotated 90 deg anticlockwise",
+    6: "rotated 90 deg clockwise",
+    7: "transversed: mirrored left-right, then rotated 90 deg clockwise",
+    8: "rotated 90 deg anticlockwise",
+}
+_EXIF_ORIENTATION_TAG = 0x0112
+
+
+def _may_hold_exif(data: bytes) -> bool:
+    """Whether a file's bytes can hold EXIF (so Pillow is asked only then: a PNG's EXIF makes it
+    decode the whole image)."""
+    if data[:4] in (b"II*\x00", b"MM\x00*"):  # TIFF: the tag, if any, is in the first directory
+        return True
+    if data[:2] == b"\xff\xd8":  # JPEG: an APP1 "Exif" segment, near the start
+        return b"Exif\x00\x00" in data[:262144]
+    if data[:8] == b"\x89PNG\r\n\x1a\n":
+        return b"eXIf" in data
+    if data[:4] == b"RIFF" and data[8:12] == b"WEBP":
+        return b"EXIF" in data
+    return False
+
+
+def exif_orientation(path, data: bytes | None = None) -> int:
+    """The EXIF ``Orientation`` of an image file: 1 (as stored) to 8, 1 when it has none.
 
     Parameters
     ----------
     path : str or Path
+    data : bytes, optional
+        The file's content, if already read.
+
+    Returns
+    -------
+    int
+        A key of :data:`EXIF_ORIENTATIONS`; 1 for a file without EXIF, an unknown value, or a
+        file Pillow cannot parse (OpenCV decodes the pixels; this reads only the header).
+    """
+    import warnings
+
+    try:
+        if not _may_hold_exif(Path(path).read_bytes() if data is None else data):
+            return 1
+        from PIL import Image  # a dependency of matplotlib and scikit-image
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # Pillow's decompression-bomb warning: only the header is read
+            with Image.open(path) as im:
+                value = im.getexif().get(_EXIF_ORIENTATION_TAG, 1)
+    except Exception:  # noqa: BLE001 - no EXIF to read is "as stored"; the decoder reports bad files
+        return 1
+    try:
+        value = int(value)
+    except (TypeError, ValueError):
+        return 1
+    return value if value in EXIF_ORIENTATIONS else 1
+
+
+def apply_exif_orientation(image: np.ndarray, orientation: int) -> np.ndarray:
+    """The stored pixels as a viewer shows them under an EXIF ``Orientation``.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W) or (H, W, C)
+        As stored in the file.
+    orientation : int
+        1-8 (:data:`EXIF_ORIENTATIONS`).
+
+    Returns
+    -------
+    ndarray, shape (H, W[, C]) for 1-4, (W, H[, C]) for 5-8
+        Same dtype, pixel values unchanged (only moved).
+    """
+    ops = {
+        1: lambda a: a,
+        2: lambda a: a[:, ::-1],
+        3: lambda a: a[::-1, ::-1],
+        4: lambda a: a[::-1, :],
+        5: lambda a: np.swapaxes(a, 0, 1),
+        6: lambda a: np.rot90(a, -1),
+        7: lambda a: np.swapaxes(a, 0, 1)[::-1, ::-1],
+        8: lambda a: np.rot90(a, 1),
+    }
+    if orientation not in ops:
+        raise InputError(f"EXIF orientation: expected 1-8, got {orientation!r}")
+    return np.ascontiguousarray(ops[orientation](image))
+
+
+def load_image(path, *, say=None) -> np.ndarray:
+    """Read an image file (8- or 16-bit, grey or colour) upright: an EXIF orientation other
+    than 1 (a phone held on its side) is applied, as a viewer shows the picture, and said.
+
+    Parameters
+    ----------
+    path : str or Path
+    say : callable, optional
+        Called with the one line that names an applied EXIF orientation; default: printed
+        on stderr.
 
     Returns
     -------
@@ -55,6 +154,19 @@ def load_image(path) -> np.ndarray:
         img = img[..., ::-1]  # OpenCV decodes BGR; the rest of the code expects RGB
     if img.size == 0 or img.ndim not in (2, 3):
         raise InputError(f"image {str(p)!r}: expected a 2-D grey or 3-channel colour image, got shape {img.shape}")
+    if p.suffix.lower() != ".npy":
+        # OpenCV's IMREAD_UNCHANGED keeps the stored layout (it ignores EXIF orientation)
+        o = exif_orientation(p, data.tobytes())
+        if o != 1:
+            h0, w0 = img.shape[:2]
+            img = apply_exif_orientation(img, o)
+            h, w = img.shape[:2]
+            line = (f"note: image {str(p)!r}: EXIF orientation {o} ({EXIF_ORIENTATIONS[o]}) applied; used as "
+                    f"displayed, {w} x {h} px (stored {w0} x {h0} px)")
+            if say is None:
+                print(f"svgs: {line}", file=sys.stderr, flush=True)
+            else:
+                say(line)
     return img
 
 
@@ -207,4 +319,4 @@ def inconsistent_failure(sol) -> Failure:
                     **c.to_json()})
 
 
-__all__ = ["load_image", "solve_image", "camera_threshold", "check_image_matches_camera", "inconsistent_failure", "Failure"]
+__all__ = ["load_image", "exif_orientation", "apply_exif_orientation", "EXIF_ORIENTATIONS", "solve_image", "camera_threshold", "check_image_matches_camera", "inconsistent_failure", "Failure"]

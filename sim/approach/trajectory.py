@@ -33,6 +33,12 @@ MAX_FRAMES = 100000
 VISIBILITY_MARGIN_PX = 2.0
 
 
+def _round_up(x: float, digits: int = 3) -> float:
+    """``x`` (> 0) rounded up to ``digits`` significant digits (a bound that still holds when printed)."""
+    step = 10.0 ** (np.floor(np.log10(x)) - (digits - 1))
+    return float(np.ceil(x / step - 1e-9) * step)
+
+
 @dataclass(frozen=True)
 class Trajectory:
     """Poses against time, interpolated linearly between knots.
@@ -110,12 +116,22 @@ class Trajectory:
         Returns
         -------
         ndarray, shape (n,)
-            Times, s; at most :data:`MAX_FRAMES`.
+            Times, s; at least 2, at most :data:`MAX_FRAMES`.
+
+        Raises
+        ------
+        InputError
+            A rate that is not positive, or that gives fewer than 2 or more than :data:`MAX_FRAMES`
+            frames over the span.
         """
         fps = float(fps)
         if not np.isfinite(fps) or fps <= 0:
             raise InputError(f"--fps: expected a positive frame rate, got {fps!r}")
         n = int(np.floor(self.duration_s * fps + 1e-9)) + 1
+        if n < 2:  # one frame is no approach: say how to get more
+            raise InputError(f"--fps: {fps:g} frames per second over the {self.duration_s:g} s trajectory gives {n} "
+                             f"frame; an approach needs at least 2: give --fps {_round_up(1.0 / self.duration_s):g} or more, "
+                             "or a longer trajectory")
         if n > MAX_FRAMES:
             raise InputError(f"--fps: {n} frames over {self.duration_s:g} s; at most {MAX_FRAMES}")
         return self.t_s[0] + np.arange(n) / fps
@@ -152,7 +168,8 @@ class Trajectory:
     @classmethod
     def load(cls, path) -> "Trajectory":
         """Read a trajectory CSV: ``t_s`` and either the paper's state (:data:`STATE_COLUMNS`) or
-        the test stand's chain (:data:`STAND_COLUMNS`) per row. Every problem is an
+        the test stand's chain (:data:`STAND_COLUMNS`) per row, not both (a header with columns of
+        both is refused). Every problem is an
         :class:`~svgs.errors.InputError` naming the file, the row and the column."""
         p = Path(path)
         where = f"--trajectory {str(path)!r}"
@@ -172,6 +189,14 @@ class Trajectory:
         header = [h.strip() for h in rows[0]]
         if "t_s" not in header:
             raise InputError(f"{where}: no t_s column in the header {header}")
+        own = {"state": [c for c in STATE_COLUMNS if c not in STAND_COLUMNS],
+               "stand": [c for c in STAND_COLUMNS if c not in STATE_COLUMNS]}
+        if all(any(c in header for c in cs) for cs in own.values()):
+            # both: refuse rather than pick one silently (the angles are shared, the rest are not)
+            raise InputError(
+                f"{where}: the header has columns of both the paper state ({', '.join(STATE_COLUMNS)}) and the test "
+                f"stand's chain ({', '.join(STAND_COLUMNS)}): found {', '.join(c for c in own['state'] if c in header)}"
+                f" and {', '.join(c for c in own['stand'] if c in header)}; keep one set (with t_s)")
         if set(STATE_COLUMNS) <= set(header):
             mount, cols = "target", STATE_COLUMNS
         elif set(STAND_COLUMNS) <= set(header):
