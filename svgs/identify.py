@@ -496,7 +496,7 @@ def identify(
     if n_cand == 0:
         return Failure(
             "no_consistent_set",
-            f"no {n_t} of the {N} blobs match the {pattern.name!r} pattern's geometry over the envelope" + hint,
+            f"no {n_t} of {_blobs_phrase(N, n_all)} match the {pattern.name!r} pattern's geometry over the envelope" + hint,
             {**diag, "n_verified": 0, **hint_d},
         )
     order = np.argsort(scores, kind="stable")[:MAX_CANDIDATES]
@@ -549,7 +549,7 @@ def _verified_identification(pts, idx_all, blobs, sets, scores, camera, pattern,
     if rank.size == 0:
         return Failure(
             "no_consistent_set",
-            f"{n_cand} candidate set(s) of the {N} blobs fit the pattern's layout, but no pose reproduces any of them "
+            f"{n_cand} candidate set(s) of {_blobs_phrase(N, n_all)} fit the pattern's layout, but no pose reproduces any of them "
             f"(best approximate residual {float(np.min(pres)):.3g} px)" + hint,
             {**diag, "n_verified": 0, **hint_d},
         )
@@ -571,7 +571,7 @@ def _unverified_failure(res, n_cand: int, N: int, n_ver: int, max_residual_px: f
     best = float(np.nanmin(res)) if np.any(np.isfinite(res)) else None
     return Failure(
         "no_consistent_set",
-        f"{n_cand} candidate set(s) of the {N} blobs fit the pattern's layout, but none of the {n_ver} solved "
+        f"{n_cand} candidate set(s) of {_blobs_phrase(N, diag['n_blobs'])} fit the pattern's layout, but none of the {n_ver} solved "
         f"reproduces it within {max_residual_px:g} px inside the envelope"
         + (f" (best RMS residual {best:.3g} px)" if best is not None else "") + hint,
         {**diag, "n_verified": n_ver, "best_residual_px": best, **hint_d},
@@ -621,12 +621,25 @@ def _check_options(tolerance_px, max_residual_px, max_blobs, max_verify) -> None
             raise InputError(f"{nm}: expected a positive integer, got {v!r}")
 
 
+def _blobs_phrase(n_used: int, n_found: int) -> str:
+    """"the 12 blobs", or "the 30 brightest of the 40 blobs found" when ``max_blobs`` kept fewer."""
+    if n_used >= n_found:
+        return f"the {n_found} blobs"
+    return f"the {n_used} brightest of the {n_found} blobs found (max_blobs {n_used})"
+
+
+def _threshold_phrase(blobs) -> str:
+    """" above the threshold 250" from a :class:`~svgs.detect.Blobs`' level (empty without one)."""
+    t = getattr(blobs, "threshold_used", None)
+    return f" above the threshold {float(t):g}" if t is not None and np.isfinite(t) else " above the threshold"
+
+
 def _count_failure(n_all: int, blobs, n_t: int, single_spot_area_px):
     """The Failure of a frame with no blob or fewer blobs than targets, else None."""
     base = {"n_blobs": n_all}
     if n_all == 0:
-        return Failure("no_blobs", "no bright blob was found (nothing above the threshold passed the size and "
-                       "shape gates)", base)
+        return Failure("no_blobs", f"no bright blob was found (nothing{_threshold_phrase(blobs)} passed the size "
+                       "and shape gates)", base)
     if n_all < n_t:
         merged = _merged_failure(blobs, n_t, single_spot_area_px)
         if merged is not None:

@@ -159,6 +159,8 @@ class Trajectory:
         :class:`~svgs.errors.InputError` naming the file, the row and the column."""
         p = Path(path)
         where = f"--trajectory {str(path)!r}"
+        if p.exists() and not p.is_file():
+            raise InputError(f"{where}: not a regular file (a folder, device, FIFO or socket); give a CSV file")
         if not p.is_file():
             raise InputError(f"{where}: no such file")
         try:
