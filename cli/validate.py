@@ -27,7 +27,8 @@ import os
 from pathlib import Path
 
 from svgs.errors import InputError
-from svgs.identify import MIN_SPAN_PX, check_attitude_deg, check_range_m, range_envelope_m  # noqa: F401 (MIN_SPAN_PX: re-exported)
+from svgs.identify import MIN_SPAN_PX  # noqa: F401 - re-exported (the module notes name it)
+from svgs.identify import check_attitude_deg, check_range_m, range_envelope_m
 
 #: Integer arguments that count something (>= 1).
 COUNTS = {"spp", "roi_spp", "rim_spp_factor", "spot_samples", "trials", "poses", "frames", "views", "subsets",
@@ -143,7 +144,7 @@ def _interval(dest: str, bounds) -> str:
     lo, hi, unit = bounds
     unit = f" {unit}" if unit else ""
     if dest in POSITIVE and lo == 0:
-        return f"a value > 0 and <= {hi:g}{unit}"
+        return f"a value > 0 and at most {hi:g}{unit}"
     return f"{lo:g} to {hi:g}{unit}"
 
 

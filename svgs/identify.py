@@ -496,7 +496,8 @@ def identify(
     if n_cand == 0:
         return Failure(
             "no_consistent_set",
-            f"no {n_t} of {_blobs_phrase(N, n_all)} match the {pattern.name!r} pattern's geometry over the envelope" + hint,
+            f"no {n_t} of {_blobs_phrase(N, n_all)} match the {pattern.name!r} pattern's geometry over the "
+            "envelope" + hint,
             {**diag, "n_verified": 0, **hint_d},
         )
     order = np.argsort(scores, kind="stable")[:MAX_CANDIDATES]
@@ -549,8 +550,8 @@ def _verified_identification(pts, idx_all, blobs, sets, scores, camera, pattern,
     if rank.size == 0:
         return Failure(
             "no_consistent_set",
-            f"{n_cand} candidate set(s) of {_blobs_phrase(N, n_all)} fit the pattern's layout, but no pose reproduces any of them "
-            f"(best approximate residual {float(np.min(pres)):.3g} px)" + hint,
+            f"{n_cand} candidate set(s) of {_blobs_phrase(N, n_all)} fit the pattern's layout, but no pose "
+            f"reproduces any of them (best approximate residual {float(np.min(pres)):.3g} px)" + hint,
             {**diag, "n_verified": 0, **hint_d},
         )
     n_ver = int(rank.size)
@@ -571,8 +572,8 @@ def _unverified_failure(res, n_cand: int, N: int, n_ver: int, max_residual_px: f
     best = float(np.nanmin(res)) if np.any(np.isfinite(res)) else None
     return Failure(
         "no_consistent_set",
-        f"{n_cand} candidate set(s) of {_blobs_phrase(N, diag['n_blobs'])} fit the pattern's layout, but none of the {n_ver} solved "
-        f"reproduces it within {max_residual_px:g} px inside the envelope"
+        f"{n_cand} candidate set(s) of {_blobs_phrase(N, diag['n_blobs'])} fit the pattern's layout, but none of "
+        f"the {n_ver} solved reproduces it within {max_residual_px:g} px inside the envelope"
         + (f" (best RMS residual {best:.3g} px)" if best is not None else "") + hint,
         {**diag, "n_verified": n_ver, "best_residual_px": best, **hint_d},
     )

@@ -28,10 +28,8 @@ def load_image(path) -> np.ndarray:
     Raises
     ------
     InputError
-        The file is missing, empty, or not an image OpenCV can decode.
+        The file is missing, empty, not a regular file, or not an image OpenCV can decode.
     """
-    import cv2
-
     p = Path(path)
     if not p.exists():
         raise InputError(f"image {str(p)!r} does not exist")
