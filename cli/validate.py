@@ -12,8 +12,11 @@ the argument names (one vocabulary across the commands, ``docs/architecture.md``
   passes (some defaults are 0 for "none");
 - ranges (``--range``, ``--ranges``, ``--focal-ranges``, ``--pose-ranges``, ``--from``, ``--to``): positive, finite,
   distinct, and inside the command's physical envelope, whose reason the message states - for
-  the phone sensor the range beyond which the pattern spans fewer than :data:`MIN_SPAN_PX`
-  pixels (its spots merge into one), for the ToF camera the paper's 0.27-15 m;
+  the phone sensor :func:`svgs.identify.range_envelope_m` (beyond it the pattern spans fewer than
+  :data:`MIN_SPAN_PX` pixels and its spots merge into one; trajectory files and sensitivity
+  bounds take the same), for the ToF camera the paper's 0.27-15 m (``tof.camera.DESIGN_RANGE_M``);
+- every float argument: a physical bound (:data:`BOUNDS`; attitudes within
+  :data:`svgs.identify.ATTITUDE_LIMITS_DEG`), so no absurd number (1e308) reaches the solver;
 - the camera profile's kind: a ToF profile for ``svgs tof ...``, a phone profile elsewhere.
 
 A failed check raises :class:`svgs.errors.InputError` naming the input (exit 2, one line,
