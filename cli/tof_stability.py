@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from svgs.errors import InputError, check_finite
+from tof.camera import DESIGN_RANGE_M
 
 from cli.exit_codes import EXIT_NO_SOLUTION, EXIT_OK
 from cli.solve import json_default
@@ -28,7 +29,7 @@ from cli.tof_render import add_scene_args
 
 #: Ranges the stability run accepts (m): the paper's design range 0.27-15 m (section 2.2) within
 #: the 15 m unambiguous range of the 10 MHz modulation.
-RANGE_LIMITS_M = (0.27, 15.0)
+RANGE_LIMITS_M = DESIGN_RANGE_M  # tof.camera: one envelope with --range elsewhere
 
 
 def _common(p) -> None:

@@ -12,8 +12,11 @@ the argument names (one vocabulary across the commands, ``docs/architecture.md``
   passes (some defaults are 0 for "none");
 - ranges (``--range``, ``--ranges``, ``--focal-ranges``, ``--pose-ranges``, ``--from``, ``--to``): positive, finite,
   distinct, and inside the command's physical envelope, whose reason the message states - for
-  the phone sensor the range beyond which the pattern spans fewer than :data:`MIN_SPAN_PX`
-  pixels (its spots merge into one), for the ToF camera the paper's 0.27-15 m;
+  the phone sensor :func:`svgs.identify.range_envelope_m` (beyond it the pattern spans fewer than
+  :data:`MIN_SPAN_PX` pixels and its spots merge into one; trajectory files and sensitivity
+  bounds take the same), for the ToF camera the paper's 0.27-15 m (``tof.camera.DESIGN_RANGE_M``);
+- every float argument: a physical bound (:data:`BOUNDS`; attitudes within
+  :data:`svgs.identify.ATTITUDE_LIMITS_DEG`), so no absurd number (1e308) reaches the solver;
 - the camera profile's kind: a ToF profile for ``svgs tof ...``, a phone profile elsewhere.
 
 A failed check raises :class:`svgs.errors.InputError` naming the input (exit 2, one line,
@@ -27,13 +30,8 @@ import os
 from pathlib import Path
 
 from svgs.errors import InputError
-
-#: The phone sensor's far limit: beyond the range where the pattern spans this many pixels its
-#: four spots merge into one blob (no identification is possible).
-MIN_SPAN_PX = 4.0
-#: The ToF camera's range envelope (m): the paper's design range 0.27-15 m (section 2.2), within
-#: the 15 m unambiguous range of its 10 MHz modulation.
-TOF_RANGE_M = (0.27, 15.0)
+from svgs.identify import MIN_SPAN_PX  # noqa: F401 - re-exported (the module notes name it)
+from svgs.identify import check_attitude_deg, check_range_m, range_envelope_m
 
 #: Integer arguments that count something (>= 1).
 COUNTS = {"spp", "roi_spp", "rim_spp_factor", "spot_samples", "trials", "poses", "frames", "views", "subsets",
@@ -43,11 +41,35 @@ COUNTS = {"spp", "roi_spp", "rim_spp_factor", "spot_samples", "trials", "poses",
 #: Integer arguments that must be >= 0 (``--processes 0``: run inline).
 NON_NEGATIVE_INTS = {"processes"}
 #: Float arguments that must be > 0.
-POSITIVE = {"sigma_px", "centroid_sigma_px", "range_sigma_m", "exposure_s", "iso", "focus_m", "integration_time_s",
-            "modulation_frequency_hz", "spacing_mm", "marker_mm", "exposure_fill", "merge_px", "aspect_ratio",
+POSITIVE = {"centroid_sigma_px", "exposure_s", "iso", "focus_m", "integration_time_s",
+            "modulation_frequency_hz", "spacing_mm", "marker_mm", "exposure_fill", "aspect_ratio",
             "range_m", "range", "from_m", "to_m", "duration_s", "fps"}
 #: Float arguments that must be >= 0.
-NON_NEGATIVE = {"jitter_deg", "jitter_m", "ambient", "ambient_lux", "backdrop_m", "true_pp_offset_px", "stage_m"}
+NON_NEGATIVE = {"sigma_px", "range_sigma_m", "merge_px", "jitter_deg", "jitter_m", "ambient", "ambient_lux", "backdrop_m"}
+#: Physical bounds of every float argument (dest -> (low, high, unit)); inclusive, except a low of
+#: 0 for the :data:`POSITIVE` ones. Far beyond any phone, lab or ToF camera the simulator models,
+#: they keep absurd numbers (1e308) from overflowing the solver and the calibrations. Ranges
+#: and attitudes are bounded by the envelope instead (:func:`svgs.identify.range_envelope_m`,
+#: :data:`svgs.identify.ATTITUDE_LIMITS_DEG`); tests/test_messages.py fails on a float option
+#: with neither.
+BOUNDS = {
+    "sigma_px": (0.0, 100.0, "px"), "consistency_sigma_px": (1e-3, 100.0, "px"),
+    "centroid_sigma_px": (1e-3, 100.0, "px"), "range_sigma_m": (0.0, 10.0, "m"),
+    "target_x_m": (-1000.0, 1000.0, "m"), "target_y_m": (-1000.0, 1000.0, "m"),
+    "focus_m": (0.0, 10000.0, "m"), "backdrop_m": (0.0, 1000.0, "m"),
+    "ambient": (0.0, 10000.0, "W m^-2 sr^-1"), "exposure_s": (0.0, 60.0, "s"), "iso": (1.0, 1e6, ""),
+    "stage_m": (-1.0, 1.0, "m"), "jitter_deg": (0.0, 90.0, "deg"), "jitter_m": (0.0, 10.0, "m"),
+    "spacing_mm": (0.0, 1000.0, "mm"), "marker_mm": (0.0, 1000.0, "mm"), "aspect_ratio": (0.1, 10.0, ""),
+    "principal_point": (-1e5, 1e5, "px"), "exposure_fill": (0.0, 1.0, "of full well"),
+    "true_pp_offset_px": (-1000.0, 1000.0, "px"), "ambient_lux": (0.0, 2e5, "lux"),
+    "integration_time_s": (0.0, 1.0, "s"), "modulation_frequency_hz": (0.0, 1e9, "Hz"),
+    "focal_error_frac": (-0.5, 0.5, ""), "k1_error": (-1.0, 1.0, ""), "merge_px": (0.0, 1000.0, "px"),
+    "duration_s": (0.0, 1e6, "s"), "fps": (0.0, 1000.0, "Hz"),
+}
+#: Attitude arguments (dest -> the envelope's angle).
+ATTITUDES = {"roll": "roll_deg", "pitch": "pitch_deg", "yaw": "yaw_deg", "roll_deg": "roll_deg",
+             "pitch_deg": "pitch_deg", "yaw_deg": "yaw_deg"}
+
 #: Comma-separated range lists (m).
 RANGE_LISTS = {"ranges", "focal_ranges", "pose_ranges"}
 #: Output locations: dest -> kind ("dir" or "file" by the metavar).
@@ -117,14 +139,16 @@ def parse_range_list(text, flag: str) -> list[float]:
 
 
 def phone_range_envelope_m(camera, pattern) -> tuple[float, float]:
-    """(near, far) ranges of the phone sensor: the pattern fills the shorter side of the frame at
-    ``near``, spans :data:`MIN_SPAN_PX` pixels at ``far``."""
-    import numpy as np
+    """(near, far) ranges of the phone sensor (m): :func:`svgs.identify.range_envelope_m`."""
+    return range_envelope_m(camera, pattern)
 
-    P = np.asarray(pattern.points_m, float)[:, :2]
-    span = float(max(np.linalg.norm(a - b) for a in P for b in P))
-    f = float(np.sqrt(camera.fx * camera.fy))
-    return f * span / min(camera.width, camera.height), f * span / MIN_SPAN_PX
+
+def _interval(dest: str, bounds) -> str:
+    lo, hi, unit = bounds
+    unit = f" {unit}" if unit else ""
+    if dest in POSITIVE and lo == 0:
+        return f"a value > 0 and at most {hi:g}{unit}"
+    return f"{lo:g} to {hi:g}{unit}"
 
 
 def _command(args) -> str:
@@ -171,9 +195,15 @@ def check_args(args, parser) -> None:
             elif isinstance(x, float):
                 if not math.isfinite(x):
                     raise InputError(f"{flag}: expected a finite number, got {x!r}")
-                if dest in POSITIVE and x <= 0:
+                if dest in ATTITUDES:
+                    check_attitude_deg(ATTITUDES[dest], x, flag)
+                    continue
+                b = BOUNDS.get(dest)
+                if b is not None and not (b[0] <= x <= b[1] and not (dest in POSITIVE and x == b[0] == 0)):
+                    raise InputError(f"{flag}: expected {_interval(dest, b)}, got {x!r}")
+                if b is None and dest in POSITIVE and x <= 0:
                     raise InputError(f"{flag}: expected a positive value, got {x!r}")
-                if dest in NON_NEGATIVE and x < 0:
+                if b is None and dest in NON_NEGATIVE and x < 0:
                     raise InputError(f"{flag}: expected a value >= 0, got {x!r}")
     ranges = {}
     for dest in ("range_m", "range", "from_m", "to_m"):
@@ -205,7 +235,9 @@ def _actions(parser, args):
 def _check_profile_and_envelope(args, cmd: str, ranges: dict) -> None:
     cam_name = getattr(args, "camera", None)
     if cmd.startswith("tof "):
-        lo, hi = TOF_RANGE_M
+        from tof.camera import DESIGN_RANGE_M  # the ToF sensor's envelope (imported only for its commands)
+
+        lo, hi = DESIGN_RANGE_M
         for flag, vals in ranges.items():
             bad = [v for v in vals if not lo <= v <= hi]
             if bad:
@@ -227,13 +259,5 @@ def _check_profile_and_envelope(args, cmd: str, ranges: dict) -> None:
         pat = load_pattern(pat_name)
     except InputError:
         return  # the command reports the pattern itself
-    near, far = phone_range_envelope_m(cam, pat)
     for flag, vals in ranges.items():
-        bad = [v for v in vals if v > far]
-        if bad:
-            raise InputError(f"{flag}: {bad} m is beyond {far:.0f} m, where the {pat.name} pattern spans fewer than "
-                             f"{MIN_SPAN_PX:g} px on {cam.name} and its spots merge into one")
-        bad = [v for v in vals if v < 0.25 * near]
-        if bad:
-            raise InputError(f"{flag}: {bad} m is closer than {0.25 * near:.2f} m, where the {pat.name} pattern "
-                             f"spans more than 4x the shorter side of the {cam.name} frame")
+        check_range_m(vals, cam, pat, flag)

@@ -35,6 +35,7 @@ import numpy as np
 from sim.metrics import ERR_KEYS, POS_ERR_NORM_M, ROT_ERR_DEG, error_columns, state_m_deg
 from svgs.errors import InputError
 from svgs.frames import STATE_KEYS
+from svgs.identify import ATTITUDE_LIMITS_DEG
 
 #: Modules that may register more trial kinds; imported when an unknown name is asked for
 #: (a module that is not installed is skipped). The render-and-solve trial of the campaign,
@@ -76,20 +77,31 @@ class Parameter:
     upper: float | None = None
     lower_open: bool = False
 
+    def domain(self) -> str:
+        """The allowed values in words, with the unit (none for a dimensionless "1")."""
+        unit = "" if self.unit in ("", "1") else f" {self.unit}"
+        if self.lower is not None and self.upper is not None:
+            if self.lower_open:
+                return f"a value > {self.lower:g} and <= {self.upper:g}{unit}"
+            return f"{self.lower:g} to {self.upper:g}{unit}"
+        if self.lower is not None:
+            return f"a value {'>' if self.lower_open else '>='} {self.lower:g}{unit}"
+        if self.upper is not None:
+            return f"a value <= {self.upper:g}{unit}"
+        return f"a finite number{unit}"
+
     def check(self, value, what: str = "") -> float:
         """``float(value)`` if it lies in the domain, else :class:`InputError`."""
         label = what or self.name
         try:
             v = float(value)
         except (TypeError, ValueError):
-            raise InputError(f"{label}: expected a number ({self.unit}), got {value!r}") from None
+            raise InputError(f"{label}: expected {self.domain()}, got {value!r}") from None
         if not np.isfinite(v):
-            raise InputError(f"{label}: expected a finite number ({self.unit}), got {value!r}")
-        if self.lower is not None and (v < self.lower or (self.lower_open and v == self.lower)):
-            op = ">" if self.lower_open else ">="
-            raise InputError(f"{label}: {self.name} must be {op} {self.lower:g} {self.unit} ({self.meaning}), got {v:g}")
-        if self.upper is not None and v > self.upper:
-            raise InputError(f"{label}: {self.name} must be <= {self.upper:g} {self.unit} ({self.meaning}), got {v:g}")
+            raise InputError(f"{label}: expected {self.domain()}, got {value!r}")
+        low_bad = self.lower is not None and (v < self.lower or (self.lower_open and v == self.lower))
+        if low_bad or (self.upper is not None and v > self.upper):
+            raise InputError(f"{label}: expected {self.domain()}, got {v:g} - {self.meaning}")
         return v
 
 
@@ -182,28 +194,36 @@ def get_trial_kind(name: str) -> TrialKind:
 
 
 # --------------------------------------------------------------------------- geometric trial
+#: Largest lateral offset of the target origin from the boresight, m (a physical bound: far
+#: outside the field of view at any range of the envelope, :func:`svgs.identify.range_envelope_m`).
+LATERAL_LIMIT_M = 1000.0
 GEOMETRIC_PARAMETERS = {
     p.name: p
     for p in (
         Parameter("range_m", "m", "distance from the camera to the target origin along the boresight", 10.0, True,
                   lower=0.0, lower_open=True),
-        Parameter("target_x_m", "m", "lateral offset of the target origin from the boresight, camera right", 0.0, True),
-        Parameter("target_y_m", "m", "lateral offset of the target origin from the boresight, camera up", 0.0, True),
+        Parameter("target_x_m", "m", "lateral offset of the target origin from the boresight, camera right", 0.0, True,
+                  lower=-LATERAL_LIMIT_M, upper=LATERAL_LIMIT_M),
+        Parameter("target_y_m", "m", "lateral offset of the target origin from the boresight, camera up", 0.0, True,
+                  lower=-LATERAL_LIMIT_M, upper=LATERAL_LIMIT_M),
         Parameter("roll_deg", "deg", "relative attitude, rotation about the target x axis (paper phi)", 0.0, True,
-                  lower=-90.0, upper=90.0),
+                  lower=-ATTITUDE_LIMITS_DEG["roll_deg"], upper=ATTITUDE_LIMITS_DEG["roll_deg"]),
         Parameter("pitch_deg", "deg", "relative attitude, rotation about the target y axis (paper theta)", 0.0, True,
-                  lower=-90.0, upper=90.0),
+                  lower=-ATTITUDE_LIMITS_DEG["pitch_deg"], upper=ATTITUDE_LIMITS_DEG["pitch_deg"]),
         Parameter("yaw_deg", "deg", "relative attitude, rotation about the target z axis (paper psi)", 0.0, True,
-                  lower=-180.0, upper=180.0),
-        Parameter("sigma_px", "px", "1-sigma Gaussian centroid noise per image axis", 0.1, False, lower=0.0),
+                  lower=-ATTITUDE_LIMITS_DEG["yaw_deg"], upper=ATTITUDE_LIMITS_DEG["yaw_deg"]),
+        Parameter("sigma_px", "px", "1-sigma Gaussian centroid noise per image axis", 0.1, False, lower=0.0,
+                  upper=100.0),
         Parameter("focal_error_frac", "1", "relative error of the focal length the solver uses (fx and fy scaled by 1 + e)",
                   0.0, False, lower=-0.5, upper=0.5),
-        Parameter("pp_error_u_px", "px", "error of the principal point cx the solver uses", 0.0, False),
-        Parameter("pp_error_v_px", "px", "error of the principal point cy the solver uses", 0.0, False),
+        Parameter("pp_error_u_px", "px", "error of the principal point cx the solver uses", 0.0, False,
+                  lower=-1000.0, upper=1000.0),
+        Parameter("pp_error_v_px", "px", "error of the principal point cy the solver uses", 0.0, False,
+                  lower=-1000.0, upper=1000.0),
         Parameter("k1_error", "1", "error of the radial distortion k1 the solver uses (the lens has the profile's k1)",
                   0.0, False, lower=-1.0, upper=1.0),
         Parameter("merge_px", "px", "spots closer than this in the image merge into one (0: never)", 0.0, True,
-                  lower=0.0),
+                  lower=0.0, upper=1000.0),
         # the paper's test stand (sim.stand): the gimbal turns the phone, the target stays still
         Parameter("stand", "1", "1: the angles turn the phone on the test stand's gimbal about its pivot, range_m is "
                   "the rail position (sim.stand.TestStand); 0: they turn the target in front of the camera", 0.0, True,

@@ -54,8 +54,9 @@ def parse_remedy(text: str) -> tuple[str, float | None]:
         v = float(val)
     except ValueError:
         raise InputError(f"--remedy {text!r}: {val!r} is not a number") from None
-    if not np.isfinite(v) or v <= 0 or (kind == "exposure" and v > 60) or (kind == "spacing" and v > 10):
-        raise InputError(f"--remedy {text!r}: value out of range")
+    hi, unit = {"exposure": (60.0, " s"), "nd": (10.0, ""), "spacing": (10.0, "x")}[kind]
+    if not np.isfinite(v) or v <= 0 or v > hi:
+        raise InputError(f"--remedy {text!r}: expected {kind}=VALUE with VALUE > 0 and <= {hi:g}{unit}, got {val}")
     return (kind, v)
 
 

@@ -179,7 +179,28 @@ def make_config(camera: str, vary, *, fixed=None, method: str = "sobol", n: int 
     _pattern(pattern)
     varied = parse_vary(vary, kind)
     fx = parse_fixed(fixed, kind, varied)
+    _check_envelope(kind, camera, pattern, varied, fx)
     return SensitivityConfig(camera, tuple(varied), fx, method, _check_n(n, method), check_seed(seed), kind.name, pattern)
+
+
+def _check_envelope(kind: TrialKind, camera: str, pattern: str, varied, fixed: dict) -> None:
+    """The range bounds (and a fixed range) inside the envelope ``--range`` takes: the phone's
+    :func:`svgs.identify.range_envelope_m` for the phone's kinds, the paper's design range for the ToF kind."""
+    from svgs.identify import check_range_m
+
+    checks = [(f"--vary range_m {w}", x) for v in varied if v.name == "range_m" for w, x in (("LOW", v.low),
+                                                                                         ("HIGH", v.high))]
+    if "range_m" in fixed:
+        checks.append(("--fixed range_m", fixed["range_m"]))
+    for what, x in checks:
+        if kind.name == "tof":
+            from tof.camera import DESIGN_RANGE_M
+
+            lo, hi = DESIGN_RANGE_M
+            if not lo <= x <= hi:
+                raise InputError(f"{what}: expected {lo:g}-{hi:g} m (the ToF paper's design range), got {x:g}")
+        elif kind.name in ("geometric", "render"):
+            check_range_m(x, camera, pattern, what)
 
 
 # --------------------------------------------------------------------------- designs

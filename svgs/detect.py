@@ -385,6 +385,16 @@ def _resolve_threshold(gray, threshold, k_sigma, peak_fraction):
     return t, bg, sigma
 
 
+def _check_level_below_full_scale(level: float, dtype) -> None:
+    """Refuse a level no pixel of an integer image can pass (foreground is strictly above it)."""
+    if np.issubdtype(dtype, np.integer):
+        top = int(np.iinfo(dtype).max)
+        if level >= top:
+            bits = 8 * np.dtype(dtype).itemsize
+            raise InputError(f"threshold: {level:g} is at or above the largest value of this {bits}-bit image "
+                             f"({top}, a saturated pixel); no pixel can pass it - give a level below {top}")
+
+
 # ------------------------------------------------------------------ components
 def _components(binary: np.ndarray, block: int = COARSE_BLOCK_PX):
     """Connected components (8-connectivity) of a 0/255 uint8 image.
@@ -572,6 +582,7 @@ def detect_blobs(
     centroid = _check_options(centroid, min_area_px, max_area_px, max_blobs)
     sat = _default_saturation(gray.dtype) if saturation_level is None else float(saturation_level)
     level, bg, sigma = _resolve_threshold(gray, threshold, k_sigma, peak_fraction)
+    _check_level_below_full_scale(level, np.asarray(image).dtype)
     meta = dict(threshold_used=level, background_level=bg, noise_sigma=sigma, saturation_level=sat,
                 image_shape=tuple(gray.shape))
     binary = _binarise(gray, level)

@@ -118,6 +118,96 @@ class Envelope:
 #: in the field of view (lateral offsets up to 60 % of the range).
 PAPER_ENVELOPE = Envelope()
 
+# --------------------------------------------------------------------------- the simulator's envelope
+#: The phone sensor's far limit: beyond the range where the pattern spans this many pixels its
+#: four spots merge into one blob (no identification is possible).
+MIN_SPAN_PX = 4.0
+#: The phone sensor's near limit: closer than the range where the pattern spans this many times
+#: the shorter side of the frame (the whole pattern is then far outside the image).
+MAX_FILL = 4.0
+#: Largest absolute attitude angles the simulator takes, degrees (the paper's x-y-z sequence):
+#: roll and pitch turn the target's face away from the camera beyond 90 deg (its reflectors
+#: then return no light); yaw, a turn about the boresight, is one turn at +/-180 deg. The
+#: paper's test envelope (:data:`PAPER_ENVELOPE`) lies inside.
+ATTITUDE_LIMITS_DEG = {"roll_deg": 90.0, "pitch_deg": 90.0, "yaw_deg": 180.0}
+
+
+def range_envelope_m(camera, pattern="svgs-3u") -> tuple[float, float]:
+    """The ranges along the boresight the simulator takes for a camera and a pattern: one
+    definition for ``--range``, range lists, trajectory files and sensitivity bounds.
+
+    Parameters
+    ----------
+    camera : Camera or str
+    pattern : Pattern or str
+
+    Returns
+    -------
+    (near_m, far_m) : tuple of float
+        ``near_m``: the pattern's widest span is :data:`MAX_FILL` times the shorter side of the
+        frame; ``far_m``: it spans :data:`MIN_SPAN_PX` pixels (its spots merge into one).
+    """
+    cam, pat = load_camera(camera), load_pattern(pattern)
+    P = np.asarray(pat.points_m, float)[:, :2]
+    span = float(max(np.linalg.norm(a - b) for a in P for b in P))
+    f = float(np.sqrt(cam.fx * cam.fy))
+    return f * span / (MAX_FILL * min(cam.width, cam.height)), f * span / MIN_SPAN_PX
+
+
+def check_range_m(values, camera, pattern="svgs-3u", what: str = "--range") -> list[float]:
+    """``values`` (m) as floats if every one lies in :func:`range_envelope_m`, else :class:`InputError`.
+
+    Parameters
+    ----------
+    values : float or sequence of float
+        Ranges along the boresight, m.
+    camera, pattern : Camera/Pattern or str
+    what : str
+        The input's name for the message (an option, a file and line, a ``--vary`` bound).
+
+    Raises
+    ------
+    InputError
+        A value that is not a finite number, or outside the envelope; the message names
+        ``what``, the value and the allowed range with its reason.
+    """
+    vals = [float(v) for v in np.atleast_1d(np.asarray(values, float))]
+    cam, pat = load_camera(camera), load_pattern(pattern)
+    near, far = range_envelope_m(cam, pat)
+    for v in vals:
+        if not np.isfinite(v) or v <= 0:
+            raise InputError(f"{what}: expected a range of {near:.2f}-{far:.0f} m, got {v!r}")
+        if v > far:
+            raise InputError(f"{what}: {v:g} m is beyond {far:.0f} m, where the {pat.name} pattern spans fewer than "
+                             f"{MIN_SPAN_PX:g} px on {cam.name} and its spots merge into one (allowed "
+                             f"{near:.2f}-{far:.0f} m)")
+        if v < near:
+            raise InputError(f"{what}: {v:g} m is closer than {near:.2f} m, where the {pat.name} pattern spans more "
+                             f"than {MAX_FILL:g}x the shorter side of the {cam.name} frame (allowed "
+                             f"{near:.2f}-{far:.0f} m)")
+    return vals
+
+
+def check_attitude_deg(name: str, value, what: str | None = None) -> float:
+    """``value`` (deg) as a float if it lies within :data:`ATTITUDE_LIMITS_DEG` of ``name``.
+
+    Parameters
+    ----------
+    name : {"roll_deg", "pitch_deg", "yaw_deg"}
+    value : float
+    what : str, optional
+        The input's name for the message (default ``name``).
+
+    Raises
+    ------
+    InputError
+    """
+    lim = ATTITUDE_LIMITS_DEG[name]
+    v = float(value)
+    if not (np.isfinite(v) and -lim <= v <= lim):
+        raise InputError(f"{what or name}: expected {-lim:g} to {lim:g} deg, got {value!r}")
+    return v
+
 
 @dataclass
 class Identification:
@@ -406,7 +496,8 @@ def identify(
     if n_cand == 0:
         return Failure(
             "no_consistent_set",
-            f"no {n_t} of the {N} blobs match the {pattern.name!r} pattern's geometry over the envelope" + hint,
+            f"no {n_t} of {_blobs_phrase(N, n_all)} match the {pattern.name!r} pattern's geometry over the "
+            "envelope" + hint,
             {**diag, "n_verified": 0, **hint_d},
         )
     order = np.argsort(scores, kind="stable")[:MAX_CANDIDATES]
@@ -459,8 +550,8 @@ def _verified_identification(pts, idx_all, blobs, sets, scores, camera, pattern,
     if rank.size == 0:
         return Failure(
             "no_consistent_set",
-            f"{n_cand} candidate set(s) of the {N} blobs fit the pattern's layout, but no pose reproduces any of them "
-            f"(best approximate residual {float(np.min(pres)):.3g} px)" + hint,
+            f"{n_cand} candidate set(s) of {_blobs_phrase(N, n_all)} fit the pattern's layout, but no pose "
+            f"reproduces any of them (best approximate residual {float(np.min(pres)):.3g} px)" + hint,
             {**diag, "n_verified": 0, **hint_d},
         )
     n_ver = int(rank.size)
@@ -481,8 +572,8 @@ def _unverified_failure(res, n_cand: int, N: int, n_ver: int, max_residual_px: f
     best = float(np.nanmin(res)) if np.any(np.isfinite(res)) else None
     return Failure(
         "no_consistent_set",
-        f"{n_cand} candidate set(s) of the {N} blobs fit the pattern's layout, but none of the {n_ver} solved "
-        f"reproduces it within {max_residual_px:g} px inside the envelope"
+        f"{n_cand} candidate set(s) of {_blobs_phrase(N, diag['n_blobs'])} fit the pattern's layout, but none of "
+        f"the {n_ver} solved reproduces it within {max_residual_px:g} px inside the envelope"
         + (f" (best RMS residual {best:.3g} px)" if best is not None else "") + hint,
         {**diag, "n_verified": n_ver, "best_residual_px": best, **hint_d},
     )
@@ -531,12 +622,25 @@ def _check_options(tolerance_px, max_residual_px, max_blobs, max_verify) -> None
             raise InputError(f"{nm}: expected a positive integer, got {v!r}")
 
 
+def _blobs_phrase(n_used: int, n_found: int) -> str:
+    """"the 12 blobs", or "the 30 brightest of the 40 blobs found" when ``max_blobs`` kept fewer."""
+    if n_used >= n_found:
+        return f"the {n_found} blobs"
+    return f"the {n_used} brightest of the {n_found} blobs found (max_blobs {n_used})"
+
+
+def _threshold_phrase(blobs) -> str:
+    """" above the threshold 250" from a :class:`~svgs.detect.Blobs`' level (empty without one)."""
+    t = getattr(blobs, "threshold_used", None)
+    return f" above the threshold {float(t):g}" if t is not None and np.isfinite(t) else " above the threshold"
+
+
 def _count_failure(n_all: int, blobs, n_t: int, single_spot_area_px):
     """The Failure of a frame with no blob or fewer blobs than targets, else None."""
     base = {"n_blobs": n_all}
     if n_all == 0:
-        return Failure("no_blobs", "no bright blob was found (nothing above the threshold passed the size and "
-                       "shape gates)", base)
+        return Failure("no_blobs", f"no bright blob was found (nothing{_threshold_phrase(blobs)} passed the size "
+                       "and shape gates)", base)
     if n_all < n_t:
         merged = _merged_failure(blobs, n_t, single_spot_area_px)
         if merged is not None:

@@ -127,15 +127,15 @@ def load_image(path, *, say=None) -> np.ndarray:
     Raises
     ------
     InputError
-        The file is missing, empty, or not an image OpenCV can decode.
+        The file is missing, empty, not a regular file, or not an image OpenCV can decode.
     """
-    import cv2
-
     p = Path(path)
     if not p.exists():
         raise InputError(f"image {str(p)!r} does not exist")
     if p.is_dir():
         raise InputError(f"image {str(p)!r} is a directory, not an image file")
+    if not p.is_file():  # /dev/null, a FIFO, a socket: not read (a FIFO would block)
+        raise InputError(f"image {str(p)!r} is not a regular file (a device, FIFO or socket); give an image file")
     if p.stat().st_size == 0:
         raise InputError(f"image {str(p)!r} is empty (0 bytes)")
     if p.suffix.lower() == ".npy":
@@ -145,9 +145,13 @@ def load_image(path, *, say=None) -> np.ndarray:
             raise InputError(f"image {str(p)!r} is not a readable .npy array: {exc}") from None
     else:
         data = np.fromfile(p, dtype=np.uint8)
-        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        img, said = _decode_quietly(data)
         if img is None:
-            raise InputError(f"image {str(p)!r} is corrupt or not an image format OpenCV can read")
+            why = f" ({said})" if said else ""
+            raise InputError(f"image {str(p)!r} is corrupt or not an image format OpenCV can read{why}")
+    if img.ndim == 3 and img.shape[2] not in (3, 4):
+        raise InputError(f"image {str(p)!r}: expected a 2-D grey image (H, W) or a colour one (H, W, 3), got an "
+                         f"array of shape {tuple(img.shape)}")
     if img.ndim == 3 and img.shape[2] == 4:
         img = img[..., :3]
     if img.ndim == 3 and img.shape[2] == 3 and p.suffix.lower() != ".npy":
@@ -170,8 +174,46 @@ def load_image(path, *, say=None) -> np.ndarray:
     return img
 
 
+def _decode_quietly(data: np.ndarray):
+    """``cv2.imdecode`` with what the codec libraries print on the process's stderr (libpng's
+    "libpng error: IDAT: CRC error") captured instead of printed.
+
+    Returns
+    -------
+    image : ndarray or None
+        As ``cv2.imdecode(data, cv2.IMREAD_UNCHANGED)``.
+    said : str
+        The captured lines, joined by "; " (empty when none).
+    """
+    import os
+    import sys
+    import tempfile
+
+    import cv2
+
+    fd = 2  # the process's stderr, where the C libraries write (whatever sys.stderr is)
+    try:
+        sys.stderr.flush()
+    except (AttributeError, OSError, ValueError):
+        pass
+    saved = os.dup(fd)
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), fd)
+        try:
+            img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        finally:
+            os.dup2(saved, fd)
+            os.close(saved)
+        tmp.seek(0)
+        said = "; ".join(ln.strip() for ln in tmp.read().decode("utf-8", "replace").splitlines() if ln.strip())
+    return img, said
+
+
 def check_image_matches_camera(image: np.ndarray, camera: Camera, name: str = "image") -> None:
     """Raise :class:`InputError` unless the image has the camera profile's size."""
+    if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] not in (3, 4)):
+        raise InputError(f"{name}: expected a grey (H, W) or colour (H, W, 3) image of {camera.width} x "
+                         f"{camera.height} px, got an array of shape {tuple(image.shape)}")
     h, w = image.shape[:2]
     if (w, h) != (camera.width, camera.height):
         raise InputError(

@@ -61,7 +61,8 @@ def _resolve(name_or_path, folder: Path, kind: str) -> Path:
     )):
         p = Path(name_or_path)
         if not p.is_file():
-            raise ProfileError(f"{kind} file {str(p)!r} does not exist")
+            what = "is not a regular file (a folder, device, FIFO or socket)" if p.exists() else "does not exist"
+            raise ProfileError(f"{kind} file {str(p)!r} {what}")
         return p
     if not isinstance(name_or_path, str) or not name_or_path:
         raise ProfileError(f"{kind}: expected a name or a path to a .toml file, got {name_or_path!r}")

@@ -127,7 +127,7 @@ def test_messages_name_the_input_and_the_envelope(capsys):
               "spots merge"),
              (["render", "--camera", "galaxy-nexus", "--range", "5", "--spot-samples", "0", "--out", "x"],
               "--spot-samples", "positive"),
-             (["range-sweep", "--camera", "galaxy-nexus", "--ranges", "5", "--jitter-deg", "-1"], "--jitter-deg", ">= 0"),
+             (["range-sweep", "--camera", "galaxy-nexus", "--ranges", "5", "--jitter-deg", "-1"], "--jitter-deg", "0 to 90 deg"),
              (["render-and-solve", "--camera", "tof-epc660", "--range", "5"], "--camera", "time-of-flight"),
              (["tof", "stability", "--range", "40"], "--range", "15")]
     for argv, name, why in cases:

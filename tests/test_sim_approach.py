@@ -64,7 +64,7 @@ def test_angles_take_the_short_way_between_rows(tmp_path):
 
 
 def test_a_trajectory_showing_the_target_s_back_is_refused(nexus, pattern):
-    traj = Trajectory.straight(10.0, 5.0, 5.0, attitude_deg=(0.0, 170.0, 0.0))
+    traj = Trajectory(np.array([0.0, 5.0]), np.array([[10.0, 0, 0, 0, 170.0, 0], [5.0, 0, 0, 0, 0, 0]]), "target")
     with pytest.raises(InputError, match="back of the target"):
         check_visible(traj, [0.0], nexus, pattern)
 
@@ -354,7 +354,7 @@ def test_approach_command_writes_its_outputs_and_resumes(small_camera, small_aut
     (["--from", "-5", "--to", "2", "--duration", "1"], "--from"),
     (["--from", "5", "--to", "2", "--duration", "0"], "--duration"),
     (["--from", "5", "--to", "2", "--duration", "1", "--fps", "40"], "rolling-shutter readout"),
-    (["--from", "5", "--to", "2", "--duration", "1", "--attitude", "0,170,0"], "back of the target"),
+    (["--from", "5", "--to", "2", "--duration", "1", "--attitude", "0,170,0"], "-90 to 90 deg"),
 ])
 def test_approach_bad_input_exits_2_before_any_work(tmp_path, capsys, extra, message):
     out = tmp_path / "never"

@@ -81,9 +81,9 @@ def test_failures_are_values_with_reasons():
 
 
 def test_bad_scenarios_are_input_errors():
-    with pytest.raises(InputError, match="range_m must be > 0"):
+    with pytest.raises(InputError, match="range_m: expected a value > 0 m"):
         geometric_scenario(camera="galaxy-nexus", range_m=0.0)
-    with pytest.raises(InputError, match="sigma_px must be >= 0"):
+    with pytest.raises(InputError, match="sigma_px: expected 0 to 100 px"):
         geometric_scenario(camera="galaxy-nexus", sigma_px=-0.1)
     with pytest.raises(InputError, match="no parameter 'exposure_s'"):
         geometric_scenario(camera="galaxy-nexus", exposure_s=0.01)

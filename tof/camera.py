@@ -28,6 +28,9 @@ DEFAULT_CAMERA = "tof-epc660"
 #: Default marker target (``assets/patterns/tof-8.toml``).
 DEFAULT_PATTERN = "tof-8"
 DEPTH_KINDS = ("radial", "z")
+#: The ToF sensor's range envelope, m: the paper's design range 0.27-15 m (section 2.2), within
+#: the 15 m unambiguous range of its 10 MHz modulation (``--range``, range lists, sensitivity bounds).
+DESIGN_RANGE_M = (0.27, 15.0)
 
 
 #: Tables that only a phone (SVGS) camera profile has.

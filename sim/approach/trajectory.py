@@ -11,6 +11,7 @@ import numpy as np
 
 from svgs.errors import InputError
 from svgs.frames import D_CAM_PHOTO, STATE_KEYS, state_to_pose
+from svgs.identify import ATTITUDE_LIMITS_DEG, check_attitude_deg, check_range_m
 from svgs.profiles import load_camera, load_pattern
 
 from sim.closed_loop import Scenario
@@ -159,6 +160,8 @@ class Trajectory:
         if len(lat) != 2 or len(att) != 3 or not np.all(np.isfinite(lat + att)):
             raise InputError(f"lateral_m/attitude_deg: expected (x, y) m and (roll, pitch, yaw) deg, got {lateral_m!r}, "
                              f"{attitude_deg!r}")
+        for name, v in zip(("roll_deg", "pitch_deg", "yaw_deg"), att):
+            check_attitude_deg(name, v, f"--attitude {name}")
         start = [float(from_m), *lat, *att]
         end = [float(to_m), 0.0, 0.0, 0.0, 0.0, 0.0]
         src = (f"straight approach {float(from_m):g} -> {float(to_m):g} m in {float(duration_s):g} s, lateral {lat} m, "
@@ -173,6 +176,8 @@ class Trajectory:
         :class:`~svgs.errors.InputError` naming the file, the row and the column."""
         p = Path(path)
         where = f"--trajectory {str(path)!r}"
+        if p.exists() and not p.is_file():
+            raise InputError(f"{where}: not a regular file (a folder, device, FIFO or socket); give a CSV file")
         if not p.is_file():
             raise InputError(f"{where}: no such file")
         try:
@@ -218,6 +223,8 @@ class Trajectory:
                     raise InputError(f"{where}: line {n}, column {c}: {row[j]!r} is not a number") from None
                 if not np.isfinite(x):
                     raise InputError(f"{where}: line {n}, column {c}: {row[j]!r} is not finite")
+                if c in ATTITUDE_LIMITS_DEG:  # the envelope --roll/--pitch/--yaw take
+                    check_attitude_deg(c, x, f"{where}: line {n}, column {c}")
                 vals.append(x)
             data.append(vals)
         if len(data) < 2:
@@ -245,6 +252,23 @@ class Trajectory:
         return cls(a[:, 0], values, mount, str(path))
 
 
+def check_envelope(trajectory: Trajectory, camera, pattern) -> None:
+    """Refuse a trajectory with a knot outside the envelope ``--range`` and ``--roll/--pitch/--yaw``
+    take (:func:`svgs.identify.range_envelope_m`, :data:`svgs.identify.ATTITUDE_LIMITS_DEG`).
+
+    Between knots the fields are interpolated linearly, so the knots bound every frame. The
+    range is the boresight range (``mount="target"``) or the rail position (``"stand"``).
+
+    Raises
+    ------
+    InputError
+        Naming the trajectory, the knot's time, the value and the allowed range.
+    """
+    for k, t in enumerate(trajectory.t_s):
+        where = f"trajectory ({trajectory.source}) at t_s = {t:g}"
+        check_range_m(trajectory.values[k, 0], camera, pattern, f"{where}: {trajectory.fields[0]}")
+
+
 def check_visible(trajectory: Trajectory, times_s, camera, pattern, base: Scenario | None = None) -> None:
     """Refuse a trajectory on which the camera cannot see the whole pattern at some frame.
 
@@ -268,6 +292,7 @@ def check_visible(trajectory: Trajectory, times_s, camera, pattern, base: Scenar
     """
     cam = load_camera(camera)
     pat = load_pattern(pattern)
+    check_envelope(trajectory, cam, pat)
     base = base or Scenario(camera=cam, pattern=pat)
     for t in np.asarray(times_s, float):
         try:
