@@ -48,7 +48,7 @@ def test_study_writes_report_csv_and_summary(tmp_path, capsys, monkeypatch):
     (["--views-list", "2,5"], "minimum 3"),
     (["--views-list", "five"], "not a number"),
     (["--true-dist", "0.1,0"], "5 numbers"),
-    (["--true-pp-offset-px", "9000", "0"], "outside"),
+    (["--true-pp-offset-px", "9000", "0"], "expected -1000 to 1000 px"),
     (["--focal-ranges", "0.01"], "closer than"),  # the validation layer: the phone's range envelope
     (["--cols", "2"], "at least 3"),
     (["--subsets", "0"], "--subsets"),

@@ -67,7 +67,7 @@ def test_render_and_solve_cli_writes_outputs(tmp_path, capsys):
         (["range-sweep", "--camera", "galaxy-nexus", "--ranges", "a,b"], "--ranges"),
         (["range-sweep", "--camera", "galaxy-nexus", "--ranges", "5", "--trials", "0"], "--trials"),
         (["exposure-study", "--camera", "galaxy-nexus", "--remedy", "magic=3"], "--remedy"),
-        (["exposure-study", "--camera", "galaxy-nexus", "--remedy", "nd=-1"], "out of range"),
+        (["exposure-study", "--camera", "galaxy-nexus", "--remedy", "nd=-1"], r"nd=VALUE with VALUE > 0 and <= 10, got -1"),
     ],
 )
 def test_bad_input_exit_2(argv, match, capsys, tmp_path, monkeypatch):
