@@ -1,12 +1,13 @@
 # Quick start: `make demo` runs a render-and-solve demo, `make test` runs the tests.
 # `make test-fast`: the tests that neither render nor are slow (markers in pyproject.toml), under a minute.
+# `make docs`: the documentation site (docs/_build/html/index.html): pages, API reference, gallery.
 # Each bootstraps its own virtual environment in .venv (Python 3.11+, pip).
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-fast venv clean bench
+.PHONY: demo test test-fast venv clean bench docs
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -31,8 +32,20 @@ test: $(STAMP)
 test-fast: $(STAMP)
 	$(PY) -m pytest -q -m "not slow and not render"
 
+DOCS_STAMP := $(VENV)/.installed-docs
+
+$(DOCS_STAMP): $(STAMP)
+	$(PY) -m pip install --progress-bar off -e ".[docs]"
+	touch $(DOCS_STAMP)
+
+# -W: a warning (a broken link between the pages, a page missing from the index, a docstring
+# Sphinx cannot read) fails the build
+docs: $(DOCS_STAMP)
+	$(PY) -m sphinx -b html -W --keep-going -q docs docs/_build/html
+	@echo "docs: docs/_build/html/index.html"
+
 bench: $(STAMP)
 	for b in benchmarks/bench_*.py; do $(PY) $$b || exit 1; done
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build *.egg-info docs/_build docs/api/generated docs/auto_gallery docs/sg_execution_times.rst

@@ -5,10 +5,10 @@
     scenario names the views (``view_indices``) and the detections file in the study
     folder (``inputs``); the trial draws no random numbers.
 ``calibration-focal``
-    One (range set, added noise) case of the paper's focal method (:mod:`.focal`) on the
+    One (range set, added noise) case of the paper's focal method (:mod:`studies.calibration.focal`) on the
     focal frames file in the study folder.
 ``calibration-pose``
-    One (believed camera, noise level, range) cell of the pose-error study (:mod:`.pose`):
+    One (believed camera, noise level, range) cell of the pose-error study (:mod:`studies.calibration.pose`):
     the true and the believed camera are scenario columns (``true_*``, ``solver_*``).
 
 Seeds. The study's parts each read one random stream whose seed is derived from the study
