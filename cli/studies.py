@@ -254,7 +254,9 @@ def cmd_campaign(args) -> int:
     if args.merge_px:
         argv += ["--merge-px", repr(args.merge_px)]
     argv += executor_argv(args)
-    with text_to_stderr(args.json):
+    from cli.outdir import output_folder
+
+    with output_folder(out), text_to_stderr(args.json):  # --out made and probed before any work
         summary, stats, path, config = run_campaign(config, out, spec, chunk_size=args.chunk_size,
                                                     progress=not args.no_progress, command=shlex.join(argv))
         print_summary(summary, config)
@@ -278,7 +280,9 @@ def cmd_merge_range(args) -> int:
         argv += ["--vary", f"{p}={lo:g}:{hi:g}"]
     argv += ["--exposures", str(config.exposures), "--out", str(out), "--seed", str(config.seed),
              "--pattern", config.pattern] + executor_argv(args)
-    with text_to_stderr(args.json):
+    from cli.outdir import output_folder
+
+    with output_folder(out), text_to_stderr(args.json):  # --out made and probed before any work
         cases, eff, stats, path = run_merge_range(config, out, spec, chunk_size=args.chunk_size,
                                                   progress=not args.no_progress, command=shlex.join(argv))
         nom = cases[0]
@@ -318,7 +322,9 @@ def cmd_sensitivity(args) -> int:
         argv += ["--fixed", v]
     argv += ["--method", args.method, "--n", str(args.n), "--out", out, "--seed", str(args.seed),
              "--trial-kind", args.trial_kind, "--pattern", args.pattern] + executor_argv(args)
-    with text_to_stderr(args.json):
+    from cli.outdir import output_folder
+
+    with output_folder(out), text_to_stderr(args.json):  # --out made and probed before any work
         print(f"{args.method}: {config.n_trials} trials over {len(config.varied)} parameters", file=sys.stderr)
         result, stats, path, n_groups = run_sensitivity(config, out, spec, chunk_size=args.chunk_size,
                                                         progress=not args.no_progress, command=shlex.join(argv))
