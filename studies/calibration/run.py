@@ -144,7 +144,24 @@ def _setup(camera, *, views_list, seed, board, subsets, spp, geometric, true_pp_
         "pattern": pat.name, "pose_spread": dict(POSE_SPREAD),
     }
     seeds = dict(zip(("board_set", "convergence", "focal_frames", "focal_study", "pose"), spawn_seeds(seed, 5)))
+    _check_board_poses(board, cam_true, vl[-1], seeds["board_set"], true_pp_offset_px, true_dist)
     return _Setup(nominal, cam_true, pat, _pattern_ref(pattern, pat), board, config, seeds)
+
+
+def _check_board_poses(board: Board, cam_true: Camera, n_views: int, seed: int, pp_offset_px, dist) -> None:
+    """Draw the board set's poses as the study will (the same seed): :class:`InputError` naming the
+    options when the true camera leaves no pose with the whole board in its image - before any
+    store or render."""
+    from calibration.synthetic import sample_board_poses
+
+    try:
+        sample_board_poses(board, cam_true, n_views, seed=seed)
+    except InputError:
+        raise InputError(
+            f"--true-dist {','.join(f'{float(x):g}' for x in dist)} / --true-pp-offset-px "
+            f"{' '.join(f'{float(x):g}' for x in pp_offset_px)}: the true camera bends or shifts its "
+            f"{cam_true.width} x {cam_true.height} px image so far that no pose keeps the whole board "
+            f"({board.describe()}) inside it; give a smaller distortion or offset") from None
 
 
 def manifest(setup: _Setup) -> dict:
