@@ -73,6 +73,18 @@ def test_the_corrected_calibration_study_runs_into_the_refused_folder(tmp_path, 
     assert (out / "summary.json").is_file()
 
 
+@pytest.mark.slow
+def test_a_calibration_study_refused_after_its_trials_started_leaves_nothing(tmp_path, capsys):
+    """Refused once the board set is drawn and detected (a fine 40 x 30 board is not found in every
+    view): the trials folder this run made is removed with its stores and detection cache."""
+    out = tmp_path / "study"
+    argv = [a for a in STUDY if a not in ("--pose-ranges", "2,5,10,20,30")] + ["--pose-ranges", "2,5"]
+    rc = main(argv + ["--board", "chessboard", "--cols", "40", "--rows", "30", "--spacing-mm", "5", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "board was found in only" in err and "Traceback" not in err
+    assert not out.exists()
+
+
 # --------------------------------------------------------------------------- the store
 COLS = ["trial_id", "seed", "x"]
 

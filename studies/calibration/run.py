@@ -21,6 +21,7 @@ quick looks). Nothing here imports Mitsuba at import time.
 from __future__ import annotations
 
 import contextlib
+import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -554,11 +555,21 @@ def run_calibration_study(camera, out_dir, *, views_list=DEFAULT_VIEWS_LIST, see
         raise InputError(f"--out {str(out)!r} exists and is not a folder")
     spec = spec or executor_spec(processes=0)
     check_executor(spec)  # Dask importable, scheduler reachable: before any work
+    made = not (out / "trials").exists()
     runner = _Runner(out, manifest(s), spec, chunk_size, show_progress)
     timings = {}
     try:
         set_info, conv_rows, conv, frames, focal_rows, f_est, believed, pose_rows, floor = _run_parts(
             s, runner, board_set_dir, focal_cache, say, timings)
+    except InputError:
+        runner.close()
+        if made:
+            # refused (e.g. the board found in fewer views than asked, no focal frame identified):
+            # nothing is left. Its stores could serve only a rerun with these inputs, which is
+            # refused again; a corrected rerun would be refused for other parameters, and a kept
+            # detections cache would be reused by it. An interrupt (not a refusal) keeps the trials.
+            shutil.rmtree(out / "trials", ignore_errors=True)
+        raise
     finally:
         runner.close()
     t4 = table4_comparison([r for r in pose_rows if r["case"] in floor and not (r["case"] == "exact" and r["noise_px"] == 0)],
