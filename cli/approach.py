@@ -150,8 +150,10 @@ def cmd_approach(args) -> int:
     from cli.json_out import emit, text_to_stderr
     from studies.approach import run_approach
 
+    from cli.outdir import output_folder
+
     cfg = config_from_args(args)
-    with text_to_stderr(args.json):
+    with output_folder(args.out), text_to_stderr(args.json):  # --out made and probed before any work
         s = run_approach(cfg, args.out, progress=not args.no_progress, command=command_line(args),
                          overlap_render=args.overlap_render)
         print_summary(s)

@@ -65,16 +65,20 @@ def cmd_focal(args) -> int:
         raise InputError(f"give one --range per --image: got {len(args.image)} images and {len(args.range)} ranges")
     camera = Camera.load(args.camera)
     pattern = Pattern.load(args.pattern)
-    est = estimate_focal_from_images(
-        args.image, args.range, camera, pattern, threshold=_threshold(args.threshold),
-        centroid_sigma_px=args.centroid_sigma_px, range_sigma_m=args.range_sigma_m, allow_roll=not args.no_roll,
-    )
-    out_path = None
-    if args.out:
-        cam = est.to_camera(camera)
-        if args.name:
-            cam = cam.replace(name=args.name)
-        out_path = str(cam.save(args.out))
+    threshold = _threshold(args.threshold)
+    from cli.outdir import output_file_if
+
+    with output_file_if(args.out):  # its folder made and probed before the work; removed again if refused
+        est = estimate_focal_from_images(
+            args.image, args.range, camera, pattern, threshold=threshold,
+            centroid_sigma_px=args.centroid_sigma_px, range_sigma_m=args.range_sigma_m, allow_roll=not args.no_roll,
+        )
+        out_path = None
+        if args.out:
+            cam = est.to_camera(camera)
+            if args.name:
+                cam = cam.replace(name=args.name)
+            out_path = str(cam.save(args.out))
     if args.json:
         d = est.to_json()
         d.update(camera=camera.name, fx_px_before=camera.fx, out=out_path)
@@ -164,16 +168,19 @@ def cmd_board(args) -> int:
     names = [f.name for f in files]
     if len(set(names)) != len(names):
         names = [str(f) for f in files]
-    cal = calibrate_images(
-        files, board, names=names, min_views=args.min_views,
-        fix_aspect=args.fix_aspect, aspect_ratio=args.aspect_ratio,
-        fix_principal_point=args.fix_principal_point,
-        principal_point=None if args.principal_point is None else tuple(args.principal_point),
-        zero_tangent=args.zero_tangent, fix_k3=args.fix_k3,
-    )
-    name = args.name or (base.name if base is not None else "calibrated")
-    cam = cal.to_camera(name=name, base=base)
-    out_path = str(cam.save(args.out)) if args.out else None
+    from cli.outdir import output_file_if
+
+    with output_file_if(args.out):  # its folder made and probed before the work; removed again if refused
+        cal = calibrate_images(
+            files, board, names=names, min_views=args.min_views,
+            fix_aspect=args.fix_aspect, aspect_ratio=args.aspect_ratio,
+            fix_principal_point=args.fix_principal_point,
+            principal_point=None if args.principal_point is None else tuple(args.principal_point),
+            zero_tangent=args.zero_tangent, fix_k3=args.fix_k3,
+        )
+        name = args.name or (base.name if base is not None else "calibrated")
+        cam = cal.to_camera(name=name, base=base)
+        out_path = str(cam.save(args.out)) if args.out else None
     if args.json:
         d = cal.to_json()
         d["out"] = out_path

@@ -149,11 +149,13 @@ def cmd_render_board(args) -> int:
         raise InputError(f"--out {str(out)!r} exists and is not a folder")
     if out.is_dir() and (out / "truth.json").exists():
         raise InputError(f"--out {str(out)!r} already holds a rendered set (truth.json); choose an empty folder")
+    from cli.outdir import output_folder
     from sim.boards import render_board_set
 
     progress = None if args.json else (lambda s: print(s, file=sys.stderr))
-    bs = render_board_set(cam, board, n, seed=args.seed, spp=spp, pinhole=args.pinhole,
-                          exposure_fill=args.exposure_fill, out_dir=out, progress=progress)
+    with output_folder(out):  # made and probed before the renders; removed again if refused
+        bs = render_board_set(cam, board, n, seed=args.seed, spp=spp, pinhole=args.pinhole,
+                              exposure_fill=args.exposure_fill, out_dir=out, progress=progress)
     c = bs.camera
     if args.json:
         print(json.dumps({"ok": True, "out": str(out), "n_views": len(bs), "board": board.to_json(),
@@ -253,25 +255,23 @@ def cmd_study(args) -> int:
     exposures = _positive_int(args.focal_exposures, "--focal-exposures")
     ppr = _positive_int(args.poses_per_range, "--poses-per-range")
     spp = _positive_int(args.spp, "--spp")
+    from cli.outdir import output_folder, output_folder_if
+
     out = Path(args.out or f"calibration-study-{cam.name}")
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {str(out)!r} exists and is not a folder")
     cache = Path(args.cache) if args.cache else None
-    if cache is not None:
-        if cache.exists() and not cache.is_dir():
-            raise InputError(f"--cache {str(cache)!r} exists and is not a folder")
-        cache.mkdir(parents=True, exist_ok=True)
     spec = executor_from_args(args)
     warn_processes(spec)
     say = lambda s: print(s, file=sys.stderr)
-    res = run_calibration_study(
-        cam, out, views_list=views, seed=args.seed, board=board, subsets=subsets, spp=spp, geometric=args.geometric,
-        true_pp_offset_px=tuple(args.true_pp_offset_px), true_dist=true_dist, focal_ranges_m=focal_ranges,
-        focal_exposures=exposures, pose_ranges_m=pose_ranges, poses_per_range=ppr, pattern=args.pattern,
-        board_set_dir=None if cache is None else cache / "board-set",
-        focal_cache=None if cache is None else cache / "focal_frames.npz", progress=say,
-        spec=spec, chunk_size=args.chunk_size, show_progress=not args.no_progress,
-    )
+    # both made and probed before any work; removed again if refused (the study removes its trials then)
+    with output_folder(out), output_folder_if(cache, "--cache"):
+        res = run_calibration_study(
+            cam, out, views_list=views, seed=args.seed, board=board, subsets=subsets, spp=spp, geometric=args.geometric,
+            true_pp_offset_px=tuple(args.true_pp_offset_px), true_dist=true_dist, focal_ranges_m=focal_ranges,
+            focal_exposures=exposures, pose_ranges_m=pose_ranges, poses_per_range=ppr, pattern=args.pattern,
+            board_set_dir=None if cache is None else cache / "board-set",
+            focal_cache=None if cache is None else cache / "focal_frames.npz", progress=say,
+            spec=spec, chunk_size=args.chunk_size, show_progress=not args.no_progress,
+        )
     command = _study_command(args)
     files = write_report(res, out, command=command)
     with text_to_stderr(args.json):

@@ -59,10 +59,12 @@ def cmd_exposure_study(args) -> int:
     if args.trials < 1:
         raise InputError(f"--trials must be >= 1, got {args.trials}")
     cfg = make_config(args.camera, ranges, args.remedy, trials=args.trials, seed=args.seed)
+    from cli.outdir import output_folder
+
     out = Path(args.out or f"exposure-study-{Path(str(args.camera)).stem}")
     if announce_plan(args, "render", cfg.n_trials, len(cfg.ranges_m) * len(cfg.remedies), spec):
         return 0
-    with text_to_stderr(args.json):
+    with output_folder(out), text_to_stderr(args.json):  # --out made and probed before any work
         lines, stats = run_exposure_study(cfg, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress)
         print("\n".join(lines))
         print_run_stats(stats)

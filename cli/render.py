@@ -81,12 +81,19 @@ def cmd_render(args) -> int:
     if not (args.range_m == args.range_m) or args.range_m <= 0:
         raise InputError(f"--range: expected a positive range in metres, got {args.range_m}")
     R, t = pose_from_scenario(args.range_m, args.target_x_m, args.target_y_m, args.roll, args.pitch, args.yaw)
+    if args.focus_m is not None and not (np.isfinite(args.focus_m) and args.focus_m > 0):
+        raise InputError(f"--focus-m: expected a positive distance in metres, got {args.focus_m}")
+    from cli.outdir import output_folder
 
+    with output_folder(args.out):  # made and probed before the render; removed again if refused
+        return _render(args, camera, pattern, R, t)
+
+
+def _render(args, camera, pattern, R, t) -> int:
+    """``svgs render`` once its inputs are checked and ``--out`` is ready."""
     from render.api import Renderer
     from render.constants import DEFAULT_ROI_SPP, DEFAULT_ROI_SPP_PATH, DEFAULT_SPOT_SAMPLES, DEFAULT_SPP
 
-    if args.focus_m is not None and not (np.isfinite(args.focus_m) and args.focus_m > 0):
-        raise InputError(f"--focus-m: expected a positive distance in metres, got {args.focus_m}")
     focus = float(np.linalg.norm(t)) if args.focus_m is None else float(args.focus_m)  # autofocus, as render-and-solve
     opts = {"focus_distance_m": focus} if args.body is None else {"body": args.body, "focus_distance_m": focus}
     spp = DEFAULT_SPP if args.spp is None else args.spp

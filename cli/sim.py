@@ -132,12 +132,20 @@ def write_outputs(out: Path, frame, row, crlb=None, threshold=None) -> dict:
 
 
 def cmd_render_and_solve(args) -> int:
-    from sim.closed_loop import expose_and_solve, render_scenario
+    from cli.outdir import output_folder_if
 
     _check_camera_renderable(args.camera)
     scen = _scenario(args)
     thr = _threshold(args.threshold)
+    with output_folder_if(args.out):  # made and probed before the render; removed again if refused
+        return _render_and_solve(args, scen, thr)
+
+
+def _render_and_solve(args, scen, thr) -> int:
+    """``svgs render-and-solve`` once its inputs are checked and ``--out`` is ready."""
     import time
+
+    from sim.closed_loop import expose_and_solve, render_scenario
 
     t0 = time.perf_counter()
     print(f"rendering {scen.camera.name} at {scen.distance_m:g} m (Mitsuba) ...", file=sys.stderr, flush=True)
@@ -217,10 +225,12 @@ def cmd_range_sweep(args) -> int:
              "exposure_s": args.exposure_s or 0.0, "iso": args.iso or 0.0}
     cfg = make_config(args.camera, ranges, trials=args.trials, poses=args.poses, jitter_deg=args.jitter_deg,
                       jitter_m=args.jitter_m, seed=args.seed, **scene)
+    from cli.outdir import output_folder
+
     out = Path(args.out or f"range-sweep-{Path(str(args.camera)).stem}")
     if announce_plan(args, "render", cfg.n_trials, len(cfg.ranges_m) * cfg.poses, spec):
         return 0
-    with text_to_stderr(args.json):
+    with output_folder(out), text_to_stderr(args.json):
         table, stats = run_range_sweep(cfg, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress)
         print("\n".join(format_table(table)))
         print_run_stats(stats)

@@ -130,7 +130,6 @@ def print_solution(result, out=None) -> None:
 
 
 def cmd_solve(args) -> int:
-    from svgs.pipeline import solve_image
     from svgs.profiles import Camera, Pattern
 
     camera = Camera.load(args.camera)
@@ -139,23 +138,30 @@ def cmd_solve(args) -> int:
         raise InputError(f"--sigma-px: expected a positive number of pixels, got {args.sigma_px}")
     if args.consistency_sigma_px is not None:
         check_finite_positive(args.consistency_sigma_px, "--consistency-sigma-px")
-    from svgs.pipeline import load_image
-
-    from svgs.detect import detect_blobs
-    from svgs.pipeline import check_image_matches_camera
+    from svgs.pipeline import check_image_matches_camera, load_image
 
     image = load_image(args.image)
     check_image_matches_camera(image, camera)
     from svgs.pipeline import camera_threshold
 
     thr = camera_threshold(image, camera, parse_threshold(args.threshold))
+    from cli.outdir import output_folder_if
+
+    with output_folder_if(args.out):  # made and probed before the solve; removed again if refused
+        return _solve(args, image, camera, pattern, thr)
+
+
+def _solve(args, image, camera, pattern, thr) -> int:
+    """``svgs solve`` once its inputs are checked and ``--out`` is ready."""
+    from svgs.detect import detect_blobs
+    from svgs.pipeline import solve_image
+
     blobs = detect_blobs(image, threshold=thr)  # once: for the solve and for the overlay
     result = solve_image(image, camera, pattern, threshold=thr, sigma_px=args.sigma_px, blobs=blobs,
                          consistency_sigma_px=args.consistency_sigma_px)
     d = solution_json(result)
     if args.out:
         out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
         d["outputs"] = {"overlay": write_solution_overlay(out / "overlay.png", image, camera, pattern, result, thr,
                                                           blobs=blobs),
                         "solution": str(out / "solution.json")}

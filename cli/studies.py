@@ -314,7 +314,9 @@ def cmd_campaign(args) -> int:
                          ("the rendered focal calibration first",
                           config.trial_kind == "render" and config.calibration == "paper")) if on)):
         return 0
-    with text_to_stderr(args.json):
+    from cli.outdir import output_folder
+
+    with output_folder(out), text_to_stderr(args.json):  # --out made and probed before any work
         summary, stats, path, config = run_campaign(config, out, spec, chunk_size=args.chunk_size,
                                                     progress=not args.no_progress, command=shlex.join(argv))
         print_summary(summary, config)
@@ -342,7 +344,9 @@ def cmd_merge_range(args) -> int:
     if announce_plan(args, "render", n_cases * len(config.ranges_m) * config.exposures,
                      n_cases * len(config.ranges_m), spec):
         return 0
-    with text_to_stderr(args.json):
+    from cli.outdir import output_folder
+
+    with output_folder(out), text_to_stderr(args.json):  # --out made and probed before any work
         cases, eff, stats, path = run_merge_range(config, out, spec, chunk_size=args.chunk_size,
                                                   progress=not args.no_progress, command=shlex.join(argv))
         nom = cases[0]
@@ -388,7 +392,9 @@ def cmd_sensitivity(args) -> int:
                      note=f"{args.method} over {len(config.varied)} parameter(s)"
                      + ("; renders at most" if renders > 1 else "")):
         return 0
-    with text_to_stderr(args.json):
+    from cli.outdir import output_folder
+
+    with output_folder(out), text_to_stderr(args.json):  # --out made and probed before any work
         result, stats, path, n_groups = run_sensitivity(config, out, spec, chunk_size=args.chunk_size,
                                                         progress=not args.no_progress, command=shlex.join(argv))
         label = "ST" if args.method == "sobol" else "mu*"

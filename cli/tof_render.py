@@ -171,6 +171,16 @@ def scenario_from_args(args):
 
 
 def cmd_render_and_solve(args) -> int:
+    _check_args(args)
+    sc = scenario_from_args(args)
+    from cli.outdir import output_folder_if
+
+    with output_folder_if(args.out):  # made and probed before the render; removed again if refused
+        return _render_and_solve(args, sc)
+
+
+def _render_and_solve(args, sc) -> int:
+    """``svgs tof render-and-solve`` once its inputs are checked and ``--out`` is ready."""
     from svgs.frames import state_dict
     from cli.tof import print_solution, solution_json
 
@@ -178,8 +188,6 @@ def cmd_render_and_solve(args) -> int:
     from sim.tof_closed_loop import pipeline_overrides, render, solve_frames
     from studies.progress import progress_bar
 
-    _check_args(args)
-    sc = scenario_from_args(args)
     if not args.json:
         print(f"rendering {sc.camera} / {sc.pattern} at {args.range_m:g} m ...", file=sys.stderr)
     tof_render = render(sc)

@@ -115,7 +115,7 @@ def check_stability_args(args):
     from sim.tof_closed_loop import check_in_view
     from sim.tof_stability import check_frames, stability_scenario
 
-    from cli.validate import check_out_dir
+    from cli.outdir import check_output_folder
 
 
     r = check_finite(args.range_m, "--range")
@@ -128,7 +128,7 @@ def check_stability_args(args):
     if not 1 <= args.bounces <= 4:
         raise InputError(f"--bounces: expected 1..4, got {args.bounces}")
     if args.out:
-        check_out_dir(args.out)
+        check_output_folder(args.out)
     sc = stability_scenario(r, camera=args.camera, pattern=args.pattern, seed=args.seed, spp=args.spp,
                             rim_spp_factor=args.rim_spp_factor, max_bounces=args.bounces,
                             scene_options=tuple(scene_options(args).items()), ambient_lux=args.ambient_lux)
@@ -217,11 +217,19 @@ def plot_stability(path, run: dict, s: dict) -> None:
 
 
 def cmd_stability(args) -> int:
+    from cli.outdir import output_folder_if
+
+    sc = check_stability_args(args)
+    with output_folder_if(args.out):  # made and probed before the render; removed again if refused
+        return _stability(args, sc)
+
+
+def _stability(args, sc) -> int:
+    """``svgs tof stability`` once its inputs are checked and ``--out`` is ready."""
     from sim.tof_closed_loop import render
     from sim.tof_stability import run_stability, summary
     from studies.progress import progress_bar
 
-    sc = check_stability_args(args)
     if not args.json:
         print(f"rendering {sc.camera} / {sc.pattern} at {args.range_m:g} m ...", file=sys.stderr)
     tof_render = render(sc)
@@ -266,8 +274,8 @@ def cmd_study(args) -> int:
     from sim.tof_stability import check_frames
     from studies.tof_study import TofStudyConfig, run_study
 
+    from cli.outdir import check_output_folder, output_folder, output_folder_if
     from cli.studies import executor_from_args, warn_processes
-    from cli.validate import check_out_dir
 
     longs = (("--long-frames", args.long_frames),) if args.long_frames else ()
     for flag, v in (("--frames", args.frames), ("--variant-frames", args.variant_frames), ("--sweep-frames", args.sweep_frames),
@@ -279,14 +287,18 @@ def cmd_study(args) -> int:
     _check_common(args)
     spec = executor_from_args(args)
     warn_processes(spec)
-    out = check_out_dir(args.out if args.out is not None else default_study_out())
+    out_arg = args.out if args.out is not None else default_study_out()
+    if args.store:
+        check_output_folder(args.store, "--store")  # at once (the layer checks --out), nothing made
     load_scene(args.camera, args.pattern)  # a bad profile is refused before any work
     cfg = TofStudyConfig(camera=args.camera, pattern=args.pattern, frames=args.frames, variant_frames=args.variant_frames,
                          sweep_frames=args.sweep_frames, long_frames=args.long_frames, seed=args.seed, spp=args.spp,
                          rim_spp_factor=args.rim_spp_factor, ambient_lux=args.ambient_lux,
                          scene=tuple(scene_options(args).items()))
-    res = run_study(cfg, out, spec, store_dir=args.store, chunk_size=args.chunk_size, argv=sys.argv[1:],
-                    quiet=args.json or args.no_progress)
+    # both folders made and probed before any work; removed again if the run is refused
+    with output_folder(out_arg) as out, output_folder_if(args.store, "--store"):
+        res = run_study(cfg, out, spec, store_dir=args.store, chunk_size=args.chunk_size, argv=sys.argv[1:],
+                        quiet=args.json or args.no_progress)
     if args.json:
         print(json.dumps(res, default=json_default))
     else:

@@ -26,7 +26,6 @@ nothing written). Commands keep their own, more specific checks after this one.
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 
 from svgs.errors import InputError
@@ -81,44 +80,26 @@ def _flag(action) -> str:
 
 
 def check_out_dir(path, flag: str = "--out") -> Path:
-    """An output folder that exists (and is a writable folder) or can be made.
+    """An output folder that takes a file (a probe written and removed), or could be made in a
+    folder that does: :func:`cli.outdir.check_output_folder` (nothing made; not fooled as root).
 
     Raises
     ------
     InputError
-        An existing file, an unwritable folder, or a parent that is a file or unwritable;
-        the message names ``flag``.
+        An existing file, or a folder (or the folder it would be made in) that is not one or
+        does not take a file; the message names ``flag``.
     """
-    p = Path(path)
-    if p.exists():
-        if not p.is_dir():
-            raise InputError(f"{flag}: {str(p)!r} exists and is not a folder")
-        if not os.access(p, os.W_OK | os.X_OK):
-            raise InputError(f"{flag}: folder {str(p)!r} is not writable")
-        return p
-    _check_parent(p, flag)
-    return p
+    from cli.outdir import check_output_folder
+
+    return check_output_folder(path, flag)
 
 
 def check_out_file(path, flag: str = "--out") -> Path:
-    """An output file: not a folder, in a folder that exists or can be made and is writable."""
-    p = Path(path)
-    if p.is_dir():
-        raise InputError(f"{flag}: {str(p)!r} is a folder; expected a file name")
-    if p.exists() and not os.access(p, os.W_OK):
-        raise InputError(f"{flag}: file {str(p)!r} is not writable")
-    _check_parent(p, flag)
-    return p
+    """An output file: not a folder, in a folder that takes a file or could be made
+    (:func:`cli.outdir.check_output_file`)."""
+    from cli.outdir import check_output_file
 
-
-def _check_parent(p: Path, flag: str) -> None:
-    parent = p.absolute().parent
-    while not parent.exists():
-        parent = parent.parent
-    if not parent.is_dir():
-        raise InputError(f"{flag}: cannot make {str(p)!r}: {str(parent)!r} is not a folder")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise InputError(f"{flag}: cannot make {str(p)!r}: {str(parent)!r} is not writable")
+    return check_output_file(path, flag)
 
 
 def parse_range_list(text, flag: str) -> list[float]:

@@ -17,6 +17,9 @@ Guarantees
     - A rerun whose parameters differ from ``manifest.json`` is refused with the list of
       differences (:class:`~svgs.errors.InputError`) before any work starts.
     - A malformed row is never counted as a result (see below).
+    - A store made by a run that ends before its first row is stored (refused, or stopped at
+      once) is removed again when it closes (:meth:`ResultStore.close`): a refused run leaves
+      nothing behind, and the corrected rerun into the same folder runs.
 
 Malformed rows
     Every complete data row is checked on open and on read: it has one field per column,
@@ -304,6 +307,16 @@ def _diff(a: dict, b: dict, prefix: str = "") -> list[str]:
     return out
 
 
+def _missing_dirs(path: Path) -> list[Path]:
+    """The folders of ``path`` (itself included) that do not exist yet, outermost first."""
+    missing = []
+    q = Path(path).absolute()
+    while not q.exists() and q != q.parent:
+        missing.append(q)
+        q = q.parent
+    return missing[::-1]
+
+
 class ResultStore:
     """The results of one study in directory ``out_dir``.
 
@@ -354,8 +367,10 @@ class ResultStore:
         self._lock_fd = None
         self._fd = None
         self._done: set[int] = set()
+        self._fresh = False  # this store wrote the manifest: it holds nothing from an earlier run
         if self.dir.exists() and not self.dir.is_dir():
             raise InputError(f"--out: {str(self.dir)!r} exists and is not a directory")
+        self._made_dirs = _missing_dirs(self.dir)
         try:
             self.dir.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
@@ -406,6 +421,7 @@ class ResultStore:
                 os.fsync(fh.fileno())
             os.replace(tmp, self.manifest_path)
             _fsync_dir(self.dir)
+            self._fresh = True
 
     # ------------------------------------------------------------------ open / close
     def open(self) -> ResultStore:
@@ -509,12 +525,38 @@ class ResultStore:
               "as results); trials without a good row run again")
 
     def close(self) -> None:
+        """Release the file and the lock. A store this run made that ends without a stored row (the
+        run was refused or stopped before its first trial finished) is removed again - its
+        ``manifest.json``, the empty ``results.csv``, ``.lock`` and the folders made for it - so
+        that a corrected rerun into the same folder is not refused for other parameters. A
+        folder holding anything else is kept as it is."""
         if self._fd is not None:
             os.close(self._fd)
             self._fd = None
         if self._lock_fd is not None:
             os.close(self._lock_fd)  # releases the flock
             self._lock_fd = None
+            if self._fresh and not self._done:
+                self._remove_unused()
+
+    def _remove_unused(self) -> None:
+        """Remove this run's store files and folders when no row was stored (see :meth:`close`)."""
+        header = len(",".join(self.columns)) + 1
+        try:
+            names = set(os.listdir(self.dir))
+            if names - {MANIFEST, RESULTS, LOCK} or (RESULTS in names and self.results_path.stat().st_size > header):
+                return  # something else is there (or a row): keep the study as it is
+            for name in (RESULTS, MANIFEST, LOCK):
+                if name in names:
+                    (self.dir / name).unlink()
+        except OSError:
+            return
+        self._fresh = False
+        for d in reversed(self._made_dirs):
+            try:
+                d.rmdir()
+            except OSError:
+                return
 
     def __enter__(self):
         return self.open()

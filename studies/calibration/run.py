@@ -21,6 +21,7 @@ quick looks). Nothing here imports Mitsuba at import time.
 from __future__ import annotations
 
 import contextlib
+import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -144,7 +145,24 @@ def _setup(camera, *, views_list, seed, board, subsets, spp, geometric, true_pp_
         "pattern": pat.name, "pose_spread": dict(POSE_SPREAD),
     }
     seeds = dict(zip(("board_set", "convergence", "focal_frames", "focal_study", "pose"), spawn_seeds(seed, 5)))
+    _check_board_poses(board, cam_true, vl[-1], seeds["board_set"], true_pp_offset_px, true_dist)
     return _Setup(nominal, cam_true, pat, _pattern_ref(pattern, pat), board, config, seeds)
+
+
+def _check_board_poses(board: Board, cam_true: Camera, n_views: int, seed: int, pp_offset_px, dist) -> None:
+    """Draw the board set's poses as the study will (the same seed): :class:`InputError` naming the
+    options when the true camera leaves no pose with the whole board in its image - before any
+    store or render."""
+    from calibration.synthetic import sample_board_poses
+
+    try:
+        sample_board_poses(board, cam_true, n_views, seed=seed)
+    except InputError:
+        raise InputError(
+            f"--true-dist {','.join(f'{float(x):g}' for x in dist)} / --true-pp-offset-px "
+            f"{' '.join(f'{float(x):g}' for x in pp_offset_px)}: the true camera bends or shifts its "
+            f"{cam_true.width} x {cam_true.height} px image so far that no pose keeps the whole board "
+            f"({board.describe()}) inside it; give a smaller distortion or offset") from None
 
 
 def manifest(setup: _Setup) -> dict:
@@ -537,11 +555,21 @@ def run_calibration_study(camera, out_dir, *, views_list=DEFAULT_VIEWS_LIST, see
         raise InputError(f"--out {str(out)!r} exists and is not a folder")
     spec = spec or executor_spec(processes=0)
     check_executor(spec)  # Dask importable, scheduler reachable: before any work
+    made = not (out / "trials").exists()
     runner = _Runner(out, manifest(s), spec, chunk_size, show_progress)
     timings = {}
     try:
         set_info, conv_rows, conv, frames, focal_rows, f_est, believed, pose_rows, floor = _run_parts(
             s, runner, board_set_dir, focal_cache, say, timings)
+    except InputError:
+        runner.close()
+        if made:
+            # refused (e.g. the board found in fewer views than asked, no focal frame identified):
+            # nothing is left. Its stores could serve only a rerun with these inputs, which is
+            # refused again; a corrected rerun would be refused for other parameters, and a kept
+            # detections cache would be reused by it. An interrupt (not a refusal) keeps the trials.
+            shutil.rmtree(out / "trials", ignore_errors=True)
+        raise
     finally:
         runner.close()
     t4 = table4_comparison([r for r in pose_rows if r["case"] in floor and not (r["case"] == "exact" and r["noise_px"] == 0)],

@@ -39,6 +39,11 @@ def run_campaign(config: CampaignConfig, out_dir, spec, *, chunk_size=None, prog
     kind = get_trial_kind(config.trial_kind)
     out_dir = Path(out_dir)
     say = (lambda m: print(m, file=sys.stderr)) if progress else None
+    if config.trial_kind == "render" and config.calibration == "paper":
+        # the design (stand settings in view, scenarios) checked before the calibration renders and
+        # writes calibration.json: a refused campaign leaves nothing behind; designed again below
+        # with the calibrated focal length (the same seeded settings)
+        campaign_trials(config, variants=False)
     config = rendered_paper_calibration(config, out_dir, progress=say)
     trials = campaign_trials(config)
     store, stats = run_stored_study(kind, trials, out_dir, config.manifest(), spec, chunk_size=chunk_size,
