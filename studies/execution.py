@@ -764,7 +764,9 @@ def library_versions() -> dict:
 #: kind: the cost table a study's plan is estimated from (docs/performance.md, "Plans"). The
 #: render kind's are the 400-trial campaigns' measured cost (97 s and 172 s on two processes,
 #: 100 renders and 400 exposures: about 1 s a render and 0.3 s an exposure of one core).
-COST_TABLE_S = {"render": (1.0, 0.3), "geometric": (0.0, 0.001)}
+#: The tof kind's: the committed ToF study (docs/reports/tof_stability.md, 15,800 frames, 20
+#: renders): renders of 2.8-20 s (about 10 s), each frame's exposure and pipeline 0.067 s.
+COST_TABLE_S = {"render": (1.0, 0.3), "geometric": (0.0, 0.001), "tof": (10.0, 0.067)}
 #: A plan warns when its estimated wall-clock time exceeds this many seconds.
 LONG_STUDY_S = 3600.0
 

@@ -232,7 +232,7 @@ def run_study(cfg: TofStudyConfig, out: Path, spec=None, *, store_dir=None, chun
     from sim.trials import get_trial_kind
     from sim.tof_trial import cached_render, chunk_frames
 
-    from .execution import ExecutorSpec, run_stored_study
+    from .execution import ExecutorSpec, plan_trials, run_stored_study
 
     t_start = time.perf_counter()
     out = Path(out)
@@ -247,6 +247,11 @@ def run_study(cfg: TofStudyConfig, out: Path, spec=None, *, store_dir=None, chun
     auto_T = auto_integration_times(cfg)
     runs = study_runs(cfg, auto_T)
     trials = study_trials(runs)
+    plan = plan_trials(get_trial_kind("tof"), trials, spec or ExecutorSpec("inline", 1))
+    log(plan.describe() + "; frames already in the store are skipped")
+    for line in plan.warnings():
+        if "--processes" not in line and "--workers" not in line:  # the command said that one already
+            log(line)
     store, stats = run_stored_study(get_trial_kind("tof"), trials, Path(store_dir) if store_dir else out / "tof-study",
                                 cfg.manifest(), spec or ExecutorSpec("inline", 1),
                                 chunk_size=chunk_frames(max(r[2].frames for r in runs), chunk_size),

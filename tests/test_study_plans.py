@@ -65,7 +65,7 @@ def test_plan_warns_when_processes_exceed_the_cores():
 def test_remote_cluster_and_unknown_kind_say_what_they_cannot_estimate():
     remote = plan_study("render", 10, 2, ExecutorSpec("dask-scheduler", 0, "tcp://10.0.0.5:8786"))
     assert remote.wall_s is None and "Dask cluster at tcp://10.0.0.5:8786" in remote.describe()
-    assert "no cost table entry" in plan_study("tof", 10, 1, ExecutorSpec("inline", 1)).describe()
+    assert "no cost table entry" in plan_study("no-such-kind", 10, 1, ExecutorSpec("inline", 1)).describe()
 
 
 def test_huge_campaign_plan_only_within_a_second_writes_nothing(tmp_path):

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import shutil
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -319,6 +320,12 @@ class _Runner:
 
         store = self.stores[part]
         if any(t.trial_id not in store.done_ids for t in trials):
+            if self.show_progress:  # the part's plan (trials, renders) before it runs
+                from studies.execution import plan_trials
+
+                plan = plan_trials(KINDS[part], trials, self.spec, done_ids=store.done_ids)
+                print(f"{description}: " + plan.describe().replace(f" {KINDS[part].name} trial(s)", " trial(s)"),
+                      file=sys.stderr, flush=True)
             if self.executor is None:
                 self.executor = self.stack.enter_context(open_executor(self.spec))
             self.stats[part] = run_study(
