@@ -74,5 +74,7 @@ def test_gallery_runs(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SVGS_LONG_TESTS"),
+                    reason="long form (~40 s, the API reference of every module): set SVGS_LONG_TESTS=1")
 def test_api_reference(tmp_path):
     _build(tmp_path, gallery=False, api=True, timeout_s=400)
