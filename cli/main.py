@@ -116,6 +116,17 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
     return parser
 
 
+def iter_commands(parser: argparse.ArgumentParser, prefix: tuple = ()):
+    """Every command's parser below ``parser``: ``(words, parser)`` pairs, e.g.
+    ``(("calibrate", "focal"), <parser>)``, the groups included, depth first (for the tests and the
+    docs that walk every option)."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield prefix + (name,), sub
+                yield from iter_commands(sub, prefix + (name,))
+
+
 def leaf_parser(parser: argparse.ArgumentParser, args) -> argparse.ArgumentParser:
     """The (sub)parser of the command that ``args`` ran (``svgs calibrate focal``'s parser)."""
     p = parser

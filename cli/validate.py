@@ -198,18 +198,10 @@ def check_args(args, parser) -> None:
 
 
 def _actions(parser, args):
-    """The actions of the subparser that parsed ``args``."""
-    import argparse
+    """The actions of the subparser that parsed ``args`` (:func:`cli.main.leaf_parser`)."""
+    from cli.main import leaf_parser
 
-    p = parser
-    for key in ("command", "calibrate_command", "tof_command"):
-        name = getattr(args, key, None)
-        if not name:
-            continue
-        sub = next((a for a in p._actions if isinstance(a, argparse._SubParsersAction)), None)
-        if sub is None or name not in sub.choices:
-            break
-        p = sub.choices[name]
+    p = leaf_parser(parser, args)
     return [a for a in p._actions if a.dest not in ("help",) and not a.__class__.__name__.startswith("_SubParsers")]
 
 

@@ -36,11 +36,13 @@ LONG_JOB_OPTIONS = (
 
 
 def _walk(parser: argparse.ArgumentParser, prefix: str = "svgs"):
+    """``("svgs calibrate focal", parser)`` for the top parser and every command's
+    (:func:`cli.main.iter_commands`)."""
+    from cli.main import iter_commands
+
     yield prefix, parser
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            for name, sub in action.choices.items():
-                yield from _walk(sub, f"{prefix} {name}")
+    for words, sub in iter_commands(parser):
+        yield " ".join((prefix, *words)), sub
 
 
 def _options():

@@ -16,13 +16,11 @@ import pytest
 from cli.main import build_parser, main
 
 
-def _walk(parser, prefix=()):
-    for a in parser._actions:
-        if isinstance(a, argparse._SubParsersAction):
-            for name, sub in a.choices.items():
-                yield from _walk(sub, prefix + (name,))
-    if prefix:
-        yield prefix, parser
+def _walk(parser):
+    """Every command's parser, groups included (:func:`cli.main.iter_commands`)."""
+    from cli.main import iter_commands
+
+    return iter_commands(parser)
 
 
 @pytest.fixture(scope="module")
