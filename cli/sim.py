@@ -148,6 +148,13 @@ def _render_and_solve(args, scen, thr) -> int:
     from sim.closed_loop import expose_and_solve, render_scenario
 
     t0 = time.perf_counter()
+    from cli.render import render_cost_warning
+    from render.constants import DEFAULT_ROI_SPP, DEFAULT_SPP
+
+    warn = render_cost_warning(scen.camera.width, scen.camera.height, scen.spp or DEFAULT_SPP,
+                               scen.roi_spp or DEFAULT_ROI_SPP, int(scen.pattern.n))
+    if warn:
+        print(f"svgs render-and-solve: {warn}", file=sys.stderr, flush=True)
     print(f"rendering {scen.camera.name} at {scen.distance_m:g} m (Mitsuba) ...", file=sys.stderr, flush=True)
     frame = render_scenario(scen, seed=args.seed)
     print(f"  rendered in {time.perf_counter() - t0:.1f} s; exposing (phone camera model) and solving ...",

@@ -99,6 +99,7 @@ def test_huge_campaign_prints_its_plan_within_a_second_before_any_trial(tmp_path
         proc.kill()
         proc.wait()
         proc.stderr.close()
+        proc.stderr.close()
     assert first.startswith("plan: 50,000,000 geometric trial(s)")
     # start-up (imports) is a few seconds on a loaded machine; building the 50M trials takes minutes
     assert seen < 15
@@ -118,3 +119,41 @@ def test_study_plan_only(args, head, tmp_path):
     plan = [ln for ln in p.stderr.splitlines() if ln.startswith("plan:")]
     assert len(plan) == 1 and plan[0].startswith(head)
     assert not out.exists() and "Traceback" not in p.stderr
+
+
+def test_a_long_render_is_announced_before_it_starts():
+    """``--spp 1000000 --full-frame`` is ~5e12 samples: hours at the demo's rate, said before the
+    render; the demo's own render (2e7 samples, 1.8 s) is not announced."""
+    from cli.render import LONG_RENDER_S, RENDER_SAMPLES_PER_S, render_cost_warning
+
+    assert render_cost_warning(2592, 1944, 4, 64, 4) is None  # the demo
+    line = render_cost_warning(2592, 1944, 1_000_000, 64, 4, full_frame=True)
+    assert line.startswith("warning: this render draws 5e+12 samples") and " h at " in line
+    # the threshold: just above LONG_RENDER_S is announced, just below is not
+    spp_edge = LONG_RENDER_S * RENDER_SAMPLES_PER_S / (100 * 100)
+    assert render_cost_warning(100, 100, int(spp_edge * 1.01), 0, 0, full_frame=True) is not None
+    assert render_cost_warning(100, 100, int(spp_edge * 0.99), 0, 0, full_frame=True) is None
+
+
+@pytest.mark.slow
+def test_svgs_render_says_a_long_render_before_starting(tmp_path):
+    """The warning is the first thing ``svgs render --spp 1000000 --full-frame`` says (read from
+    the running process, which is then stopped)."""
+    import subprocess
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-m", "cli.main", "render", "--camera", "galaxy-nexus", "--range", "5",
+                             "--spp", "1000000", "--full-frame", "--out", str(tmp_path / "r")],
+                            stderr=subprocess.PIPE, text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    try:
+        t0 = time.monotonic()
+        line = ""
+        while time.monotonic() - t0 < 30:
+            line = proc.stderr.readline()
+            if "warning: this render draws" in line or not line:
+                break
+        assert "svgs render: warning: this render draws 5e+12 samples" in line, line
+    finally:
+        proc.kill()
+        proc.wait()
+        proc.stderr.close()
