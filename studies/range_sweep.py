@@ -295,7 +295,9 @@ def format_table(table) -> list[str]:
 
 
 def write_outputs(out_dir, cfg: RangeSweepConfig, rows: list[dict]) -> tuple[list[dict], list[dict]]:
-    """``trials.jsonl``, ``summary.csv`` and ``range_sweep.png`` from the stored rows.
+    """``trials.jsonl``, ``summary.csv`` and ``range_sweep.png`` from the stored rows, and
+    ``overlays.png`` (it renders each range's first trial again) unless the folder's one is newer
+    than its results: a rerun of a finished sweep re-renders nothing.
 
     Returns
     -------
@@ -309,7 +311,9 @@ def write_outputs(out_dir, cfg: RangeSweepConfig, rows: list[dict]) -> tuple[lis
         fh.writelines(json.dumps(rec) + "\n" for rec in records)
     plot_sweep(table, out_dir / "range_sweep.png",
                f"{cfg.camera}: range sweep ({cfg.trials} trials x {cfg.poses} pose(s) per range)")
-    sample_overlays(out_dir / "overlays.png", cfg)
+    overlays, results = out_dir / "overlays.png", out_dir / "results.csv"
+    if not (overlays.exists() and results.exists() and overlays.stat().st_mtime >= results.stat().st_mtime):
+        sample_overlays(overlays, cfg)
     return records, table
 
 
