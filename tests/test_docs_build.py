@@ -38,10 +38,12 @@ def _build(tmp_path, *, gallery: bool, api: bool, timeout_s: float):
     return proc
 
 
+@pytest.mark.slow  # a few seconds each (make test runs it; make test-fast does not)
 def test_pages_and_links(tmp_path):
     _build(tmp_path, gallery=False, api=False, timeout_s=120)
 
 
+@pytest.mark.slow  # a few seconds each (make test runs it; make test-fast does not)
 def test_a_broken_link_fails_the_build(tmp_path):
     """The check can fail: a page linking to a page that does not exist is a build error."""
     import shutil

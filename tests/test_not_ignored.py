@@ -150,6 +150,7 @@ def test_focal_refuses_the_same_image_twice_even_under_another_name(tmp_path, ca
         assert "range2m.png" in lines[0] and "same picture" in lines[0]
 
 
+@pytest.mark.slow  # a few seconds each (make test runs it; make test-fast does not)
 def test_board_calibration_refuses_a_view_given_twice(tmp_path, capsys):
     import cv2
 

@@ -34,6 +34,7 @@ def _one_error_line(err: str) -> str:
     return lines[0]
 
 
+@pytest.mark.slow  # a few seconds each (make test runs it; make test-fast does not)
 @pytest.mark.parametrize("bad", [["--ranges", "5,5"], ["--ranges", "1e9"], ["--misalignment-deg", "0,0,11"],
                                  ["--misalignment-deg", "1,2"], ["--sigma-px", "-1"]])
 def test_a_refused_campaign_leaves_nothing_and_the_corrected_rerun_runs(bad, tmp_path, capsys):
