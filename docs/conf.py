@@ -64,6 +64,8 @@ autodoc_default_options = {"members": True, "ignore-module-all": True}
 # not this project's numpydoc
 autodoc_inherit_docstrings = False
 autodoc_member_order = "bysource"
+# The optional Basilisk extra (sim.basilisk_svgs): its pages build without it installed.
+autodoc_mock_imports = ["Basilisk"]
 numpydoc_show_class_members = False
 numpydoc_class_members_toctree = False
 numpydoc_validation_checks: set[str] = set()
