@@ -185,7 +185,7 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
     wall = time.perf_counter() - t_start
     summary = summarise(rows, cfg)
     summary["run"] = {"frames_run": n_new, "frames_reused": len(rows) - n_new, "wall_s": wall}
-    summary["outputs"] = write_outputs(rows, cfg, out)
+    summary["outputs"] = write_outputs(rows, cfg, out, glint_frames=summary["far_above_bound"]["glint_frames"])
     summary["outputs"]["report"] = str(write_report(summary, out / "report.md", command))
     (out / "summary.json").write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n")
     return summary
@@ -313,8 +313,9 @@ def bound_line(s: dict) -> str | None:
             + cause_text(glint=False) + ".")
 
 
-def write_outputs(rows: list[dict], cfg: dict, out: Path) -> dict:
-    """measurements.csv, the video and approach.png from the stored rows; returns their paths."""
+def write_outputs(rows: list[dict], cfg: dict, out: Path, *, glint_frames=None) -> dict:
+    """measurements.csv, the video and approach.png from the stored rows; returns their paths.
+    ``glint_frames``: :func:`far_above_bound`'s, when the caller has them (else computed)."""
     import csv
 
     paths = {}
@@ -326,7 +327,7 @@ def write_outputs(rows: list[dict], cfg: dict, out: Path) -> dict:
             w.writerow(["" if _num(r.get(c)) is None else r[c] for c in MEASUREMENT_COLUMNS])
     paths["measurements"] = str(p)
     paths.update(write_video(out, cfg["fps"], len(rows)))
-    paths["plot"] = str(plot_approach(rows, cfg, out / "approach.png"))
+    paths["plot"] = str(plot_approach(rows, cfg, out / "approach.png", glint_frames=glint_frames))
     return paths
 
 
@@ -394,7 +395,7 @@ def write_report(s: dict, path: Path, command: str | None) -> Path:
     return path
 
 
-def plot_approach(rows: list[dict], cfg: dict, path: Path) -> Path:
+def plot_approach(rows: list[dict], cfg: dict, path: Path, *, glint_frames=None) -> Path:
     """Errors against time (left) and range (middle), +-1-sigma CRLB bands, dropouts marked; and
     |error| / CRLB against range on a log scale (right), with 1 and the "far above"
     line (:data:`studies.diagnosis.FAR_ABOVE_BOUND`): the bound stays visible beside errors a
@@ -408,7 +409,7 @@ def plot_approach(rows: list[dict], cfg: dict, path: Path) -> Path:
     t = np.array([float(r["t_s"]) for r in rows])
     rng = np.array([float(r["range_m"]) for r in rows])
     ok = np.array([int(r["ok"]) == 1 for r in rows])
-    glint = set(far_above_bound(rows, cfg)["glint_frames"])
+    glint = set(far_above_bound(rows, cfg)["glint_frames"] if glint_frames is None else glint_frames)
     at_glint = np.array([int(r["frame"]) in glint for r in rows])
     fig = Figure(figsize=(17, 14), constrained_layout=True)
     FigureCanvasAgg(fig)

@@ -52,9 +52,9 @@ def front_glint_targets(camera, pattern, R_cam_target, t_cam_target_m) -> tuple[
     from render.geometry import Reflector, SceneOptions, build_target
     from render.optics import Flash, Optics
     from render.predict import virtual_sources
-    from svgs.profiles import Pattern
+    from svgs.profiles import load_pattern
 
-    pat = Pattern.load(pattern)
+    pat = load_pattern(pattern)
     R = np.asarray(R_cam_target, float)
     t = np.asarray(t_cam_target_m, float)
     if R.shape != (3, 3) or t.shape != (3,):
@@ -88,9 +88,9 @@ def glint_targets_of_truth(truth: dict, pattern) -> tuple[str, ...]:
     tuple of str
         Target ids; empty when the record holds no front-face strategy.
     """
-    from svgs.profiles import Pattern
+    from svgs.profiles import load_pattern
 
-    ids = Pattern.load(pattern).ids
+    ids = load_pattern(pattern).ids
     hit = set()
     for s in (truth.get("render") or {}).get("spot_strategies") or ():
         cube, _, kind = str(s.get("label", "::")).split(":")
