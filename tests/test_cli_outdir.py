@@ -18,6 +18,7 @@ import pytest
 from cli.main import build_parser, main
 from cli.outdir import check_output_folder, output_folder, prepare_output_file, prepare_output_folder
 from svgs.errors import InputError
+from test_cli_validation import base_argv
 
 #: Output options of the commands: the study store of ``tof study`` too.
 OUTPUT_DESTS = ("out", "cache", "store")
@@ -49,21 +50,7 @@ def files(tmp_path_factory):
 
 def _base_argv(cmd, parser, files):
     """A valid invocation of ``cmd`` (its required arguments) without its output options."""
-    tof = cmd[0] == "tof"
-    values = {"image": files["img"], "images": [files["img"]], "camera": "tof-epc660" if tof else "galaxy-nexus",
-              "range_m": "2" if tof else "5", "range": "5", "ranges": "5,10", "gray": [files["gray"]],
-              "depth": [files["depth"]], "board": "chessboard", "cols": "9", "rows": "6", "spacing_mm": "20",
-              "views": "3", "fps": "1"}
-    argv = list(cmd)
-    for a in parser._actions:
-        if isinstance(a, (argparse._HelpAction, argparse._SubParsersAction)) or a.dest in OUTPUT_DESTS:
-            continue
-        if not (a.required or not a.option_strings):
-            continue
-        v = values[a.dest]
-        vs = v if isinstance(v, list) else [v]
-        argv += vs if not a.option_strings else [a.option_strings[0], *vs]
-    return argv
+    return base_argv(cmd, parser, files, None, skip=OUTPUT_DESTS)
 
 
 def _output_options(parser):

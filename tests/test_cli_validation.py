@@ -35,16 +35,17 @@ def files(tmp_path_factory):
     return {"img": str(img), "gray": str(d / "gray.npy"), "depth": str(d / "depth.npy")}
 
 
-def base_argv(cmd, parser, files, out_dir):
-    """A valid invocation of ``cmd`` (its required arguments), writing under ``out_dir``."""
+def base_argv(cmd, parser, files, out_dir, *, skip=()):
+    """A valid invocation of ``cmd`` (its required arguments but those whose dest is in ``skip``),
+    writing under ``out_dir``."""
     tof = cmd[0] == "tof"
     values = {"image": files["img"], "images": [files["img"]], "camera": "tof-epc660" if tof else "galaxy-nexus",
               "range_m": "2" if tof else "5", "range": "5", "ranges": "5,10", "gray": [files["gray"]],
-              "depth": [files["depth"]], "out": str(out_dir / "out"), "board": "chessboard", "cols": "9",
+              "depth": [files["depth"]], "out": None if out_dir is None else str(out_dir / "out"), "board": "chessboard", "cols": "9",
               "rows": "6", "spacing_mm": "20", "views": "3", "fps": "1"}
     argv = list(cmd)
     for a in parser._actions:
-        if isinstance(a, (argparse._HelpAction, argparse._SubParsersAction)):
+        if isinstance(a, (argparse._HelpAction, argparse._SubParsersAction)) or a.dest in skip:
             continue
         if not (a.required or not a.option_strings):
             continue
