@@ -16,7 +16,8 @@ names the command that was run (``svgs calibrate focal``), for argparse's usage 
 an :class:`~svgs.errors.InputError`; ``svgs <command>: no solution (<reason>): <message>`` for a
 simulated failure. With ``--json`` the same message also goes to stdout as exactly one JSON
 object, ``{"ok": false, "error": "..."}`` (exit 2), or ``{"ok": false, "reason": "...",
-"error": "..."}`` for a simulated failure (exit 1).
+"error": "..."}`` for a simulated failure (exit 1), ``{"ok": false, "signal": "SIGINT", "error":
+"..."}`` for an interrupt (exit 130; 143 for SIGTERM; :func:`cli.signals.report_interrupt`).
 """
 
 from __future__ import annotations
@@ -162,7 +163,16 @@ def _parse(parser: argparse.ArgumentParser, argv: list):
 
 
 def main(argv=None) -> int:
-    """Run the CLI; returns the exit code (also used by tests in-process)."""
+    """Run the CLI; returns the exit code.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments. None: ``sys.argv[1:]``, and the call is the program itself (the ``svgs``
+        script, ``python -m cli.main``), so an interrupt may end the process from a watchdog
+        thread (:mod:`sim.hard_stop`); with a list (tests, in-process callers) it never does.
+    """
+    as_program = argv is None
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv)
     try:
@@ -185,7 +195,9 @@ def main(argv=None) -> int:
             if not kernels_cached():  # a fresh install that skipped `make`: say why the first call waits
                 print("compiling the solver and camera kernels (first run only, ~20 s; cached for later runs) ...",
                       file=sys.stderr, flush=True)
-        args.func = interruptible(args)  # Ctrl-C and SIGTERM: one line, exit 130 / 143 (cli.signals)
+        # Ctrl-C and SIGTERM: one line, exit 130 / 143 (cli.signals); run as the program, within a
+        # second even inside a render (a watchdog that may end the process: never in-process)
+        args.func = interruptible(args, hard_stop=as_program)
         return int(args.func(args))
     except InputError as exc:
         report_error(prog, str(exc), as_json)
@@ -193,8 +205,10 @@ def main(argv=None) -> int:
     except SimulationFailure as exc:  # valid input, the simulated physics measured nothing: no solution
         report_error(prog, str(exc), as_json, reason=exc.reason)
         return EXIT_NO_SOLUTION
-    except KeyboardInterrupt:
-        print(f"{prog}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:  # before the command's handler started
+        from cli.signals import report_interrupt
+
+        report_interrupt(prog.removeprefix("svgs "), exc, as_json)
         return EXIT_INTERRUPTED
     except BrokenPipeError:  # output piped into a program that stopped reading (e.g. head)
         sys.stderr.close()

@@ -135,7 +135,10 @@ def _render(args, camera, pattern, R, t) -> int:
 
     if r.variant.notice and not is_fallback(r.variant.requested, r.variant.name):  # a fallback: said by select_variant
         print(f"svgs render: note: {r.variant.notice}", file=sys.stderr)
-    res = r.render(R, t, seed=args.seed, full_frame=args.full_frame)
+    from sim import hard_stop
+
+    with hard_stop.scope():  # Ctrl-C stops the render within a second (nothing is written yet)
+        res = r.render(R, t, seed=args.seed, full_frame=args.full_frame)
     res.truth["command"] = {k: v for k, v in vars(args).items() if k != "func"}
     from cli.sim import resolve_ambient
     from sim.closed_loop import DEFAULT_BACKDROP_DISTANCE_M, Scenario, lab_flux

@@ -156,16 +156,18 @@ def _render_and_solve(args, scen, thr) -> int:
     if warn:
         print(f"svgs render-and-solve: {warn}", file=sys.stderr, flush=True)
     print(f"rendering {scen.camera.name} at {scen.distance_m:g} m (Mitsuba) ...", file=sys.stderr, flush=True)
-    frame = render_scenario(scen, seed=args.seed)
-    print(f"  rendered in {time.perf_counter() - t0:.1f} s; exposing (phone camera model) and solving ...",
-          file=sys.stderr, flush=True)
-    exposer = frame.exposer()
-    row = expose_and_solve(frame, exposer, seed=args.seed, threshold=thr, exposure_s=args.exposure_s, iso=args.iso)
     from sim.crlb import frame_crlb
+    from sim import hard_stop
 
-    if row["ok"]:
-        print("  the Cramer-Rao bound of the simulated sensor ...", file=sys.stderr, flush=True)
-    crlb = frame_crlb(frame, exposer, row)
+    with hard_stop.scope():  # Ctrl-C stops the render within a second (nothing is written yet)
+        frame = render_scenario(scen, seed=args.seed)
+        print(f"  rendered in {time.perf_counter() - t0:.1f} s; exposing (phone camera model) and solving ...",
+              file=sys.stderr, flush=True)
+        exposer = frame.exposer()
+        row = expose_and_solve(frame, exposer, seed=args.seed, threshold=thr, exposure_s=args.exposure_s, iso=args.iso)
+        if row["ok"]:
+            print("  the Cramer-Rao bound of the simulated sensor ...", file=sys.stderr, flush=True)
+        crlb = frame_crlb(frame, exposer, row)
     paths = write_outputs(Path(args.out), frame, row, crlb, thr) if args.out else {}
     out = {k: v for k, v in row.items() if not k.startswith("_")}
     out["crlb"] = crlb

@@ -190,7 +190,10 @@ def _render_and_solve(args, sc) -> int:
 
     if not args.json:
         print(f"rendering {sc.camera} / {sc.pattern} at {args.range_m:g} m ...", file=sys.stderr)
-    tof_render = render(sc)
+    from sim import hard_stop
+
+    with hard_stop.scope():  # Ctrl-C stops the render within a second (nothing is written yet)
+        tof_render = render(sc)
     sensor, rendered, render_s = tof_render.sensor, tof_render.rendered, tof_render.render_s
     truth_state = tof_render.truth_state
     t0 = time.perf_counter()

@@ -28,7 +28,9 @@ import numpy as np
 from svgs.errors import InputError
 from svgs.frames import STATE_KEYS
 
+from sim import hard_stop
 from sim.approach import MEASUREMENT_COLUMNS, TIMING_KEYS, ApproachSensor, Trajectory, check_visible
+from studies.execution import StoredProgress
 from studies.progress import progress_bar
 from studies.store import ResultStore
 
@@ -165,8 +167,11 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
             if todo[0] > 0:
                 last = {r["trial_id"]: r for r in store.read_rows()}[todo[0] - 1]
                 sensor.restore(todo[0], last["next_exposure_s"], last["next_iso"])
+            def kept() -> StoredProgress:
+                return StoredProgress(len(store.done_ids), len(times), str(out))
+
             with progress_bar(len(todo), f"approach {cfg['camera']}", progress, unit="frame") as bar, \
-                    contextlib.closing(sensor):
+                    contextlib.closing(sensor), hard_stop.scope(kept):
                 for k in todo:
                     # the next frame renders while this one is exposed, solved and written
                     m = sensor.measure_on(traj, float(times[k]),
@@ -174,9 +179,10 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
                     title = (f"t = {m.t_s:7.2f} s  range {m.range_m:6.2f} m  "
                              + ("SOLVED" if m.ok else f"NO SOLUTION ({m.reason})")
                              + f"  exposure {m.exposure_s * 1e3:.2f} ms ISO {m.iso:.0f}")
-                    cv2.imwrite(str(frames_dir / f"{k:05d}.jpg"), _overlay(m, cam, pattern, title),
-                                [cv2.IMWRITE_JPEG_QUALITY, 90])
-                    store.append([{"trial_id": k, **m.row()}])
+                    picture = _overlay(m, cam, pattern, title)
+                    with hard_stop.protected():  # Ctrl-C inside a render stops the process, never mid-write
+                        cv2.imwrite(str(frames_dir / f"{k:05d}.jpg"), picture, [cv2.IMWRITE_JPEG_QUALITY, 90])
+                        store.append([{"trial_id": k, **m.row()}])
                     n_new += 1
                     if on_frame is not None:
                         on_frame(m)

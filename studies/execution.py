@@ -20,8 +20,10 @@ Interrupts: Ctrl-C (``KeyboardInterrupt``, or a subclass such as the CLI's SIGTE
 stops a study at once. In this process (``--processes 0``) the trials run render group by render
 group and each group's rows are stored as it finishes; an interrupt lets the group under way
 finish (a few trials, or one render and its exposures: a second Ctrl-C abandons it), stores it
-and stops, so no group starts after the interrupt. On a pool the rows of every finished task
-are stored, then the workers are terminated (they ignore SIGINT themselves: Ctrl-C in a
+and stops, so no group starts after the interrupt; run from the command line, a group still
+under way half a second after the signal (a render cannot be entered by Python's handler) is
+abandoned and the process stops with the rows stored so far (:mod:`sim.hard_stop`). On a pool
+the rows of every finished task are stored, then the workers are terminated (they ignore SIGINT themselves: Ctrl-C in a
 terminal reaches the whole process group). The interrupt is re-raised with :class:`StoredProgress` attached as its
 ``svgs_stored`` attribute (:func:`stored_progress`): how many trials the store holds.
 
@@ -575,30 +577,37 @@ def _store_rows(store, rows: list, bar) -> None:
     bar.update(len(rows))
 
 
-def _run_inline(kind: TrialKind, tasks: list, store, bar) -> None:
+def _run_inline(kind: TrialKind, tasks: list, store, bar, progress) -> None:
     """Run ``tasks`` in this process, storing each render group's rows as it finishes.
 
     Ctrl-C or SIGTERM during a group lets it finish (a few trials, or one render and its
     exposures), stores its rows and then propagates: no group starts after it. A second
     signal stops the group under way. A failing trial raises after every finished group
-    was stored.
+    was stored. When the CLI runs as the program, a group that does not finish within
+    :data:`sim.hard_stop.HARD_STOP_AFTER_S` of the signal (a render: native code the
+    handler cannot enter) is abandoned and the process stops with the rows stored so far
+    (:mod:`sim.hard_stop`; ``progress()`` says how many).
     """
+    from sim import hard_stop
+
     _warm(kind)
-    for items in tasks:
-        groups = _group_rows(kind, items)
-        while True:
-            with _signals_held(escalate=True):
-                try:
-                    rows = next(groups, None)
-                except SystemError as exc:
-                    interrupt = _interrupt_in(exc)
-                    if interrupt is None:
-                        raise
-                    raise interrupt from None
-                if rows is None:
-                    break
-                store.append(rows)
-            bar.update(len(rows))
+    with hard_stop.scope(progress):
+        for items in tasks:
+            groups = _group_rows(kind, items)
+            while True:
+                with _signals_held(escalate=True):
+                    try:
+                        rows = next(groups, None)
+                    except SystemError as exc:
+                        interrupt = _interrupt_in(exc)
+                        if interrupt is None:
+                            raise
+                        raise interrupt from None
+                    if rows is None:
+                        break
+                    with hard_stop.protected():  # a hard stop waits for the rows to be written whole
+                        store.append(rows)
+                bar.update(len(rows))
 
 
 def _run_on_executor(kind: TrialKind, tasks: list, store, executor: Executor, bar, window) -> None:
@@ -684,15 +693,18 @@ def run_study(kind: TrialKind, trials: list[Trial], store, executor: Executor, *
     def window() -> int:
         return max(2, TASKS_PER_WORKER * max(1, slots() if slots is not None else n_workers))
 
+    def kept() -> StoredProgress:
+        return StoredProgress(len(set(ids) & store.done_ids), len(ids), str(store.dir))
+
     try:
         with progress_bar(len(pending), description, enabled=progress) as bar:
             if isinstance(executor, InlineExecutor):
-                _run_inline(kind, tasks, store, bar)
+                _run_inline(kind, tasks, store, bar, kept)
             else:
                 _run_on_executor(kind, tasks, store, executor, bar, window)
     except KeyboardInterrupt as exc:  # Ctrl-C, or a subclass (the CLI's SIGTERM): say what is kept
         if getattr(exc, "svgs_stored", None) is None:
-            exc.svgs_stored = StoredProgress(len(set(ids) & store.done_ids), len(ids), str(store.dir))
+            exc.svgs_stored = kept()
         raise
     return RunStats(len(trials), len(trials) - len(pending), len(pending), len(tasks), n_groups,
                     time.perf_counter() - t0, spec.describe() if spec else type(executor).__name__)

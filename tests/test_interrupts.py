@@ -37,7 +37,7 @@ N_TRIALS = 3000
 #: The CLI in a child whose SIGINT raises KeyboardInterrupt even when the test runner was
 #: started with SIGINT ignored (a background job): the child of ``python -m cli.main``.
 _CLI_CHILD = ("import signal, sys\nsignal.signal(signal.SIGINT, signal.default_int_handler)\n"
-              "from cli.main import main\nsys.exit(main(sys.argv[1:]))")
+              "from cli.main import main\nsys.exit(main())")  # main() without arguments: run as the program
 _STORED = re.compile(r"(\d+) of (\d+) trials are stored in (.+); rerun the same command to resume$")
 
 
@@ -256,3 +256,126 @@ def test_an_ignored_sigterm_stays_ignored():
         assert signal.getsignal(signal.SIGTERM) == signal.SIG_IGN
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+# --------------------------------------------------------------------------- stuck in native code
+#: A child whose study's trials sit in native code that holds no GIL and never returns to Python
+#: for seconds (as a Mitsuba render does): a Numba ``nogil`` loop. Run under the CLI's wrapper as
+#: the program would (``hard_stop=True``); trial 0 is fast, so one row is stored before the signal.
+_NATIVE_CHILD = r"""
+import signal, sys, time
+signal.signal(signal.SIGINT, signal.default_int_handler)
+from argparse import Namespace
+from pathlib import Path
+import numba
+from cli.signals import interruptible
+from sim.trials import TrialKind, register_trial_kind
+from studies.execution import ExecutorSpec, Trial, run_stored_study
+
+@numba.njit(nogil=True, cache=False)
+def spin(n):
+    x = 1
+    for i in range(n):
+        x = (x * 1103515245 + 12345) % 2147483648
+    return x
+
+def trial(scenario, seed):
+    if scenario["i"] > 0:
+        sys.stderr.write("native\n"); sys.stderr.flush()
+        spin(20_000_000_000)  # far longer than the test: only a hard stop ends it
+    return {"y": float(scenario["i"])}
+
+spin(10)  # compiled before the study starts
+kind = register_trial_kind(TrialKind("test-native", trial, ("y",), {}, text_keys=()))
+out = Path(sys.argv[1])
+trials = [Trial(i, {"i": i}, 0) for i in range(4)]
+
+def command(args):
+    run_stored_study(kind, trials, out, {"study": "native"}, ExecutorSpec("inline"), chunk_size=1, progress=False)
+    return 0
+
+args = Namespace(command="campaign", func=command, json="--json" in sys.argv)
+sys.exit(interruptible(args, hard_stop=True)(args))
+"""
+
+
+@pytest.mark.parametrize("signum, code, what", [(signal.SIGINT, EXIT_INTERRUPTED, "interrupted"),
+                                                (signal.SIGTERM, EXIT_TERMINATED, "terminated (SIGTERM)")])
+def test_a_study_inside_native_code_stops_within_a_second_keeping_its_rows(tmp_path, signum, code, what):
+    """The main thread cannot run Python's handler until the native call returns: the watchdog
+    stops the process, after the stored row, with the one line and the exit code."""
+    out = tmp_path / "study"
+    proc = subprocess.Popen([sys.executable, "-c", _NATIVE_CHILD, str(out), "--json"], cwd=REPO,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        line = ""
+        while "native" not in line and time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            assert line or proc.poll() is None, "the child ended before its native trial"
+        time.sleep(0.3)  # well inside the native loop
+        t0 = time.perf_counter()
+        os.kill(proc.pid, signum)
+        stdout, stderr = proc.communicate(timeout=30)
+        exit_s = time.perf_counter() - t0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == code, stderr
+    assert exit_s < EXIT_WITHIN_S, f"{exit_s:.2f} s from the signal to the exit"
+    assert "Traceback" not in stderr, stderr
+    expected = (f"svgs campaign: {what}; 1 of 4 trials are stored in {out}; rerun the same command to resume")
+    assert stderr.strip().splitlines() == [expected]
+    import json
+
+    assert json.loads(stdout) == {"ok": False, "signal": signal.Signals(signum).name, "error": expected,
+                                  "stored": 1, "trials": 4, "out": str(out)}
+    assert [r["trial_id"] for r in read_rows(out / "results.csv")] == [0]
+
+
+def test_json_output_of_an_interrupt_is_one_object(capsys):
+    def command(args):
+        exc = KeyboardInterrupt()
+        exc.svgs_stored = StoredProgress(3, 9, "runs/y")
+        raise exc
+
+    args = _args(command, json=True)
+    assert interruptible(args)(args) == EXIT_INTERRUPTED
+    cap = capsys.readouterr()
+    import json
+
+    line = "svgs campaign: interrupted; 3 of 9 trials are stored in runs/y; rerun the same command to resume"
+    assert cap.err == line + "\n"
+    assert json.loads(cap.out) == {"ok": False, "signal": "SIGINT", "error": line, "stored": 3, "trials": 9,
+                                   "out": "runs/y"}
+
+
+@pytest.mark.slow
+@pytest.mark.render
+def test_ctrl_c_stops_svgs_render_inside_its_render_within_a_second(tmp_path):
+    """A real Mitsuba render (announced as long) interrupted mid-render: exit 130 within a second."""
+    out = tmp_path / "render"
+    proc = subprocess.Popen([sys.executable, "-c", _CLI_CHILD, "render", "--camera", "galaxy-nexus", "--range", "5",
+                             "--spp", "1024", "--full-frame", "--out", str(out)], cwd=REPO,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True, text=True)
+    try:
+        deadline = time.monotonic() + 180
+        line = ""
+        while "warning: this render" not in line and time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            assert line or proc.poll() is None, "the render ended before its warning"
+        time.sleep(3.0)  # the render's kernels compiled and running
+        assert proc.poll() is None
+        t0 = time.perf_counter()
+        os.kill(proc.pid, signal.SIGINT)
+        _, stderr = proc.communicate(timeout=60)
+        exit_s = time.perf_counter() - t0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == EXIT_INTERRUPTED, stderr
+    assert exit_s < EXIT_WITHIN_S, f"{exit_s:.2f} s from the signal to the exit"
+    assert "Traceback" not in stderr and stderr.strip().splitlines()[-1] == "svgs render: interrupted", stderr
+    assert not (out / "image.png").exists()

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from refusal import refused
 from svgs.errors import InputError
 from svgs.frames import pose_from_scenario
 
@@ -87,10 +88,9 @@ def test_trajectory_with_state_and_stand_columns_is_refused(tmp_path, capsys):
     f.write_text("t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg,rail_m,stage_m\n"
                  "0,0,0,10,0,0,0,10,0\n4,0,0,6,0,0,0,6,0\n")
     out_dir = tmp_path / "run"
-    code, out, err = _run(["approach", "--trajectory", str(f), "--fps", "2", "--out", str(out_dir)], capsys)
-    assert code == 2
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("svgs approach: error: --trajectory")
+    lines = [refused(["approach", "--trajectory", str(f), "--fps", "2", "--out", str(out_dir)], capsys,
+                     watch=[tmp_path])]
+    assert lines[0].startswith("svgs approach: error: --trajectory")
     assert "x_m, y_m, z_m" in lines[0] and "rail_m, stage_m" in lines[0]  # both sets named
     assert not out_dir.exists()
 
@@ -98,11 +98,9 @@ def test_trajectory_with_state_and_stand_columns_is_refused(tmp_path, capsys):
 # ------------------------------------------------------------------------ frame count
 def test_approach_of_one_frame_is_refused_with_the_rate_that_gives_two(tmp_path, capsys):
     out_dir = tmp_path / "run"
-    code, out, err = _run(["approach", "--from", "10", "--to", "5", "--duration", "3", "--fps", "1e-9",
-                           "--out", str(out_dir)], capsys)
-    assert code == 2
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and "--fps" in lines[0] and "gives 1 frame" in lines[0] and "at least 2" in lines[0]
+    lines = [refused(["approach", "--from", "10", "--to", "5", "--duration", "3", "--fps", "1e-9",
+                      "--out", str(out_dir)], capsys, watch=[tmp_path])]
+    assert "--fps" in lines[0] and "gives 1 frame" in lines[0] and "at least 2" in lines[0]
     assert not out_dir.exists()
     # the rate it names gives two frames over the 3 s: floor(3 s x fps) + 1 >= 2
     import re
@@ -143,10 +141,8 @@ def test_focal_refuses_the_same_image_twice_even_under_another_name(tmp_path, ca
     code, out, err = _run(ok + ["--json"], capsys)
     assert code == 0, err
     for extra in (["--image", str(focal_images[0]), "--range", "2"], ["--image", str(copy), "--range", "3"]):
-        code, out, err = _run(ok + extra, capsys)
-        assert code == 2
-        lines = err.strip().splitlines()
-        assert len(lines) == 1 and lines[0].startswith("svgs calibrate focal: error: --image")
+        lines = [refused(ok + extra, capsys, watch=[tmp_path])]
+        assert lines[0].startswith("svgs calibrate focal: error: --image")
         assert "range2m.png" in lines[0] and "same picture" in lines[0]
 
 
@@ -172,10 +168,8 @@ def test_board_calibration_refuses_a_view_given_twice(tmp_path, capsys):
     code, out, err = _run(base + [str(p) for p in paths] + [str(tmp_path / "blank1.png"), str(tmp_path / "blank2.png")],
                           capsys)
     assert code == 0, err
-    code, out, err = _run(base + [str(p) for p in paths] + [str(paths[1])], capsys)
-    assert code == 2
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("svgs calibrate board: error: images:")
+    lines = [refused(base + [str(p) for p in paths] + [str(paths[1])], capsys, watch=[tmp_path], json_out=True)]
+    assert lines[0].startswith("svgs calibrate board: error: images:")
     assert "v1.png" in lines[0] and "same picture" in lines[0]
 
 
