@@ -170,8 +170,9 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
             def kept() -> StoredProgress:
                 return StoredProgress(len(store.done_ids), len(times), str(out))
 
-            with progress_bar(len(todo), f"approach {cfg['camera']}", progress, unit="frame") as bar, \
-                    contextlib.closing(sensor), hard_stop.scope(kept):
+            # the scope outermost: a Ctrl-C that waits for the background render (closing) is stopped too
+            with hard_stop.scope(kept), progress_bar(len(todo), f"approach {cfg['camera']}", progress,
+                                                     unit="frame") as bar, contextlib.closing(sensor):
                 for k in todo:
                     # the next frame renders while this one is exposed, solved and written
                     m = sensor.measure_on(traj, float(times[k]),
