@@ -36,12 +36,14 @@ charge with the grayscale sensitivity.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, fields, replace
 
 import numpy as np
 
 from svgs.constants import SPEED_OF_LIGHT_M_S
 from svgs.errors import InputError, ProfileError, check_finite_positive
+from svgs.profile_schema import RENDER_TABLES, TOF_CAMERA_TABLES, Num, check_table
 
 from camera.rendered import RenderedFrame
 
@@ -184,6 +186,14 @@ class TofFrame:
     mode: str = "active"
 
 
+#: What each :class:`TofSensor` field may be: the entry of the same key in the profile's ``[tof]``,
+#: ``[noise]`` or ``[optics]`` table (:mod:`svgs.profile_schema`), except ``ambient_lux``: the
+#: model takes any light (saturating the sensor on purpose), a profile only natural light.
+SENSOR_SPECS = {**TOF_CAMERA_TABLES["tof"], **TOF_CAMERA_TABLES["noise"],
+                "transmittance": RENDER_TABLES["optics"]["transmittance"],
+                "ambient_lux": Num(0, math.inf, why="any ambient light, saturating included")}
+
+
 @dataclass(frozen=True)
 class TofSensor:
     """The EPC660 pixel and read-out (see the module notes for the model).
@@ -251,21 +261,14 @@ class TofSensor:
     min_amplitude_dn: float = 25.0
 
     def __post_init__(self):
+        """Check every field with the profile's entry of the same name (:data:`SENSOR_SPECS`)."""
         for f in fields(self):
             v = getattr(self, f.name)
             if f.name == "integration_time_s" and v is None:
                 continue
-            zero_ok = f.name in ("read_noise_e", "dark_current_e_per_s", "ambient_suppression", "ambient_lux",
-                                 "ambient_w_m2_per_lux", "min_amplitude_dn")
-            check_finite_positive(v, f"tof sensor {f.name}", allow_zero=zero_ok)
-        for k in ("demodulation_contrast", "quantum_efficiency", "transmittance", "ambient_suppression",
-                  "auto_exposure_target"):
-            if getattr(self, k) > 1:
-                raise InputError(f"tof sensor {k}: expected a fraction in [0, 1], got {getattr(self, k)!r}")
-        if int(self.adc_bits) != self.adc_bits or not 2 <= self.adc_bits <= 24:
-            raise InputError(f"tof sensor adc_bits: expected an integer 2..24, got {self.adc_bits!r}")
-        if self.integration_time_min_s > self.integration_time_max_s:
-            raise InputError("tof sensor: integration_time_min_s exceeds integration_time_max_s")
+            v = SENSOR_SPECS[f.name].check(v, f"tof sensor {f.name}")
+            object.__setattr__(self, f.name, None if v == "auto" else v)
+        check_table("tof", {k: getattr(self, k) for k in ("integration_time_min_s", "integration_time_max_s")})
 
     # ------------------------------------------------------------------ construction
     @classmethod

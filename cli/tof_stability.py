@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from svgs.errors import InputError, check_finite
+from svgs.profile_schema import TOF_MATERIALS
 from tof.camera import DESIGN_RANGE_M
 
 from cli.exit_codes import EXIT_NO_SOLUTION, EXIT_OK
@@ -37,7 +38,7 @@ def _common(p) -> None:
     add_scene_args(p)
     p.add_argument("--ambient-lux", type=float, default=None,
                    help="ambient illuminance (default: the profile's 1000 lux, the paper's normal light)")
-    p.add_argument("--marker-material", choices=("retroreflective", "lambertian"), default=None,
+    p.add_argument("--marker-material", choices=TOF_MATERIALS, default=None,
                    help="marker faces (default: the pattern's, retroreflective sheeting for tof-8)")
     p.add_argument("--sheeting", default=None,
                    help="sheeting table of the retroreflective markers (default: the pattern's, en12899-ra2-white)")

@@ -4,19 +4,22 @@ One table of allowed values, read by two layers:
 
 - :meth:`svgs.profiles.Camera.load` / :meth:`svgs.profiles.Pattern.load` check every value
   of a file when it is loaded, before anything is rendered (a bad value costs no render);
-- :mod:`camera.phone.params` and :mod:`render.geometry` build their parameter objects from
-  the same table (``camera`` and ``render`` sit above ``svgs`` in the layer contract of
-  ``pyproject.toml`` and may import it; ``svgs`` may import neither, so the table lives here).
+- the models build or check their parameters with the same entries: :mod:`camera.phone.params`
+  and :mod:`render.geometry` (phone camera, reflectors), :class:`camera.amcw.TofSensor`,
+  :class:`render.tof.camera.Illumination` / ``TofOptics``, :mod:`render.tof.scene` and
+  :mod:`tof.camera` (ToF camera and target). ``camera``, ``render`` and ``tof`` sit above
+  ``svgs`` in the layer contract of ``pyproject.toml`` and may import it; ``svgs`` may import
+  none of them, so the table lives here.
 
 Each bound says why it is physical in :attr:`Num.why` where it is not evident. A value is
 refused with a message naming the table, the key, the value and the allowed range, e.g.
 ``[sensor] qe = 1.5: expected a number in (0, 1] (a quantum efficiency)``.
 
-Tables checked: camera ``[sensor]``, ``[glare]``, ``[exposure]``, ``[cfa]``, ``[isp]``
-(every key; an unknown key is refused), ``[optics]``, ``[flash]`` (every key); pattern
-``[reflector]`` and each ``[[target]]``. The ToF tables (``[tof]``, ``[noise]``,
-``[illumination]``) and the ToF target's ``[plate]``, ``[marker]`` are checked by their own
-models (:mod:`camera.amcw`, :mod:`tof.camera`).
+Tables checked (every key; an unknown key is refused): camera ``[intrinsics]``, ``[sensor]``,
+``[glare]``, ``[exposure]``, ``[cfa]``, ``[isp]``, ``[optics]``, ``[flash]`` and the ToF
+camera's ``[tof]``, ``[noise]``, ``[illumination]`` (:data:`TOF_CAMERA_TABLES`); pattern
+``[reflector]``, each ``[[target]]`` and the ToF target's ``[plate]``, ``[marker]``
+(:data:`TOF_PATTERN_TABLES`).
 """
 
 from __future__ import annotations
@@ -46,6 +49,18 @@ BLOOM_DIRECTIONS = ("isotropic", "column")
 #: ``[flash] spectrum``: the spectra the renderer knows (``render.optics.SPECTRA``; a test
 #: keeps the two lists equal).
 FLASH_SPECTRA = ("white-led",)
+
+#: ``[tof] depth_kind``: what a ToF depth image holds: the distance along the pixel's line of
+#: sight (what an AMCW camera measures) or the coordinate along the boresight.
+DEPTH_KINDS = ("radial", "z")
+#: ``[tof] gray_modes``: the ToF camera's image modes (illumination on: depth; off: gray).
+GRAY_MODES = ("active", "passive")
+#: ``[marker] material``: the surfaces the ToF renderer knows (:mod:`render.tof.scene`).
+TOF_MATERIALS = ("retroreflective", "lambertian")
+#: ``[marker] sheeting``: the retroreflective sheeting tables of
+#: ``assets/materials/retroreflective-sheeting.toml`` (``render.tof.retro.sheeting_names()``;
+#: a test keeps the two lists equal).
+SHEETINGS = ("en12899-ra2-white", "en12899-ra1-white", "astm-d4956-type-i-white", "3m-983-diamond-grade-white")
 
 #: Named reflector models (``[reflector] model`` in a pattern file), read by
 #: :class:`render.geometry.Reflector`.
@@ -94,17 +109,55 @@ def _is_np_number(value) -> bool:
 
 @dataclass(frozen=True)
 class Choice:
-    """One of ``values``."""
+    """One of ``values`` (texts, or whole numbers: the value must be of the same kind, so
+    ``4.0`` is not the choice ``4`` and ``true`` is not ``1``)."""
 
     values: tuple
+    why: str = ""
 
     def describe(self) -> str:
-        return "one of " + ", ".join(repr(v) for v in self.values)
+        return "one of " + ", ".join(repr(v) for v in self.values) + (f" ({self.why})" if self.why else "")
 
     def check(self, value, name: str):
-        if not isinstance(value, str) or value not in self.values:
+        if isinstance(value, bool) or not any(isinstance(value, type(v)) and value == v for v in self.values):
             raise InputError(f"{name} = {value!r}: expected {self.describe()}")
-        return str(value)
+        return value
+
+
+@dataclass(frozen=True)
+class Text:
+    """A one-line text of 1 to ``max_chars`` characters (a label nothing computes with)."""
+
+    max_chars: int = 200
+    why: str = ""
+
+    def describe(self) -> str:
+        return f"a one-line text of 1-{self.max_chars} characters" + (f" ({self.why})" if self.why else "")
+
+    def check(self, value, name: str):
+        if not isinstance(value, str) or not 0 < len(value) <= self.max_chars or "\n" in value or "\r" in value:
+            raise InputError(f"{name} = {value!r}: expected {self.describe()}")
+        return value
+
+
+@dataclass(frozen=True)
+class AutoOr:
+    """The text ``"auto"`` (the model chooses the value) or a value of ``spec``."""
+
+    spec: object
+
+    def describe(self) -> str:
+        return f"'auto' or {self.spec.describe()}"
+
+    def check(self, value, name: str):
+        if value == "auto":
+            return "auto"
+        if isinstance(value, str):
+            raise InputError(f"{name} = {value!r}: expected {self.describe()}")
+        try:
+            return self.spec.check(value, name)
+        except InputError:
+            raise InputError(f"{name} = {value!r}: expected {self.describe()}") from None
 
 
 @dataclass(frozen=True)
@@ -265,6 +318,88 @@ RENDER_TABLES = {
     },
 }
 
+#: A reflectance (albedo) at the ToF wavelength.
+REFLECTANCE = Num(0, 1, why="a reflectance")
+#: Seconds a ToF pixel integrates one DCS: AMCW sensors integrate for microseconds to milliseconds.
+_TOF_TIME_S = Num(0, 1, lo_open=True, why="an integration time; ToF pixels integrate us to ms")
+#: Irradiance on a pixel per LSB at the reference time: the EPC660's are 6e-4 and 2.5e-4 W m^-2;
+#: at 1 W m^-2 per LSB sunlight (~1e3 W m^-2) would fill only a thousand LSB.
+_SENSITIVITY = Num(0, 1, lo_open=True, why="W m^-2 per LSB; the EPC660's are 6e-4 (ToF) and 2.5e-4 (gray)")
+#: Ambient illuminance: direct sunlight is ~1.1e5 lux (the command line's bound, cli.validate).
+_LUX = Num(0, 2e5, why="natural light; direct sunlight is ~1.1e5 lux")
+
+#: Every key of the ToF camera tables (their whole key set: other keys are refused). Read by
+#: :class:`camera.amcw.TofSensor` (``[tof]``, ``[noise]``), :class:`render.tof.camera.Illumination`
+#: and ``TofOptics``, :func:`tof.camera.depth_kind` and ``svgs tof solve`` (``depth_png_scale_m``);
+#: ``n_taps``, ``frame_rate_hz``, ``gray_modes``, ``ambient_lux_high``, ``[illumination] model`` and
+#: ``radiant_flux_per_emitter_w`` (while ``radiant_intensity_w_sr`` is given) are the record's.
+TOF_CAMERA_TABLES = {
+    "tof": {
+        "depth_kind": Choice(DEPTH_KINDS),
+        "depth_png_scale_m": Num(0, 1, lo_open=True, why="metres per count of an integer depth image; 0.001: mm"),
+        "modulation_frequency_hz": Num(0, 1e9, lo_open=True, why="AMCW pixels demodulate below ~1 GHz"),
+        "wavelength_m": Num(3e-7, 1.1e-6, lo_open=True, why="silicon's response"),
+        "n_taps": Choice((4,), why="DCS per depth frame: the pixel model draws four"),
+        "demodulation_contrast": Num(0, 1, lo_open=True, why="a modulation contrast"),
+        "adc_bits": Num(2, 24, integer=True, why="DCS span +-(2^(bits-1) - 1) LSB: one bit holds only 0"),
+        "pixel_pitch_m": Num(0, 1e-4, lo_open=True, why="image-sensor pixels are 0.5-50 um"),
+        "tof_sensitivity_w_m2_per_lsb": _SENSITIVITY,
+        "gray_sensitivity_w_m2_per_lsb": _SENSITIVITY,
+        "sensitivity_reference_time_s": _TOF_TIME_S,
+        "frame_rate_hz": Num(0, 1e4, lo_open=True),
+        "integration_time_s": AutoOr(_TOF_TIME_S),
+        "integration_time_min_s": _TOF_TIME_S,
+        "integration_time_max_s": _TOF_TIME_S,
+        "auto_exposure_target": Num(0, 1, lo_open=True, why="a fraction of the DCS range"),
+        "min_amplitude_dn": Num(0, 1e7, why="LSB; 0: every depth pixel valid"),
+        "gray_modes": Vec(0, Choice(GRAY_MODES), min_len=1),
+    },
+    "noise": {
+        "quantum_efficiency": Num(0, 1, lo_open=True, why="a quantum efficiency, e-/photon"),
+        "read_noise_e": Num(0, 1e4),
+        "full_well_e": Num(0, 1e8, lo_open=True, why="the EPC660's storage node holds 8e6 e-"),
+        "dark_current_e_per_s": Num(0, 1e7),
+        "ambient_lux": _LUX,
+        "ambient_lux_high": _LUX,
+        "ambient_suppression": Num(0, 1, why="a fraction of the ambient charge removed"),
+        "ambient_w_m2_per_lux": Num(0, 0.1, why="in-band W m^-2 per lux; an incandescent lamp's whole "
+                                                "spectrum gives ~0.07"),
+    },
+    "illumination": {
+        "n_emitters": Num(1, 1000, integer=True),
+        "model": Text(why="the emitter's part name, for the record"),
+        "divergence_full_angle_deg": Num(0, 180, lo_open=True, hi_open=True, why="a full cone angle"),
+        "radiant_intensity_w_sr": Num(0, 1e5, lo_open=True),
+        "radiant_flux_per_emitter_w": Num(0, 1e4, lo_open=True),
+        "duty_cycle": Num(0, 1, lo_open=True, why="mean / peak optical power"),
+        "offset_from_lens_m": Vec(3, Num(-1, 1, why="m from the lens centre"), labels="x, y, z"),
+        "ring_radius_m": Num(0, 1, why="m from the lens axis; 0: at the lens"),
+        "emitter_diameter_m": Num(0, 0.1, lo_open=True),
+    },
+}
+
+#: Defaults the cross-key rules of ``[tof]`` assume for an absent key: those of
+#: :class:`camera.amcw.TofSensor` (a test keeps them equal).
+TOF_DEFAULTS = {"tof": {"integration_time_min_s": 1.67e-7, "integration_time_max_s": 2.0e-3}}
+
+#: Every key of the ToF target's tables (read by :func:`tof.camera.load_target` and
+#: :mod:`render.tof.scene`).
+TOF_PATTERN_TABLES = {
+    "plate": {
+        "width_m": Num(0, 100, lo_open=True),
+        "height_m": Num(0, 100, lo_open=True),
+        "thickness_m": Num(0, 1, lo_open=True),
+        "albedo": REFLECTANCE,
+    },
+    "marker": {
+        "material": Choice(TOF_MATERIALS),
+        "sheeting": Choice(SHEETINGS),
+        "albedo": REFLECTANCE,
+        "post_diameter_ratio": Num(0, 1, lo_open=True, hi_open=True, why="a post narrower than its marker"),
+        "diameter_m": Num(0, 1, lo_open=True, why="the markers' diameter where a [[target]] gives none"),
+    },
+}
+
 #: ``[intrinsics]``: image size and pinhole (the principal point is checked against the size by
 #: :class:`svgs.profiles.Camera`).
 INTRINSICS_KEYS = {
@@ -286,7 +421,7 @@ PHONE_DEFAULTS = {"sensor": {"adc_bits": 10, "black_level_dn": 64.0},
 #: ``calibration`` (what :mod:`calibration` estimated) and ``preview`` (a preview stream's
 #: record, :mod:`camera.phone.preview`) are written by this project's own tools.
 CAMERA_KEYS = ("name", "description", "intrinsics", "distortion", "sources", "fitted", "calibration", "preview",
-               *PHONE_TABLES, *RENDER_TABLES, "tof", "noise", "illumination")
+               *PHONE_TABLES, *RENDER_TABLES, *TOF_CAMERA_TABLES)
 
 #: Pattern tables and keys.
 REFLECTOR_KEYS = {
@@ -301,7 +436,10 @@ TARGET_KEYS = {
     "diameter_m": Num(0, 1, lo_open=True),
     "standoff_m": Num(0, 10),
 }
-PATTERN_KEYS = ("name", "description", "reflector", "target", "plate", "marker")
+PATTERN_KEYS = ("name", "description", "reflector", "target", *TOF_PATTERN_TABLES)
+
+#: Every named table: ``check_table(name, t)`` finds its keys here.
+_TABLES = {**PHONE_TABLES, **RENDER_TABLES, **TOF_CAMERA_TABLES, **TOF_PATTERN_TABLES}
 
 
 # ----------------------------------------------------------------------------- checks
@@ -311,8 +449,9 @@ def check_table(table: str, t, specs: dict | None = None, *, closed: bool = True
     Parameters
     ----------
     table : str
-        The table's name (``"sensor"``...): the key of :data:`PHONE_TABLES` or
-        :data:`RENDER_TABLES` when ``specs`` is None.
+        The table's name (``"sensor"``...): the key of :data:`PHONE_TABLES`,
+        :data:`RENDER_TABLES`, :data:`TOF_CAMERA_TABLES` or :data:`TOF_PATTERN_TABLES` when
+        ``specs`` is None.
     t : dict or None
         The table as read from TOML (None: empty).
     specs : dict, optional
@@ -333,7 +472,7 @@ def check_table(table: str, t, specs: dict | None = None, *, closed: bool = True
         minimum above its maximum...).
     """
     if specs is None:
-        specs = PHONE_TABLES.get(table) or RENDER_TABLES[table]
+        specs = _TABLES[table]
     if t is None:
         t = {}
     if not isinstance(t, dict):
@@ -380,8 +519,15 @@ def _cross_flash(o):
                          "(radiant_intensity_w_sr would win silently)")
 
 
+def _cross_tof(o):
+    d = {**TOF_DEFAULTS["tof"], **o}
+    a, b = d["integration_time_min_s"], d["integration_time_max_s"]
+    if a > b:
+        raise InputError(f"[tof] integration_time_min_s = {a:g} exceeds integration_time_max_s = {b:g}")
+
+
 _CROSS = {"sensor": _cross_sensor, "exposure": _cross_exposure, "isp": _cross_isp,
-          "optics": _cross_optics, "flash": _cross_flash}
+          "optics": _cross_optics, "flash": _cross_flash, "tof": _cross_tof}
 
 
 def check_camera_tables(data: dict) -> None:
@@ -396,9 +542,40 @@ def check_camera_tables(data: dict) -> None:
     extra = set(data) - set(CAMERA_KEYS)
     if extra:
         raise InputError(f"unknown table(s) or key(s) {sorted(extra)}; known: {', '.join(CAMERA_KEYS)}")
-    for table in (*PHONE_TABLES, *RENDER_TABLES):
+    for table in (*PHONE_TABLES, *RENDER_TABLES, *TOF_CAMERA_TABLES):
         if table in data:
             check_table(table, data[table])
+
+
+def check_pattern_tables(data: dict) -> list[dict]:
+    """Check a target pattern's TOML structure: its top-level keys, ``[reflector]``, the ToF
+    target's ``[plate]`` and ``[marker]``, and every ``[[target]]``.
+
+    Parameters
+    ----------
+    data : dict
+        The parsed file; ``data["target"]`` a non-empty list.
+
+    Returns
+    -------
+    list of dict
+        The checked values of each ``[[target]]``, in file order.
+
+    Raises
+    ------
+    InputError
+        A key that is not one of :data:`PATTERN_KEYS`; a value refused by :func:`check_table`
+        (naming ``[table] key`` and the allowed range).
+    """
+    extra = set(data) - set(PATTERN_KEYS)
+    if extra:
+        raise InputError(f"unknown table(s) or key(s) {sorted(extra)}; known: {', '.join(PATTERN_KEYS)}")
+    if "reflector" in data:
+        check_reflector_table(data["reflector"])
+    for table in TOF_PATTERN_TABLES:
+        if table in data:
+            check_table(table, data[table])
+    return [check_target(t, i) for i, t in enumerate(data["target"])]
 
 
 def check_reflector_table(t) -> dict:

@@ -29,11 +29,9 @@ from .errors import InputError, ProfileError, check_finite, check_finite_positiv
 from .profile_schema import (
     DISTINCT_TARGETS_M,
     INTRINSICS_KEYS,
-    PATTERN_KEYS,
     check_camera_tables,
-    check_reflector_table,
+    check_pattern_tables,
     check_table,
-    check_target,
 )
 
 ASSETS_DIR = Path(__file__).resolve().parent.parent / "assets"
@@ -545,7 +543,12 @@ class Pattern:
 
     @classmethod
     def load(cls, name_or_path) -> "Pattern":
-        """Load a pattern by name (``assets/patterns/<name>.toml``) or path."""
+        """Load a pattern by name (``assets/patterns/<name>.toml``) or path.
+
+        Every value is checked here, before any use (:func:`svgs.profile_schema.check_pattern_tables`:
+        ``[reflector]``, each ``[[target]]``, the ToF target's ``[plate]`` and ``[marker]``, unknown
+        keys): :class:`ProfileError` naming the file, ``[table] key`` and the allowed range.
+        """
         if isinstance(name_or_path, Pattern):
             return name_or_path
         path = _resolve(name_or_path, PATTERNS_DIR, "target pattern")
@@ -556,12 +559,7 @@ class Pattern:
         if not isinstance(targets, list) or not targets:
             raise ProfileError(f"{where}: expected [[target]] tables with id, x_m, y_m, z_m")
         try:  # every value checked at load (svgs.profile_schema): nothing unknown is ignored
-            extra = set(data) - set(PATTERN_KEYS)
-            if extra:
-                raise InputError(f"unknown table(s) or key(s) {sorted(extra)}; known: {', '.join(PATTERN_KEYS)}")
-            if "reflector" in data:
-                check_reflector_table(data["reflector"])
-            checked = [check_target(t, i) for i, t in enumerate(targets)]
+            checked = check_pattern_tables(data)
         except InputError as exc:
             raise ProfileError(f"{where}: {exc}") from None
         ids = [c["id"] for c in checked]

@@ -191,6 +191,8 @@ def test_every_shipped_camera_loads_to_its_file_values(path, fitted):
 
     cam = Camera.load(path, fitted=fitted)
     raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    if "tof" in raw:
+        _assert_tof_models_hold_the_file_values(cam, raw)
     if not any(t in raw for t in PHONE_TABLES):
         return  # the ToF camera: no phone tables
     params = PhoneParams.from_camera(cam)
@@ -205,6 +207,26 @@ def test_every_shipped_camera_loads_to_its_file_values(path, fitted):
     assert params.band_nm == tuple(raw["optics"]["band_nm"])
 
 
+def _assert_tof_models_hold_the_file_values(cam, raw):
+    """The ToF sensor, illumination and lens built from a loaded ToF profile carry the numbers of
+    its ``[tof]``, ``[noise]``, ``[illumination]`` and ``[optics]`` tables (``raw``, read with
+    tomllib), and the tables are kept as the file has them."""
+    from camera.amcw import TofSensor
+    from render.tof.camera import Illumination, TofOptics
+
+    for table in ("tof", "noise", "illumination"):
+        assert cam.tables[table] == raw[table], table
+    sensor, light, lens = TofSensor.from_camera(cam), Illumination.from_camera(cam), TofOptics.from_camera(cam)
+    for table, model in (("tof", sensor), ("noise", sensor), ("illumination", light)):
+        for key, value in raw[table].items():
+            if hasattr(model, key):
+                want = None if value == "auto" else tuple(value) if isinstance(value, list) else value
+                assert getattr(model, key) == want, (table, key, getattr(model, key), want)
+    assert sensor.transmittance == raw["optics"]["transmittance"]
+    assert (lens.focal_length_m, lens.f_number, lens.wavelength_m) == (
+        raw["optics"]["focal_length_m"], raw["optics"]["f_number"], raw["tof"]["wavelength_m"])
+
+
 @pytest.mark.parametrize("path", SHIPPED_PATTERNS, ids=lambda p: p.name)
 def test_every_shipped_pattern_loads_to_its_file_values(path):
     pat = Pattern.load(path)
@@ -213,6 +235,21 @@ def test_every_shipped_pattern_loads_to_its_file_values(path):
     assert sorted(by_id) == pat.ids.tolist()
     for i, p in zip(pat.ids, pat.points_m):
         assert tuple(p) == by_id[i]
+    if "plate" in raw or "marker" in raw:  # the ToF target: its scene is built from the file's numbers
+        from render.tof.scene import TofSceneOptions, resolve_geometry
+        from tof.camera import load_target
+
+        target = load_target(path)
+        assert (target.plate, target.marker) == (raw["plate"], raw["marker"])
+        assert target.diameter_m.tolist() == [t["diameter_m"] for t in sorted(raw["target"], key=lambda t: t["id"])]
+        geo = resolve_geometry(target, TofSceneOptions())
+        assert geo.plate_size_m == (raw["plate"]["width_m"], raw["plate"]["height_m"])
+        assert geo.plate_thickness_m == raw["plate"]["thickness_m"]
+        assert geo.albedo == {"plate": raw["plate"]["albedo"], "marker": raw["marker"]["albedo"],
+                              "dark": raw["plate"]["albedo"]}
+        assert geo.materials == {"marker": raw["marker"]["material"], "plate": "lambertian",
+                                 "sheeting": raw["marker"]["sheeting"]}
+        assert geo.post_radius_m.tolist() == [d / 2 * raw["marker"]["post_diameter_ratio"] for d in target.diameter_m]
 
 
 def test_the_shared_tables_agree_with_their_users():

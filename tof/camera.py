@@ -21,13 +21,13 @@ from pathlib import Path
 import numpy as np
 
 from svgs.errors import InputError, ProfileError
+from svgs.profile_schema import DEPTH_KINDS, TARGET_KEYS, TOF_CAMERA_TABLES
 from svgs.profiles import Camera, Pattern
 
 #: Default ToF camera profile (``assets/cameras/tof-epc660.toml``).
 DEFAULT_CAMERA = "tof-epc660"
 #: Default marker target (``assets/patterns/tof-8.toml``).
 DEFAULT_PATTERN = "tof-8"
-DEPTH_KINDS = ("radial", "z")
 #: The ToF sensor's range envelope, m: the paper's design range 0.27-15 m (section 2.2), within
 #: the 15 m unambiguous range of its 10 MHz modulation (``--range``, range lists, sensitivity bounds).
 DESIGN_RANGE_M = (0.27, 15.0)
@@ -53,8 +53,10 @@ def load_camera(name_or_path=DEFAULT_CAMERA, *, render: bool = False) -> Camera:
     Raises
     ------
     ProfileError
-        A phone profile (it has a ``[flash]``/``[cfa]``... table: an SVGS camera, not a ToF
-        one), or ``render=True`` and a table missing.
+        A value of the profile refused when it is loaded (:meth:`svgs.profiles.Camera.load`
+        checks ``[tof]``, ``[noise]``, ``[illumination]`` with the rest); a phone profile (it has
+        a ``[flash]``/``[cfa]``... table: an SVGS camera, not a ToF one), or ``render=True`` and
+        a table missing.
     """
     cam = Camera.load(name_or_path)
     phone = [t for t in PHONE_TABLES if t in cam.tables]
@@ -66,17 +68,19 @@ def load_camera(name_or_path=DEFAULT_CAMERA, *, render: bool = False) -> Camera:
         if missing:
             raise ProfileError(f"camera {cam.name!r}: rendering the ToF camera needs the table(s) "
                                f"{['[' + m + ']' for m in missing]} (see {DEFAULT_CAMERA!r})")
-    depth_kind(cam)  # validates the [tof] table when present
     return cam
 
 
 def depth_kind(camera: Camera) -> str:
-    """What the camera's depth image holds: ``"radial"`` (default) or ``"z"``."""
+    """What the camera's depth image holds: ``"radial"`` (default) or ``"z"``
+    (:data:`svgs.profile_schema.DEPTH_KINDS`; checked by the profile's entry, for cameras
+    built in code: a loaded profile passed the check already)."""
     t = camera.tables.get("tof", {})
     kind = t.get("depth_kind", "radial") if isinstance(t, dict) else "radial"
-    if kind not in DEPTH_KINDS:
-        raise ProfileError(f"camera {camera.name!r}: tof.depth_kind must be one of {DEPTH_KINDS}, got {kind!r}")
-    return kind
+    try:
+        return TOF_CAMERA_TABLES["tof"]["depth_kind"].check(kind, f"camera {camera.name!r}: [tof] depth_kind")
+    except InputError as exc:
+        raise ProfileError(str(exc)) from None
 
 
 def line_of_sight(camera: Camera, uv_px) -> np.ndarray:
@@ -176,7 +180,9 @@ def load_target(name_or_path=DEFAULT_PATTERN) -> MarkerTarget:
     Raises
     ------
     ProfileError
-        Missing or non-positive diameters.
+        A value of the pattern refused when it is loaded (:meth:`svgs.profiles.Pattern.load`
+        checks every ``[[target]]``, ``[plate]``, ``[marker]`` and ``[reflector]`` value); a
+        marker without a diameter, or a diameter out of range (a pattern built in code).
     """
     if isinstance(name_or_path, MarkerTarget):
         return name_or_path
@@ -198,13 +204,10 @@ def load_target(name_or_path=DEFAULT_PATTERN) -> MarkerTarget:
         d = t.get("diameter_m", default_d)
         if d is None:
             raise ProfileError(f"pattern {pattern.name!r}: target {tid} has no diameter_m (and no [marker] diameter_m)")
-        try:
-            d = float(d)
-        except (TypeError, ValueError):
-            raise ProfileError(f"pattern {pattern.name!r}: target {tid}.diameter_m must be a number, got {d!r}") from None
-        if not (np.isfinite(d) and d > 0):
-            raise ProfileError(f"pattern {pattern.name!r}: target {tid}.diameter_m must be positive and finite, got {d!r}")
-        diam.append(d)
+        try:  # a loaded file passed this check already; a pattern built in code may not have
+            diam.append(TARGET_KEYS["diameter_m"].check(d, f"pattern {pattern.name!r}: target {tid} diameter_m"))
+        except InputError as exc:
+            raise ProfileError(str(exc)) from None
         stand.append(float(t.get("standoff_m", p[2])))
     plate = pattern.tables.get("plate", {})
     marker = pattern.tables.get("marker", {})

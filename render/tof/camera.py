@@ -62,6 +62,7 @@ import numpy as np
 
 from svgs.errors import InputError, ProfileError, check_finite, check_finite_positive
 from svgs.frames import check_pose, pose_to_state, state_dict
+from svgs.profile_schema import TOF_CAMERA_TABLES, check_table
 from tof.camera import DEFAULT_CAMERA, DEFAULT_PATTERN, load_camera, load_target
 
 from camera.amcw import RenderedTof, unambiguous_range_m
@@ -83,6 +84,8 @@ DEFAULT_RIM_SPP_FACTOR = 64
 RIM_MARGIN_PX = 0.5
 #: Sample generators of :class:`TofRenderer` (see the module docstring).
 SAMPLERS = ("sobol", "r2")
+#: What a modulation frequency may be: the profile's ``[tof] modulation_frequency_hz`` entry.
+MODULATION_FREQUENCY_HZ = TOF_CAMERA_TABLES["tof"]["modulation_frequency_hz"]
 #: Dimensions of the per-pixel Sobol' point: film u, v; aperture u, v; emitter index; emitter disk u, v.
 SOBOL_DIMS = (0, 1, 2, 3, 4, 5, 6)
 #: Most samples traced in one pass (memory: six float32 channels and the wavefront state per lane).
@@ -126,26 +129,13 @@ class Illumination:
     radiant_intensity_w_sr: float | None = None
 
     def __post_init__(self):
-        if self.radiant_intensity_w_sr is not None:
-            check_finite_positive(self.radiant_intensity_w_sr, "illumination.radiant_intensity_w_sr")
-        if int(self.n_emitters) != self.n_emitters or self.n_emitters < 1:
-            raise InputError(f"illumination.n_emitters: expected a positive integer, got {self.n_emitters!r}")
-        check_finite_positive(self.radiant_flux_per_emitter_w, "illumination.radiant_flux_per_emitter_w")
-        d = check_finite_positive(self.duty_cycle, "illumination.duty_cycle")
-        if d > 1:
-            raise InputError(f"illumination.duty_cycle: expected a fraction in (0, 1], got {d!r}")
-        a = check_finite_positive(self.divergence_full_angle_deg, "illumination.divergence_full_angle_deg")
-        if a >= 180:
-            raise InputError(f"illumination.divergence_full_angle_deg: expected < 180, got {a!r}")
-        check_finite_positive(self.ring_radius_m, "illumination.ring_radius_m", allow_zero=True)
-        check_finite_positive(self.emitter_diameter_m, "illumination.emitter_diameter_m")
-        try:
-            off = tuple(float(x) for x in self.offset_from_lens_m)
-        except (TypeError, ValueError):
-            raise InputError(f"illumination.offset_from_lens_m: expected [x, y, z] m, got {self.offset_from_lens_m!r}") from None
-        if len(off) != 3 or not np.all(np.isfinite(off)):
-            raise InputError(f"illumination.offset_from_lens_m: expected 3 finite numbers, got {self.offset_from_lens_m!r}")
-        object.__setattr__(self, "offset_from_lens_m", off)
+        """Check every field with the profile's ``[illumination]`` entry of the same name
+        (:data:`svgs.profile_schema.TOF_CAMERA_TABLES`); ``offset_from_lens_m`` becomes a tuple."""
+        given = {f: getattr(self, f) for f in self.__dataclass_fields__}
+        if given["radiant_intensity_w_sr"] is None:
+            del given["radiant_intensity_w_sr"]
+        for k, v in check_table("illumination", given).items():
+            object.__setattr__(self, k, v)
 
     @classmethod
     def from_camera(cls, camera, **overrides) -> "Illumination":
@@ -220,17 +210,16 @@ class TofOptics:
 
     @classmethod
     def from_camera(cls, camera) -> "TofOptics":
+        """The lens of ``[optics]`` and the wavelength of ``[tof]`` (missing keys: class defaults),
+        checked by the profile's own entries (:mod:`svgs.profile_schema`)."""
         o = dict(camera.tables.get("optics") or {})
         t = dict(camera.tables.get("tof") or {})
-        kw = {k: o[k] for k in ("focal_length_m", "f_number", "focus_distance_m") if k in o}
-        if "wavelength_m" in t:
-            kw["wavelength_m"] = t["wavelength_m"]
-        for k, v in kw.items():
-            try:
-                kw[k] = check_finite_positive(v, f"camera {camera.name!r} {k}")
-            except InputError as exc:
-                raise ProfileError(str(exc)) from None
-        return cls(**kw)
+        try:
+            lens = check_table("optics", {k: o[k] for k in ("focal_length_m", "f_number", "focus_distance_m") if k in o})
+            light = check_table("tof", {k: t[k] for k in ("wavelength_m",) if k in t})
+        except InputError as exc:
+            raise ProfileError(f"camera {camera.name!r}: {exc}") from None
+        return cls(**lens, **light)
 
     def to_json(self) -> dict:
         d = asdict(self)
@@ -341,7 +330,7 @@ class TofRenderer:
         f = modulation_frequency_hz
         if f is None:
             f = (self.camera.tables.get("tof") or {}).get("modulation_frequency_hz", 10.0e6)
-        self.modulation_frequency_hz = check_finite_positive(f, "modulation_frequency_hz")
+        self.modulation_frequency_hz = MODULATION_FREQUENCY_HZ.check(f, "modulation_frequency_hz")
         self.spp = check_spp(DEFAULT_SPP if spp is None else spp, "spp", base=2)
         self.rim_spp_factor = check_spp(DEFAULT_RIM_SPP_FACTOR if rim_spp_factor is None else rim_spp_factor,
                                         "rim_spp_factor", base=2)
@@ -492,7 +481,7 @@ class TofRenderer:
         spp = self.spp if spp is None else check_spp(spp, "spp", base=2)
         factor = self.rim_spp_factor if rim_spp_factor is None else check_spp(rim_spp_factor, "rim_spp_factor", base=2)
         f_mod = self.modulation_frequency_hz if modulation_frequency_hz is None else \
-            check_finite_positive(modulation_frequency_hz, "modulation_frequency_hz")
+            MODULATION_FREQUENCY_HZ.check(modulation_frequency_hz, "modulation_frequency_hz")
         if self.options.markers:
             truth_m = check_target_in_view(self.camera, self.target, R, t)
         else:

@@ -21,22 +21,23 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from svgs.errors import InputError, check_finite, check_finite_positive
+from svgs.errors import InputError, check_finite_positive
+from svgs.profile_schema import REFLECTANCE, TOF_MATERIALS, TOF_PATTERN_TABLES, check_table
 
 from ..geometry import OptionsMixin
 
 #: Distractor kinds: ``sphere`` (``position_m``, ``radius_m``) and ``box`` (``lo_m``, ``hi_m``
 #: corners, axis-aligned in the target frame); both take ``albedo`` (Lambertian, default 0.8).
 DISTRACTOR_KINDS = ("sphere", "box")
-#: Surface materials: ``retroreflective`` (a sheeting table of :mod:`render.tof.retro`) or ``lambertian``.
-MATERIALS = ("retroreflective", "lambertian")
+#: Surface materials: ``retroreflective`` (a sheeting table of :mod:`render.tof.retro`) or
+#: ``lambertian`` (the pattern's ``[marker] material`` choices, :mod:`svgs.profile_schema`).
+MATERIALS = TOF_MATERIALS
+#: The pattern's ``[plate]`` and ``[marker]`` entries, which the options of the same meaning share.
+_PLATE, _MARKER = TOF_PATTERN_TABLES["plate"], TOF_PATTERN_TABLES["marker"]
 
 
 def _reflectance(v, name):
-    v = check_finite(v, name)
-    if not 0.0 <= v <= 1.0:
-        raise InputError(f"{name}: expected a reflectance in [0, 1], got {v!r}")
-    return float(v)
+    return REFLECTANCE.check(v, name)
 
 
 def _check_distractor(d, i) -> dict:
@@ -115,8 +116,8 @@ class TofSceneOptions(OptionsMixin):
     def __post_init__(self):
         for k in ("marker_material", "plate_material"):
             v = getattr(self, k)
-            if v is not None and v not in MATERIALS:
-                raise InputError(f"scene_options.{k}: expected one of {MATERIALS}, got {v!r}")
+            if v is not None:
+                _MARKER["material"].check(v, f"scene_options.{k}")
         if self.sheeting is not None:
             from .retro import load_sheeting
 
@@ -130,16 +131,13 @@ class TofSceneOptions(OptionsMixin):
                 w, h = (float(x) for x in self.plate_size_m)
             except (TypeError, ValueError):
                 raise InputError(f"scene_options.plate_size_m: expected (width, height) metres, got {self.plate_size_m!r}") from None
-            check_finite_positive(w, "scene_options.plate_size_m[0]")
-            check_finite_positive(h, "scene_options.plate_size_m[1]")
-            object.__setattr__(self, "plate_size_m", (w, h))
+            object.__setattr__(self, "plate_size_m", (_PLATE["width_m"].check(w, "scene_options.plate_size_m[0]"),
+                                                      _PLATE["height_m"].check(h, "scene_options.plate_size_m[1]")))
         if self.plate_thickness_m is not None:
-            check_finite_positive(self.plate_thickness_m, "scene_options.plate_thickness_m")
+            _PLATE["thickness_m"].check(self.plate_thickness_m, "scene_options.plate_thickness_m")
         check_finite_positive(self.marker_thickness_m, "scene_options.marker_thickness_m")
         if self.post_diameter_ratio is not None:
-            v = check_finite_positive(self.post_diameter_ratio, "scene_options.post_diameter_ratio")
-            if v >= 1:
-                raise InputError(f"scene_options.post_diameter_ratio: expected < 1, got {v!r}")
+            _MARKER["post_diameter_ratio"].check(self.post_diameter_ratio, "scene_options.post_diameter_ratio")
         object.__setattr__(self, "distractors", tuple(_check_distractor(d, i) for i, d in enumerate(self.distractors)))
 
     def to_json(self) -> dict:
@@ -219,7 +217,11 @@ def resolve_geometry(target, opts: TofSceneOptions) -> TofGeometry:
     InputError
         No plate size anywhere, or a marker face below its puck thickness.
     """
-    plate, marker = target.plate or {}, target.marker or {}
+    # the pattern's tables, by its own entries (a loaded pattern passed them; a target built in code may not have)
+    try:
+        plate, marker = check_table("plate", target.plate or {}), check_table("marker", target.marker or {})
+    except InputError as exc:
+        raise InputError(f"pattern {target.pattern.name!r}: {exc}") from None
     if opts.plate_size_m is not None:
         size = opts.plate_size_m
     elif "width_m" in plate and "height_m" in plate:
@@ -227,13 +229,11 @@ def resolve_geometry(target, opts: TofSceneOptions) -> TofGeometry:
     else:
         raise InputError(f"pattern {target.pattern.name!r}: [plate] width_m/height_m missing and no plate_size_m given")
     thick = float(opts.plate_thickness_m if opts.plate_thickness_m is not None else plate.get("thickness_m", 0.005))
-    a_plate = opts.plate_albedo if opts.plate_albedo is not None else _reflectance(plate.get("albedo", 0.04), "[plate].albedo")
-    a_marker = opts.marker_albedo if opts.marker_albedo is not None else _reflectance(marker.get("albedo", 0.85), "[marker].albedo")
+    a_plate = opts.plate_albedo if opts.plate_albedo is not None else plate.get("albedo", 0.04)
+    a_marker = opts.marker_albedo if opts.marker_albedo is not None else marker.get("albedo", 0.85)
     a_dark = opts.dark_albedo if opts.dark_albedo is not None else a_plate
     ratio = opts.post_diameter_ratio if opts.post_diameter_ratio is not None else float(marker.get("post_diameter_ratio", 0.5))
-    m_mat = opts.marker_material if opts.marker_material is not None else str(marker.get("material", "lambertian"))
-    if m_mat not in MATERIALS:
-        raise InputError(f"pattern {target.pattern.name!r}: [marker] material must be one of {MATERIALS}, got {m_mat!r}")
+    m_mat = opts.marker_material if opts.marker_material is not None else marker.get("material", "lambertian")
     sheeting = opts.sheeting if opts.sheeting is not None else marker.get("sheeting")
     if "retroreflective" in (m_mat, opts.plate_material):
         from .retro import load_sheeting
