@@ -11,7 +11,7 @@ command resumes - and returns the exit code: 130 after Ctrl-C (``EXIT_INTERRUPTE
 
 With ``--json`` the interrupt is also one JSON object on stdout (:func:`report_interrupt`). Run
 as the program, a watchdog thread stops the process within a second even while the main thread
-is inside a render (:mod:`sim.hard_stop`).
+is inside a render (:func:`watchdog`; what may be stopped so is registered in :mod:`sim.hard_stop`).
 
 A SIGTERM that the caller set to be ignored stays ignored, and the previous handler is put
 back when the command returns (``main`` is also called in-process, by tests).
@@ -21,9 +21,12 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import signal
+import socket
 import sys
 import threading
+import time
 
 from cli.exit_codes import EXIT_INTERRUPTED
 
@@ -80,6 +83,110 @@ def report_interrupt(name: str, exc: KeyboardInterrupt, as_json: bool = False) -
         print(json.dumps(obj), file=sys.stdout, flush=True)
 
 
+# --------------------------------------------------------------------------- the watchdog
+#: Signals the watchdog acts on.
+STOP_SIGNALS = (int(signal.SIGINT), int(signal.SIGTERM))
+#: The registry of stoppable parts (:mod:`sim.hard_stop`); looked up only when a signal arrives.
+HARD_STOP_MODULE = "sim.hard_stop"
+
+
+def exit_code(signum: int) -> int:
+    """130 after Ctrl-C, 128 + the signal number otherwise (143 for SIGTERM), as a shell reports it."""
+    return EXIT_INTERRUPTED if signum == int(signal.SIGINT) else 128 + int(signum)
+
+
+class _Watchdog(threading.Thread):
+    """Reads the signal numbers the C-level handler writes into ``sock`` (see :func:`watchdog`)."""
+
+    def __init__(self, sock: socket.socket, announce):
+        super().__init__(name="svgs-hard-stop", daemon=True)
+        self.sock, self.announce = sock, announce
+        self.finished = threading.Event()
+
+    def run(self) -> None:
+        while not self.finished.is_set():
+            try:
+                data = self.sock.recv(64)
+            except OSError:
+                return
+            if not data or self.finished.is_set():
+                return
+            signums = [b for b in data if b in STOP_SIGNALS]
+            if signums:
+                self._stop_if_stuck(signums[0])
+
+    def _stop_if_stuck(self, signum: int) -> None:
+        """Give the main thread its time; end the process if the command is still in a stoppable part."""
+        hs = sys.modules.get(HARD_STOP_MODULE)
+        if hs is None:  # never imported: no stoppable part has run
+            return
+        deadline = time.monotonic() + hs.HARD_STOP_AFTER_S
+        while time.monotonic() < deadline:
+            if self.finished.wait(0.02):
+                return
+        entry = hs.active_progress()
+        if entry is None or self.finished.is_set():
+            return  # the main thread is stopping on its own (or outside a stoppable part): let it
+        hs.hold_writes()  # a row or file being written is finished first; never given back below
+        if self.finished.is_set():
+            hs.release_writes()
+            return
+        try:
+            kept = entry[0]() if entry[0] is not None else None
+        except Exception:  # noqa: BLE001 - the count is a courtesy; the stop must happen
+            kept = None
+        try:
+            self.announce(signum, kept)
+            sys.stderr.flush()
+            sys.stdout.flush()
+        finally:
+            os._exit(exit_code(signum))
+
+
+@contextlib.contextmanager
+def watchdog(announce):
+    """Run the block with the hard-stop watchdog (main thread only; elsewhere a no-op).
+
+    The C-level signal handler writes each signal's number into a socket
+    (``signal.set_wakeup_fd``) even while the main thread is inside native code; a daemon thread
+    reads it. After Ctrl-C or SIGTERM it waits :data:`sim.hard_stop.HARD_STOP_AFTER_S`; if the
+    command is then still inside a :func:`sim.hard_stop.scope` it takes the write lock, calls
+    ``announce`` and ends the process with :func:`exit_code`.
+
+    Parameters
+    ----------
+    announce : callable
+        ``announce(signum, kept)`` prints the command's interrupt line; ``kept`` is what the
+        scope's ``progress`` returned (or None).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    reader, writer = socket.socketpair()
+    writer.setblocking(False)
+    try:
+        previous = signal.set_wakeup_fd(writer.fileno(), warn_on_full_buffer=False)
+    except (ValueError, OSError):  # not allowed here: the main thread's own handling only
+        reader.close()
+        writer.close()
+        yield
+        return
+    dog = _Watchdog(reader, announce)
+    dog.start()
+    try:
+        yield
+    finally:
+        dog.finished.set()
+        signal.set_wakeup_fd(previous)
+        try:
+            writer.send(b"\0")  # wake the reader so that it ends
+        except OSError:
+            pass
+        dog.join(1.0)
+        reader.close()
+        writer.close()
+
+
 def interruptible(args, *, hard_stop: bool = False):
     """``args.func`` wrapped: SIGTERM handled like Ctrl-C while it runs, one line and the exit
     code (130 or 143) when either stops it.
@@ -90,7 +197,7 @@ def interruptible(args, *, hard_stop: bool = False):
         Parsed command line, with the handler ``func`` (and ``json``, if the command has it).
     hard_stop : bool
         The command runs as the program (not called in-process): a watchdog
-        (:func:`sim.hard_stop.watchdog`) ends the process within a second of the signal when
+        (:func:`watchdog`) ends the process within a second of the signal when
         the main thread is stuck in native code inside a stoppable part (a render, an in-process
         study's render group), after printing the same line.
 
@@ -111,8 +218,6 @@ def interruptible(args, *, hard_stop: bool = False):
         report_interrupt(name, exc, as_json)
 
     def run(a) -> int:
-        from sim import hard_stop as hs
-
         previous = None
         if threading.current_thread() is threading.main_thread():
             previous = signal.getsignal(signal.SIGTERM)
@@ -121,7 +226,7 @@ def interruptible(args, *, hard_stop: bool = False):
             else:
                 signal.signal(signal.SIGTERM, _raise_terminated)
         try:
-            with hs.watchdog(announce) if hard_stop else contextlib.nullcontext():
+            with watchdog(announce) if hard_stop else contextlib.nullcontext():
                 return func(a)
         except KeyboardInterrupt as exc:  # Ctrl-C or Terminated: the command has unwound, its rows are kept
             report_interrupt(name, exc, as_json)

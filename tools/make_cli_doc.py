@@ -59,7 +59,9 @@ def _render() -> str:
            "the study commands (range-sweep, exposure-study, campaign, sensitivity, calibrate study) write NaN as "
            "`null` and also write the object to their folder's `summary.json`. A refused run (exit 2) prints "
            "`{\"ok\": false, \"error\": \"...\"}` instead, a simulated physical failure (exit 1) "
-           "`{\"ok\": false, \"reason\": \"...\", \"error\": \"...\"}`; the message is also on stderr."), ""]
+           "`{\"ok\": false, \"reason\": \"...\", \"error\": \"...\"}`, an interrupted one (Ctrl-C: exit 130, "
+           "SIGTERM: exit 143) `{\"ok\": false, \"signal\": \"SIGINT\", \"error\": \"...\"}` with, for a study, "
+           "`\"stored\"`, `\"trials\"` and `\"out\"` (what its store holds); the message is also on stderr."), ""]
     for name, p in _walk(parser, "svgs"):
         out += [f"## `{name}`", "", "```", p.format_help().rstrip(), "```", ""]
         if name in SCHEMAS:
