@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from calibration import Board
-from svgs.errors import InputError, check_finite_positive
+from svgs.errors import InputError, SimulationFailure, check_finite_positive
 from svgs.profiles import DISTORTION_KEYS, Camera, Pattern
 
 from .common import (
@@ -607,11 +607,11 @@ def run_calibration_study(camera, out_dir, *, views_list=DEFAULT_VIEWS_LIST, see
     try:
         set_info, conv_rows, conv, frames, focal_rows, f_est, believed, pose_rows, floor = _run_parts(
             s, runner, board_set_dir, focal_cache, say, timings)
-    except InputError:
+    except (InputError, SimulationFailure):
         runner.close()
         if made:
-            # refused (e.g. the board found in fewer views than asked, no focal frame identified):
-            # nothing is left. Its stores could serve only a rerun with these inputs, which is
+            # refused (e.g. the board found in fewer views than asked, no focal frame identified),
+            # or the simulated physics left nothing to measure (a black board render): nothing is left. Its stores could serve only a rerun with these inputs, which is
             # refused again; a corrected rerun would be refused for other parameters, and a kept
             # detections cache would be reused by it. An interrupt (not a refusal) keeps the trials.
             shutil.rmtree(out / "trials", ignore_errors=True)
