@@ -54,7 +54,7 @@ class CalibrationStudyPlan(StudyPlan):
     Attributes
     ----------
     counts : str
-        What the study does, in words (``"40 board views rendered at 2592x1944 px ..."``).
+        What the study does, in words (``"40 board view(s) rendered (16 spp) at 2592x1944 px ..."``).
     serial_s : float
         Core-seconds of the work done in this process, one core.
     trials_s : float
