@@ -227,7 +227,7 @@ def _add_study(sub) -> None:
                    "DIR/summary.json")
     from cli.studies import add_executor_options
 
-    add_executor_options(p)
+    add_executor_options(p, plan_only=True)
     p.set_defaults(func=cmd_study)
 
 
@@ -235,9 +235,10 @@ def cmd_study(args) -> int:
     import json
 
     from cli.json_out import emit, run_info, text_to_stderr
-    from cli.studies import executor_from_args, print_run_stats, warn_processes
+    from cli.studies import executor_from_args, print_run_stats
     from studies.calibration import (
         parse_number_list,
+        plan_calibration_study,
         run_calibration_study,
         summary_text,
         write_report,
@@ -260,18 +261,21 @@ def cmd_study(args) -> int:
     out = Path(args.out or f"calibration-study-{cam.name}")
     cache = Path(args.cache) if args.cache else None
     spec = executor_from_args(args)
-    warn_processes(spec)
     say = lambda s: print(s, file=sys.stderr)
+    study = dict(views_list=views, seed=args.seed, board=board, subsets=subsets, spp=spp, geometric=args.geometric,
+                 true_pp_offset_px=tuple(args.true_pp_offset_px), true_dist=true_dist, focal_ranges_m=focal_ranges,
+                 focal_exposures=exposures, pose_ranges_m=pose_ranges, poses_per_range=ppr, pattern=args.pattern)
+    kept = dict(board_set_dir=None if cache is None else cache / "board-set",
+                focal_cache=None if cache is None else cache / "focal_frames.npz")
+    # the checks and the plan (counts, estimate, warnings) before any work
+    for line in plan_calibration_study(cam, out, spec=spec, **kept, **study).lines():
+        say(line)
+    if args.plan_only:
+        return 0
     # both made and probed before any work; removed again if refused (the study removes its trials then)
     with output_folder(out), output_folder_if(cache, "--cache"):
-        res = run_calibration_study(
-            cam, out, views_list=views, seed=args.seed, board=board, subsets=subsets, spp=spp, geometric=args.geometric,
-            true_pp_offset_px=tuple(args.true_pp_offset_px), true_dist=true_dist, focal_ranges_m=focal_ranges,
-            focal_exposures=exposures, pose_ranges_m=pose_ranges, poses_per_range=ppr, pattern=args.pattern,
-            board_set_dir=None if cache is None else cache / "board-set",
-            focal_cache=None if cache is None else cache / "focal_frames.npz", progress=say,
-            spec=spec, chunk_size=args.chunk_size, show_progress=not args.no_progress,
-        )
+        res = run_calibration_study(cam, out, **study, **kept, progress=say, spec=spec, chunk_size=args.chunk_size,
+                                    show_progress=not args.no_progress)
     command = _study_command(args)
     files = write_report(res, out, command=command)
     with text_to_stderr(args.json):

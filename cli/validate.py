@@ -6,7 +6,8 @@ the argument names (one vocabulary across the commands, ``docs/architecture.md``
 - output locations (``--out``, ``--cache``): a folder that is a folder and writable (or can be
   made), or - where the metavar says ``.toml`` - a file whose folder is writable and that is not
   a folder;
-- seeds (>= 0), counts (>= 1: samples, trials, frames, views, workers...), finite floats,
+- seeds (0 to 2**32 - 1), counts (>= 1: samples, trials, frames, views, workers...; samples
+  per pixel at most :data:`svgs.limits.MAX_SPP`), finite floats,
   positive physical quantities (exposure, ISO, sigmas, sizes), non-negative ones (jitter,
   ambient light) - a value equal to the option's default is the command's own choice and
   passes (some defaults are 0 for "none");
@@ -31,6 +32,7 @@ from pathlib import Path
 from svgs.errors import InputError
 from svgs.identify import MIN_SPAN_PX  # noqa: F401 - re-exported (the module notes name it)
 from svgs.identify import check_attitude_deg, check_range_m, range_envelope_m
+from svgs.limits import INPUT_BOUNDS, INT_BOUNDS
 
 #: Integer arguments that count something (>= 1).
 COUNTS = {"spp", "roi_spp", "rim_spp_factor", "spot_samples", "trials", "poses", "frames", "views", "subsets",
@@ -46,25 +48,15 @@ POSITIVE = {"centroid_sigma_px", "exposure_s", "iso", "focus_m", "integration_ti
 #: Float arguments that must be >= 0.
 NON_NEGATIVE = {"sigma_px", "range_sigma_m", "merge_px", "jitter_deg", "jitter_m", "ambient", "ambient_lux", "backdrop_m"}
 #: Physical bounds of every float argument (dest -> (low, high, unit)); inclusive, except a low of
-#: 0 for the :data:`POSITIVE` ones. Far beyond any phone, lab or ToF camera the simulator models,
-#: they keep absurd numbers (1e308) from overflowing the solver and the calibrations. Ranges
-#: and attitudes are bounded by the envelope instead (:func:`svgs.identify.range_envelope_m`,
-#: :data:`svgs.identify.ATTITUDE_LIMITS_DEG`); tests/test_messages.py fails on a float option
-#: with neither.
-BOUNDS = {
-    "sigma_px": (0.0, 100.0, "px"), "consistency_sigma_px": (1e-3, 100.0, "px"),
-    "centroid_sigma_px": (1e-3, 100.0, "px"), "range_sigma_m": (0.0, 10.0, "m"),
-    "target_x_m": (-1000.0, 1000.0, "m"), "target_y_m": (-1000.0, 1000.0, "m"),
-    "focus_m": (0.0, 10000.0, "m"), "backdrop_m": (0.0, 1000.0, "m"),
-    "ambient": (0.0, 10000.0, "W m^-2 sr^-1"), "exposure_s": (0.0, 60.0, "s"), "iso": (1.0, 1e6, ""),
-    "stage_m": (-1.0, 1.0, "m"), "jitter_deg": (0.0, 90.0, "deg"), "jitter_m": (0.0, 10.0, "m"),
-    "spacing_mm": (0.0, 1000.0, "mm"), "marker_mm": (0.0, 1000.0, "mm"), "aspect_ratio": (0.1, 10.0, ""),
-    "principal_point": (-1e5, 1e5, "px"), "exposure_fill": (0.0, 1.0, "of full well"),
-    "true_pp_offset_px": (-1000.0, 1000.0, "px"), "ambient_lux": (0.0, 2e5, "lux"),
-    "integration_time_s": (0.0, 1.0, "s"), "modulation_frequency_hz": (0.0, 1e9, "Hz"),
-    "focal_error_frac": (-0.5, 0.5, ""), "k1_error": (-1.0, 1.0, ""), "merge_px": (0.0, 1000.0, "px"),
-    "duration_s": (0.0, 1e6, "s"), "fps": (0.0, 1000.0, "Hz"),
-}
+#: 0 for the :data:`POSITIVE` ones: :data:`svgs.limits.INPUT_BOUNDS`, the one table the study
+#: parameters (:class:`sim.trials.Parameter`) take their bounds from too. Far beyond any phone,
+#: lab or ToF camera the simulator models, they keep absurd numbers (1e308) from overflowing the
+#: solver and the calibrations. Ranges and attitudes are bounded by the envelope instead
+#: (:func:`svgs.identify.range_envelope_m`, :data:`svgs.identify.ATTITUDE_LIMITS_DEG`);
+#: tests/test_messages.py fails on a float option with neither.
+BOUNDS = INPUT_BOUNDS
+#: Whole-number arguments with an upper bound (samples per pixel, seeds): :data:`svgs.limits.INT_BOUNDS`.
+INT_ARG_BOUNDS = INT_BOUNDS
 #: Attitude arguments (dest -> the envelope's angle).
 ATTITUDES = {"roll": "roll_deg", "pitch": "pitch_deg", "yaw": "yaw_deg", "roll_deg": "roll_deg",
              "pitch_deg": "pitch_deg", "yaw_deg": "yaw_deg"}
@@ -173,6 +165,9 @@ def check_args(args, parser) -> None:
                     raise InputError(f"{flag}: expected a positive whole number, got {x}")
                 if dest in NON_NEGATIVE_INTS and x < 0:
                     raise InputError(f"{flag}: expected a whole number >= 0, got {x}")
+                b = INT_ARG_BOUNDS.get(dest)
+                if b is not None and not b[0] <= x <= b[1]:
+                    raise InputError(f"{flag}: expected {b[0]} to {b[1]}{' ' + b[2] if b[2] else ''}, got {x}")
             elif isinstance(x, float):
                 if not math.isfinite(x):
                     raise InputError(f"{flag}: expected a finite number, got {x!r}")

@@ -17,7 +17,7 @@ import numpy as np
 
 from render.boards import (DEFAULT_BOARD_SPP, DEFAULT_EXPOSURE_FILL, DEFAULT_TEXELS_PER_PX, MAX_MANUAL_EXPOSURE_S,
                            BoardRenderer, texture_px_per_m)
-from svgs.errors import InputError
+from svgs.errors import InputError, SimulationFailure
 from svgs.profiles import Camera
 
 
@@ -38,13 +38,22 @@ def manual_exposure(phone, exposer, fill: float = DEFAULT_EXPOSURE_FILL) -> tupl
     Returns
     -------
     exposure_s, iso : float
+
+    Raises
+    ------
+    InputError
+        ``fill`` outside (0, 1].
+    SimulationFailure
+        The image is black (reason ``"no_signal"``): no light reaches the sensor, so no exposure
+        can bring the paper to ``fill``.
     """
     if not (np.isfinite(fill) and 0.0 < fill <= 1.0):
         raise InputError(f"exposure fill: expected a fraction of full well in (0, 1], got {fill!r}")
     sp, ex = phone.params.sensor, phone.params.exposure
     white = float(np.percentile(exposer.flux_optics, 99.5)) * sp.qe  # e-/s
-    if not white > 0:
-        raise InputError("board render: the image is black (no light reaches the sensor)")
+    if not white > 0:  # valid input, the simulated physics left nothing to expose for: exit 1, not 2
+        raise SimulationFailure(f"board render: the image is black (no light reaches the sensor: the brightest "
+                                f"pixels collect {white:g} e-/s)", "no_signal")
     S = fill * sp.full_well_e / white  # exposure product: seconds at base ISO
     if S <= MAX_MANUAL_EXPOSURE_S:
         return float(S), float(sp.base_iso)

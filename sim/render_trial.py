@@ -63,6 +63,7 @@ from sim.trials import (
 )
 from svgs.errors import InputError
 from svgs.frames import STATE_KEYS
+from svgs.limits import INPUT_BOUNDS, MAX_SEED, MAX_SPP, bounds
 
 _POSE = POSE_KEYS
 
@@ -74,25 +75,25 @@ THRESHOLD_APP, THRESHOLD_OTSU, THRESHOLD_AUTO = 0.0, -1.0, -2.0
 RENDER_PARAMETERS = {
     **{k: GEOMETRIC_PARAMETERS[k] for k in _POSE},
     "backdrop_distance_m": Parameter("backdrop_distance_m", "m", "grey backdrop behind the target (0: none)",
-                                     DEFAULT_BACKDROP_DISTANCE_M, True,
-                                     lower=0.0),
+                                     DEFAULT_BACKDROP_DISTANCE_M, True, **bounds("backdrop_m")),
     "ambient_radiance_w_m2_sr": Parameter("ambient_radiance_w_m2_sr", "W m^-2 sr^-1",
                                           "uniform ambient scene radiance from room lights, in band (default: the lab's, sim.lab)",
-                                          DEFAULT_AMBIENT_RADIANCE_W_M2_SR, True, lower=0.0),
+                                          DEFAULT_AMBIENT_RADIANCE_W_M2_SR, True, **bounds("ambient")),
     "spp": Parameter("spp", "1", "samples per pixel of the full frame (-1: the renderer's default)", -1.0, True,
-                     lower=-1.0),
+                     lower=-1.0, upper=MAX_SPP),
     "roi_spp": Parameter("roi_spp", "1", "samples per pixel in the spot windows (-1: the renderer's default)", -1.0,
-                         True, lower=-1.0),
-    "render_seed": Parameter("render_seed", "1", "seed of the render's Monte Carlo sampling", 0.0, True, lower=0.0),
+                         True, lower=-1.0, upper=MAX_SPP),
+    "render_seed": Parameter("render_seed", "1", "seed of the render's Monte Carlo sampling", 0.0, True, lower=0.0,
+                              upper=MAX_SEED),
     "pattern_scale": Parameter("pattern_scale", "1", "the pattern scaled about its origin by this factor (a wider target)",
                                1.0, True, lower=0.0, upper=10.0, lower_open=True),
     "target_scale": Parameter("target_scale", "1", "multiplies the target's flux, not the lab's (an ND filter of "
                               "transmission T over every reflector: T**2)", 1.0, False, lower=0.0, upper=1.0,
                               lower_open=True),
     "exposure_s": Parameter("exposure_s", "s", "exposure time forced on the phone (0: the phone's auto-exposure)", 0.0,
-                            False, lower=0.0, upper=60.0),
+                            False, **bounds("exposure_s")),
     "iso": Parameter("iso", "ISO", "sensitivity forced on the phone (0: the phone's auto-exposure)", 0.0, False,
-                     lower=0.0),
+                     lower=0.0, upper=INPUT_BOUNDS["iso"][1]),
     "threshold": Parameter("threshold", "DN", "detector threshold in 8-bit counts (0: the app's for the camera, "
                            "svgs.app; -1: Otsu's; -2: the automatic rule)", 0.0, False, lower=-2.0, upper=255.0),
     **{k: GEOMETRIC_PARAMETERS[k] for k in ("focal_error_frac", "pp_error_u_px", "pp_error_v_px", "k1_error")},

@@ -35,14 +35,16 @@ from sim.tof_stability import COLUMNS, REFERENCES, RUN_INFO_KEYS
 from sim.trials import Parameter, TrialKind, register_trial_kind
 from svgs.errors import InputError
 from svgs.frames import STATE_KEYS
+from tof.camera import DESIGN_RANGE_M
 
 #: The scenario's row keys that are text.
 TEXT_KEYS = ("camera", "pattern", "run", "scene", "pipeline", "reference")
-#: Numeric parameters of a ToF trial (validation; ``needs_render`` as in :class:`sim.trials.Parameter`).
+#: Numeric parameters of a ToF trial (validation; ``needs_render`` as in :class:`sim.trials.Parameter`). The
+#: ranges lie in the paper's design range (``tof.camera.DESIGN_RANGE_M``), the envelope the ToF commands take.
 TOF_PARAMETERS = {
-    "range_m": Parameter("range_m", "m", "along the boresight to the target origin", 1.0, True, 0.0, None, True),
+    "range_m": Parameter("range_m", "m", "along the boresight to the target origin", 1.0, True, *DESIGN_RANGE_M),
     "nominal_range_m": Parameter("nominal_range_m", "m", "the stability run's range (selects the paper's tables)",
-                                 1.0, False, 0.0, None, True),
+                                 1.0, False, *DESIGN_RANGE_M),
     "frames": Parameter("frames", "", "frames of the run", 1, False, 1, 20000),
     "frame": Parameter("frame", "", "index of the frame in the run's noise stream", 0, False, 0, 19999),
 }

@@ -36,6 +36,7 @@ from sim.metrics import ERR_KEYS, POS_ERR_NORM_M, ROT_ERR_DEG, error_columns, st
 from svgs.errors import InputError
 from svgs.frames import STATE_KEYS
 from svgs.identify import ATTITUDE_LIMITS_DEG
+from svgs.limits import RANGE_LIMIT_M, bounds
 
 #: Modules that may register more trial kinds; imported when an unknown name is asked for
 #: (a module that is not installed is skipped). The render-and-solve trial of the campaign,
@@ -46,6 +47,14 @@ KIND_MODULES = ("sim.render_trial", "sim.tof_trial")
 #: Columns every study row has besides the scenario and the kind's outputs.
 ID_COLUMNS = ("trial_id", "seed")
 TIMING_COLUMNS = ("wall_s", "cpu_s")
+
+
+def _number(x) -> str:
+    """``x`` for a message: a whole number in full (a seed, samples per pixel), else ``:g``."""
+    if x is None:
+        return ""
+    x = float(x)
+    return str(int(x)) if x.is_integer() and abs(x) < 1e15 else f"{x:g}"
 
 
 @dataclass(frozen=True)
@@ -80,14 +89,15 @@ class Parameter:
     def domain(self) -> str:
         """The allowed values in words, with the unit (none for a dimensionless "1")."""
         unit = "" if self.unit in ("", "1") else f" {self.unit}"
+        lo, hi = _number(self.lower), _number(self.upper)
         if self.lower is not None and self.upper is not None:
             if self.lower_open:
-                return f"a value > {self.lower:g} and <= {self.upper:g}{unit}"
-            return f"{self.lower:g} to {self.upper:g}{unit}"
+                return f"a value > {lo} and <= {hi}{unit}"
+            return f"{lo} to {hi}{unit}"
         if self.lower is not None:
-            return f"a value {'>' if self.lower_open else '>='} {self.lower:g}{unit}"
+            return f"a value {'>' if self.lower_open else '>='} {lo}{unit}"
         if self.upper is not None:
-            return f"a value <= {self.upper:g}{unit}"
+            return f"a value <= {hi}{unit}"
         return f"a finite number{unit}"
 
     def check(self, value, what: str = "") -> float:
@@ -194,42 +204,42 @@ def get_trial_kind(name: str) -> TrialKind:
 
 
 # --------------------------------------------------------------------------- geometric trial
-#: Largest lateral offset of the target origin from the boresight, m (a physical bound: far
-#: outside the field of view at any range of the envelope, :func:`svgs.identify.range_envelope_m`).
-LATERAL_LIMIT_M = 1000.0
+# Every numeric parameter of every kind has a physical lower and upper bound (a test walks the
+# registry): the CLI's for the same quantity (svgs.limits, one table), the sensor's envelope, or
+# the parameter's own (a switch 0-1, an error a calibration could have).
 GEOMETRIC_PARAMETERS = {
     p.name: p
     for p in (
         Parameter("range_m", "m", "distance from the camera to the target origin along the boresight", 10.0, True,
-                  lower=0.0, lower_open=True),
+                  lower=0.0, upper=RANGE_LIMIT_M, lower_open=True),
         Parameter("target_x_m", "m", "lateral offset of the target origin from the boresight, camera right", 0.0, True,
-                  lower=-LATERAL_LIMIT_M, upper=LATERAL_LIMIT_M),
+                  **bounds("target_x_m")),
         Parameter("target_y_m", "m", "lateral offset of the target origin from the boresight, camera up", 0.0, True,
-                  lower=-LATERAL_LIMIT_M, upper=LATERAL_LIMIT_M),
+                  **bounds("target_y_m")),
         Parameter("roll_deg", "deg", "relative attitude, rotation about the target x axis (paper phi)", 0.0, True,
                   lower=-ATTITUDE_LIMITS_DEG["roll_deg"], upper=ATTITUDE_LIMITS_DEG["roll_deg"]),
         Parameter("pitch_deg", "deg", "relative attitude, rotation about the target y axis (paper theta)", 0.0, True,
                   lower=-ATTITUDE_LIMITS_DEG["pitch_deg"], upper=ATTITUDE_LIMITS_DEG["pitch_deg"]),
         Parameter("yaw_deg", "deg", "relative attitude, rotation about the target z axis (paper psi)", 0.0, True,
                   lower=-ATTITUDE_LIMITS_DEG["yaw_deg"], upper=ATTITUDE_LIMITS_DEG["yaw_deg"]),
-        Parameter("sigma_px", "px", "1-sigma Gaussian centroid noise per image axis", 0.1, False, lower=0.0,
-                  upper=100.0),
+        Parameter("sigma_px", "px", "1-sigma Gaussian centroid noise per image axis", 0.1, False,
+                  **bounds("sigma_px")),
         Parameter("focal_error_frac", "1", "relative error of the focal length the solver uses (fx and fy scaled by 1 + e)",
-                  0.0, False, lower=-0.5, upper=0.5),
+                  0.0, False, **bounds("focal_error_frac")),
         Parameter("pp_error_u_px", "px", "error of the principal point cx the solver uses", 0.0, False,
-                  lower=-1000.0, upper=1000.0),
+                  **bounds("true_pp_offset_px")),
         Parameter("pp_error_v_px", "px", "error of the principal point cy the solver uses", 0.0, False,
-                  lower=-1000.0, upper=1000.0),
+                  **bounds("true_pp_offset_px")),
         Parameter("k1_error", "1", "error of the radial distortion k1 the solver uses (the lens has the profile's k1)",
-                  0.0, False, lower=-1.0, upper=1.0),
+                  0.0, False, **bounds("k1_error")),
         Parameter("merge_px", "px", "spots closer than this in the image merge into one (0: never)", 0.0, True,
-                  lower=0.0, upper=1000.0),
+                  **bounds("merge_px")),
         # the paper's test stand (sim.stand): the gimbal turns the phone, the target stays still
         Parameter("stand", "1", "1: the angles turn the phone on the test stand's gimbal about its pivot, range_m is "
                   "the rail position (sim.stand.TestStand); 0: they turn the target in front of the camera", 0.0, True,
                   lower=0.0, upper=1.0),
         Parameter("stage_m", "m", "the stand's translation stage along the rail, positive away from the target "
-                  "(stand = 1 only)", 0.0, True, lower=-1.0, upper=1.0),
+                  "(stand = 1 only)", 0.0, True, **bounds("stage_m")),
         Parameter("misalign_yaw_deg", "deg", "the phone's yaw in its holder on the stand (stand = 1 only)", 0.0, True,
                   lower=-10.0, upper=10.0),
         Parameter("misalign_pitch_deg", "deg", "the phone's pitch in its holder on the stand (stand = 1 only)", 0.0,

@@ -20,15 +20,17 @@ from __future__ import annotations
 import numpy as np
 
 from svgs.errors import InputError
+from svgs.limits import MAX_SEED
 
 #: Spawn-key suffixes of the two streams under a trial's SeedSequence child.
 _TRIAL_STREAM, _DESIGN_STREAM = 0, 1
 
 
 def check_seed(seed) -> int:
-    """A study seed: a non-negative integer (``InputError`` otherwise)."""
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or int(seed) < 0:
-        raise InputError(f"seed: expected a non-negative integer, got {seed!r}")
+    """A study seed: an integer from 0 to :data:`svgs.limits.MAX_SEED` (``InputError`` otherwise),
+    the bound ``--seed`` takes."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= int(seed) <= MAX_SEED:
+        raise InputError(f"seed: expected an integer from 0 to {MAX_SEED}, got {seed!r}")
     return int(seed)
 
 

@@ -74,8 +74,11 @@ def _known(kind: TrialKind) -> str:
     return "; ".join(f"{p.name} ({p.unit}): {p.meaning}" for p in kind.parameters.values())
 
 
-def parse_vary(texts, kind: TrialKind) -> list[Varied]:
+def parse_vary(texts, kind: TrialKind, envelope=None) -> list[Varied]:
     """Parse ``PARAM=LOW:HIGH`` specifications against the kind's parameter registry.
+
+    ``envelope(name, value, what)``, if given, checks a bound first (the camera's range envelope,
+    :func:`range_envelope_check`: its message is more specific than the parameter's domain).
 
     Raises
     ------
@@ -104,16 +107,19 @@ def parse_vary(texts, kind: TrialKind) -> list[Varied]:
         if lo == hi:
             raise InputError(f"--vary {name}: empty range {lo:g}:{hi:g}; to hold it fixed use --fixed {name}={lo:g}")
         p = kind.parameters[name]
-        p.check(lo, f"--vary {name} LOW")
-        p.check(hi, f"--vary {name} HIGH")
+        for what, x in (("LOW", lo), ("HIGH", hi)):
+            if envelope is not None:
+                envelope(name, x, f"--vary {name} {what}")
+            p.check(x, f"--vary {name} {what}")
         out.append(Varied(name, lo, hi, p.unit, p.meaning, p.needs_render))
     if len(out) < 2:
         raise InputError("--vary: a sensitivity analysis needs at least two varied parameters")
     return out
 
 
-def parse_fixed(texts, kind: TrialKind, varied) -> dict:
-    """Parse ``PARAM=VALUE`` for parameters held fixed (InputError like :func:`parse_vary`)."""
+def parse_fixed(texts, kind: TrialKind, varied, envelope=None) -> dict:
+    """Parse ``PARAM=VALUE`` for parameters held fixed (InputError like :func:`parse_vary`, the
+    same ``envelope`` check)."""
     out = {}
     names = {v.name for v in varied}
     for t in texts or ():
@@ -127,6 +133,8 @@ def parse_fixed(texts, kind: TrialKind, varied) -> dict:
             raise InputError(f"--fixed {name}: it is also varied")
         if name in out:
             raise InputError(f"--fixed: parameter {name!r} given twice")
+        if envelope is not None:
+            envelope(name, float(v), f"--fixed {name}")
         out[name] = kind.parameters[name].check(v, f"--fixed {name}")
     return out
 
@@ -177,22 +185,22 @@ def make_config(camera: str, vary, *, fixed=None, method: str = "sobol", n: int 
         raise InputError(f"--method: expected 'sobol' or 'morris', got {method!r}")
     _camera(camera)
     _pattern(pattern)
-    varied = parse_vary(vary, kind)
-    fx = parse_fixed(fixed, kind, varied)
-    _check_envelope(kind, camera, pattern, varied, fx)
+    envelope = range_envelope_check(kind, camera, pattern)
+    varied = parse_vary(vary, kind, envelope)
+    fx = parse_fixed(fixed, kind, varied, envelope)
     return SensitivityConfig(camera, tuple(varied), fx, method, _check_n(n, method), check_seed(seed), kind.name, pattern)
 
 
-def _check_envelope(kind: TrialKind, camera: str, pattern: str, varied, fixed: dict) -> None:
-    """The range bounds (and a fixed range) inside the envelope ``--range`` takes: the phone's
-    :func:`svgs.identify.range_envelope_m` for the phone's kinds, the paper's design range for the ToF kind."""
+def range_envelope_check(kind: TrialKind, camera: str, pattern: str):
+    """``check(name, value, what)``: a ``range_m`` bound (or fixed range) inside the envelope
+    ``--range`` takes - the phone's :func:`svgs.identify.range_envelope_m` for the phone's kinds,
+    the paper's design range for the ToF kind - else :class:`InputError` naming ``what``; other
+    parameters pass (their own domain is checked after it)."""
     from svgs.identify import check_range_m
 
-    checks = [(f"--vary range_m {w}", x) for v in varied if v.name == "range_m" for w, x in (("LOW", v.low),
-                                                                                         ("HIGH", v.high))]
-    if "range_m" in fixed:
-        checks.append(("--fixed range_m", fixed["range_m"]))
-    for what, x in checks:
+    def check(name: str, x: float, what: str) -> None:
+        if name != "range_m":
+            return
         if kind.name == "tof":
             from tof.camera import DESIGN_RANGE_M
 
@@ -201,6 +209,8 @@ def _check_envelope(kind: TrialKind, camera: str, pattern: str, varied, fixed: d
                 raise InputError(f"{what}: expected {lo:g}-{hi:g} m (the ToF paper's design range), got {x:g}")
         elif kind.name in ("geometric", "render"):
             check_range_m(x, camera, pattern, what)
+
+    return check
 
 
 # --------------------------------------------------------------------------- designs

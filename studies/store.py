@@ -307,6 +307,70 @@ def _diff(a: dict, b: dict, prefix: str = "") -> list[str]:
     return out
 
 
+def _refuse_other_study(out_dir: Path, want: dict, ignore=()) -> None:
+    """:class:`InputError` when ``out_dir``'s manifest is unreadable or differs from ``want`` (a
+    full manifest: format, parameters, columns) in anything but the parameters in ``ignore``."""
+    path = Path(out_dir) / MANIFEST
+    try:
+        have = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise InputError(f"--out: {str(path)!r} is not a readable study manifest ({exc}); "
+                         "choose another --out directory") from None
+    if ignore and isinstance(have, dict) and isinstance(have.get("parameters"), dict):
+        have = {**have, "parameters": {k: v for k, v in have["parameters"].items() if k not in ignore}}
+        want = {**want, "parameters": {k: v for k, v in want["parameters"].items() if k not in ignore}}
+    diffs = _diff(have, want)
+    if diffs:
+        raise InputError(
+            f"--out: {str(out_dir)!r} holds a study with different parameters, so its results cannot be "
+            f"resumed or extended by this run. Differences (stored -> requested): {'; '.join(diffs[:12])}. "
+            "Rerun with the stored parameters to resume, or choose another --out directory."
+        )
+
+
+def check_resumable(out_dir, manifest: dict, columns=None, *, ignore=()) -> bool:
+    """Whether ``out_dir`` holds this study's store, refusing one with other parameters - as
+    :class:`ResultStore` would, but without making, changing or locking anything (a study checks
+    it before work that comes before its store, and before it writes beside the store).
+
+    Parameters
+    ----------
+    out_dir : str or Path
+    manifest : dict
+        The study's parameters (as given to :class:`ResultStore`).
+    columns : sequence of str, optional
+        The store's columns; None: not compared (not known yet).
+    ignore : collection of str
+        Parameters not compared (decided by work still to come).
+
+    Returns
+    -------
+    bool
+        True: ``out_dir`` holds a store with these parameters; False: no store there.
+
+    Raises
+    ------
+    InputError
+        A store with other parameters (the same message as :class:`ResultStore`), an unreadable
+        manifest, or a results file without a manifest.
+    """
+    out_dir = Path(out_dir)
+    if not (out_dir / MANIFEST).exists():
+        if (out_dir / RESULTS).exists():
+            raise InputError(f"--out: {str(out_dir)!r} holds {RESULTS} but no {MANIFEST}; "
+                             "choose another --out directory")
+        return False
+    want = {"format_version": FORMAT_VERSION, "parameters": _jsonable(dict(manifest)),
+            "columns": None if columns is None else list(columns)}
+    if columns is None:
+        try:
+            want["columns"] = json.loads((out_dir / MANIFEST).read_text()).get("columns")
+        except (OSError, ValueError, AttributeError):
+            pass  # refused as unreadable below
+    _refuse_other_study(out_dir, want, ignore)
+    return True
+
+
 def _missing_dirs(path: Path) -> list[Path]:
     """The folders of ``path`` (itself included) that do not exist yet, outermost first."""
     missing = []
@@ -396,18 +460,7 @@ class ResultStore:
     def _check_manifest(self) -> None:
         want = self._full_manifest()
         if self.manifest_path.exists():
-            try:
-                have = json.loads(self.manifest_path.read_text())
-            except (OSError, ValueError) as exc:
-                raise InputError(f"--out: {str(self.manifest_path)!r} is not a readable study manifest ({exc}); "
-                                 "choose another --out directory") from None
-            diffs = _diff(have, want)
-            if diffs:
-                raise InputError(
-                    f"--out: {str(self.dir)!r} holds a study with different parameters, so its results cannot be "
-                    f"resumed or extended by this run. Differences (stored -> requested): {'; '.join(diffs[:12])}. "
-                    "Rerun with the stored parameters to resume, or choose another --out directory."
-                )
+            _refuse_other_study(self.dir, want)
         else:
             stray = [p.name for p in self.dir.iterdir() if p.name in (RESULTS,)]
             if stray:

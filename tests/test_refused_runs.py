@@ -75,7 +75,7 @@ def test_a_calibration_study_refused_after_its_trials_started_leaves_nothing(tmp
     line = refused(argv + ["--board", "chessboard", "--cols", "40", "--rows", "30", "--spacing-mm", "5",
                            "--out", str(out)], capsys, watch=[tmp_path], within_s=60.0,
                    after_work=True)
-    assert "board was found in only" in line
+    assert "--views-list: 8 views asked but the board was found in only" in line
     assert not out.exists()
 
 

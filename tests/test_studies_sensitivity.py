@@ -54,7 +54,7 @@ def test_morris_mu_star_of_a_linear_function():
     (["range_m=30:5", "sigma_px=0.1:0.2"], "LOW 30 is greater than HIGH 5"),
     (["range_m=5:5", "sigma_px=0.1:0.2"], "empty range 5:5"),
     (["range_m=5:30", "range_m=1:2"], "given twice"),
-    (["range_m=0:30", "sigma_px=0.1:0.2"], "range_m LOW: expected a value > 0 m"),
+    (["range_m=0:30", "sigma_px=0.1:0.2"], "range_m LOW: expected a range of 0.09-168 m"),
     (["range_m=5..30", "sigma_px=0.1:0.2"], "expected PARAM=LOW:HIGH"),
     (["range_m=5:30"], "at least two"),
 ])

@@ -81,7 +81,7 @@ def test_failures_are_values_with_reasons():
 
 
 def test_bad_scenarios_are_input_errors():
-    with pytest.raises(InputError, match="range_m: expected a value > 0 m"):
+    with pytest.raises(InputError, match="range_m: expected a value > 0 and <= 1000 m"):
         geometric_scenario(camera="galaxy-nexus", range_m=0.0)
     with pytest.raises(InputError, match="sigma_px: expected 0 to 100 px"):
         geometric_scenario(camera="galaxy-nexus", sigma_px=-0.1)

@@ -49,8 +49,9 @@ def _render() -> str:
             "error is one line on stderr that names the command: `svgs calibrate focal: error: ...` (exit 2), "
             "`svgs tof stability: no solution (saturated): ...` (exit 1)."), "",
            ("Every argument is checked before any work starts (`cli/validate.py`): output locations (a writable "
-            "folder, or a file where the metavar says `.toml`), seeds (>= 0), counts (>= 1), finite numbers, "
-            "positive and non-negative physical quantities, ranges (positive, distinct, inside the sensor's "
+            "folder, or a file where the metavar says `.toml`), seeds (0 to 2^32 - 1), counts (>= 1; samples per "
+            "pixel at most 2^24), finite numbers, physical quantities within physical bounds (`svgs/limits.py`, "
+            "the table the study parameters of `sensitivity --vary`/`--fixed` take too), ranges (positive, distinct, inside the sensor's "
             "physical envelope: for a phone, closer than where the pattern spans fewer than 4 px; for the ToF "
             "camera 0.27-15 m) and the kind of camera profile. A bad input exits 2 with one line naming it and "
             "writes nothing."), "",

@@ -53,7 +53,7 @@ from .focal import (
 )
 from .pose import error_cases, pose_error_study, pose_errors_batch, study_poses
 from .report import summary_text, write_report
-from .run import StudyResult, run_calibration_study
+from .run import StudyResult, plan_calibration_study, run_calibration_study
 from .table4 import (
     paper_phone,
     power_law_exponent,
@@ -84,6 +84,7 @@ __all__ = [
     "focal_study",
     "paper_phone",
     "parse_number_list",
+    "plan_calibration_study",
     "pose_error_study",
     "pose_errors_batch",
     "power_law_exponent",

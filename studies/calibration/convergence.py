@@ -215,13 +215,13 @@ def check_views_list(detections: Detections, camera_true: Camera, views_list) ->
                          f"but camera {camera_true.name!r} is {camera_true.width} x {camera_true.height} px")
     vl = sorted({int(v) for v in views_list})
     if not vl:
-        raise InputError("views list: empty")
+        raise InputError("--views-list: no number of views given")
     if vl[0] < 3:
-        raise InputError(f"views list: a calibration needs at least 3 views, got {vl[0]}")
+        raise InputError(f"--views-list: a calibration needs at least 3 views, got {vl[0]}")
     if vl[-1] > n_have:
         skipped = "; ".join(f"{n} ({f.message})" for n, f in detections.skipped[:8])
-        raise InputError(f"views list: {vl[-1]} views asked but the board was found in only {n_have}"
-                         + (f" (skipped: {skipped})" if skipped else ""))
+        raise InputError(f"--views-list: {vl[-1]} views asked but the board was found in only {n_have}"
+                         + (f" (skipped: {skipped})" if skipped else "") + f"; give numbers from 3 to {n_have}")
     return vl
 
 

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from calibration import Board
-from svgs.errors import InputError, check_finite_positive
+from svgs.errors import InputError, SimulationFailure, check_finite_positive
 from svgs.profiles import DISTORTION_KEYS, Camera, Pattern
 
 from .common import (
@@ -119,10 +119,13 @@ def _pattern_ref(pattern, loaded: Pattern) -> str:
         return input_path(loaded.source)
 
 
-def _setup(camera, *, views_list, seed, board, subsets, spp, geometric, true_pp_offset_px, true_dist,
-           focal_ranges_m, focal_exposures, noise_levels_px, pose_ranges_m, poses_per_range, floor_noise_px,
-           pattern) -> _Setup:
-    """Load and check the parameters (:class:`InputError` before any work)."""
+def _setup(camera, *, views_list=DEFAULT_VIEWS_LIST, seed=0, board=None, subsets=DEFAULT_SUBSETS, spp=16,
+           geometric=False, true_pp_offset_px=DEFAULT_TRUE_PP_OFFSET_PX, true_dist=DEFAULT_TRUE_DIST,
+           focal_ranges_m=DEFAULT_FOCAL_RANGES_M, focal_exposures=DEFAULT_FOCAL_EXPOSURES,
+           noise_levels_px=DEFAULT_NOISE_LEVELS_PX, pose_ranges_m=DEFAULT_POSE_RANGES_M,
+           poses_per_range=DEFAULT_POSES_PER_RANGE, floor_noise_px=DEFAULT_FLOOR_NOISE_PX, pattern="svgs-3u") -> _Setup:
+    """Load and check the parameters (:class:`InputError` before any work); the defaults are
+    :func:`run_calibration_study`'s."""
     nominal = Camera.load(camera)
     pat = Pattern.load(pattern)
     board = board or Board(*DEFAULT_BOARD)
@@ -320,12 +323,11 @@ class _Runner:
 
         store = self.stores[part]
         if any(t.trial_id not in store.done_ids for t in trials):
-            if self.show_progress:  # the part's plan (trials, renders) before it runs
-                from studies.execution import plan_trials
+            if self.show_progress:  # the part's plan (trials, estimate) before it runs
+                from .plan import part_plan
 
-                plan = plan_trials(KINDS[part], trials, self.spec, done_ids=store.done_ids)
-                print(f"{description}: " + plan.describe().replace(f" {KINDS[part].name} trial(s)", " trial(s)"),
-                      file=sys.stderr, flush=True)
+                plan = part_plan(part, trials, self.spec, done_ids=store.done_ids)
+                print(f"{description}: {plan.describe()}", file=sys.stderr, flush=True)
             if self.executor is None:
                 self.executor = self.stack.enter_context(open_executor(self.spec))
             self.stats[part] = run_study(
@@ -494,6 +496,43 @@ def _run_parts(s, runner, board_set_dir, focal_cache, say, timings: dict) -> tup
 
 
 # --------------------------------------------------------------------------- the study
+def plan_calibration_study(camera, out_dir, *, spec=None, board_set_dir=None, focal_cache=None, **study):
+    """The study's plan (:func:`studies.calibration.plan.study_plan`): the checks of
+    :func:`run_calibration_study` (:class:`InputError`), then the counts and the estimate;
+    nothing is made or written. What a rerun would reuse (the detections and focal frames in
+    ``out_dir``, the board set in ``board_set_dir``, the frames in ``focal_cache``) costs nothing.
+
+    Parameters
+    ----------
+    camera, out_dir, board_set_dir, focal_cache
+        As :func:`run_calibration_study`.
+    spec : studies.execution.ExecutorSpec, optional
+        Where the trials would run (default: in this process).
+    **study
+        The study's parameters as :func:`run_calibration_study` takes them (``views_list``,
+        ``seed``, ``board``, ``subsets``, ``spp``, ``geometric``, ...).
+
+    Returns
+    -------
+    studies.calibration.plan.CalibrationStudyPlan
+    """
+    from studies.execution import executor_spec
+
+    from .plan import study_plan
+    from .pose import error_cases
+
+    s = _setup(camera, **study)
+    trials = Path(out_dir) / "trials"
+    kept = {"detections": (trials / "convergence" / "board_detections.npz").is_file(),
+            "views": (not s.config["geometric"] and board_set_dir is not None
+                      and (Path(board_set_dir) / "truth.json").is_file()),
+            "focal_frames": (trials / "focal" / "focal_frames.npz").is_file()
+            or (not s.config["geometric"] and focal_cache is not None and Path(focal_cache).is_file())}
+    ct = s.camera_true
+    return study_plan(s.config, ct.width, ct.height, len(error_cases(ct)), spec or executor_spec(processes=0),
+                      convergence_seed=s.seeds["convergence"], kept=kept)
+
+
 def run_calibration_study(camera, out_dir, *, views_list=DEFAULT_VIEWS_LIST, seed: int = 0, board: Board | None = None,
                           subsets: int = DEFAULT_SUBSETS, spp: int = 16, geometric: bool = False,
                           true_pp_offset_px=DEFAULT_TRUE_PP_OFFSET_PX, true_dist=DEFAULT_TRUE_DIST,
@@ -568,11 +607,11 @@ def run_calibration_study(camera, out_dir, *, views_list=DEFAULT_VIEWS_LIST, see
     try:
         set_info, conv_rows, conv, frames, focal_rows, f_est, believed, pose_rows, floor = _run_parts(
             s, runner, board_set_dir, focal_cache, say, timings)
-    except InputError:
+    except (InputError, SimulationFailure):
         runner.close()
         if made:
-            # refused (e.g. the board found in fewer views than asked, no focal frame identified):
-            # nothing is left. Its stores could serve only a rerun with these inputs, which is
+            # refused (e.g. the board found in fewer views than asked, no focal frame identified),
+            # or the simulated physics left nothing to measure (a black board render): nothing is left. Its stores could serve only a rerun with these inputs, which is
             # refused again; a corrected rerun would be refused for other parameters, and a kept
             # detections cache would be reused by it. An interrupt (not a refusal) keeps the trials.
             shutil.rmtree(out / "trials", ignore_errors=True)

@@ -93,7 +93,43 @@ def rangefinder_readings(config: CampaignConfig) -> list[float]:
     return [float(r + sig * rng.standard_normal()) for r in config.ranges_m]
 
 
-def rendered_paper_calibration(config: CampaignConfig, out_dir=None, progress=None) -> CampaignConfig:
+#: The file of a campaign folder that keeps the rendered calibration (:func:`rendered_paper_calibration`).
+CALIBRATION_FILE = "calibration.json"
+
+
+def _calibration_key(config: CampaignConfig) -> dict:
+    """What decides the rendered calibration (a kept one is reused only for the same)."""
+    return {"camera": config.camera, "pattern": config.pattern, "ranges_m": list(config.ranges_m),
+            "seed": config.seed, "lens": config.lens, "range_sigma_m": config.lab_error("rangefinder_sigma_m")}
+
+
+def save_paper_calibration(config: CampaignConfig, out_dir) -> bool:
+    """Keep ``config``'s rendered calibration in ``out_dir/calibration.json`` for a rerun (unless
+    it holds this one already: the file is then left as it is).
+
+    Returns
+    -------
+    bool
+        Whether the file was written.
+    """
+    import json
+
+    if not config.calibration_info:
+        return False
+    path = Path(out_dir) / CALIBRATION_FILE
+    text = json.dumps({"key": _calibration_key(config), "result": config.calibration_info}, indent=1, default=float)
+    try:
+        if path.read_text() == text:
+            return False
+    except (OSError, UnicodeDecodeError):
+        pass
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+    return True
+
+
+def rendered_paper_calibration(config: CampaignConfig, out_dir=None, progress=None, *,
+                               save: bool = True) -> CampaignConfig:
     """The paper's focal-length calibration simulated on rendered frames; returns the config
     with the solver's ``focal_error_frac`` set (and ``calibration_info``).
 
@@ -103,7 +139,9 @@ def rendered_paper_calibration(config: CampaignConfig, out_dir=None, progress=No
     hand-held laser range finder gives it (:func:`rangefinder_readings`, the readings that are also the
     rail positions' truth);
     :func:`calibration.focal.estimate_focal` on those. Kept in ``out_dir/calibration.json``
-    (a rerun reuses it when the campaign's configuration is the same).
+    (a rerun reuses it when the campaign's configuration is the same); with ``save=False`` it is
+    only read from there, and :func:`save_paper_calibration` keeps a new one once the campaign's
+    store has taken it (:func:`studies.campaign.run_campaign`: a refused run writes nothing).
     """
     import dataclasses
     import json
@@ -115,9 +153,8 @@ def rendered_paper_calibration(config: CampaignConfig, out_dir=None, progress=No
     if config.trial_kind != "render" or config.calibration != "paper":
         return config
     sig = config.lab_error("rangefinder_sigma_m")
-    key = {"camera": config.camera, "pattern": config.pattern, "ranges_m": list(config.ranges_m),
-           "seed": config.seed, "lens": config.lens, "range_sigma_m": sig}
-    path = Path(out_dir) / "calibration.json" if out_dir is not None else None
+    key = _calibration_key(config)
+    path = Path(out_dir) / CALIBRATION_FILE if out_dir is not None else None
     info = None
     if path is not None and path.is_file():
         try:
@@ -147,9 +184,9 @@ def rendered_paper_calibration(config: CampaignConfig, out_dir=None, progress=No
         info = {"f_px": float(est.f_px), "f_sigma_px": float(est.sigma_f_px),
                 "f_true_px": float(cam.fx), "focal_error_frac": float(est.f_px / cam.fx - 1.0),
                 "ranges_used_m": used, "ranges_measured_m": rngs, "frames": frames.info}
-        if path is not None:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_text(json.dumps({"key": key, "result": info}, indent=1, default=float))
     err = dict(config.calibration_error)
     err["focal_error_frac"] = info["focal_error_frac"]
-    return dataclasses.replace(config, calibration_error=err, calibration_info=info)
+    config = dataclasses.replace(config, calibration_error=err, calibration_info=info)
+    if save and out_dir is not None:
+        save_paper_calibration(config, out_dir)
+    return config

@@ -11,9 +11,11 @@ from .design import CampaignConfig, campaign_trials
 from .folder import config_from_manifest, finite_json, log_run, read_honest_count
 from .honest_count import misalignment_text
 from .html_report import carried_figure, write_campaign_report
-from .paper_calibration import rendered_paper_calibration
+from ..store import check_resumable
+from .paper_calibration import rendered_paper_calibration, save_paper_calibration
 from .statistics import READING_OUTPUT_NAMES, RENAMED_STATISTICS, summarize
 from sim.trials import get_trial_kind
+from svgs.errors import InputError
 from svgs.frames import STATE_KEYS
 
 
@@ -39,15 +41,26 @@ def run_campaign(config: CampaignConfig, out_dir, spec, *, chunk_size=None, prog
     kind = get_trial_kind(config.trial_kind)
     out_dir = Path(out_dir)
     say = (lambda m: print(m, file=sys.stderr)) if progress else None
-    if config.trial_kind == "render" and config.calibration == "paper":
-        # the design (stand settings in view, scenarios) checked before the calibration renders and
-        # writes calibration.json: a refused campaign leaves nothing behind; designed again below
-        # with the calibrated focal length (the same seeded settings)
+    paper = config.trial_kind == "render" and config.calibration == "paper"
+    if paper:
+        # before the calibration renders: the design (stand settings in view, scenarios; designed
+        # again below with the calibrated focal length, the same seeded settings) and a stored
+        # campaign in the folder with other parameters (all but the focal length still to come)
         campaign_trials(config, variants=False)
-    config = rendered_paper_calibration(config, out_dir, progress=say)
+        check_resumable(out_dir, config.manifest(), ignore=("calibration_error",))
+    # calibration.json is only read here: written once the store has taken this campaign
+    config = rendered_paper_calibration(config, out_dir, progress=say, save=False)
     trials = campaign_trials(config)
-    store, stats = run_stored_study(kind, trials, out_dir, config.manifest(), spec, chunk_size=chunk_size,
-                                    progress=progress, description=f"campaign {config.camera}")
+    try:
+        store, stats = run_stored_study(kind, trials, out_dir, config.manifest(), spec, chunk_size=chunk_size,
+                                        progress=progress, description=f"campaign {config.camera}")
+    except InputError:
+        _keep_calibration(config, out_dir, refused=True)
+        raise
+    except BaseException:
+        _keep_calibration(config, out_dir)  # interrupted: the renders kept for the rerun
+        raise
+    _keep_calibration(config, out_dir)
     log_run(out_dir, "rendered trials" if kind.name == "render" else "trials", stats)
     table = store.read_table()
     summary = summarize(table, config)
@@ -57,6 +70,21 @@ def run_campaign(config: CampaignConfig, out_dir, spec, *, chunk_size=None, prog
     path = write_campaign_report(out_dir, config, table, summary, command=command, versions=library_versions(),
                                  stats=stats, budget=budget, trials=trials)
     return summary, stats, path, config
+
+
+def _keep_calibration(config: CampaignConfig, out_dir: Path, *, refused: bool = False) -> None:
+    """Keep the rendered calibration (``calibration.json``) for a rerun - unless the folder holds
+    another campaign's store, whose files a run never changes, or (``refused``) holds no store of
+    this campaign: a refused run leaves the folder as it was (a store it made without a row
+    removed itself)."""
+    if not config.calibration_info:
+        return
+    try:
+        ours = check_resumable(out_dir, config.manifest())
+    except InputError:
+        return
+    if ours or not refused:
+        save_paper_calibration(config, out_dir)
 
 
 def run_budget_geometric(config: CampaignConfig, trials: list, table: dict, out_dir, *, progress: bool = True) -> dict:
