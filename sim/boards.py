@@ -209,15 +209,18 @@ def render_board_set(camera, board, n_views: int, *, seed: int = 0, spp: int = D
     e_seeds = np.random.SeedSequence(s_expose).generate_state(n, dtype=np.uint32)
     images, names, views = [], [], []
     delivered = None
-    for k in range(n):
-        img, delivered, view = _render_view(renderer, phone, cam, board, R[k], t[k], int(r_seeds[k]), int(e_seeds[k]),
-                                            st, exposure_fill, name=f"view_{k:03d}.png")
-        images.append(img)
-        names.append(view["image"])
-        views.append(view)
-        if progress is not None:
-            progress(f"view {k + 1}/{n}: rendered in {view['timings_s']['render_s']:.1f} s, "
-                     f"exposure {view['exposure_s'] * 1e3:.2f} ms ISO {view['iso']:.0f}")
+    from sim import hard_stop
+
+    with hard_stop.scope():  # run from the CLI, Ctrl-C stops a render within a second (nothing is written yet)
+        for k in range(n):
+            img, delivered, view = _render_view(renderer, phone, cam, board, R[k], t[k], int(r_seeds[k]),
+                                                int(e_seeds[k]), st, exposure_fill, name=f"view_{k:03d}.png")
+            images.append(img)
+            names.append(view["image"])
+            views.append(view)
+            if progress is not None:
+                progress(f"view {k + 1}/{n}: rendered in {view['timings_s']['render_s']:.1f} s, "
+                         f"exposure {view['exposure_s'] * 1e3:.2f} ms ISO {view['iso']:.0f}")
     truth = _set_truth(cam, delivered, board, renderer, views, seed=seed, stages=st, exposure_fill=exposure_fill)
     out = BoardSet(images, names, delivered, board, R, t, truth)
     if out_dir is not None:
