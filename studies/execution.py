@@ -878,11 +878,14 @@ class StudyPlan:
         render_s, trial_s = COST_TABLE_S[self.kind]
         table = (f"{render_s:g} s a render, {trial_s:g} s a trial" if render_s else f"{trial_s:g} s a trial")
         est = f"~{_duration(self.core_s)} of one core ({self.kind} cost table, docs/performance.md: {table})"
+        return f"plan: {self.n_trials:,} {self.kind} trial(s), {renders}{note}; {est}{self.spread_text()}"
+
+    def spread_text(self) -> str:
+        """How the estimate spreads over the executor: ``", ~T on N core(s) (pool)"``, or the
+        Dask cluster's share (its size is not known here)."""
         if self.wall_s is not None:
-            est += f", ~{_duration(self.wall_s)} on {self.parallel} core(s) ({self.spec.describe()})"
-        else:
-            est += f", divided among the workers of the Dask cluster at {self.spec.scheduler}"
-        return f"plan: {self.n_trials:,} {self.kind} trial(s), {renders}{note}; {est}"
+            return f", ~{_duration(self.wall_s)} on {self.parallel} core(s) ({self.spec.describe()})"
+        return f", divided among the workers of the Dask cluster at {self.spec.scheduler}"
 
     def lines(self) -> list[str]:
         """:meth:`describe` and :meth:`warnings`."""

@@ -299,29 +299,47 @@ sys.exit(interruptible(args, hard_stop=True)(args))
 """
 
 
+def _signal_after_marker(argv, marker: str, delay_s: float, signum: int):
+    """Start ``argv``, wait for ``marker`` on its stderr, then ``delay_s``, and send ``signum``.
+
+    Returns
+    -------
+    proc : subprocess.Popen
+        The ended child.
+    exit_s : float
+        Seconds from the signal to the end of the child.
+    stdout, stderr : str
+        What the child printed (stderr: after the marker).
+    """
+    proc = subprocess.Popen(argv, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True,
+                            text=True)
+    try:
+        deadline = time.monotonic() + 180  # start-up on a loaded machine; not a speed test
+        line = ""
+        while marker not in line and time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            assert line or proc.poll() is None, f"the child ended before {marker!r}"
+        time.sleep(delay_s)
+        assert proc.poll() is None, "the child ended before the signal"
+        t0 = time.perf_counter()
+        os.kill(proc.pid, signum)
+        stdout, stderr = proc.communicate(timeout=60)
+        exit_s = time.perf_counter() - t0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return proc, exit_s, stdout, stderr
+
+
 @pytest.mark.parametrize("signum, code, what", [(signal.SIGINT, EXIT_INTERRUPTED, "interrupted"),
                                                 (signal.SIGTERM, EXIT_TERMINATED, "terminated (SIGTERM)")])
 def test_a_study_inside_native_code_stops_within_a_second_keeping_its_rows(tmp_path, signum, code, what):
     """The main thread cannot run Python's handler until the native call returns: the watchdog
     stops the process, after the stored row, with the one line and the exit code."""
     out = tmp_path / "study"
-    proc = subprocess.Popen([sys.executable, "-c", _NATIVE_CHILD, str(out), "--json"], cwd=REPO,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True, text=True)
-    try:
-        deadline = time.monotonic() + 120
-        line = ""
-        while "native" not in line and time.monotonic() < deadline:
-            line = proc.stderr.readline()
-            assert line or proc.poll() is None, "the child ended before its native trial"
-        time.sleep(0.3)  # well inside the native loop
-        t0 = time.perf_counter()
-        os.kill(proc.pid, signum)
-        stdout, stderr = proc.communicate(timeout=30)
-        exit_s = time.perf_counter() - t0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+    proc, exit_s, stdout, stderr = _signal_after_marker([sys.executable, "-c", _NATIVE_CHILD, str(out), "--json"],
+                                                        "native", 0.3, signum)  # well inside the native loop
     assert proc.returncode == code, stderr
     assert exit_s < EXIT_WITHIN_S, f"{exit_s:.2f} s from the signal to the exit"
     assert "Traceback" not in stderr, stderr
@@ -356,25 +374,10 @@ def test_json_output_of_an_interrupt_is_one_object(capsys):
 def test_ctrl_c_stops_svgs_render_inside_its_render_within_a_second(tmp_path):
     """A real Mitsuba render (announced as long) interrupted mid-render: exit 130 within a second."""
     out = tmp_path / "render"
-    proc = subprocess.Popen([sys.executable, "-c", _CLI_CHILD, "render", "--camera", "galaxy-nexus", "--range", "5",
-                             "--spp", "1024", "--full-frame", "--out", str(out)], cwd=REPO,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True, text=True)
-    try:
-        deadline = time.monotonic() + 180
-        line = ""
-        while "warning: this render" not in line and time.monotonic() < deadline:
-            line = proc.stderr.readline()
-            assert line or proc.poll() is None, "the render ended before its warning"
-        time.sleep(3.0)  # the render's kernels compiled and running
-        assert proc.poll() is None
-        t0 = time.perf_counter()
-        os.kill(proc.pid, signal.SIGINT)
-        _, stderr = proc.communicate(timeout=60)
-        exit_s = time.perf_counter() - t0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+    argv = [sys.executable, "-c", _CLI_CHILD, "render", "--camera", "galaxy-nexus", "--range", "5", "--spp", "1024",
+            "--full-frame", "--out", str(out)]
+    # 3 s after the warning: the render's kernels compiled and running
+    proc, exit_s, _, stderr = _signal_after_marker(argv, "warning: this render", 3.0, signal.SIGINT)
     assert proc.returncode == EXIT_INTERRUPTED, stderr
     assert exit_s < EXIT_WITHIN_S, f"{exit_s:.2f} s from the signal to the exit"
     assert "Traceback" not in stderr and stderr.strip().splitlines()[-1] == "svgs render: interrupted", stderr

@@ -120,20 +120,17 @@ def _ids(cases):
     return [f"{t}.{k}={v!r}" for t, k, v, _ in cases]
 
 
-@pytest.mark.parametrize("table, key, value, words", BAD_CAMERA, ids=_ids(BAD_CAMERA))
-def test_bad_tof_camera_value_refused_before_the_render(tmp_path, capsys, table, key, value, words):
-    bad = _write(tmp_path, TOF_CAMERA, {(table, key): value}, "bad-tof-camera.toml")
-    out = tmp_path / "out"
-    rc, dt, cap = _run(["tof", "render-and-solve", "--camera", str(bad), "--range", "5", "--out", str(out)], capsys)
-    _assert_refused(rc, dt, cap, "tof render-and-solve", bad, words)
-    _nothing_written(out)
+#: Every bad value of both files, with the option that passes the file and the file it edits.
+BAD_FILES = ([("--camera", TOF_CAMERA, "bad-tof-camera.toml", *c) for c in BAD_CAMERA]
+             + [("--pattern", TOF_PATTERN, "bad-tof-pattern.toml", *c) for c in BAD_PATTERN])
 
 
-@pytest.mark.parametrize("table, key, value, words", BAD_PATTERN, ids=_ids(BAD_PATTERN))
-def test_bad_tof_pattern_value_refused_before_the_render(tmp_path, capsys, table, key, value, words):
-    bad = _write(tmp_path, TOF_PATTERN, {(table, key): value}, "bad-tof-pattern.toml")
+@pytest.mark.parametrize("option, base, name, table, key, value, words", BAD_FILES,
+                         ids=[f"{o[2:]}:{i}" for (o, *_), i in zip(BAD_FILES, _ids(BAD_CAMERA) + _ids(BAD_PATTERN))])
+def test_bad_tof_value_refused_before_the_render(tmp_path, capsys, option, base, name, table, key, value, words):
+    bad = _write(tmp_path, base, {(table, key): value}, name)
     out = tmp_path / "out"
-    rc, dt, cap = _run(["tof", "render-and-solve", "--pattern", str(bad), "--range", "5", "--out", str(out)], capsys)
+    rc, dt, cap = _run(["tof", "render-and-solve", option, str(bad), "--range", "5", "--out", str(out)], capsys)
     _assert_refused(rc, dt, cap, "tof render-and-solve", bad, words)
     _nothing_written(out)
 

@@ -79,11 +79,7 @@ class CalibrationStudyPlan(StudyPlan):
         """One line: the counts and the estimate."""
         note = f" ({self.note})" if self.note else ""
         est = f"~{_duration(self.core_s)} of one core ({COST_SOURCE})"
-        if self.wall_s is not None:
-            est += f", ~{_duration(self.wall_s)} on {self.parallel} core(s) ({self.spec.describe()})"
-        else:
-            est += f", the trials divided among the workers of the Dask cluster at {self.spec.scheduler}"
-        return f"plan: {self.counts}{note}; {est}"
+        return f"plan: {self.counts}{note}; {est}{self.spread_text()}"
 
 
 def _plan(counts: str, serial_s: float, trials_s: float, spec, note: str = "") -> CalibrationStudyPlan:
