@@ -55,8 +55,6 @@ NON_NEGATIVE = {"sigma_px", "range_sigma_m", "merge_px", "jitter_deg", "jitter_m
 #: (:func:`svgs.identify.range_envelope_m`, :data:`svgs.identify.ATTITUDE_LIMITS_DEG`);
 #: tests/test_messages.py fails on a float option with neither.
 BOUNDS = INPUT_BOUNDS
-#: Whole-number arguments with an upper bound (samples per pixel, seeds): :data:`svgs.limits.INT_BOUNDS`.
-INT_ARG_BOUNDS = INT_BOUNDS
 #: Attitude arguments (dest -> the envelope's angle).
 ATTITUDES = {"roll": "roll_deg", "pitch": "pitch_deg", "yaw": "yaw_deg", "roll_deg": "roll_deg",
              "pitch_deg": "pitch_deg", "yaw_deg": "yaw_deg"}
@@ -165,7 +163,7 @@ def check_args(args, parser) -> None:
                     raise InputError(f"{flag}: expected a positive whole number, got {x}")
                 if dest in NON_NEGATIVE_INTS and x < 0:
                     raise InputError(f"{flag}: expected a whole number >= 0, got {x}")
-                b = INT_ARG_BOUNDS.get(dest)
+                b = INT_BOUNDS.get(dest)  # whole numbers with an upper bound (samples per pixel, seeds)
                 if b is not None and not b[0] <= x <= b[1]:
                     raise InputError(f"{flag}: expected {b[0]} to {b[1]}{' ' + b[2] if b[2] else ''}, got {x}")
             elif isinstance(x, float):

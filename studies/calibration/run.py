@@ -611,9 +611,10 @@ def run_calibration_study(camera, out_dir, *, views_list=DEFAULT_VIEWS_LIST, see
         runner.close()
         if made:
             # refused (e.g. the board found in fewer views than asked, no focal frame identified),
-            # or the simulated physics left nothing to measure (a black board render): nothing is left. Its stores could serve only a rerun with these inputs, which is
-            # refused again; a corrected rerun would be refused for other parameters, and a kept
-            # detections cache would be reused by it. An interrupt (not a refusal) keeps the trials.
+            # or the simulated physics left nothing to measure (a black board render): nothing is
+            # left. Its stores could serve only a rerun with these inputs, which is refused again;
+            # a corrected rerun would be refused for other parameters, and a kept detections cache
+            # would be reused by it. An interrupt (not a refusal) keeps the trials.
             shutil.rmtree(out / "trials", ignore_errors=True)
         raise
     finally:
