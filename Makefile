@@ -18,13 +18,13 @@ $(STAMP): pyproject.toml
 	  $(PY) -m pip uninstall -y -q opencv-python-headless opencv-python opencv-contrib-python opencv-contrib-python-headless; fi
 	@echo "installing svgs-sim and its dependencies (a few minutes on a fresh machine; pip lists what it collects) ..."
 	$(PY) -m pip install --progress-bar off -e ".[render,test,dask,docs]"
-	$(PY) -m cli.compile_kernels
+	$(PY) -m svgs_sim.cli.compile_kernels
 	touch $(STAMP)
 
 venv: $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m cli.demo
+	$(PY) -m svgs_sim.cli.demo
 
 test: $(STAMP)
 	$(PY) -m pytest -q

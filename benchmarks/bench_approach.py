@@ -1,16 +1,16 @@
 """Benchmark (issue 15): frames per second of ``svgs approach`` and where a frame's time goes.
 
 Along a 20 -> 5 m straight approach of the Galaxy Nexus (and, with ``--camera``, any phone), at
-full resolution and at the 640 x 480 preview stream (:func:`camera.phone.preview.binned_camera`),
+full resolution and at the 640 x 480 preview stream (:func:`svgs_sim.camera.phone.preview.binned_camera`),
 each frame is rendered (Mitsuba, LLVM on the CPU), exposed through the phone (optics, metering,
 noise, ISP), detected, identified and solved, and its Cramer-Rao bound computed.
 
-Ours: :class:`sim.approach.ApproachSensor` (the scene, the lab's radiometric factor, the phone's
+Ours: :class:`svgs_sim.sim.approach.ApproachSensor` (the scene, the lab's radiometric factor, the phone's
 sensor and the auto-exposure kept from frame to frame; the lens refocused each frame), without
 motion so that both sides make the same frames.
 Peer: the same frames as isolated poses, the path of ``svgs render-and-solve``
-(:func:`sim.closed_loop.render_scenario`, a fresh phone model and exposer, ``expose_and_solve``,
-:func:`sim.crlb.frame_crlb` with the sensor's :data:`sim.approach.CRLB_DRAWS`), measured in the
+(:func:`svgs_sim.sim.closed_loop.render_scenario`, a fresh phone model and exposer, ``expose_and_solve``,
+:func:`svgs_sim.sim.crlb.frame_crlb` with the sensor's :data:`svgs_sim.sim.approach.CRLB_DRAWS`), measured in the
 same run. Without motion a frame of ours is the peer's frame for the same seeds
 (``tests/test_sim_approach.py``); the seeds differ here, the work does not. Prints each stage's
 mean time, frames/s and the ratio; ``with motion`` adds the cost of the moved point samples.
@@ -38,7 +38,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
 def ours(camera, traj, times, motion=False, overlap=True):
-    from sim.approach import ApproachSensor
+    from svgs_sim.sim.approach import ApproachSensor
 
     sensor = ApproachSensor(camera, seed=1, motion=motion, overlap_render=overlap)
     sensor.measure_on(traj, float(times[0]))  # warm-up: kernels compiled, scene built
@@ -58,9 +58,9 @@ def ours(camera, traj, times, motion=False, overlap=True):
 
 
 def peer(camera, traj, times):
-    from sim.approach import CRLB_DRAWS
-    from sim.closed_loop import Scenario, expose_and_solve, render_scenario
-    from sim.crlb import frame_crlb
+    from svgs_sim.sim.approach import CRLB_DRAWS
+    from svgs_sim.sim.closed_loop import Scenario, expose_and_solve, render_scenario
+    from svgs_sim.sim.crlb import frame_crlb
 
     base = Scenario(camera=camera if isinstance(camera, str) else camera.name)
     stages = {"render": 0.0, "optics": 0.0, "expose+solve": 0.0, "crlb": 0.0}
@@ -92,8 +92,8 @@ def peer(camera, traj, times):
 
 
 def main(argv=None):
-    from camera.phone.preview import binned_camera
-    from sim.approach import Trajectory
+    from svgs_sim.camera.phone.preview import binned_camera
+    from svgs_sim.sim.approach import Trajectory
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--frames", type=int, default=6, help="timed frames per run (default 6, after one warm-up)")

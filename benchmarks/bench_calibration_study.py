@@ -1,6 +1,6 @@
 """Benchmark (issue 26): the per-unit costs of ``svgs calibrate study``'s parts, for its plan.
 
-Runs small calibration studies in this process (:func:`studies.calibration.run_calibration_study`,
+Runs small calibration studies in this process (:func:`svgs_sim.studies.calibration.run_calibration_study`,
 ``processes=0``) in a temporary folder and times each part from the study's own progress lines
 and run statistics:
 
@@ -13,7 +13,7 @@ and run statistics:
 - the rendered focal frames, per range (one render and ``--focal-exposures`` exposures);
 - the focal-method cases, per noise draw; the pose-error cells, per pose.
 
-The numbers are the constants of :mod:`studies.calibration.plan` (its notes say where they were
+The numbers are the constants of :mod:`svgs_sim.studies.calibration.plan` (its notes say where they were
 measured). ``--geometric-only`` skips the rendered parts (no Mitsuba).
 
 Run: ``.venv/bin/python benchmarks/bench_calibration_study.py [--geometric-only]``
@@ -32,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 def _timed_study(out: Path, **kw):
     """Run one study; (result, {progress line prefix: time it was said, s from the start})."""
-    from studies.calibration import run_calibration_study
+    from svgs_sim.studies.calibration import run_calibration_study
 
     t0 = time.perf_counter()
     said = []

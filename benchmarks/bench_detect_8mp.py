@@ -23,11 +23,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test-only helpers (synth_svgs)
 
-from svgs import Camera, Pattern, solve_centroids  # noqa: E402
-from svgs.detect import detect_blobs  # noqa: E402
-from svgs.frames import pose_from_scenario  # noqa: E402
-from svgs.identify import identify  # noqa: E402
-from svgs.pipeline import solve_image  # noqa: E402
+from svgs_sim.svgs import Camera, Pattern, solve_centroids  # noqa: E402
+from svgs_sim.svgs.detect import detect_blobs  # noqa: E402
+from svgs_sim.svgs.frames import pose_from_scenario  # noqa: E402
+from svgs_sim.svgs.identify import identify  # noqa: E402
+from svgs_sim.svgs.pipeline import solve_image  # noqa: E402
 from synth_svgs import synth_frame  # noqa: E402
 
 

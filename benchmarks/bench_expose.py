@@ -39,7 +39,7 @@ def main(argv=None):
     ap.add_argument("--renders", type=int, default=3, help="render-and-solve frames timed (default 3)")
     args = ap.parse_args(argv)
 
-    from sim.closed_loop import Scenario, expose_and_solve, render_scenario
+    from svgs_sim.sim.closed_loop import Scenario, expose_and_solve, render_scenario
 
     scen = Scenario(camera="galaxy-nexus", range_m=10.0, roll_deg=5, pitch_deg=-3, yaw_deg=10)
     frame = render_scenario(scen, seed=0)  # warm-up: scene build, JIT

@@ -25,8 +25,8 @@ GOAL_FRAME_S = 0.3
 
 
 def one_frame(scen, seed: int, method: str):
-    from sim.closed_loop import expose_and_solve, render_scenario
-    from sim.crlb import centroid_crlb_px
+    from svgs_sim.sim.closed_loop import expose_and_solve, render_scenario
+    from svgs_sim.sim.crlb import centroid_crlb_px
 
     t0 = time.perf_counter()
     fr = render_scenario(scen, seed=seed)
@@ -50,7 +50,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=3, help="frames timed per path (default 3)")
     args = ap.parse_args(argv)
-    from sim.closed_loop import Scenario
+    from svgs_sim.sim.closed_loop import Scenario
 
     scen = Scenario(camera="galaxy-nexus", range_m=10.0, roll_deg=5, pitch_deg=-3, yaw_deg=10)
     one_frame(scen, 0, "analytic")  # warm-up: scene build, JIT, kernels

@@ -22,7 +22,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from svgs.frames import pose_from_scenario  # noqa: E402
+from svgs_sim.svgs.frames import pose_from_scenario  # noqa: E402
 
 
 def main(argv=None):
@@ -31,7 +31,7 @@ def main(argv=None):
     ap.add_argument("--camera", default="galaxy-nexus")
     ap.add_argument("--range", type=float, default=10.0)
     args = ap.parse_args(argv)
-    from render import Renderer
+    from svgs_sim.render import Renderer
 
     t0 = time.perf_counter()
     r = Renderer(args.camera, "svgs-3u")
@@ -66,7 +66,7 @@ def main(argv=None):
     print(f"total flux {res.flux.sum(dtype=np.float64):.4g} photons/s")
     # image formation of the rendered film (once per render): lens PSF on the points and the
     # diffuse light, pixel integration, Bayer mosaic - what Exposer(...) costs before exposing
-    from camera.phone import PhoneCamera
+    from svgs_sim.camera.phone import PhoneCamera
 
     phone = PhoneCamera(args.camera)
     flux, points = res.film()

@@ -26,14 +26,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 import test_render_radiometry as T  # noqa: E402  (the test set-ups)
 
-from render.predict import retro_irradiance_w_m2  # noqa: E402
+from svgs_sim.render.predict import retro_irradiance_w_m2  # noqa: E402
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=4)
     args = ap.parse_args(argv)
-    from render.api import Renderer
+    from svgs_sim.render.api import Renderer
 
     t0 = time.perf_counter()
     print("single cube, LED 4 mm from the lens (inside the footprint): rendered / predicted")

@@ -29,7 +29,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from svgs.frames import pose_from_scenario  # noqa: E402
+from svgs_sim.svgs.frames import pose_from_scenario  # noqa: E402
 
 
 def centroid(flux, c, half=4):
@@ -60,7 +60,7 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, default=6)
     ap.add_argument("--roi-spp", type=int, default=4096)
     args = ap.parse_args(argv)
-    from render import Renderer
+    from svgs_sim.render import Renderer
 
     # 1. brute force: windows versus whole frame
     S = args.roi_spp

@@ -1,7 +1,7 @@
 """Benchmark (issue 12, item 6): rendered trials/s, 1 versus 2 workers; render once, expose many.
 
 What it measures
-    Studies of ``render`` trials (:mod:`sim.render_trial`: a full-frame Mitsuba render of the
+    Studies of ``render`` trials (:mod:`svgs_sim.sim.render_trial`: a full-frame Mitsuba render of the
     Galaxy Nexus's view at 10-20 m with small target angles, then the phone's exposure, the
     detector and the solver) run through the study layer - tasks, executor, results store
     with fsync - on a local process pool (optionally also a Dask LocalCluster) of 1 and of 2
@@ -43,10 +43,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from studies.execution import ExecutorSpec, Trial, open_executor, run_study  # noqa: E402
-from studies.seeding import design_rng, trial_seed  # noqa: E402
-from studies.store import ResultStore, read_table  # noqa: E402
-from sim.render_trial import RENDER, render_key, render_trial_scenario  # noqa: E402
+from svgs_sim.studies.execution import ExecutorSpec, Trial, open_executor, run_study  # noqa: E402
+from svgs_sim.studies.seeding import design_rng, trial_seed  # noqa: E402
+from svgs_sim.studies.store import ResultStore, read_table  # noqa: E402
+from svgs_sim.sim.render_trial import RENDER, render_key, render_trial_scenario  # noqa: E402
 
 CAMERA = "galaxy-nexus"
 #: Ranges of the rendered poses (uniform), m.
@@ -63,13 +63,13 @@ def render_study(n_trials: int, exposures_per_render: int, seed: int) -> list[Tr
     """``n_trials`` rendered trials, ``exposures_per_render`` noise draws of each of ``n_trials /
     exposures_per_render`` poses.
 
-    Pose ``p``'s range, angles and render seed are drawn from :func:`studies.seeding.design_rng`
+    Pose ``p``'s range, angles and render seed are drawn from :func:`svgs_sim.studies.seeding.design_rng`
     ``(seed, p)``; trial ``i = p * exposures_per_render + k`` exposes (the phone's auto-exposure)
-    with :func:`studies.seeding.trial_seed` ``(seed, i)``.
+    with :func:`svgs_sim.studies.seeding.trial_seed` ``(seed, i)``.
 
     Returns
     -------
-    list of :class:`studies.execution.Trial`
+    list of :class:`svgs_sim.studies.execution.Trial`
     """
     if n_trials % exposures_per_render:
         raise ValueError(f"{n_trials} trials are not a multiple of {exposures_per_render} exposures per render")

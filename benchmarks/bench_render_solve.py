@@ -2,7 +2,7 @@
 
 The noise-free flux of the Galaxy Nexus frame, scaled linearly so that its brightest
 pixel is 255 and rounded to 8 bits (no camera model: no noise, blooming or glare), is fed
-to :func:`svgs.pipeline.solve_image` (the code behind ``svgs solve``) at 1, 5, 10, 20 and
+to :func:`svgs_sim.svgs.pipeline.solve_image` (the code behind ``svgs solve``) at 1, 5, 10, 20 and
 30 m, nominal attitude and a tilted one. Prints position and attitude errors against the
 rendered truth. Part of the position error is physics, not solver error: the spots sit
 at the flash's image through each cube, shifted from the targets by about half the
@@ -21,12 +21,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from svgs.frames import pose_from_scenario, rotation_angle_deg, state_to_pose  # noqa: E402
-from svgs.pipeline import solve_image  # noqa: E402
+from svgs_sim.svgs.frames import pose_from_scenario, rotation_angle_deg, state_to_pose  # noqa: E402
+from svgs_sim.svgs.pipeline import solve_image  # noqa: E402
 
 
 def main():
-    from render import Renderer
+    from svgs_sim.render import Renderer
 
     r = Renderer("galaxy-nexus", "svgs-3u")
     print(f"{'range':>6s} {'attitude (r,p,y) deg':>22s} {'ok':>3s} {'pos err (dx, dy, dz) mm':>28s} {'|dpos| mm':>9s} "

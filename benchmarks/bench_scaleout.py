@@ -1,7 +1,7 @@
 """Benchmark (issue 23, scale-out): the rendered campaign on a process pool and on Dask, 1 and 2 workers.
 
 What it measures
-    - **Throughput**: one rendered campaign (``studies.campaign``, the ``render`` trial kind:
+    - **Throughput**: one rendered campaign (``svgs_sim.studies.campaign``, the ``render`` trial kind:
       the Galaxy Nexus on the test stand, the paper's calibration practice, ``--exposures``
       noise draws of every rendered stand setting) through the study layer - tasks, executor,
       results store with fsync - on a local process pool of 1 and of 2 spawned processes and on
@@ -11,8 +11,8 @@ What it measures
       peer is the 1-process pool; every configuration prints its trials/s, the peer's and the
       ratio, and the rows of the four runs are compared (timings aside: they must agree).
     - **Where a trial's time goes**: the same campaign's first stand setting of each range run
-      in this process through the workers' own code (:func:`studies.execution.run_task`), with
-      the stages of :mod:`sim.render_trial` timed: render (Mitsuba and the lab's light,
+      in this process through the workers' own code (:func:`svgs_sim.studies.execution.run_task`), with
+      the stages of :mod:`svgs_sim.sim.render_trial` timed: render (Mitsuba and the lab's light,
       ``_frame``), optics (the lens PSF, glare and CFA, once per render: ``_exposer``), expose
       (sensor, ISP, JPEG: ``_exposure``), detect + identify + solve (``solve_exposure``), the
       sensor's centroid CRLB (once per render and exposure setting: ``_sensor_centroid_sigma``)
@@ -21,7 +21,7 @@ What it measures
       (round trip) and 400 at once (per task); and the workers' memory (VmRSS now and VmHWM,
       the peak, from ``/proc``) after the timed campaign.
     - With ``--merge-range``: the cost of a trial of the merge-range study (``svgs
-      merge-range --camera htc-amaze-4g``, :mod:`studies.merge_range`: the Amaze facing the
+      merge-range --camera htc-amaze-4g``, :mod:`svgs_sim.studies.merge_range`: the Amaze facing the
       target at 6 and 7 m, the f-number at the profile's value, low and high, 2 exposures per
       render), timed by stage the same way.
 
@@ -50,11 +50,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from studies.campaign import campaign_trials, make_config, rendered_paper_calibration  # noqa: E402
-from studies.execution import (DEFAULT_CHUNK_SIZE, TASKS_PER_WORKER, ExecutorSpec, open_executor,  # noqa: E402
+from svgs_sim.studies.campaign import campaign_trials, make_config, rendered_paper_calibration  # noqa: E402
+from svgs_sim.studies.execution import (DEFAULT_CHUNK_SIZE, TASKS_PER_WORKER, ExecutorSpec, open_executor,  # noqa: E402
                                run_study, run_task)
-from studies.store import ResultStore, read_rows  # noqa: E402
-from sim.render_trial import RENDER, RENDER_TIMING_OUTPUTS, render_key  # noqa: E402
+from svgs_sim.studies.store import ResultStore, read_rows  # noqa: E402
+from svgs_sim.sim.render_trial import RENDER, RENDER_TIMING_OUTPUTS, render_key  # noqa: E402
 
 CAMERA = "galaxy-nexus"
 #: Seed of the timed campaign and of the warm-up study (other poses, so no worker reuses a render).
@@ -66,9 +66,9 @@ NOOP_SERIAL, NOOP_BATCH = 50, 400
 #: The timings of a row (everything else must be the same on every executor).
 TIMINGS = ("wall_s", "cpu_s", *RENDER_TIMING_OUTPUTS)
 #: The stages timed in :func:`breakdown`: (label, module, function).
-STAGES = (("render", "sim.render_trial", "_frame"), ("optics", "sim.render_trial", "_exposer"),
-          ("expose", "sim.render_trial", "_exposure"), ("detect+solve", "sim.closed_loop", "solve_exposure"),
-          ("CRLB", "sim.render_trial", "_sensor_centroid_sigma"))
+STAGES = (("render", "svgs_sim.sim.render_trial", "_frame"), ("optics", "svgs_sim.sim.render_trial", "_exposer"),
+          ("expose", "svgs_sim.sim.render_trial", "_exposure"), ("detect+solve", "svgs_sim.sim.closed_loop", "solve_exposure"),
+          ("CRLB", "svgs_sim.sim.render_trial", "_sensor_centroid_sigma"))
 
 
 def _load() -> str:
@@ -239,7 +239,7 @@ def print_breakdown(title: str, b: dict) -> None:
 
 
 #: The Sobol' study of the rendered merge range (docs/performance.md): d = 9 parameters (range_m and the 8 of
-#: studies.merge_range.PHYSICS), k = 5 of them change the render (range_m, f_number, led_offset_scale,
+#: svgs_sim.studies.merge_range.PHYSICS), k = 5 of them change the render (range_m, f_number, led_offset_scale,
 #: pattern_scale, ambient_radiance_w_m2_sr); 2 change the optics after the render (the glare's veiling fraction
 #: and wing exponent), 1 the exposure (exposure_compensation_ev), 1 only the detector (threshold).
 SOBOL_D, SOBOL_K, SOBOL_OPTICS, SOBOL_EXPOSURE, SOBOL_DETECTOR = 9, 5, 2, 1, 1
@@ -260,7 +260,7 @@ def sobol_cost(b: dict) -> float:
 
 
 def merge_range_trials():
-    from studies.merge_range import make_config as mr_config, merge_range_trials as mr_trials
+    from svgs_sim.studies.merge_range import make_config as mr_config, merge_range_trials as mr_trials
 
     cfg = mr_config("htc-amaze-4g", ranges_m=(6.0, 7.0), vary=["f_number"], exposures=2)
     return mr_trials(cfg)

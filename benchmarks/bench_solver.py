@@ -21,8 +21,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from svgs import Camera, Pattern, solve_centroids  # noqa: E402
-from svgs.frames import pose_from_scenario, sample_envelope_scenario  # noqa: E402
+from svgs_sim.svgs import Camera, Pattern, solve_centroids  # noqa: E402
+from svgs_sim.svgs.frames import pose_from_scenario, sample_envelope_scenario  # noqa: E402
 
 
 def envelope_points(n, seed, cam, pat, sigma_px=0.1):

@@ -8,7 +8,7 @@ ranges (697 mm and 5712 mm):
 2. centroid error against the projected marker centres, with and without the
    projected-circle-centre correction (and the analytic Kanatani check);
 3. pose scatter over the frames: fluctuation range (max - min) per axis beside the paper's
-   Tables 1-2 (``assets/data/tof_2022_stability.csv``, read by :mod:`assets.papers`), and the mean error.
+   Tables 1-2 (``assets/data/tof_2022_stability.csv``, read by :mod:`svgs_sim.assets.papers`), and the mean error.
 
 The synthetic frames use assumed noise levels (synth_tof), so part 3 illustrates the
 pipeline; the physical comparison needs the rendered ToF frames (render/).
@@ -29,10 +29,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # test-only helpers (synth_tof)
 
-from svgs.frames import pose_from_scenario, pose_to_state, rotation_angle_deg  # noqa: E402
-from tof import TofPipeline, load_camera, load_target
-from tof.ellipse import conic_center, project_circle_conic, projected_circle_centre
-from tof.pipeline import STAGES
+from svgs_sim.svgs.frames import pose_from_scenario, pose_to_state, rotation_angle_deg  # noqa: E402
+from svgs_sim.tof import TofPipeline, load_camera, load_target
+from svgs_sim.tof.ellipse import conic_center, project_circle_conic, projected_circle_centre
+from svgs_sim.tof.pipeline import STAGES
 from synth_tof import synth_frame  # noqa: E402
 
 BUDGET_S = 0.020  # 50 fps (assumed frame rate of the EPC660 set-up, tof-epc660.toml)
@@ -81,7 +81,7 @@ def _load() -> str:
 
 
 def paper_fluctuations():
-    from assets.papers import tof_2022_stability
+    from svgs_sim.assets.papers import tof_2022_stability
 
     out = {}
     for d in tof_2022_stability():

@@ -13,9 +13,9 @@ import os
 import time
 
 
-from camera.amcw import TofSensor
-from render.tof import TofRenderer
-from svgs.frames import pose_from_scenario
+from svgs_sim.camera.amcw import TofSensor
+from svgs_sim.render.tof import TofRenderer
+from svgs_sim.svgs.frames import pose_from_scenario
 
 SCENARIOS = {"697 mm": (0.697, 0.0022, -0.0105, -0.38, -2.65, -2.53),
              "5712 mm": (5.712, 0.0051, -0.0024, 3.82, 1.32, -2.05)}

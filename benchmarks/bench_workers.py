@@ -23,10 +23,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from studies.campaign import campaign_trials, make_config  # noqa: E402
-from studies.execution import ExecutorSpec, open_executor, run_study  # noqa: E402
-from studies.store import ResultStore  # noqa: E402
-from sim.trials import GEOMETRIC  # noqa: E402
+from svgs_sim.studies.campaign import campaign_trials, make_config  # noqa: E402
+from svgs_sim.studies.execution import ExecutorSpec, open_executor, run_study  # noqa: E402
+from svgs_sim.studies.store import ResultStore  # noqa: E402
+from svgs_sim.sim.trials import GEOMETRIC  # noqa: E402
 
 
 def _study(trials_per_range: int, seed: int):
@@ -42,7 +42,7 @@ def throughput(spec: ExecutorSpec, trials_per_range: int, repeats: int, chunk: i
     -------
     list of (trials/s, worker CPU ms per trial, cores' worth of CPU the workers got)
     """
-    from studies.store import read_table
+    from svgs_sim.studies.store import read_table
 
     rates = []
     with tempfile.TemporaryDirectory() as tmp, open_executor(spec, GEOMETRIC) as ex:

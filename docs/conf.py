@@ -19,7 +19,9 @@ sys.path.insert(0, str(ROOT))
 project = "svgs-sim"
 author = "svgs-sim contributors"
 copyright = "svgs-sim contributors, Apache-2.0"
-release = version = "0.1.0"
+import svgs_sim  # noqa: E402
+
+release = version = svgs_sim.__version__
 
 GALLERY = os.environ.get("SVGS_DOCS_GALLERY", "1") != "0"
 # SVGS_DOCS_API=0 leaves the API reference out (the pages and their links only: seconds)
@@ -64,7 +66,7 @@ autodoc_default_options = {"members": True, "ignore-module-all": True}
 # not this project's numpydoc
 autodoc_inherit_docstrings = False
 autodoc_member_order = "bysource"
-# The optional Basilisk extra (sim.basilisk_svgs): its pages build without it installed.
+# The optional Basilisk extra (svgs_sim.sim.basilisk_svgs): its pages build without it installed.
 autodoc_mock_imports = ["Basilisk"]
 numpydoc_show_class_members = False
 numpydoc_class_members_toctree = False

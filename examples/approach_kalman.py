@@ -1,7 +1,7 @@
 """The SVGS sensor inside a user's own loop: a constant-velocity Kalman filter on its measurements.
 
 A chaser closes from 12 m to 4 m in 16 s (0.5 m/s) with the target turned by (2, -1, 3) deg
-and 0.2 m off the boresight. :class:`sim.approach.ApproachSensor` takes the pose at each frame
+and 0.2 m off the boresight. :class:`svgs_sim.sim.approach.ApproachSensor` takes the pose at each frame
 time (here from a generator, as a dynamics simulation would give them) and returns a
 measurement: the paper's state (the camera's position in the target frame, the attitude), its
 1-sigma Cramer-Rao bound, ``ok`` and the reason. A constant-velocity Kalman filter, written with
@@ -24,8 +24,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from sim.approach import ApproachSensor  # noqa: E402
-from svgs.frames import pose_from_scenario  # noqa: E402
+from svgs_sim.sim.approach import ApproachSensor  # noqa: E402
+from svgs_sim.svgs.frames import pose_from_scenario  # noqa: E402
 
 #: Frames per second of the sensor.
 FPS = 2.0

@@ -5,8 +5,8 @@ facing along its -y (along-track, backwards); it holds the Hill frame (x radial,
 z orbit normal), spinning at the orbital rate. A chaser (10 kg) starts 30 m behind with the Galaxy
 Nexus on its +y face, looking at the pattern. Basilisk propagates both spacecraft (Earth's point-mass
 gravity); the chaser's thrusters are an ideal force (``extForceTorque``, at most
-:data:`MAX_FORCE_N`). The sensor is :class:`sim.basilisk_svgs.SVGSModule`: it renders, exposes and
-solves a frame at ``--sensor-rate-hz`` and releases it :data:`sim.basilisk_svgs.PROCESSING_LATENCY_S`
+:data:`MAX_FORCE_N`). The sensor is :class:`svgs_sim.sim.basilisk_svgs.SVGSModule`: it renders, exposes and
+solves a frame at ``--sensor-rate-hz`` and releases it :data:`svgs_sim.sim.basilisk_svgs.PROCESSING_LATENCY_S`
 later. A linear Kalman filter on Hill's (Clohessy-Wiltshire) equations takes the measurements
 (replaying the control history over the latency), and a glide-slope guidance flies the camera down
 the pattern's +z axis to 1 m. The same run with an ideal sensor (the true pose, every frame, no
@@ -36,10 +36,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from svgs.errors import InputError  # noqa: E402
-from svgs.frames import STATE_KEYS, pose_to_state, state_to_pose  # noqa: E402
+from svgs_sim.base.errors import InputError  # noqa: E402
+from svgs_sim.svgs.frames import STATE_KEYS, pose_to_state, state_to_pose  # noqa: E402
 
-from sim.basilisk_frames import (  # noqa: E402
+from svgs_sim.sim.basilisk_frames import (  # noqa: E402
     Mount, chaser_from_pose, dcm_to_mrp, hill_dcm, hill_from_inertial, mrp_to_dcm,
 )
 
@@ -148,7 +148,7 @@ def _make_gnc_class():
     only be imported lazily (Basilisk is an optional extra); each method is short."""
     from Basilisk.architecture import messaging, sysModel
 
-    from sim.basilisk_svgs import camera_position_covariance
+    from svgs_sim.sim.basilisk_svgs import camera_position_covariance
 
     class DockingGNC(sysModel.SysModel):
         """Navigation (CW Kalman filter with latency replay), glide-slope guidance, ideal-force control."""
@@ -323,7 +323,7 @@ def _make_gnc_class():
 
 
 def _true_pose(tg, ch):
-    from sim.basilisk_frames import relative_pose
+    from svgs_sim.sim.basilisk_frames import relative_pose
 
     return relative_pose(np.array(ch.r_BN_N), np.array(ch.sigma_BN), np.array(tg.r_BN_N), np.array(tg.sigma_BN),
                          CAMERA, PATTERN)
@@ -331,16 +331,16 @@ def _true_pose(tg, ch):
 
 def _sensor(phone: str | None, *, preview: bool, seed: int, rate_hz: float):
     """The SVGS sensor of a phone (None: the ideal sensor)."""
-    from sim.basilisk_svgs import IdealSensor
+    from svgs_sim.sim.basilisk_svgs import IdealSensor
 
     if phone is None:
         return IdealSensor()
-    from sim.approach import ApproachSensor
+    from svgs_sim.sim.approach import ApproachSensor
 
     cam = phone
     if preview:
-        from camera.phone.preview import binned_camera
-        from svgs.profiles import Camera
+        from svgs_sim.camera.phone.preview import binned_camera
+        from svgs_sim.base.profiles import Camera
 
         cam = binned_camera(Camera.load(phone))
     return ApproachSensor(cam, seed=seed, keep_images=True, frame_rate_hz=rate_hz)
@@ -353,8 +353,8 @@ def run(phone: str | None, *, start_state=START_STATE, sensor_rate_hz=0.25, prev
     from Basilisk.simulation import extForceTorque, spacecraft
     from Basilisk.utilities import SimulationBaseClass, macros, orbitalMotion, simIncludeGravBody
 
-    from sim.basilisk_svgs import PROCESSING_LATENCY_S, SVGSModule
-    from svgs.profiles import Camera
+    from svgs_sim.sim.basilisk_svgs import PROCESSING_LATENCY_S, SVGSModule
+    from svgs_sim.base.profiles import Camera
 
     ideal = phone is None
     lat = 0.0 if ideal else (PROCESSING_LATENCY_S if latency_s is None else float(latency_s))

@@ -21,15 +21,15 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from svgs.frames import pose_from_scenario  # noqa: E402
-from svgs.profiles import Camera, Pattern  # noqa: E402
+from svgs_sim.svgs.frames import pose_from_scenario  # noqa: E402
+from svgs_sim.base.profiles import Camera, Pattern  # noqa: E402
 
 RANGE_M = 10.0
 WINDOW_PX = 12
 
 
 def render_centroids():
-    from render.api import Renderer
+    from svgs_sim.render.api import Renderer
 
     cam, pat = Camera.load("galaxy-nexus"), Pattern.load("svgs-3u")
     r = Renderer(cam, pat, scene_options={"focus_distance_m": RANGE_M})
@@ -48,7 +48,7 @@ def render_centroids():
 
 
 def chain_errors():
-    from sim.closed_loop import Scenario, expose_and_solve, render_scenario
+    from svgs_sim.sim.closed_loop import Scenario, expose_and_solve, render_scenario
 
     pat = Pattern.load("svgs-3u")
     print(f"\nPart 2: render, expose, solve at {RANGE_M:g} m (Galaxy Nexus, seed 1)")

@@ -39,14 +39,14 @@ def _mitsuba_needs_the_render_marker(request):
 
 @pytest.fixture(scope="session")
 def nexus():
-    from svgs import Camera
+    from svgs_sim.base.profiles import Camera
 
     return Camera.load("galaxy-nexus", fitted=False)  # geometry for model tests: no fitted values
 
 
 @pytest.fixture(scope="session")
 def pattern():
-    from svgs import Pattern
+    from svgs_sim.base.profiles import Pattern
 
     return Pattern.load("svgs-3u")
 
@@ -55,7 +55,7 @@ def pattern():
 def small_camera(tmp_path_factory):
     """The Galaxy Nexus profile scaled to 648 x 486 (the same lens delivering a quarter-size
     image): a path to its .toml, for rendered tests that need frames of about a second."""
-    from svgs import Camera
+    from svgs_sim.base.profiles import Camera
 
     path = tmp_path_factory.mktemp("cam") / "nexus-small.toml"
     Camera.load("galaxy-nexus").scaled(648, 486).replace(name="nexus-small").save(path)
@@ -65,7 +65,7 @@ def small_camera(tmp_path_factory):
 def random_envelope_poses(n, seed, range_interval_m=(1.0, 40.0)):
     """Poses drawn over the paper's test envelope: range log-uniform, roll/pitch +/-25 deg,
     yaw +/-45 deg, lateral offsets up to +/-15 % of range. Returns (R (n,3,3), t (n,3))."""
-    from svgs.frames import pose_from_scenario, sample_envelope_scenario
+    from svgs_sim.svgs.frames import pose_from_scenario, sample_envelope_scenario
 
     rng = np.random.default_rng(seed)
     Rs, ts = [], []

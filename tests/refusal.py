@@ -12,7 +12,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from cli.main import main
+from svgs_sim.cli.main import main
 
 #: Seconds from the call to the exit of a command refused before any work. The work such a
 #: refusal saves is a render (3-7 s), a board set or a study; parsing and checking take ~0.2 s,

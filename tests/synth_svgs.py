@@ -22,9 +22,9 @@ import cv2
 import numpy as np
 from scipy.special import erf
 
-from svgs.errors import InputError
-from svgs.frames import pose_from_scenario, sample_envelope_scenario
-from svgs.profiles import Camera, Pattern
+from svgs_sim.base.errors import InputError
+from svgs_sim.svgs.frames import pose_from_scenario, sample_envelope_scenario
+from svgs_sim.base.profiles import Camera, Pattern
 
 #: Half-width of a spot's drawing window in Gaussian sigmas (the flux beyond is < 1e-12).
 WINDOW_SIGMAS = 7.0
@@ -177,7 +177,7 @@ def random_envelope_pose(rng=None, *, range_interval_m=(1.0, 40.0), roll_deg=25.
 
     Range log-uniform in ``range_interval_m``; roll and pitch uniform in +/-``roll_deg``/``pitch_deg``,
     yaw in +/-``yaw_deg``; lateral offsets of the target origin uniform up to
-    +/-``lateral_fraction`` of the range (see :func:`svgs.frames.pose_from_scenario`).
+    +/-``lateral_fraction`` of the range (see :func:`svgs_sim.svgs.frames.pose_from_scenario`).
 
     Returns
     -------

@@ -20,11 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from svgs.frames import pose_from_scenario
-from svgs.profiles import Camera
+from svgs_sim.svgs.frames import pose_from_scenario
+from svgs_sim.base.profiles import Camera
 
-from tof.camera import MarkerTarget
-from tof.ellipse import project_circle_conic
+from svgs_sim.tof.camera import MarkerTarget
+from svgs_sim.tof.ellipse import project_circle_conic
 
 C_LIGHT = 299_792_458.0  # m/s
 

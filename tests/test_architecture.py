@@ -17,7 +17,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("svgs", "tof", "calibration", "camera", "render", "sim", "studies", "cli", "assets")
+#: The subpackages of svgs_sim (the layers of docs/architecture.md).
+PACKAGES = tuple(sorted(p.name for p in (ROOT / "svgs_sim").iterdir() if (p / "__init__.py").is_file()))
 LINT = shutil.which("lint-imports", path=str(Path(sys.executable).parent)) or shutil.which("lint-imports")
 
 
@@ -42,14 +43,13 @@ def test_import_contracts_are_kept(lint_available):
 
 def test_import_contract_fails_on_a_cycle(lint_available, tmp_path):
     shutil.copy(ROOT / "pyproject.toml", tmp_path / "pyproject.toml")
-    for p in PACKAGES:
-        shutil.copytree(ROOT / p, tmp_path / p, ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(ROOT / "svgs_sim", tmp_path / "svgs_sim", ignore=shutil.ignore_patterns("__pycache__"))
     # a lazy import from the sensor layer up to the closed loop: svgs -> sim -> svgs
-    with open(tmp_path / "svgs" / "frames.py", "a") as fh:
-        fh.write("\n\ndef _cycle():\n    from sim.closed_loop import Scenario\n\n    return Scenario\n")
+    with open(tmp_path / "svgs_sim" / "svgs" / "frames.py", "a") as fh:
+        fh.write("\n\ndef _cycle():\n    from svgs_sim.sim.closed_loop import Scenario\n\n    return Scenario\n")
     r = _lint(tmp_path)
     assert r.returncode != 0
-    assert "svgs.frames -> sim.closed_loop" in r.stdout
+    assert "svgs_sim.svgs.frames -> svgs_sim.sim.closed_loop" in r.stdout
 
 
 def test_svgs_solve_loads_no_renderer_study_or_calibration_code(tmp_path):
@@ -60,22 +60,24 @@ def test_svgs_solve_loads_no_renderer_study_or_calibration_code(tmp_path):
     cv2.imwrite(str(img), np.zeros((1944, 2592), np.uint8))
     code = (
         "import json, sys\n"
-        "from cli.main import main\n"
+        "from svgs_sim.cli.main import main\n"
         f"rc = main(['solve', {str(img)!r}, '--camera', 'galaxy-nexus', '--json'])\n"
-        "mods = sorted({m.split('.')[0] for m in sys.modules})\n"
+        "mods = sorted({'.'.join(m.split('.')[:2]) for m in sys.modules})\n"
         "print(json.dumps({'rc': rc, 'mods': mods}))\n"
     )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=ROOT)
     out = json.loads(r.stdout.strip().splitlines()[-1])
     assert out["rc"] == 1  # a dark frame: no solution, a clean exit
     loaded = set(out["mods"])
-    for forbidden in ("render", "sim", "studies", "calibration", "camera", "tof", "mitsuba", "drjit"):
+    assert "svgs_sim.svgs" in loaded and "svgs_sim.base" in loaded  # the scan sees the project's packages
+    for forbidden in ("svgs_sim.render", "svgs_sim.sim", "svgs_sim.studies", "svgs_sim.calibration", "svgs_sim.camera",
+                      "svgs_sim.tof", "mitsuba", "drjit"):
         assert forbidden not in loaded, f"svgs solve loaded {forbidden}"
 
 
 def test_every_registered_command_is_in_the_parser():
-    """The registry (cli.main.COMMANDS) is the parser: each command and group exists once."""
-    from cli.main import COMMANDS, build_parser
+    """The registry (svgs_sim.cli.main.COMMANDS) is the parser: each command and group exists once."""
+    from svgs_sim.cli.main import COMMANDS, build_parser
 
     parser = build_parser()
     top = next(a for a in parser._actions if a.dest == "command")
@@ -89,11 +91,11 @@ def test_every_registered_command_is_in_the_parser():
 
 
 def test_building_one_command_registers_only_its_modules():
-    from cli.main import _selected
+    from svgs_sim.cli.main import _selected
 
-    assert _selected(["solve", "x.png", "--camera", "galaxy-nexus"]) == {"cli.solve"}
-    assert _selected(["calibrate", "focal"]) == {"cli.calibrate", "cli.calibrate_study"}
-    assert _selected(["tof", "solve"]) == {"cli.tof", "cli.tof_render", "cli.tof_stability"}
+    assert _selected(["solve", "x.png", "--camera", "galaxy-nexus"]) == {"svgs_sim.cli.solve"}
+    assert _selected(["calibrate", "focal"]) == {"svgs_sim.cli.calibrate", "svgs_sim.cli.calibrate_study"}
+    assert _selected(["tof", "solve"]) == {"svgs_sim.cli.tof", "svgs_sim.cli.tof_render", "svgs_sim.cli.tof_stability"}
     assert _selected(["--help"]) is None and _selected(["no-such-command"]) is None
 
 
@@ -103,8 +105,8 @@ def _is_private(name: str) -> bool:
 
 
 def private_cross_package_uses(source: str, module: str, packages=PACKAGES) -> list[str]:
-    """Where the module ``module`` (dotted name; its package is the first part) uses a private
-    name (``_x``, not ``__x__``) of another of the project's ``packages``.
+    """Where the module ``module`` (dotted name ``svgs_sim.PKG...``; its package is ``PKG``) uses a
+    private name (``_x``, not ``__x__``) of another of the project's ``packages``.
 
     Found: ``from pkg.mod import _x``, ``from pkg import _mod``, ``import pkg._mod`` and
     ``from pkg._mod import x`` (a private module), and ``pkg.mod._x`` / ``m._x`` attribute
@@ -117,16 +119,20 @@ def private_cross_package_uses(source: str, module: str, packages=PACKAGES) -> l
     """
     import ast
 
-    own = module.split(".")[0]
+    def package(path: str) -> str | None:
+        parts = path.split(".")
+        return parts[1] if parts[0] == "svgs_sim" and len(parts) > 1 else None
+
+    own = package(module)
     here = module.split(".")[:-1]  # the module's package (for a package's __init__: the package)
     found, bound = [], {}  # bound: local name -> dotted path in a project package
 
     def foreign(path: str) -> bool:
-        top = path.split(".")[0]
+        top = package(path)
         return top in packages and top != own
 
     def check_path(path: str, line: int, what: str) -> None:
-        if foreign(path) and any(_is_private(p) for p in path.split(".")[1:]):
+        if foreign(path) and any(_is_private(p) for p in path.split(".")[2:]):
             found.append(f"line {line}: {what}")
 
     tree = ast.parse(source)
@@ -165,30 +171,30 @@ def test_the_private_import_scan_finds_each_form():
     """The scan below is not vacuous: each form of reaching into another package is found, and
     a package's own private names, dunders and public names are not."""
     src = (
-        "import sim.trials\n"
-        "import sim.closed_loop as cl\n"
-        "from sim import trials as tr, closed_loop\n"
-        "from sim.trials import _camera\n"           # 4: a private name
-        "import sim._private_mod\n"                  # 5: a private module
-        "from sim import _mod\n"                     # 6: a private module by from-import
-        "from sim._mod import public\n"              # 7: a name of a private module
-        "x = sim.trials._pattern('svgs-3u')\n"       # 8: attribute access through the import
-        "y = cl._helper({})\n"                       # 9: through an alias
-        "z = tr._camera, closed_loop.Scenario, sim.__name__\n"   # 10: through a from-imported module
-        "from .store import _format\n"               # own package (relative): allowed
-        "from studies.store import _parse\n"         # own package: allowed
+        "import svgs_sim.sim.trials\n"
+        "import svgs_sim.sim.closed_loop as cl\n"
+        "from svgs_sim.sim import trials as tr, closed_loop\n"
+        "from svgs_sim.sim.trials import _camera\n"         # 4: a private name
+        "import svgs_sim.sim._private_mod\n"                # 5: a private module
+        "from svgs_sim.sim import _mod\n"                   # 6: a private module by from-import
+        "from svgs_sim.sim._mod import public\n"            # 7: a name of a private module
+        "x = svgs_sim.sim.trials._pattern('svgs-3u')\n"     # 8: attribute access through the import
+        "y = cl._helper({})\n"                              # 9: through an alias
+        "z = tr._camera, closed_loop.Scenario, svgs_sim.sim.__name__\n"   # 10: through a from-imported module
+        "from .store import _format\n"                      # own package (relative): allowed
+        "from svgs_sim.studies.store import _parse\n"       # own package: allowed
     )
-    got = private_cross_package_uses(src, "studies.example")
+    got = private_cross_package_uses(src, "svgs_sim.studies.example")
     assert [g.split(":")[0] for g in got] == ["line 4", "line 5", "line 6", "line 7", "line 8", "line 9", "line 10"], got
     # in sim, sim's private names are its own; studies' is not
-    assert [g.split(":")[0] for g in private_cross_package_uses(src, "sim.example")] == ["line 12"]
+    assert [g.split(":")[0] for g in private_cross_package_uses(src, "svgs_sim.sim.example")] == ["line 12"]
 
 
 def test_no_module_uses_another_packages_private_names():
     """A package's private names (``_x``) are its own: another package imports only public ones."""
     bad = []
     for pkg in PACKAGES:
-        for path in sorted((ROOT / pkg).rglob("*.py")):
+        for path in sorted((ROOT / "svgs_sim" / pkg).rglob("*.py")):
             rel = path.relative_to(ROOT).with_suffix("")
             module = ".".join(rel.parts)  # a package's __init__ as pkg.__init__: its package is pkg
             for use in private_cross_package_uses(path.read_text(), module):
@@ -236,7 +242,7 @@ def test_no_function_is_long_without_a_reason():
     """No function over ~90 lines without a reason in its docstring (the project's packages,
     tools, examples and benchmarks)."""
     bad = []
-    for folder in (*PACKAGES, "tools", "examples", "benchmarks"):
+    for folder in ("svgs_sim", "tools", "examples", "benchmarks"):
         for path in sorted((ROOT / folder).rglob("*.py")):
             bad += [f"{path.relative_to(ROOT)}: {f}" for f in long_functions(path.read_text())]
     assert not bad, "functions over %d lines without a reason in the docstring:\n" % MAX_FUNCTION_LINES + "\n".join(bad)

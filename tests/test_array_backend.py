@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 from scipy.signal import fftconvolve
 
-from camera.backend import BACKENDS, get_backend
-from camera.phone import PhoneCamera
-from camera.rendered import PointFlux
-from svgs.errors import InputError
+from svgs_sim.camera.backend import BACKENDS, get_backend
+from svgs_sim.camera.phone import PhoneCamera
+from svgs_sim.camera.rendered import PointFlux
+from svgs_sim.base.errors import InputError
 
 
 def test_fft_filter_equals_opencv():
@@ -68,7 +68,7 @@ def test_environment_variable_chooses_the_backend(monkeypatch):
 
 @pytest.mark.skipif(importlib.util.find_spec("cupy") is not None, reason="CuPy is installed: no fallback to show")
 def test_cupy_without_cupy_falls_back_to_the_cpu_and_says_so():
-    from camera import backend as mod
+    from svgs_sim.camera import backend as mod
 
     mod._cupy.cache_clear()
     with warnings.catch_warnings(record=True) as caught:

@@ -1,4 +1,4 @@
-"""Basilisk's frames -> the paper's state and back (sim.basilisk_frames).
+"""Basilisk's frames -> the paper's state and back (svgs_sim.sim.basilisk_frames).
 
 References the code did not produce: hand-computed poses and MRPs, and - where the ``basilisk``
 extra is installed - Basilisk's own ``RigidBodyKinematics`` and ``orbitalMotion``.
@@ -7,10 +7,10 @@ extra is installed - Basilisk's own ``RigidBodyKinematics`` and ``orbitalMotion`
 import numpy as np
 import pytest
 
-from svgs.errors import InputError
-from svgs.frames import rotation_angle_deg
+from svgs_sim.base.errors import InputError
+from svgs_sim.svgs.frames import rotation_angle_deg
 
-from sim.basilisk_frames import (
+from svgs_sim.sim.basilisk_frames import (
     Mount,
     chaser_from_pose,
     dcm_to_mrp,

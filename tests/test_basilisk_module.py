@@ -1,8 +1,8 @@
-"""The SVGS Basilisk module (sim.basilisk_svgs) inside a Basilisk simulation.
+"""The SVGS Basilisk module (svgs_sim.sim.basilisk_svgs) inside a Basilisk simulation.
 
 Skipped, with the reason, where the ``basilisk`` extra is not installed. The geometry of each
 case is set by hand (bodies drifting without gravity, so their states at any time are known
-without Basilisk), and the expected measurement is :meth:`sim.approach.ApproachSensor.measure`
+without Basilisk), and the expected measurement is :meth:`svgs_sim.sim.approach.ApproachSensor.measure`
 of a second sensor given that hand-made pose.
 """
 
@@ -22,10 +22,10 @@ V_M_S = np.array([0.0, 0.0, -0.2])
 def test_import_without_basilisk_names_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "Basilisk", None)  # "import Basilisk..." now fails as if absent
     monkeypatch.delitem(sys.modules, "Basilisk.architecture", raising=False)
-    monkeypatch.delitem(sys.modules, "sim.basilisk_svgs", raising=False)
+    monkeypatch.delitem(sys.modules, "svgs_sim.sim.basilisk_svgs", raising=False)
     with pytest.raises(ImportError, match=r"pip install -e \"\.\[basilisk\]\""):
-        importlib.import_module("sim.basilisk_svgs")
-    monkeypatch.delitem(sys.modules, "sim.basilisk_svgs", raising=False)
+        importlib.import_module("svgs_sim.sim.basilisk_svgs")
+    monkeypatch.delitem(sys.modules, "svgs_sim.sim.basilisk_svgs", raising=False)
 
 
 def _sim(module, stop_s, task_s=0.25):
@@ -63,8 +63,8 @@ def _hand_pose(t_s):
 
 def test_ideal_sensor_frames_latency_and_opnav_message():
     pytest.importorskip("Basilisk", reason="the basilisk extra is not installed (pip install -e \".[basilisk]\")")
-    from sim.basilisk_frames import Mount
-    from sim.basilisk_svgs import IdealSensor, SVGSModule
+    from svgs_sim.sim.basilisk_frames import Mount
+    from svgs_sim.sim.basilisk_svgs import IdealSensor, SVGSModule
 
     mod = SVGSModule(IdealSensor(), Mount(), Mount(), frame_rate_hz=2.0, latency_s=0.3)
     rec = _sim(mod, 2.0, task_s=0.1)
@@ -93,9 +93,9 @@ def test_ideal_sensor_frames_latency_and_opnav_message():
 @pytest.mark.render
 def test_module_measurement_equals_approach_sensor(small_camera):
     pytest.importorskip("Basilisk", reason="the basilisk extra is not installed (pip install -e \".[basilisk]\")")
-    from sim.approach import ApproachSensor
-    from sim.basilisk_frames import Mount
-    from sim.basilisk_svgs import SVGSModule
+    from svgs_sim.sim.approach import ApproachSensor
+    from svgs_sim.sim.basilisk_frames import Mount
+    from svgs_sim.sim.basilisk_svgs import SVGSModule
 
     kw = dict(seed=3, keep_images=True, frame_rate_hz=2.0)
     mod = SVGSModule(ApproachSensor(small_camera, **kw), Mount(), Mount(), frame_rate_hz=2.0, latency_s=0.25)

@@ -1,17 +1,17 @@
 """A black board render is a simulated physical failure, not bad input (issue 26): no light reaches
-the sensor, so no manual exposure exists - :class:`svgs.errors.SimulationFailure` (exit 1 with its
-reason), not :class:`svgs.errors.InputError` (exit 2)."""
+the sensor, so no manual exposure exists - :class:`svgs_sim.base.errors.SimulationFailure` (exit 1 with its
+reason), not :class:`svgs_sim.base.errors.InputError` (exit 2)."""
 
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-import sim.boards
-from camera.phone import PhoneCamera
-from cli.main import main
-from sim.boards import manual_exposure
-from svgs.errors import InputError, SimulationFailure
+import svgs_sim.sim.boards
+from svgs_sim.camera.phone import PhoneCamera
+from svgs_sim.cli.main import main
+from svgs_sim.sim.boards import manual_exposure
+from svgs_sim.base.errors import InputError, SimulationFailure
 
 
 def test_a_black_image_has_no_manual_exposure():
@@ -25,7 +25,7 @@ def test_a_black_image_has_no_manual_exposure():
 
 
 class _BlackRenderer:
-    """Stands in for render.boards.BoardRenderer: every view renders black (no Mitsuba)."""
+    """Stands in for svgs_sim.render.boards.BoardRenderer: every view renders black (no Mitsuba)."""
 
     def __init__(self, cam, board, **kw):
         self.cam = cam
@@ -35,10 +35,10 @@ class _BlackRenderer:
 
 
 def test_svgs_calibrate_render_board_exits_1_with_the_reason(monkeypatch, tmp_path, capsys):
-    import cli.compile_kernels as ck
+    import svgs_sim.cli.compile_kernels as ck
 
     monkeypatch.setattr(ck, "kernels_cached", lambda: True)
-    monkeypatch.setattr(sim.boards, "BoardRenderer", _BlackRenderer)
+    monkeypatch.setattr(svgs_sim.sim.boards, "BoardRenderer", _BlackRenderer)
     out = tmp_path / "set"
     rc = main(["calibrate", "render-board", "--camera", "galaxy-nexus", "--width", "160", "--height", "120",
                "--board", "chessboard", "--cols", "9", "--rows", "6", "--spacing-mm", "20", "--views", "1",

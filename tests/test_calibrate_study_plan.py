@@ -4,10 +4,10 @@ before any work, warns above an hour like the other studies, and stops there wit
 
 import time
 
-from cli.main import main
-from studies.calibration import plan_calibration_study
-from studies.calibration.plan import part_plan
-from studies.execution import LONG_STUDY_S, ExecutorSpec, Trial
+from svgs_sim.cli.main import main
+from svgs_sim.studies.calibration import plan_calibration_study
+from svgs_sim.studies.calibration.plan import part_plan
+from svgs_sim.studies.execution import LONG_STUDY_S, ExecutorSpec, Trial
 
 
 def _plan_only(capsys, tmp_path, *extra):
@@ -30,7 +30,7 @@ def test_plan_only_prints_the_counts_and_an_estimate_and_writes_nothing(capsys, 
     for counts in ("10 calibration(s)", "10 focal frame(s) of 4 exposure(s)", "20 focal-method case(s)",
                    "264 pose-error cell(s) of 16 pose(s)"):
         assert counts in lines[0], lines[0]
-    assert " min of one core (measured costs, studies/calibration/plan.py)" in lines[0]
+    assert " min of one core (measured costs, svgs_sim/studies/calibration/plan.py)" in lines[0]
 
 
 def test_a_study_over_an_hour_is_warned_about(capsys, tmp_path):
@@ -40,7 +40,7 @@ def test_a_study_over_an_hour_is_warned_about(capsys, tmp_path):
 
 
 def test_the_geometric_study_costs_its_board_set_mostly(tmp_path):
-    """The default geometric study, measured at 187 s (studies/calibration/plan.py), is planned
+    """The default geometric study, measured at 187 s (svgs_sim/studies/calibration/plan.py), is planned
     at a few minutes, nearly all of it the board set made in this process."""
     plan = plan_calibration_study("galaxy-nexus", tmp_path / "s", geometric=True, spec=ExecutorSpec("inline", 1))
     assert 100 < plan.core_s < 300 and plan.serial_s > 0.95 * plan.core_s

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from calibration import (
+from svgs_sim.calibration import (
     Board,
     calibrate,
     calibrate_images,
@@ -15,8 +15,8 @@ from calibration import (
     sample_board_poses,
     synthesize_views,
 )
-from svgs.errors import InputError
-from svgs.profiles import Camera
+from svgs_sim.base.errors import InputError
+from svgs_sim.base.profiles import Camera
 
 REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real-calibration" / "ximea-acircles-4x11"
 needs_real = pytest.mark.skipif(
@@ -89,7 +89,7 @@ def test_real_acircles_unconstrained_rms_below_0_1_px(real_left):
 
 @needs_real
 def test_cli_board_on_real_images_writes_a_loadable_profile(tmp_path, capsys):
-    from cli.main import main
+    from svgs_sim.cli.main import main
 
     out = tmp_path / "ximea-left.toml"
     rc = main(["calibrate", "board", str(REAL / "left"), "--board", "acircles", "--cols", "4", "--rows", "11",
@@ -254,7 +254,7 @@ def test_mixed_image_sizes_name_the_files(chess_views):
 def test_cli_bad_input_exits_2_without_traceback(tmp_path, capsys, chess_views):
     import cv2
 
-    from cli.main import main
+    from svgs_sim.cli.main import main
 
     board, R, t, imgs = chess_views
     cv2.imwrite(str(tmp_path / "a.png"), imgs[0])

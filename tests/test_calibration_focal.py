@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from calibration.focal import estimate_focal, estimate_focal_from_images
-from svgs.errors import InputError
-from svgs.frames import pose_from_scenario
+from svgs_sim.calibration.focal import estimate_focal, estimate_focal_from_images
+from svgs_sim.base.errors import InputError
+from svgs_sim.svgs.frames import pose_from_scenario
 
 F_TRUE = 2450.0
 RANGES = np.arange(1.0, 11.0)  # 1..10 m
@@ -31,7 +31,7 @@ def centroids(camera, pattern, ranges_m, noise_px, seed, *, yaw_deg=10.0, roll_d
 
 @pytest.fixture(scope="module")
 def cams():
-    from svgs import Camera
+    from svgs_sim.base.profiles import Camera
 
     true = Camera.load("galaxy-nexus").replace(fx=F_TRUE, fy=F_TRUE)
     start = true.replace(fx=2300.0, fy=2300.0)  # the profile's focal length need only be rough
@@ -213,8 +213,8 @@ def test_image_level_path_recovers_focal_length(cams, pattern, pattern_images):
 
 
 def test_cli_focal_prints_estimate_and_writes_profile(tmp_path, capsys, pattern_images):
-    from svgs import Camera
-    from cli.main import main
+    from svgs_sim.base.profiles import Camera
+    from svgs_sim.cli.main import main
 
     paths, ranges = pattern_images
     start = Camera.load("galaxy-nexus").replace(fx=2300.0, fy=2300.0)
@@ -236,7 +236,7 @@ def test_cli_focal_prints_estimate_and_writes_profile(tmp_path, capsys, pattern_
 
 
 def test_cli_focal_bad_input_exits_2(tmp_path, capsys, pattern_images):
-    from cli.main import main
+    from svgs_sim.cli.main import main
 
     paths, ranges = pattern_images
     base = ["calibrate", "focal", "--camera", "galaxy-nexus"]

@@ -1,4 +1,4 @@
-"""Rendered calibration sets (sim.boards, ``svgs calibrate render-board``).
+"""Rendered calibration sets (svgs_sim.sim.boards, ``svgs calibrate render-board``).
 
 The renders are small (a 640 x 480 camera with strong distortion, a few views at 16 spp, about
 a second each on two cores); the acceptance run over 40 views is marked slow. Truth comes from
@@ -15,9 +15,9 @@ import pytest
 if importlib.util.find_spec("mitsuba") is None:
     pytest.skip("Mitsuba is not installed (the 'render' extra)", allow_module_level=True)
 
-from calibration import Board, calibrate_images, detect_board, mapping_error_px
-from svgs import Camera
-from cli.main import main
+from svgs_sim.calibration import Board, calibrate_images, detect_board, mapping_error_px
+from svgs_sim.base.profiles import Camera
+from svgs_sim.cli.main import main
 
 pytestmark = pytest.mark.render
 
@@ -32,7 +32,7 @@ def small_camera(width=640, height=480):
 
 @pytest.fixture(scope="module")
 def chess_set(tmp_path_factory):
-    from sim.boards import render_board_set
+    from svgs_sim.sim.boards import render_board_set
 
     out = tmp_path_factory.mktemp("chess")
     board = Board("chessboard", 9, 6, 0.1)
@@ -54,7 +54,7 @@ def test_rendered_corners_agree_with_the_camera_model(chess_set):
 
 
 def test_truth_record_round_trip(chess_set):
-    from sim.boards import BoardSet
+    from svgs_sim.sim.boards import BoardSet
 
     bs, out = chess_set
     truth = json.loads((out / "truth.json").read_text())
@@ -83,8 +83,8 @@ def test_manual_exposure_puts_the_paper_at_the_fill_level(chess_set):
 def test_board_radiance_is_reflectance_times_room_radiance():
     # constant environment, BSDF sampling only: a Lambertian board has radiance rho * L with
     # no Monte Carlo noise away from edges; the flux follows the radiometric chain
-    from render.boards import BoardRenderer
-    from render.optics import Optics, photometry, pixel_normalized_grid, radiance_to_photon_rate
+    from svgs_sim.render.boards import BoardRenderer
+    from svgs_sim.render.optics import Optics, photometry, pixel_normalized_grid, radiance_to_photon_rate
 
     cam = small_camera(160, 120)
     board = Board("chessboard", 5, 4, 0.2)
@@ -105,7 +105,7 @@ def test_board_radiance_is_reflectance_times_room_radiance():
 
 def test_charuco_texture_orientation():
     # an asymmetric board: marker ids can only land right if the texture is not mirrored
-    from sim.boards import render_board_set
+    from svgs_sim.sim.boards import render_board_set
 
     board = Board("charuco", 7, 5, 0.16)
     bs = render_board_set(small_camera(), board, 2, seed=5, spp=4)
@@ -120,7 +120,7 @@ def test_charuco_texture_orientation():
 def test_calibration_from_rendered_set_meets_acceptance(tmp_path):
     # issue 5: fx, fy within 0.2 %, principal point within 1 px, mapping error < 0.1 px
     # (after the best rotation, which absorbs the principal-point error) - 40 views
-    from sim.boards import render_board_set
+    from svgs_sim.sim.boards import render_board_set
 
     cam = small_camera()
     board = Board("chessboard", 9, 6, 0.1)

@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from cli.main import main
+from svgs_sim.cli.main import main
 
 QUICK = ["--camera", "galaxy-nexus", "--width", "640", "--height", "480", "--geometric", "--views-list", "4,8",
          "--subsets", "2", "--focal-ranges", "1,3,5,10", "--focal-exposures", "2", "--pose-ranges", "2,5,10,20,30",

@@ -4,8 +4,8 @@ errors against the truth (geometric images: calibration.synthesize_views, no ren
 import numpy as np
 import pytest
 
-from calibration import Board, calibrate, sample_board_poses, synthesize_views
-from studies.calibration import (
+from svgs_sim.calibration import Board, calibrate, sample_board_poses, synthesize_views
+from svgs_sim.studies.calibration import (
     calibration_convergence,
     calibration_errors,
     convergence_summary,
@@ -13,8 +13,8 @@ from studies.calibration import (
     parse_number_list,
     true_camera,
 )
-from svgs import Camera
-from svgs.errors import InputError
+from svgs_sim.base.profiles import Camera
+from svgs_sim.base.errors import InputError
 
 from conftest import REPO
 
@@ -97,9 +97,9 @@ def test_results_stored_under_the_old_column_names_are_read(tmp_path):
     import json
     import shutil
 
-    from studies.calibration.convergence import RENAMED_COLUMNS, upgrade_stored_columns
-    from studies.calibration.trials import KINDS, SCENARIO_KEYS
-    from studies.store import ResultStore, read_rows
+    from svgs_sim.studies.calibration.convergence import RENAMED_COLUMNS, upgrade_stored_columns
+    from svgs_sim.studies.calibration.trials import KINDS, SCENARIO_KEYS
+    from svgs_sim.studies.store import ResultStore, read_rows
 
     src = REPO / "docs" / "reports" / "calibration-study-galaxy-nexus" / "trials" / "convergence"
     folder = tmp_path / "convergence"

@@ -1,4 +1,4 @@
-"""The paper's focal-length method inside the calibration study (studies.calibration.focal_study).
+"""The paper's focal-length method inside the calibration study (svgs_sim.studies.calibration.focal_study).
 
 Projected centroids (no render) with seeded noise; the rendered path is checked by a slow test
 on two Galaxy Nexus frames.
@@ -9,14 +9,14 @@ import importlib.util
 import numpy as np
 import pytest
 
-from studies.calibration import (
+from svgs_sim.studies.calibration import (
     FocalFrames,
     default_range_sets,
     focal_frames_geometric,
     focal_study,
     true_camera,
 )
-from svgs import Camera
+from svgs_sim.base.profiles import Camera
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +68,7 @@ def test_focal_frames_cache_round_trip(tmp_path, nominal, pattern):
     assert np.array_equal(again.centroids_px, frames.centroids_px, equal_nan=True)
     assert again.info == frames.info and again.rendered is False and again.camera == frames.camera
     assert again.ok().tolist() == [[True, True, True], [True, True, False]]
-    from svgs.errors import InputError
+    from svgs_sim.base.errors import InputError
 
     (tmp_path / "bad.npz").write_bytes(b"not a zip")
     with pytest.raises(InputError, match="not a focal-frames cache"):
@@ -81,7 +81,7 @@ def test_focal_frames_cache_round_trip(tmp_path, nominal, pattern):
 def test_rendered_frames_recover_the_focal_length(nominal, pattern):
     # two rendered Galaxy Nexus frames (corner cubes, flash, phone exposure, detection,
     # identification) - the focal-only estimate within 1 % of the truth
-    from studies.calibration import focal_frames_rendered
+    from svgs_sim.studies.calibration import focal_frames_rendered
 
     cam = true_camera(nominal, (0.0, 0.0), (0.0, 0, 0, 0, 0))
     frames = focal_frames_rendered(cam, nominal, pattern, [2.0, 5.0], exposures=1, seed=1)

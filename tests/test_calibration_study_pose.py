@@ -1,4 +1,4 @@
-"""Pose error caused by calibration error (studies.calibration.pose, centroid level).
+"""Pose error caused by calibration error (svgs_sim.studies.calibration.pose, centroid level).
 
 Expected values from first-order geometry: a focal length too long by e makes the solver put
 the target e times farther (Z_L off by e R); a principal point off by d px tilts the camera
@@ -8,8 +8,8 @@ by atan(d / f) and leaves the position where it was; exact intrinsics reproduce 
 import numpy as np
 import pytest
 
-from assets.papers import svgs_2014_rows
-from studies.calibration import (
+from svgs_sim.assets.papers import svgs_2014_rows
+from svgs_sim.studies.calibration import (
     error_cases,
     pose_error_study,
     pose_errors_batch,
@@ -18,8 +18,8 @@ from studies.calibration import (
     table4_comparison,
     true_camera,
 )
-from svgs import Camera
-from svgs.frames import pose_from_scenario
+from svgs_sim.base.profiles import Camera
+from svgs_sim.svgs.frames import pose_from_scenario
 
 
 @pytest.fixture(scope="module")
@@ -115,7 +115,7 @@ def test_table4_comparison_reads_the_paper():
 def test_true_camera_checks(cams):
     nominal, cam = cams
     assert (cam.cx - nominal.cx, cam.cy - nominal.cy) == (15.0, -15.0) and cam.dist[0] == 0.03
-    from svgs.errors import InputError
+    from svgs_sim.base.errors import InputError
 
     with pytest.raises(InputError, match="outside"):
         true_camera(nominal, (5000.0, 0.0))

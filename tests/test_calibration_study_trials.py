@@ -1,4 +1,4 @@
-"""The calibration study run as trials (studies.calibration.trials via studies.execution):
+"""The calibration study run as trials (svgs_sim.studies.calibration.trials via svgs_sim.studies.execution):
 identical rows in this process and on a 2-process pool, resume after an interrupted run,
 refusal of other parameters, and trials computed alone that draw exactly the numbers of the
 whole study's random streams (references: the sequential draws, computed here)."""
@@ -6,13 +6,13 @@ whole study's random streams (references: the sequential draws, computed here)."
 import numpy as np
 import pytest
 
-from studies.calibration import run_calibration_study, study_poses, true_camera
-from studies.calibration.focal import focal_cases, focal_frames_geometric, focal_study
-from studies.calibration.pose import range_noise, range_poses
-from studies.execution import ExecutorSpec
-from studies.store import read_rows
-from svgs import Camera
-from svgs.errors import InputError
+from svgs_sim.studies.calibration import run_calibration_study, study_poses, true_camera
+from svgs_sim.studies.calibration.focal import focal_cases, focal_frames_geometric, focal_study
+from svgs_sim.studies.calibration.pose import range_noise, range_poses
+from svgs_sim.studies.execution import ExecutorSpec
+from svgs_sim.studies.store import read_rows
+from svgs_sim.base.profiles import Camera
+from svgs_sim.base.errors import InputError
 
 PARTS = ("convergence", "focal", "pose")
 SMALL = {"views_list": (3, 4), "subsets": 2, "geometric": True, "focal_ranges_m": (1.0, 3.0, 5.0),
@@ -84,7 +84,7 @@ def test_a_range_alone_draws_the_study_poses_and_noise(pattern):
 
 def test_focal_cases_alone_draw_the_sequential_noise(pattern):
     # reference: the whole study's noise drawn from one generator, case after case
-    from calibration import estimate_focal
+    from svgs_sim.calibration import estimate_focal
 
     nominal = Camera.load("galaxy-nexus", fitted=False)
     cam = true_camera(nominal)

@@ -3,7 +3,7 @@
 The reference is GalSim (``galsim.Airy`` convolved with ``galsim.Gaussian``, drawn with its
 pixel response, ``drawImage(method="auto")``), which this code did not produce. Our path is
 the one the closed loop takes: point samples at sub-pixel positions through
-:meth:`camera.phone.PhoneCamera.optics` (Monte Carlo convolution with the Airy pattern and
+:meth:`svgs_sim.camera.phone.PhoneCamera.optics` (Monte Carlo convolution with the Airy pattern and
 the aberration Gaussian, exact pixel-area integration).
 """
 
@@ -15,11 +15,11 @@ import galsim  # a test dependency (pyproject [test]): the reference must be the
 import numpy as np
 import pytest
 
-from camera.phone import PhoneCamera
-from camera.phone.optics import tent_matrix, wings
-from camera.phone.psf import CorePSF
-from camera.rendered import PointFlux
-from svgs.profiles import Camera
+from svgs_sim.camera.phone import PhoneCamera
+from svgs_sim.camera.phone.optics import tent_matrix, wings
+from svgs_sim.camera.phone.psf import CorePSF
+from svgs_sim.camera.rendered import PointFlux
+from svgs_sim.base.profiles import Camera
 
 #: Ten sub-pixel offsets (px) of the point source, both axes, corners and centre of the pixel included.
 OFFSETS = [(0.0, 0.0), (0.5, 0.5), (-0.5, 0.25), (0.125, -0.375), (0.3, 0.1), (-0.2, -0.45), (0.45, -0.05),
@@ -93,8 +93,8 @@ def test_monte_carlo_convolution_conserves_the_light():
 def test_the_order_matters_psf_after_binning_loses_the_subpixel_position():
     """What the issue measured: a Gaussian PSF applied after the flux is binned to pixels
     puts every sub-pixel position of a small spot on the pixel centre (a staircase)."""
-    from camera.phone.optics import apply_psf
-    from camera.phone.params import GlareParams
+    from svgs_sim.camera.phone.optics import apply_psf
+    from svgs_sim.camera.phone.params import GlareParams
 
     g = GlareParams(aberration_sigma_px=0.6, veiling_fraction=0.0)
     psf = CorePSF.from_optics(2.4, 550.0, 1.4e-6, 0.6)
@@ -113,7 +113,7 @@ def test_the_order_matters_psf_after_binning_loses_the_subpixel_position():
 def test_glare_wings_never_move_a_spot():
     """The wing convolution on a coarse grid (tent binning and spreading back) keeps the first
     moment of a point at any sub-pixel position."""
-    from camera.phone.params import GlareParams
+    from svgs_sim.camera.phone.params import GlareParams
 
     g = GlareParams(veiling_fraction=0.08, wing_exponent=4.0, wing_core_px=2.0, wing_radius_px=120.0)
     H, W = 1200, 1400  # coarse step 2 (at most 2^19 coarse pixels)
@@ -135,13 +135,13 @@ def test_tent_matrix_reproduces_positions():
 
 @pytest.mark.slow
 def test_centroid_crlb_matches_the_fisher_information_of_galsims_image():
-    """sim.crlb's centroid bound of an unsaturated spot against the Fisher information of
+    """svgs_sim.sim.crlb's centroid bound of an unsaturated spot against the Fisher information of
     GalSim's image of the same PSF with the same pixel noise (shot, read, quantisation):
     ``I = sum (d mu / dx)^2 / var``, the derivative by finite differences of GalSim images."""
     from types import SimpleNamespace
 
-    from camera.phone import Exposer
-    from sim.crlb import centroid_crlb_px
+    from svgs_sim.camera.phone import Exposer
+    from svgs_sim.sim.crlb import centroid_crlb_px
 
     phone = _core_only_phone("galaxy-nexus")
     sp, isp = phone.params.sensor, phone.params.isp

@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from studies.campaign import (
+from svgs_sim.assets import ASSETS_DIR
+from svgs_sim.studies.campaign import (
     campaign_verdicts,
     fitted_cells,
     fitted_values_table,
@@ -21,9 +22,9 @@ from studies.campaign import (
     run_campaign,
     summarize,
 )
-from studies.error_budget import HEADLINE_READING, MEAN_READINGS, VARIANT_NAMES, attribute, variant_statistics
-from studies.execution import ExecutorSpec
-from svgs.frames import STATE_KEYS
+from svgs_sim.studies.error_budget import HEADLINE_READING, MEAN_READINGS, VARIANT_NAMES, attribute, variant_statistics
+from svgs_sim.studies.execution import ExecutorSpec
+from svgs_sim.svgs.frames import STATE_KEYS
 
 REPO = Path(__file__).resolve().parents[1]
 #: The paper's Table 4 (mean error) and Table 5 (std) of the Galaxy Nexus at 5, 10 and 15 m, typed in here
@@ -107,7 +108,7 @@ def test_the_amaze_has_no_fitted_cell_but_its_light_sets_every_statistic():
     assert not any(r["key"].startswith("stand.") for r in rows)  # the Nexus's holder is not the Amaze's
     amb = next(r for r in rows if r["key"] == "lab.ambient_radiance_w_m2_sr")
     assert "every Amaze statistic" in amb["effect"] and "auto-exposure" in amb["effect"]
-    if (REPO / "assets" / "app" / "svgs-app.toml").is_file():
+    if (ASSETS_DIR / "app" / "svgs-app.toml").is_file():
         th = next(r for r in rows if r["key"].startswith("threshold"))
         assert th["status"] == "chosen" and th["consumes"] == []
 

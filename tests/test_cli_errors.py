@@ -1,7 +1,7 @@
 """Error messages and exit codes of the ``svgs`` command line (issue 26, deliverable 6).
 
 - the error line names the sub-command that was run (``svgs calibrate focal: error: ...``), for
-  argparse's usage errors and for bad input (:class:`svgs.errors.InputError`) alike;
+  argparse's usage errors and for bad input (:class:`svgs_sim.base.errors.InputError`) alike;
 - with ``--json``, exit 2 prints exactly one JSON object ``{"ok": false, "error": ...}`` on
   stdout (as ``docs/cli.md`` promises) and the same message on stderr;
 - a simulated physical failure (a ToF frame that the ambient light leaves without one valid
@@ -18,7 +18,7 @@ import time
 
 import pytest
 
-from cli.main import main
+from svgs_sim.cli.main import main
 
 
 def _run(argv, capsys, tmp_path, monkeypatch):
@@ -90,7 +90,7 @@ def test_json_exit_2_prints_one_object(argv, prefix, fragment, capsys, tmp_path,
 
 
 def test_a_multi_line_message_is_printed_on_one_line(capsys):
-    from cli.main import report_error
+    from svgs_sim.cli.main import report_error
 
     report_error("svgs solve", "first\n  second", as_json=True)
     cap = capsys.readouterr()
@@ -103,8 +103,8 @@ def test_a_saturated_simulated_frame_is_a_simulation_failure():
     """1e12 lux saturates every pixel of the simulated ToF frame: the closed loop raises
     SimulationFailure (reason 'saturated'), not InputError. (The CLI bounds --ambient-lux to
     natural light, 2e5 lux, so this is the library's path.)"""
-    from sim import tof_closed_loop as tcl
-    from svgs.errors import InputError, SimulationFailure
+    from svgs_sim.sim import tof_closed_loop as tcl
+    from svgs_sim.base.errors import InputError, SimulationFailure
 
     tr = tcl.render(tcl.TofScenario(range_m=1.0, spp=4, ambient_lux=1e12))
     frame = next(tcl.expose(tr, 1))
@@ -120,7 +120,7 @@ def test_a_simulation_failure_is_exit_1_with_its_reason(as_json, capsys, tmp_pat
     """The CLI turns the closed loop's SimulationFailure into exit 1 and one line with the reason
     (with --json, {"ok": false, "reason": ...}): the sensor is made to saturate every frame by
     running the stability command's sensor at 1e12 lux (the command line refuses that value)."""
-    from sim import tof_closed_loop as tcl
+    from svgs_sim.sim import tof_closed_loop as tcl
 
     real = tcl.make_sensor
 

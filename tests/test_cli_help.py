@@ -1,7 +1,7 @@
 """Every option of every ``svgs`` command has a help text that says its default, its unit, and
 for the options that size a long job, what it costs (issue 26, deliverable 9).
 
-The parser is walked from :func:`cli.main.build_parser` through every sub-parser, so a new
+The parser is walked from :func:`svgs_sim.cli.main.build_parser` through every sub-parser, so a new
 command or option is checked without being listed here.
 """
 
@@ -12,7 +12,7 @@ import re
 
 import pytest
 
-from cli.main import build_parser
+from svgs_sim.cli.main import build_parser
 
 #: A unit or a word saying the number has none; a float option's help must name one.
 UNIT = re.compile(r"\b(m|s|ms|deg|px|mm|Hz|lux|LSB|DN|ISO|metres|seconds|pixels)\b"
@@ -37,8 +37,8 @@ LONG_JOB_OPTIONS = (
 
 def _walk(parser: argparse.ArgumentParser, prefix: str = "svgs"):
     """``("svgs calibrate focal", parser)`` for the top parser and every command's
-    (:func:`cli.main.iter_commands`)."""
-    from cli.main import iter_commands
+    (:func:`svgs_sim.cli.main.iter_commands`)."""
+    from svgs_sim.cli.main import iter_commands
 
     yield prefix, parser
     for words, sub in iter_commands(parser):

@@ -1,5 +1,5 @@
 """``--json`` of the study commands: exactly one JSON object on stdout (the text on stderr), the
-keys of its schema (:data:`cli.json_out.SCHEMAS`, shown in docs/cli.md), values that agree with
+keys of its schema (:data:`svgs_sim.cli.json_out.SCHEMAS`, shown in docs/cli.md), values that agree with
 the CSV outputs, and the same object in DIR/summary.json. Small runs: geometric trials, scaled
 cameras, one render per rendered study."""
 
@@ -8,8 +8,8 @@ import json
 
 import pytest
 
-from cli.json_out import SCHEMAS, clean, failures_from_text
-from cli.main import main
+from svgs_sim.cli.json_out import SCHEMAS, clean, failures_from_text
+from svgs_sim.cli.main import main
 
 STATE = {"x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg"}
 RUN = {"trials_run", "already_done", "elapsed_s", "executor"}
@@ -46,7 +46,7 @@ def test_clean_makes_strict_json():
 def test_every_command_takes_json_and_has_a_schema():
     import argparse
 
-    from cli.main import build_parser
+    from svgs_sim.cli.main import build_parser
 
     def leaves(parser, name):
         subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]

@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cli.main import build_parser, main
-from cli.outdir import check_output_folder, output_folder, prepare_output_file, prepare_output_folder
-from svgs.errors import InputError
+from svgs_sim.cli.main import build_parser, main
+from svgs_sim.cli.outdir import check_output_folder, output_folder, prepare_output_file, prepare_output_folder
+from svgs_sim.base.errors import InputError
 from test_cli_validation import base_argv
 
 #: Output options of the commands: the study store of ``tof study`` too.
@@ -27,8 +27,8 @@ MAX_S = 1.0
 
 
 def _walk(parser):
-    """Every command's parser, groups included (:func:`cli.main.iter_commands`)."""
-    from cli.main import iter_commands
+    """Every command's parser, groups included (:func:`svgs_sim.cli.main.iter_commands`)."""
+    from svgs_sim.cli.main import iter_commands
 
     return iter_commands(parser)
 
@@ -37,7 +37,7 @@ def _walk(parser):
 def files(tmp_path_factory):
     import cv2
 
-    from svgs.profiles import load_camera
+    from svgs_sim.base.profiles import load_camera
 
     d = tmp_path_factory.mktemp("inputs")
     cam = load_camera("galaxy-nexus")
@@ -81,7 +81,7 @@ def test_every_writing_command_has_a_case():
 
 @pytest.mark.parametrize("case", PARAMS, ids=IDS)
 def test_an_output_that_cannot_be_made_is_refused_at_once(case, files, tmp_path, capsys, monkeypatch):
-    import cli.compile_kernels as ck
+    import svgs_sim.cli.compile_kernels as ck
 
     monkeypatch.setattr(ck, "kernels_cached", lambda: True)  # no first-run notice: the one line is the error
     monkeypatch.chdir(tmp_path)  # default output folders of the other options land here (and must not)

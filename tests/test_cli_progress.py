@@ -5,13 +5,13 @@ import importlib.util
 import numpy as np
 import pytest
 
-from cli.main import main
+from svgs_sim.cli.main import main
 
 
 def test_a_fresh_install_says_it_is_compiling(monkeypatch, tmp_path, capsys):
     import cv2
 
-    import cli.compile_kernels as ck
+    import svgs_sim.cli.compile_kernels as ck
 
     img = tmp_path / "dark.png"
     cv2.imwrite(str(img), np.zeros((1944, 2592), np.uint8))
@@ -27,7 +27,7 @@ def test_a_fresh_install_says_it_is_compiling(monkeypatch, tmp_path, capsys):
 def test_the_kernel_cache_is_found_where_numba_keeps_it(monkeypatch, tmp_path):
     import io
 
-    from cli.compile_kernels import compile_kernels, kernels_cached
+    from svgs_sim.cli.compile_kernels import compile_kernels, kernels_cached
 
     compile_kernels(out=io.StringIO())  # cached by `make`; cheap when already compiled
     assert kernels_cached()

@@ -13,13 +13,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cli.main import build_parser, main
+from svgs_sim.cli.main import build_parser, main
 from refusal import refused
 
 
 def _walk(parser):
-    """Every command's parser, groups included (:func:`cli.main.iter_commands`)."""
-    from cli.main import iter_commands
+    """Every command's parser, groups included (:func:`svgs_sim.cli.main.iter_commands`)."""
+    from svgs_sim.cli.main import iter_commands
 
     return iter_commands(parser)
 
@@ -105,7 +105,7 @@ def test_every_subcommand_refuses_a_bad_value_before_any_work(bad_case, files, t
 
 def test_the_valid_base_invocations_pass_the_layer(files, tmp_path):
     """The base invocations themselves are valid for the layer (so each case tests its one value)."""
-    from cli.validate import check_args
+    from svgs_sim.cli.validate import check_args
 
     parser = build_parser()
     for cmd, p in _walk(parser):

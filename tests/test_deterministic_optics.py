@@ -13,10 +13,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from camera.phone import PhoneCamera
-from camera.phone.optics import core_image
-from camera.phone.psf import CorePSF
-from camera.rendered import PointFlux
+from svgs_sim.camera.phone import PhoneCamera
+from svgs_sim.camera.phone.optics import core_image
+from svgs_sim.camera.phone.psf import CorePSF
+from svgs_sim.camera.rendered import PointFlux
 
 #: Monte Carlo runs averaged for the expectation (each 2^20 PSF draws per channel).
 MC_RUNS = 6
@@ -160,7 +160,7 @@ def test_background_kept_between_frames_equals_its_sum():
         ref = cam.optics(target + np.float32(scale) * unit, pts)
         out = cam.optics(target, pts, background=(scale, unit))
         assert np.abs(out - ref).max() <= 2e-6 * ref.max()
-    from camera.phone import _BACKGROUND_CACHE
+    from svgs_sim.camera.phone import _BACKGROUND_CACHE
 
     _BACKGROUND_CACHE.clear()
     cam.optics(target, pts, background=(1.0, unit))

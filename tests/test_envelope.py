@@ -9,16 +9,16 @@ shorter side of the frame.
 import numpy as np
 import pytest
 
-from cli.main import build_parser, main
-from cli.validate import check_args
+from svgs_sim.cli.main import build_parser, main
+from svgs_sim.cli.validate import check_args
 from refusal import refused
-from sim.approach.trajectory import Trajectory, check_envelope
-from studies.sensitivity import make_config
-from svgs.errors import InputError
-from svgs.frames import pose_from_scenario
-from svgs.identify import ATTITUDE_LIMITS_DEG, MAX_FILL, MIN_SPAN_PX, check_range_m, range_envelope_m
-from svgs.profiles import load_camera, load_pattern
-from sim.trials import GEOMETRIC_PARAMETERS
+from svgs_sim.sim.approach.trajectory import Trajectory, check_envelope
+from svgs_sim.studies.sensitivity import make_config
+from svgs_sim.base.errors import InputError
+from svgs_sim.svgs.frames import pose_from_scenario
+from svgs_sim.svgs.identify import ATTITUDE_LIMITS_DEG, MAX_FILL, MIN_SPAN_PX, check_range_m, range_envelope_m
+from svgs_sim.base.profiles import load_camera, load_pattern
+from svgs_sim.sim.trials import GEOMETRIC_PARAMETERS
 
 
 def _span_px(camera, pattern, range_m):

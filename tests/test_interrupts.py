@@ -18,12 +18,12 @@ from pathlib import Path
 
 import pytest
 
-from cli.exit_codes import EXIT_INTERRUPTED
-from cli.main import main
-from cli.signals import EXIT_TERMINATED, Terminated, interruptible
-from sim.trials import TrialKind, register_trial_kind
-from studies.execution import InlineExecutor, StoredProgress, Trial, run_study, stored_progress
-from studies.store import ResultStore, read_rows
+from svgs_sim.cli.exit_codes import EXIT_INTERRUPTED
+from svgs_sim.cli.main import main
+from svgs_sim.cli.signals import EXIT_TERMINATED, Terminated, interruptible
+from svgs_sim.sim.trials import TrialKind, register_trial_kind
+from svgs_sim.studies.execution import InlineExecutor, StoredProgress, Trial, run_study, stored_progress
+from svgs_sim.studies.store import ResultStore, read_rows
 
 REPO = Path(__file__).resolve().parents[1]
 #: The acceptance bound: seconds from the signal to the end of the process.
@@ -35,9 +35,9 @@ CAMPAIGN = ["campaign", "--camera", "galaxy-nexus", "--trial-kind", "geometric",
             "--trials", "1500", "--ranges", "5,15", "--seed", "7", "--no-progress"]
 N_TRIALS = 3000
 #: The CLI in a child whose SIGINT raises KeyboardInterrupt even when the test runner was
-#: started with SIGINT ignored (a background job): the child of ``python -m cli.main``.
+#: started with SIGINT ignored (a background job): the child of ``python -m svgs_sim.cli.main``.
 _CLI_CHILD = ("import signal, sys\nsignal.signal(signal.SIGINT, signal.default_int_handler)\n"
-              "from cli.main import main\nsys.exit(main())")  # main() without arguments: run as the program
+              "from svgs_sim.cli.main import main\nsys.exit(main())")  # main() without arguments: run as the program
 _STORED = re.compile(r"(\d+) of (\d+) trials are stored in (.+); rerun the same command to resume$")
 
 
@@ -172,12 +172,19 @@ _KIND = register_trial_kind(TrialKind("test-self-signal", _self_signalling, ("y"
 
 
 def _run_self_signalling(tmp_path, n=8, chunk_size=16, **signal_at):
+    """Run the self-signalling kind in this process under Python's own SIGINT handler, installed
+    here: a test runner started with SIGINT ignored (``make test &`` of a non-interactive shell)
+    has none, and a self-sent SIGINT would then be lost."""
     _SIGNAL_AT.update({"trial": 3, "times": 1, "signum": int(signal.SIGINT), **signal_at})
     trials = [Trial(i, {"i": i}, 0) for i in range(n)]
     store = ResultStore(tmp_path, {}, _KIND.columns(["i"]), trial_ids=range(n))
-    with store:
-        with pytest.raises(KeyboardInterrupt) as info:
-            run_study(_KIND, trials, store, InlineExecutor(), chunk_size=chunk_size, progress=False)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with store:
+            with pytest.raises(KeyboardInterrupt) as info:
+                run_study(_KIND, trials, store, InlineExecutor(), chunk_size=chunk_size, progress=False)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     return info.value, read_rows(store.results_path)
 
 
@@ -197,6 +204,22 @@ def test_a_second_ctrl_c_abandons_the_trial_under_way(tmp_path):
     assert type(exc) is KeyboardInterrupt
     assert [r["trial_id"] for r in rows] == [0, 1, 2]
     assert stored_progress(exc).n_stored == 3
+
+
+def test_the_in_process_interrupt_tests_pass_when_sigint_is_ignored():
+    """A background job of a non-interactive shell (``make test &``) starts with SIGINT ignored,
+    and Python then installs no KeyboardInterrupt handler: the tests above install their own, so
+    they pass in a test run started that way too."""
+    tests = ["test_ctrl_c_in_process_finishes_the_trial_keeps_its_row_and_starts_no_other",
+             "test_a_second_ctrl_c_abandons_the_trial_under_way"]
+    ignore = "import signal, sys, pytest; signal.signal(signal.SIGINT, signal.SIG_IGN); sys.exit(pytest.main(sys.argv[1:]))"
+    check = "import signal; assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN"
+    p = subprocess.run([sys.executable, "-c", f"{check}; {ignore}", "-q", "-p", "no:cacheprovider",
+                        *[f"{Path(__file__).name}::{t}" for t in tests]],
+                       cwd=Path(__file__).parent, capture_output=True, text=True, timeout=300,
+                       preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
+    assert "2 passed" in p.stdout
 
 
 def test_sigterm_in_process_is_held_like_ctrl_c(tmp_path):
@@ -268,9 +291,9 @@ signal.signal(signal.SIGINT, signal.default_int_handler)
 from argparse import Namespace
 from pathlib import Path
 import numba
-from cli.signals import interruptible
-from sim.trials import TrialKind, register_trial_kind
-from studies.execution import ExecutorSpec, Trial, run_stored_study
+from svgs_sim.cli.signals import interruptible
+from svgs_sim.sim.trials import TrialKind, register_trial_kind
+from svgs_sim.studies.execution import ExecutorSpec, Trial, run_stored_study
 
 @numba.njit(nogil=True, cache=False)
 def spin(n):

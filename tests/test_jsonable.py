@@ -1,4 +1,4 @@
-"""The one numpy-to-JSON converter (svgs.jsonable) and its three writers' options."""
+"""The one numpy-to-JSON converter (svgs_sim.base.jsonable) and its three writers' options."""
 
 import json
 from pathlib import Path
@@ -8,7 +8,7 @@ import pytest
 
 
 def test_numpy_values_become_plain_ones():
-    from svgs.jsonable import to_jsonable
+    from svgs_sim.base.jsonable import to_jsonable
 
     out = to_jsonable({1: np.float32(0.5), "a": (np.int64(2), np.bool_(True)), "m": np.array([[1, 2], [3, 4]])})
     assert out == {"1": 0.5, "a": [2, True], "m": [[1, 2], [3, 4]]}
@@ -16,7 +16,7 @@ def test_numpy_values_become_plain_ones():
 
 
 def test_nonfinite_kept_or_null():
-    from svgs.jsonable import to_jsonable
+    from svgs_sim.base.jsonable import to_jsonable
 
     x = {"v": np.array([np.nan, 1.5, np.inf]), "s": float("-inf")}
     assert to_jsonable(x, nonfinite="null") == {"v": [None, 1.5, None], "s": None}
@@ -28,7 +28,7 @@ def test_nonfinite_kept_or_null():
 
 
 def test_other_types_as_text_or_left_for_json_to_refuse():
-    from svgs.jsonable import json_default, to_jsonable
+    from svgs_sim.base.jsonable import json_default, to_jsonable
 
     assert to_jsonable({"p": Path("a") / "b"}) == {"p": "a/b"}
     obj = object()
@@ -40,12 +40,12 @@ def test_other_types_as_text_or_left_for_json_to_refuse():
 
 
 def test_the_writers_share_it():
-    """cli.json_out.clean (strict --json), cli.solve.json_default (solution files) and the results
+    """svgs_sim.cli.json_out.clean (strict --json), svgs_sim.cli.solve.json_default (solution files) and the results
     store's manifests are the one converter with their options."""
-    from cli.json_out import clean
-    from cli.solve import json_default
-    from studies.store import _jsonable
-    from svgs import jsonable
+    from svgs_sim.cli.json_out import clean
+    from svgs_sim.cli.solve import json_default
+    from svgs_sim.studies.store import _jsonable
+    from svgs_sim.base import jsonable
 
     assert json_default is jsonable.json_default
     x = {"a": np.float64("nan"), "b": (np.int64(2), Path("p"))}

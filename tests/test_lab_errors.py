@@ -4,8 +4,8 @@ variance, the stand's errors against the stand's own geometry, the campaign's dr
 import numpy as np
 import pytest
 
-from sim.turbulence import aoa_variance_rad2, draw_tilts, image_shifts_px, tilt_covariance
-from svgs.errors import InputError
+from svgs_sim.sim.turbulence import aoa_variance_rad2, draw_tilts, image_shifts_px, tilt_covariance
+from svgs_sim.base.errors import InputError
 
 
 def test_single_spot_variance_is_the_spherical_wave_formula():
@@ -73,10 +73,10 @@ def test_bad_turbulence_input_is_named():
 
 
 def test_stand_errors_move_the_actual_pose_by_the_stands_own_geometry():
-    """Each gimbal angle alone is the same angle of the paper's truth state (sim.stand), so an
+    """Each gimbal angle alone is the same angle of the paper's truth state (svgs_sim.sim.stand), so an
     error of the gimbal's yaw is that much yaw; the rail's error moves the camera along the rail."""
-    from sim.closed_loop import Scenario
-    from svgs.frames import pose_to_state
+    from svgs_sim.sim.closed_loop import Scenario
+    from svgs_sim.svgs.frames import pose_to_state
 
     sc = Scenario(camera="galaxy-nexus", range_m=10.0, mount="stand", yaw_deg=10.0,
                   stand_error=(0.0, 0.0, 0.03, 0.0, -0.015))
@@ -96,8 +96,8 @@ def test_stand_errors_move_the_actual_pose_by_the_stands_own_geometry():
 
 
 def test_campaign_draws_the_stands_errors_within_the_lab_accuracies_and_records_the_rangefinder():
-    from sim.lab import lab_errors
-    from studies.campaign import campaign_trials, make_config, rangefinder_readings
+    from svgs_sim.sim.lab import lab_errors
+    from svgs_sim.studies.campaign import campaign_trials, make_config, rangefinder_readings
 
     lab = lab_errors()
     cfg = make_config("galaxy-nexus", ranges_m=(5.0, 10.0), trials_per_range=40, exposures_per_render=4,
@@ -131,7 +131,7 @@ def test_rendered_spots_move_by_the_angle_of_arrival():
     """The render trial through turbulent air: the centroids' scatter over exposures grows in
     quadrature by the analytic image motion (f_px * sigma_a). 10 exposures x 8 coordinates; the
     excess variance's relative standard error about 20 %: the check is within a factor 1.6."""
-    from sim.render_trial import render_trial, render_trial_scenario
+    from svgs_sim.sim.render_trial import render_trial, render_trial_scenario
 
     cn2 = 1e-11
     def scatter(c):

@@ -12,11 +12,11 @@ import cv2
 import numpy as np
 import pytest
 
-from cli.main import build_parser, main
-from cli.validate import ATTITUDES, BOUNDS
-from svgs.errors import InputError
-from svgs.frames import pose_from_scenario
-from svgs.identify import identify
+from svgs_sim.cli.main import build_parser, main
+from svgs_sim.cli.validate import ATTITUDES, BOUNDS
+from svgs_sim.base.errors import InputError
+from svgs_sim.svgs.frames import pose_from_scenario
+from svgs_sim.svgs.identify import identify
 from synth_svgs import synth_frame
 from refusal import refused
 from test_cli_validation import _walk, _with, base_argv
@@ -147,7 +147,7 @@ def test_the_blobs_counted_are_the_blobs_found(nexus, pattern):
 
 
 def test_a_bad_float_to_the_parameters_is_an_input_error():
-    from sim.trials import GEOMETRIC_PARAMETERS as G
+    from svgs_sim.sim.trials import GEOMETRIC_PARAMETERS as G
 
     with pytest.raises(InputError, match=r"^k1_error: expected -1 to 1, got 2 - "):
         G["k1_error"].check(2.0)

@@ -16,14 +16,14 @@ import numpy as np
 import pytest
 
 from refusal import refused
-from svgs.errors import InputError
-from svgs.frames import pose_from_scenario
+from svgs_sim.base.errors import InputError
+from svgs_sim.svgs.frames import pose_from_scenario
 
 REPO = Path(__file__).resolve().parents[1]
 
 
 def _run(argv, capsys):
-    from cli.main import main
+    from svgs_sim.cli.main import main
 
     code = main(argv)
     cap = capsys.readouterr()
@@ -46,7 +46,7 @@ def _save_with_orientation(path, array, orientation, **kw):
 def test_exif_orientation_is_applied_as_pillow_does(tmp_path, capsys, orientation, colour):
     from PIL import Image, ImageOps
 
-    from svgs.pipeline import load_image
+    from svgs_sim.svgs.pipeline import load_image
 
     rng = np.random.default_rng(orientation)
     a = rng.integers(0, 256, (30, 50, 3) if colour else (30, 50), dtype=np.uint8)
@@ -105,7 +105,7 @@ def test_approach_of_one_frame_is_refused_with_the_rate_that_gives_two(tmp_path,
     # the rate it names gives two frames over the 3 s: floor(3 s x fps) + 1 >= 2
     import re
 
-    from sim.approach import Trajectory
+    from svgs_sim.sim.approach import Trajectory
 
     fps = float(re.search(r"give --fps ([0-9.e+-]+) or more", lines[0]).group(1))
     assert 3.0 * fps >= 1.0
@@ -117,7 +117,7 @@ def test_approach_of_one_frame_is_refused_with_the_rate_that_gives_two(tmp_path,
 def focal_images(tmp_path_factory):
     import cv2
 
-    from svgs import Camera, Pattern
+    from svgs_sim.base.profiles import Camera, Pattern
     from synth_svgs import synth_frame
 
     cam, pat = Camera.load("galaxy-nexus"), Pattern.load("svgs-3u")
@@ -150,8 +150,8 @@ def test_focal_refuses_the_same_image_twice_even_under_another_name(tmp_path, ca
 def test_board_calibration_refuses_a_view_given_twice(tmp_path, capsys):
     import cv2
 
-    from calibration import Board, sample_board_poses, synthesize_views
-    from svgs import Camera
+    from svgs_sim.calibration import Board, sample_board_poses, synthesize_views
+    from svgs_sim.base.profiles import Camera
 
     cam = Camera(name="synthetic", width=640, height=480, fx=600.0, fy=600.0, cx=319.5, cy=239.5)
     board = Board("chessboard", 9, 6, 0.025)
@@ -177,8 +177,8 @@ def test_board_calibration_refuses_a_view_given_twice(tmp_path, capsys):
 def test_resize_to_another_shape_warns_with_the_focal_lengths(capsys):
     from argparse import Namespace
 
-    from cli.calibrate_study import _camera
-    from svgs import Camera
+    from svgs_sim.cli.calibrate_study import _camera
+    from svgs_sim.base.profiles import Camera
 
     prof = Camera.load("galaxy-nexus")
     cam = _camera(Namespace(camera="galaxy-nexus", width=640, height=100, calibrate_command="render-board"))
@@ -194,7 +194,7 @@ def test_resize_to_another_shape_warns_with_the_focal_lengths(capsys):
 
 
 def test_non_square_calibration_result_is_warned():
-    from calibration.intrinsics import Calibration
+    from svgs_sim.calibration.intrinsics import Calibration
 
     std = {k: 0.0 for k in ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")}
     K = np.array([[605.0, 0, 319.5], [0, 126.0, 49.5], [0, 0, 1]])
@@ -210,7 +210,7 @@ def test_non_square_calibration_result_is_warned():
 
 # ------------------------------------------------------------------------ GPU variant
 def test_variant_fallback_decision_is_named():
-    from render.variant import decide, fallback_line, is_fallback
+    from svgs_sim.render.variant import decide, fallback_line, is_fallback
 
     avail = ["scalar_rgb", "llvm_ad_mono", "cuda_ad_mono"]
     name, _, note = decide("cuda", cuda_ok=False, llvm_version=(19, 1, 0), available=avail)
@@ -224,7 +224,7 @@ def test_variant_fallback_decision_is_named():
 
 @pytest.mark.render
 def test_cuda_request_without_a_gpu_is_said_once_on_stderr():
-    script = ("from render.variant import select_variant\n"
+    script = ("from svgs_sim.render.variant import select_variant\n"
               "a = select_variant(); b = select_variant()\n"
               "print(a.name, a.backend)\n")
     env = dict(os.environ, SVGS_MI_VARIANT="cuda")

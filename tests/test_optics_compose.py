@@ -10,9 +10,9 @@ import cv2
 import numpy as np
 import pytest
 
-from camera.phone.optics import _tent_pair, compose, glare_source, wing_kernel, wing_step, wings_coarse
-from camera.phone.params import GlareParams
-from camera.rendered import PointFlux
+from svgs_sim.camera.phone.optics import _tent_pair, compose, glare_source, wing_kernel, wing_step, wings_coarse
+from svgs_sim.camera.phone.params import GlareParams
+from svgs_sim.camera.rendered import PointFlux
 
 GLARE = GlareParams(veiling_fraction=0.06, wing_exponent=3.0, wing_core_px=2.5, wing_radius_px=150.0)
 

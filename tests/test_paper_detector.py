@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from svgs.app import consistency, settings
-from svgs.detect import app_level, detect_blobs
-from svgs.frames import pose_from_scenario
-from svgs.pipeline import camera_threshold, solve_image
-from svgs.profiles import Camera, Pattern
-from svgs.solver import solve_centroids
+from svgs_sim.svgs.app import consistency, settings
+from svgs_sim.svgs.detect import app_level, detect_blobs
+from svgs_sim.svgs.frames import pose_from_scenario
+from svgs_sim.svgs.pipeline import camera_threshold, solve_image
+from svgs_sim.base.profiles import Camera, Pattern
+from svgs_sim.svgs.solver import solve_centroids
 
 
 def _gauss(shape, centres, sigma, amp):
@@ -100,7 +100,7 @@ def test_windowed_centroid_does_not_move_toward_a_neighbours_halo():
     the deblended windowed centroid of the fainter one moves less than 0.005 px toward the
     neighbour (the windowed centroid without deblending, the detector's old default, moves 0.04
     and 0.21 px; the paper's weighted centroid 0.045 and 0.07 px)."""
-    from svgs.detect import windowed_centroid
+    from svgs_sim.svgs.detect import windowed_centroid
 
     shape = (80, 120)
     for sep, thr, plain_min in ((16.0, 60.0, 0.03), (14.0, 100.0, 0.15)):

@@ -1,5 +1,5 @@
 """Every trial parameter has a physical lower and upper bound (issue 26): the CLI's for the same
-quantity (one table, :mod:`svgs.limits`), and ``svgs sensitivity --vary P=LOW:1e308`` is refused
+quantity (one table, :mod:`svgs_sim.base.limits`), and ``svgs sensitivity --vary P=LOW:1e308`` is refused
 before any work - exit 2, one line naming ``--vary P HIGH`` and the allowed range, nothing written.
 """
 
@@ -8,13 +8,13 @@ import time
 
 import pytest
 
-from cli.main import build_parser, main
-from cli.validate import check_args
-from sim.trials import get_trial_kind, known_trial_kinds
-from studies.seeding import check_seed
-from svgs.errors import InputError
-from svgs.limits import INPUT_BOUNDS, INT_BOUNDS, MAX_SEED, MAX_SPP
-from tof.camera import DESIGN_RANGE_M
+from svgs_sim.cli.main import build_parser, main
+from svgs_sim.cli.validate import check_args
+from svgs_sim.sim.trials import get_trial_kind, known_trial_kinds
+from svgs_sim.studies.seeding import check_seed
+from svgs_sim.base.errors import InputError
+from svgs_sim.base.limits import INPUT_BOUNDS, INT_BOUNDS, MAX_SEED, MAX_SPP
+from svgs_sim.tof.camera import DESIGN_RANGE_M
 
 #: Parameters whose quantity the CLI bounds under another name (parameter -> INPUT_BOUNDS key).
 SAME_QUANTITY = {"backdrop_distance_m": "backdrop_m", "ambient_radiance_w_m2_sr": "ambient",
@@ -100,7 +100,7 @@ def test_an_absurd_vary_high_is_refused_before_any_work(kind, name, warm, tmp_pa
     lines = [ln for ln in cap.err.splitlines() if ln.strip()]
     assert rc == 2 and len(lines) == 1 and cap.out == "", cap.err
     assert f"--vary {name} HIGH" in lines[0] and "Traceback" not in cap.err, lines[0]
-    if name == "range_m":  # the camera's envelope (svgs.identify.range_envelope_m)
+    if name == "range_m":  # the camera's envelope (svgs_sim.svgs.identify.range_envelope_m)
         assert "allowed" in lines[0] and " m)" in lines[0], lines[0]
     else:
         assert p.domain() in lines[0], lines[0]

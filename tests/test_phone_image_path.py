@@ -11,11 +11,11 @@ import pytest
 from PIL import Image
 from scipy.special import erf
 
-from camera.phone import ALL_STAGES, Exposer, PhoneCamera
-from camera.phone.cfa import linear_bgr
-from camera.phone.isp import jpeg_roundtrip, noise_reduction, unsharp_mask
-from camera.phone.params import CfaParams, IspParams
-from svgs import Camera, InputError
+from svgs_sim.camera.phone import ALL_STAGES, Exposer, PhoneCamera
+from svgs_sim.camera.phone.cfa import linear_bgr
+from svgs_sim.camera.phone.isp import jpeg_roundtrip, noise_reduction, unsharp_mask
+from svgs_sim.camera.phone.params import CfaParams, IspParams
+from svgs_sim.svgs import Camera, InputError
 
 
 def small_camera(w=96, h=80, **tables):
@@ -316,7 +316,7 @@ def test_new_stages_are_known_and_off_where_the_profile_leaves_them_off():
 def test_the_preview_stream_is_read_as_its_y_plane_not_a_jpeg():
     """A preview frame is the ISP's YCbCr 4:2:0 handed to the app: the binned preview camera has
     no JPEG and keeps the colour output (its luma is the Y plane)."""
-    from camera.phone.preview import binned_camera
+    from svgs_sim.camera.phone.preview import binned_camera
 
     isp = PhoneCamera(binned_camera("galaxy-nexus")).params.isp
     # no JPEG; the Y plane as the stills' ISP makes it (the profile's jpeg_subsampling)
@@ -327,7 +327,7 @@ def test_the_preview_stream_is_read_as_its_y_plane_not_a_jpeg():
 
 # ------------------------------------------------------------------ switches and the error budget
 def test_render_trial_switches_map_onto_the_stages():
-    from sim.render_trial import _stages, render_trial_scenario
+    from svgs_sim.sim.render_trial import _stages, render_trial_scenario
 
     sc = render_trial_scenario(camera="galaxy-nexus")
     assert _stages(sc) == ALL_STAGES
@@ -341,7 +341,7 @@ def test_render_trial_switches_map_onto_the_stages():
 
 
 def test_render_trial_isp_choices():
-    from sim.render_trial import _isp, render_trial_scenario
+    from svgs_sim.sim.render_trial import _isp, render_trial_scenario
 
     class _Ex:  # what _isp reads of an exposer
         phone = PhoneCamera("galaxy-nexus")
@@ -354,7 +354,7 @@ def test_render_trial_isp_choices():
 
 
 def test_error_budget_variants_of_the_image_path():
-    from studies.error_budget import SOURCE_IDS, SOURCE_LABELS, VARIANT_NAMES, VARIANTS, applicable_variants
+    from svgs_sim.studies.error_budget import SOURCE_IDS, SOURCE_LABELS, VARIANT_NAMES, VARIANTS, applicable_variants
 
     # the earlier variants keep their places (their trial ids)
     assert VARIANT_NAMES[:6] == ("perfect_calibration", "no_sensor_noise", "no_glare", "no_quantisation",
@@ -367,7 +367,7 @@ def test_error_budget_variants_of_the_image_path():
     for n in VARIANT_NAMES:
         assert n in SOURCE_IDS and (n in SOURCE_LABELS or n == "all_removed")
     # a phone on the luminance JPEG alone, no NR, no sharpening: the budget before issue 24
-    from studies.error_budget import image_path_on
+    from svgs_sim.studies.error_budget import image_path_on
 
     image_vars = {"no_jpeg", "no_chroma_subsampling", "no_cfa", "no_noise_reduction", "no_sharpening"}
     cam = Camera.load("galaxy-nexus")

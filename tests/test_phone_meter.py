@@ -1,4 +1,4 @@
-"""The phone's meter (camera.phone.isp.ExposureSolver): its weighted log histogram of the
+"""The phone's meter (svgs_sim.camera.phone.isp.ExposureSolver): its weighted log histogram of the
 noise-free signal, built in parallel chunks from the flux, equals numpy's ``bincount`` of the
 same bins in pixel order, and the metered level equals the direct weighted sum of the clipped
 signal to within one bin."""
@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from camera.phone.isp import ExposureSolver, metering_weights
-from camera.phone.params import SensorParams
+from svgs_sim.camera.phone.isp import ExposureSolver, metering_weights
+from svgs_sim.camera.phone.params import SensorParams
 
 
 def _flux(shape, seed=0):

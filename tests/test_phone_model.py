@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from camera.phone import Exposer, PhoneCamera, PhoneParams
-from camera.phone.optics import apply_psf, core_sigma_px
-from camera.phone.params import GlareParams, SensorParams
-from camera.phone.sensor import bloom
-from svgs import Camera, InputError
+from svgs_sim.camera.phone import Exposer, PhoneCamera, PhoneParams
+from svgs_sim.camera.phone.optics import apply_psf, core_sigma_px
+from svgs_sim.camera.phone.params import GlareParams, SensorParams
+from svgs_sim.camera.phone.sensor import bloom
+from svgs_sim.svgs import Camera, InputError
 
 FLAT_STAGES = ("shot", "dark", "fpn", "read", "bloom", "adc")
 
@@ -137,7 +137,7 @@ def test_psf_conserves_energy_and_core_width():
 def test_profile_psf_conserves_energy_with_the_unfitted_glare(name):
     """The model on the physical (unfitted) profile: the PSF keeps the energy of a point
     inside the frame and its wings carry the share the wing law gives."""
-    from camera.phone.params import PhoneParams as PP
+    from svgs_sim.camera.phone.params import PhoneParams as PP
 
     cam = Camera.load(name, fitted=False)
     pp = PP.from_camera(cam)
@@ -236,8 +236,8 @@ def test_bayer_layouts_demosaic_to_their_colours():
     colour through OpenCV's demosaic code chosen for the layout."""
     import cv2
 
-    from camera.phone.cfa import channel_map, demosaic_code
-    from camera.phone.params import CfaParams
+    from svgs_sim.camera.phone.cfa import channel_map, demosaic_code
+    from svgs_sim.camera.phone.params import CfaParams
 
     rgb = np.array([900, 500, 100], np.uint16)
     for pattern in ("RGGB", "BGGR", "GRBG", "GBRG"):
@@ -257,7 +257,7 @@ def test_cfa_keeps_white_light_and_saturation_as_the_mono_sensor_sees_them():
     colour = ("cfa", "adc", "tone")
     import dataclasses
 
-    from camera.phone.params import CfaParams
+    from svgs_sim.camera.phone.params import CfaParams
 
     phone_c = PhoneCamera(cam, dataclasses.replace(phone.params, cfa=CfaParams(pattern="RGGB")))
     for level in (0.05, 0.3, 0.7):

@@ -10,12 +10,12 @@ import math
 import numpy as np
 import pytest
 
-from svgs.frames import STATE_KEYS, pose_from_scenario
-from svgs.profiles import Camera, Pattern
+from svgs_sim.svgs.frames import STATE_KEYS, pose_from_scenario
+from svgs_sim.base.profiles import Camera, Pattern
 
 
 def test_overlay_notes_panel_is_drawn_below_the_picture():
-    from svgs.overlay import render_overlay
+    from svgs_sim.svgs.overlay import render_overlay
 
     img = np.zeros((120, 160), np.uint8)
     img[60:63, 80:83] = 255
@@ -33,7 +33,7 @@ def test_overlay_notes_panel_is_drawn_below_the_picture():
 
 
 def test_bound_note_names_the_components_far_above_and_the_glint():
-    from studies.diagnosis import bound_note
+    from svgs_sim.studies.diagnosis import bound_note
 
     crlb = {k: 1e-3 for k in STATE_KEYS}
     within = {k: 2e-3 for k in STATE_KEYS}  # 2 sigma: noise, nothing said
@@ -49,7 +49,7 @@ def test_bound_note_names_the_components_far_above_and_the_glint():
 
 
 def test_bound_note_ignores_unknown_or_zero_bounds():
-    from studies.diagnosis import bound_note
+    from svgs_sim.studies.diagnosis import bound_note
 
     errors = {k: 1.0 for k in STATE_KEYS}
     assert bound_note(errors, {k: None for k in STATE_KEYS}) is None
@@ -62,7 +62,7 @@ def _hand_head_on_glint(camera, pattern, range_m):
     the face lies at (s, 2 z_face) for an LED at lateral offset s, and the line from it to the
     lens crosses the face's plane at s / 2 whatever z_face. The glint reaches the lens when that
     point is on the face: within its radius (+ the renderer's 3 mm footprint margin,
-    render.predict.virtual_sources) of the face's centre."""
+    svgs_sim.render.predict.virtual_sources) of the face's centre."""
     led = np.asarray(camera.table("flash")["led_offsets_m"], float)
     R, t = pose_from_scenario(range_m)
     centres = pattern.points_m @ R.T + t  # the faces' centres are on the cubes' axes, laterally at the points
@@ -77,7 +77,7 @@ def _hand_head_on_glint(camera, pattern, range_m):
 
 @pytest.mark.parametrize("range_m", [1.0, 5.0, 20.0])
 def test_front_glint_head_on_matches_the_mirror_geometry(range_m):
-    from studies.diagnosis import front_glint_targets
+    from svgs_sim.studies.diagnosis import front_glint_targets
 
     cam, pat = Camera.load("galaxy-nexus"), Pattern.load("svgs-3u")
     expected = _hand_head_on_glint(cam, pat, range_m)
@@ -89,7 +89,7 @@ def test_front_glint_head_on_matches_the_mirror_geometry(range_m):
 def test_front_glint_gone_when_tilted_far_off_facing():
     """Tilted by 2 deg at 20 m the mirror image moves ~2 x 2 deg x 20 m = 1.4 m sideways: the line
     to the lens crosses the face's plane ~0.7 m from any face (faces 12.7 mm wide)."""
-    from studies.diagnosis import front_glint_targets
+    from svgs_sim.studies.diagnosis import front_glint_targets
 
     cam = Camera.load("galaxy-nexus")
     R, t = pose_from_scenario(20.0, pitch_deg=2.0)
@@ -110,7 +110,7 @@ def _row(frame, range_m, err=1e-3, crlb=1e-3):
 
 
 def test_approach_bins_are_half_open_and_labelled_so():
-    from studies.approach import bin_label, summarise
+    from svgs_sim.studies.approach import bin_label, summarise
 
     cfg = {"camera": "galaxy-nexus", "pattern": "svgs-3u", "preview": False, "fps": 1.0, "seed": 0,
            "trajectory": {"source": "test"}}
@@ -121,7 +121,7 @@ def test_approach_bins_are_half_open_and_labelled_so():
 
 
 def test_approach_report_line_on_errors_far_above_the_bound(tmp_path):
-    from studies.approach import bound_line, summarise
+    from svgs_sim.studies.approach import bound_line, summarise
 
     cfg = {"camera": "galaxy-nexus", "pattern": "svgs-3u", "preview": False, "fps": 1.0, "seed": 0,
            "trajectory": {"source": "test"}}
@@ -135,7 +135,7 @@ def test_approach_report_line_on_errors_far_above_the_bound(tmp_path):
 
 
 def test_slow_studies_print_seconds_per_trial():
-    from studies.execution import RunStats
+    from svgs_sim.studies.execution import RunStats
 
     def stats(n, s):
         return RunStats(n_trials=n, n_already_done=0, n_run=n, n_tasks=1, n_render_groups=1, elapsed_s=s,
@@ -147,7 +147,7 @@ def test_slow_studies_print_seconds_per_trial():
 
 
 def test_results_file_with_windows_line_endings_is_read(tmp_path):
-    from studies.store import ResultStore, read_rows
+    from svgs_sim.studies.store import ResultStore, read_rows
 
     cols = ("trial_id", "value")
     with ResultStore(tmp_path, {"p": 1}, cols, trial_ids=range(3)) as store:
@@ -163,7 +163,7 @@ def test_results_file_with_windows_line_endings_is_read(tmp_path):
 
 
 def test_tof_study_default_folder_never_overwrites_a_report(tmp_path, monkeypatch, capsys):
-    from cli.tof_stability import DEFAULT_STUDY_OUT, default_study_out
+    from svgs_sim.cli.tof_stability import DEFAULT_STUDY_OUT, default_study_out
 
     monkeypatch.chdir(tmp_path)
     assert DEFAULT_STUDY_OUT != "docs/reports"
@@ -177,7 +177,7 @@ def test_tof_study_default_folder_never_overwrites_a_report(tmp_path, monkeypatc
 
 
 def test_render_and_solve_notes_name_the_glint_the_renderer_sampled():
-    from cli.sim import bound_line, error_notes
+    from svgs_sim.cli.sim import bound_line, error_notes
 
     crlb = {"crlb_std": {k: 1e-3 for k in STATE_KEYS}}
     row = {"ok": True, "truth_state": {k: 0.0 for k in STATE_KEYS},

@@ -18,9 +18,9 @@ from pathlib import Path
 import pytest
 import tomli_w
 
-from cli.main import main
-from svgs.errors import InputError, ProfileError
-from svgs.profiles import CAMERAS_DIR, PATTERNS_DIR, Camera, Pattern
+from svgs_sim.cli.main import main
+from svgs_sim.base.errors import InputError, ProfileError
+from svgs_sim.base.profiles import CAMERAS_DIR, PATTERNS_DIR, Camera, Pattern
 
 REPO = Path(__file__).resolve().parent.parent
 PHONE_TABLES = ("sensor", "glare", "exposure", "cfa", "isp")
@@ -103,7 +103,7 @@ def _warm():
     """Import what ``render-and-solve`` imports first, so the time measured is the check's."""
     import importlib
 
-    for module in ("cli.sim", "sim.closed_loop"):
+    for module in ("svgs_sim.cli.sim", "svgs_sim.sim.closed_loop"):
         importlib.import_module(module)
 
 
@@ -150,7 +150,7 @@ def test_the_command_line_prints_one_line_and_no_traceback(tmp_path):
     traceback printed by the interpreter)."""
     bad = tmp_path / "bad.toml"
     bad.write_bytes(b"\xff\xfe" + (CAMERAS_DIR / "galaxy-nexus.toml").read_bytes())
-    p = subprocess.run([sys.executable, "-m", "cli.main", "render-and-solve", "--camera", str(bad), "--range", "5"],
+    p = subprocess.run([sys.executable, "-m", "svgs_sim.cli.main", "render-and-solve", "--camera", str(bad), "--range", "5"],
                        capture_output=True, text=True, cwd=REPO, timeout=120)
     assert p.returncode == 2 and "Traceback" not in p.stderr and p.stdout == ""
     assert [ln for ln in p.stderr.splitlines() if ln.strip()] == [
@@ -159,7 +159,7 @@ def test_the_command_line_prints_one_line_and_no_traceback(tmp_path):
 
 
 def test_an_unknown_reflector_model_is_never_replaced_by_the_default():
-    from render.geometry import Reflector
+    from svgs_sim.render.geometry import Reflector
 
     good = Pattern.load("svgs-3u")
     made = Pattern(name="made", ids=good.ids, points_m=good.points_m, tables={"reflector": {"model": "acme"}})
@@ -185,9 +185,9 @@ SHIPPED_PATTERNS = sorted(PATTERNS_DIR.glob("*.toml"))
 @pytest.mark.parametrize("path", SHIPPED_CAMERAS, ids=lambda p: p.name)
 @pytest.mark.parametrize("fitted", [True, False])
 def test_every_shipped_camera_loads_to_its_file_values(path, fitted):
-    """Each phone table's values, as built by camera.phone.params, equal the file's own numbers
+    """Each phone table's values, as built by svgs_sim.camera.phone.params, equal the file's own numbers
     (read here with tomllib, not by the code under test): the checks moved no number."""
-    from camera.phone.params import PhoneParams
+    from svgs_sim.camera.phone.params import PhoneParams
 
     cam = Camera.load(path, fitted=fitted)
     raw = tomllib.loads(path.read_text(encoding="utf-8"))
@@ -211,8 +211,8 @@ def _assert_tof_models_hold_the_file_values(cam, raw):
     """The ToF sensor, illumination and lens built from a loaded ToF profile carry the numbers of
     its ``[tof]``, ``[noise]``, ``[illumination]`` and ``[optics]`` tables (``raw``, read with
     tomllib), and the tables are kept as the file has them."""
-    from camera.amcw import TofSensor
-    from render.tof.camera import Illumination, TofOptics
+    from svgs_sim.camera.amcw import TofSensor
+    from svgs_sim.render.tof.camera import Illumination, TofOptics
 
     for table in ("tof", "noise", "illumination"):
         assert cam.tables[table] == raw[table], table
@@ -236,8 +236,8 @@ def test_every_shipped_pattern_loads_to_its_file_values(path):
     for i, p in zip(pat.ids, pat.points_m):
         assert tuple(p) == by_id[i]
     if "plate" in raw or "marker" in raw:  # the ToF target: its scene is built from the file's numbers
-        from render.tof.scene import TofSceneOptions, resolve_geometry
-        from tof.camera import load_target
+        from svgs_sim.render.tof.scene import TofSceneOptions, resolve_geometry
+        from svgs_sim.tof.camera import load_target
 
         target = load_target(path)
         assert (target.plate, target.marker) == (raw["plate"], raw["marker"])
@@ -253,10 +253,10 @@ def test_every_shipped_pattern_loads_to_its_file_values(path):
 
 
 def test_the_shared_tables_agree_with_their_users():
-    """The allowed values live in svgs.profile_schema; the models that use them agree."""
-    from camera.phone import params as pp
-    from render import geometry, optics
-    from svgs import profile_schema as ps
+    """The allowed values live in svgs_sim.base.profile_schema; the models that use them agree."""
+    from svgs_sim.camera.phone import params as pp
+    from svgs_sim.render import geometry, optics
+    from svgs_sim.base import profile_schema as ps
 
     assert set(ps.FLASH_SPECTRA) == set(optics.SPECTRA)
     assert geometry.REFLECTOR_MODELS is ps.REFLECTOR_MODELS

@@ -13,13 +13,13 @@ from pathlib import Path
 
 import pytest
 
-import calibration.focal
-import studies.calibration.focal as study_focal
-import studies.execution
-from cli.main import main
-from studies.calibration.focal import focal_frames_geometric
-from studies.campaign import make_config, rendered_paper_calibration
-from studies.store import ResultStore
+import svgs_sim.calibration.focal
+import svgs_sim.studies.calibration.focal as study_focal
+import svgs_sim.studies.execution
+from svgs_sim.cli.main import main
+from svgs_sim.studies.calibration.focal import focal_frames_geometric
+from svgs_sim.studies.campaign import make_config, rendered_paper_calibration
+from svgs_sim.studies.store import ResultStore
 
 ARGS = ["campaign", "--camera", "galaxy-nexus", "--trial-kind", "render", "--calibration", "paper", "--trials", "2",
         "--exposures-per-render", "2", "--ranges", "4,8", "--processes", "0", "--no-progress"]
@@ -27,7 +27,7 @@ ARGS = ["campaign", "--camera", "galaxy-nexus", "--trial-kind", "render", "--cal
 
 @pytest.fixture(autouse=True)
 def _no_compile_notice(monkeypatch):
-    import cli.compile_kernels as ck
+    import svgs_sim.cli.compile_kernels as ck
 
     monkeypatch.setattr(ck, "kernels_cached", lambda: True)
 
@@ -84,13 +84,13 @@ def test_a_resumed_folder_with_other_parameters_is_refused_untouched_before_the_
 def test_a_refusal_after_the_calibration_leaves_no_folder(renders, monkeypatch, tmp_path, capsys):
     """A calibration 60 % off (forced here) makes every scenario's focal_error_frac invalid: the
     campaign is refused after its calibration, which was kept in the folder before."""
-    real = calibration.focal.estimate_focal
+    real = svgs_sim.calibration.focal.estimate_focal
 
     def off(*a, **kw):
         est = real(*a, **kw)
         return dataclasses.replace(est, f_px=1.6 * est.f_px)
 
-    monkeypatch.setattr(calibration.focal, "estimate_focal", off)
+    monkeypatch.setattr(svgs_sim.calibration.focal, "estimate_focal", off)
     out = tmp_path / "campaign"
     line = _refused(capsys, ARGS + ["--out", str(out)])
     assert "focal_error_frac" in line and renders, line
@@ -102,7 +102,7 @@ def test_an_interrupted_campaign_keeps_its_calibration(renders, monkeypatch, tmp
     def interrupted(*a, **kw):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(studies.execution, "run_stored_study", interrupted)
+    monkeypatch.setattr(svgs_sim.studies.execution, "run_stored_study", interrupted)
     out = tmp_path / "campaign"
     assert main(ARGS + ["--out", str(out)]) == 130
     capsys.readouterr()

@@ -10,10 +10,10 @@ import json
 
 import pytest
 
-from cli.main import main
+from svgs_sim.cli.main import main
 from refusal import refused
-from studies.store import ResultStore
-from svgs.errors import InputError
+from svgs_sim.studies.store import ResultStore
+from svgs_sim.base.errors import InputError
 
 CAMPAIGN = ["campaign", "--camera", "galaxy-nexus", "--trial-kind", "geometric", "--trials", "4",
             "--exposures-per-render", "2", "--ranges", "5,10", "--processes", "0", "--no-progress"]
@@ -24,7 +24,7 @@ STUDY = ["calibrate", "study", "--camera", "galaxy-nexus", "--width", "640", "--
 
 @pytest.fixture(autouse=True)
 def _no_compile_notice(monkeypatch):
-    import cli.compile_kernels as ck
+    import svgs_sim.cli.compile_kernels as ck
 
     monkeypatch.setattr(ck, "kernels_cached", lambda: True)
 

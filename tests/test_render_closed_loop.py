@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
-from studies.exposure_study import parse_remedy
-from sim.closed_loop import Scenario, expose_and_solve, pose_errors, render_scenario
-from svgs import InputError, Pattern
-from cli.main import main
+from svgs_sim.studies.exposure_study import parse_remedy
+from svgs_sim.sim.closed_loop import Scenario, expose_and_solve, pose_errors, render_scenario
+from svgs_sim.svgs import InputError, Pattern
+from svgs_sim.cli.main import main
 
 
 @pytest.mark.render
@@ -119,14 +119,14 @@ def test_scenario_validation():
 def test_render_trial_kind_runs_the_full_chain_and_groups_renders():
     """The studies' `render` trial kind: same numbers alone or in a render group; the knobs
     acting after the render (ND filter, threshold, calibration errors) share the render."""
-    from sim.render_trial import (
+    from svgs_sim.sim.render_trial import (
         RENDER,
         RENDER_TIMING_OUTPUTS,
         render_group,
         render_key,
         render_trial,
     )
-    from sim.trials import build_scenario
+    from svgs_sim.sim.trials import build_scenario
 
     def numbers(row):
         return {k: v for k, v in row.items() if k not in RENDER_TIMING_OUTPUTS}
@@ -151,8 +151,8 @@ def test_demo_pose_within_table4_and_no_estimator_beats_the_crlb():
     mean error lies within the paper's Table 4 mean error at 10 m, and the scatter of the
     solutions is not smaller than the Cramer-Rao bound computed from the simulated sensor
     (the bound is a bound: a centroid estimator cannot beat it)."""
-    from sim.crlb import frame_crlb
-    from svgs.frames import STATE_KEYS
+    from svgs_sim.sim.crlb import frame_crlb
+    from svgs_sim.svgs.frames import STATE_KEYS
 
     scen = Scenario(camera="galaxy-nexus", range_m=10, target_x_m=0.3, target_y_m=-0.2, roll_deg=5, pitch_deg=-3,
                     yaw_deg=10)

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from render.constants import CIE_V, CIE_V_WAVELENGTH_NM, nbk7_index
-from render.geometry import Reflector, SceneOptions, box_mesh, build_target, corner_cube_meshes, cube_triad
-from render.optics import Flash, Optics, photometry, pixel_solid_angle_sr, radiance_to_photon_rate
-from render.predict import (
+from svgs_sim.render.constants import CIE_V, CIE_V_WAVELENGTH_NM, nbk7_index
+from svgs_sim.render.geometry import Reflector, SceneOptions, box_mesh, build_target, corner_cube_meshes, cube_triad
+from svgs_sim.render.optics import Flash, Optics, photometry, pixel_solid_angle_sr, radiance_to_photon_rate
+from svgs_sim.render.predict import (
     binned_spot,
     fresnel_normal,
     retro_factor,
@@ -14,8 +14,8 @@ from render.predict import (
     spot_direction_cam,
     virtual_source_cam,
 )
-from svgs.errors import InputError, ProfileError
-from svgs.profiles import Camera, Pattern
+from svgs_sim.base.errors import InputError, ProfileError
+from svgs_sim.base.profiles import Camera, Pattern
 
 
 def test_nbk7_index_matches_schott_datasheet():
@@ -31,7 +31,7 @@ def test_cie_v_table_peaks_at_555():
 
 
 def test_photometry_of_monochromatic_555_is_683_lm_per_w(monkeypatch):
-    import render.optics as ro
+    import svgs_sim.render.optics as ro
 
     monkeypatch.setitem(ro.SPECTRA, "narrow555", ((555.0, 0.5, 1.0),))
     ph = photometry("narrow555", (400.0, 700.0))

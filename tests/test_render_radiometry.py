@@ -14,9 +14,9 @@ glint and the retro return coincide, as the analytic sum assumes).
 import numpy as np
 import pytest
 
-from render.optics import pixel_normalized_grid, pixel_solid_angle_sr
-from render.predict import retro_irradiance_w_m2
-from svgs.profiles import Camera, Pattern
+from svgs_sim.render.optics import pixel_normalized_grid, pixel_solid_angle_sr
+from svgs_sim.render.predict import retro_irradiance_w_m2
+from svgs_sim.base.profiles import Camera, Pattern
 
 pytestmark = pytest.mark.render
 
@@ -55,7 +55,7 @@ def _irradiance(res, cam):
 
 @pytest.fixture(scope="module")
 def renderers():
-    from render.api import Renderer
+    from svgs_sim.render.api import Renderer
 
     out = {}
     for kind in ("hollow", "solid"):
@@ -107,7 +107,7 @@ def _guided_rel_sigma(res, r):
 
 @pytest.mark.parametrize("range_m", [1.0, 40.0])
 def test_no_return_when_the_flash_is_beyond_the_footprint(range_m):
-    from render.api import Renderer
+    from svgs_sim.render.api import Renderer
 
     # LED 16 mm from the lens: the footprint (radius ~ cube diameter 12.7 mm, centred on
     # the LED) no longer covers the lens
@@ -122,7 +122,7 @@ def test_no_return_when_the_flash_is_beyond_the_footprint(range_m):
 
 def test_brute_force_path_tracing_agrees_at_1m():
     """The reference: the LED as a disk area emitter, everything path traced."""
-    from render.api import Renderer
+    from svgs_sim.render.api import Renderer
 
     r = Renderer(_camera(), SINGLE, reflector="hollow", scene_options={"body": "none"}, spp=4, roi_spp=1024,
                  method="path")
@@ -138,8 +138,8 @@ def test_brute_force_path_tracing_agrees_at_1m():
 
 @pytest.mark.parametrize("range_m", [1.0, 3.0])
 def test_lambertian_plate_radiance(range_m):
-    from render.api import Renderer
-    from render.geometry import box_mesh
+    from svgs_sim.render.api import Renderer
+    from svgs_sim.render.geometry import box_mesh
 
     rho = 0.5
     plate = box_mesh("plate", [-0.3, -0.3, -0.02], [0.3, 0.3, 0.0], "body")

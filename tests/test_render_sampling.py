@@ -1,11 +1,11 @@
-"""The spp rule and the Dr.Jit exit (render.sampling), and the shared rendered-frame type."""
+"""The spp rule and the Dr.Jit exit (svgs_sim.render.sampling), and the shared rendered-frame type."""
 
 import importlib.util
 
 import numpy as np
 import pytest
 
-from svgs.errors import InputError
+from svgs_sim.base.errors import InputError
 
 needs_mitsuba = pytest.mark.skipif(importlib.util.find_spec("mitsuba") is None, reason="Mitsuba is not installed")
 
@@ -14,8 +14,8 @@ needs_mitsuba = pytest.mark.skipif(importlib.util.find_spec("mitsuba") is None, 
 @pytest.mark.render
 def test_spp_rule_is_what_ldsampler_renders():
     # the reference is Mitsuba's own ldsampler: check_spp must record the count it renders
-    from render.sampling import check_spp
-    from render.variant import select_variant
+    from svgs_sim.render.sampling import check_spp
+    from svgs_sim.render.variant import select_variant
 
     select_variant()
     import mitsuba as mi
@@ -26,7 +26,7 @@ def test_spp_rule_is_what_ldsampler_renders():
 
 
 def test_spp_rule_values_and_errors():
-    from render.sampling import check_spp
+    from svgs_sim.render.sampling import check_spp
 
     assert [check_spp(n) for n in (1, 4, 5, 16, 17)] == [4, 4, 16, 16, 64]
     assert check_spp(0, allow_zero=True) == 0
@@ -38,9 +38,9 @@ def test_spp_rule_values_and_errors():
 
 
 def test_rendered_frames_share_one_type():
-    from camera.amcw import RenderedTof
-    from camera.rendered import RenderedFrame
-    from render.api import RenderResult
+    from svgs_sim.camera.amcw import RenderedTof
+    from svgs_sim.camera.rendered import RenderedFrame
+    from svgs_sim.render.api import RenderResult
 
     ones = np.ones((3, 5))
     R, t = np.eye(3), np.array([0.1, 0.2, 3.0])

@@ -1,7 +1,7 @@
 """The 3U scene: spot positions, ROI versus full frame, distortion, in-place updates, bad
 input and the CLI (issue 3 acceptance).
 
-Spot-position prediction tested against (render.api.Renderer.predicted_centroids_px):
+Spot-position prediction tested against (svgs_sim.render.api.Renderer.predicted_centroids_px):
 the flash S seen through each cube is a virtual source at 2V - S (V the cube's apparent
 vertex, which sits on the pattern point), along the exact chief ray through the glass;
 the thin lens blurs it into a defocus disk of LED images, binned into pixels. Relative
@@ -14,9 +14,9 @@ import json
 import numpy as np
 import pytest
 
-from svgs.errors import InputError
-from svgs.frames import pose_from_scenario, pose_to_state, state_dict
-from svgs.profiles import Camera, Pattern
+from svgs_sim.base.errors import InputError
+from svgs_sim.svgs.frames import pose_from_scenario, pose_to_state, state_dict
+from svgs_sim.base.profiles import Camera, Pattern
 
 pytestmark = pytest.mark.render
 
@@ -38,7 +38,7 @@ def _centroids(res, centres):
 
 @pytest.fixture(scope="module")
 def nexus_renderer():
-    from render.api import Renderer
+    from svgs_sim.render.api import Renderer
 
     return Renderer("galaxy-nexus", "svgs-3u", spp=4, roi_spp=16, spot_samples=1 << 16)
 
@@ -88,7 +88,7 @@ def test_in_place_updates_do_not_leak_between_frames(nexus_renderer):
 
 
 def test_distortion_moves_the_spots_with_the_profile():
-    from render.api import Renderer
+    from svgs_sim.render.api import Renderer
 
     cam = Camera.load("galaxy-nexus").replace(name="distorted", dist=np.array([-0.12, 0.05, 0.0008, -0.0005, 0.0]))
     r = Renderer(cam, "svgs-3u", spp=0, roi_spp=4, spot_samples=1 << 16)
@@ -98,7 +98,7 @@ def test_distortion_moves_the_spots_with_the_profile():
     z = -t / np.linalg.norm(t)
     x = np.cross([0.0, 1.0, 0.0], z)
     x /= np.linalg.norm(x)
-    from svgs.frames import rotation_from_angles
+    from svgs_sim.svgs.frames import rotation_from_angles
 
     R = np.stack([x, np.cross(z, x), z], 1) @ rotation_from_angles(*np.radians([1.0, -1.0, 1.0]))
     res = r.render(R, t, seed=2)
@@ -121,7 +121,7 @@ def _small_camera():
 def test_roi_matches_full_frame_brute_force():
     """Windows at 1024 spp versus the whole frame at 1024 spp, spots path traced (the
     crop and the principal point must agree: mitsuba3 #236)."""
-    from render.api import Renderer
+    from svgs_sim.render.api import Renderer
 
     pat = Pattern(name="single", ids=np.arange(1, 5),
                   points_m=np.array([[0.004, -0.003, 0.0], [5.0, 0.0, 0.0], [0.0, 5.0, 0.0], [5.0, 5.0, -1.0]]))
@@ -171,7 +171,7 @@ def test_bad_poses_are_input_errors(nexus_renderer, pose, msg):
 
 
 def test_missing_flash_table_and_unknown_profile():
-    from render.api import Renderer
+    from svgs_sim.render.api import Renderer
 
     cam = Camera.load("galaxy-nexus")
     no_flash = cam.replace(tables={k: v for k, v in cam.tables.items() if k != "flash"})
@@ -182,7 +182,7 @@ def test_missing_flash_table_and_unknown_profile():
 
 
 def test_cli_render_and_bad_input(tmp_path, capsys):
-    from cli.main import main
+    from svgs_sim.cli.main import main
 
     out = tmp_path / "r10"
     rc = main(["render", "--camera", "galaxy-nexus", "--range", "10", "--roll", "2", "--yaw", "-3",
@@ -211,7 +211,7 @@ def test_cli_render_and_bad_input(tmp_path, capsys):
 
 
 def test_cli_doctor(capsys):
-    from cli.main import main
+    from svgs_sim.cli.main import main
 
     assert main(["doctor", "--json"]) == 0
     rep = json.loads(capsys.readouterr().out)
@@ -222,8 +222,8 @@ def test_cli_doctor(capsys):
 
 def test_distractors_make_blobs_where_expected():
     """A polished sphere mirrors the flash at its glint point; a lamp glows where it is."""
-    from render.api import Renderer
-    from render.predict import sphere_glint
+    from svgs_sim.render.api import Renderer
+    from svgs_sim.render.predict import sphere_glint
 
     glint = {"type": "glint", "position_m": [0.06, 0.09, 0.04], "radius_m": 0.02}
     lamp = {"type": "lamp", "position_m": [-0.04, -0.09, 0.02], "radius_m": 0.003, "radiance_w_m2_sr": 200.0}
@@ -254,7 +254,7 @@ def test_distractors_make_blobs_where_expected():
 def test_render_and_render_and_solve_form_the_same_image(tmp_path):
     """One scene for one set of arguments: both commands focus on the target (autofocus) and
     add the same lab, so the same arguments give the same flux."""
-    from cli.main import main
+    from svgs_sim.cli.main import main
 
     args = ["--camera", "galaxy-nexus", "--range", "10", "--roll", "2", "--yaw", "-3", "--seed", "4"]
     assert main(["render", *args, "--no-expose", "--out", str(tmp_path / "a")]) == 0
@@ -274,9 +274,9 @@ def test_background_tiles_under_distortion_cover_every_pixel_that_sees_the_scene
     by OpenCV (cv2.projectPoints, not this code), falls in a tile."""
     import cv2
 
-    from render.scene import TILE_COUNTS, TILE_SIZE_PX
-    from render.windows import background_tiles
-    from svgs.frames import pose_from_scenario
+    from svgs_sim.render.scene import TILE_COUNTS, TILE_SIZE_PX
+    from svgs_sim.render.windows import background_tiles
+    from svgs_sim.svgs.frames import pose_from_scenario
 
     cam = Camera.load("galaxy-nexus")
     cam = cam.replace(cx=cam.cx + pp[0], cy=cam.cy + pp[1], dist=cam.dist + np.array([k1, 0.0, 0.0, 0.0, 0.0]))
@@ -303,16 +303,16 @@ def test_background_tiles_under_distortion_cover_every_pixel_that_sees_the_scene
 def test_background_tiles_fall_back_to_the_whole_frame_when_the_distortion_folds():
     """A distortion that is not one-to-one over the frame (strong barrel: the radial map turns
     back within the field) gets the whole frame rendered (None), as before."""
-    from render.scene import TILE_COUNTS, TILE_SIZE_PX
-    from render.windows import background_tiles
-    from svgs.frames import pose_from_scenario
+    from svgs_sim.render.scene import TILE_COUNTS, TILE_SIZE_PX
+    from svgs_sim.render.windows import background_tiles
+    from svgs_sim.svgs.frames import pose_from_scenario
 
     cam = Camera.load("galaxy-nexus")
     cam = cam.replace(dist=np.array([-2.0, 0.0, 0.0, 0.0, 0.0]))
     corners = np.array([[x, y, z] for x in (-0.2, 0.2) for y in (-0.2, 0.2) for z in (-0.25, 0.05)])
     R, t = pose_from_scenario(6.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     assert background_tiles(cam, corners, R, t, TILE_SIZE_PX, TILE_COUNTS) is None
-    from render.windows import _distorted_box_outline
+    from svgs_sim.render.windows import _distorted_box_outline
 
     assert _distorted_box_outline(cam, corners @ R.T + t) is None  # the one-to-one check refuses it
     mild = cam.replace(dist=np.array([0.04, 0.0, 0.0, 0.0, 0.0]))
@@ -337,7 +337,7 @@ def test_stratified_spot_samples_same_expectation_less_noise():
     as independent random samples - flux and centroid within their seed-to-seed scatter - with
     a smaller scatter of the spots' centroids (tools/render_noise.py: 0.00035 against 0.00082 px
     at 2^14 samples, 10 m)."""
-    from render.api import Renderer
+    from svgs_sim.render.api import Renderer
 
     R, t = pose_from_scenario(10.0, roll_deg=5.0, pitch_deg=-3.0, yaw_deg=10.0)
     res = {}

@@ -2,7 +2,7 @@
 steps, the spots of the optical image move with it.
 
 The render-and-solve path: lens focused on the target, the guided estimator's samples through
-the phone's PSF and integrated over pixels (:meth:`camera.phone.PhoneCamera.optics`), glare on.
+the phone's PSF and integrated over pixels (:meth:`svgs_sim.camera.phone.PhoneCamera.optics`), glare on.
 
 The prediction comes from geometry and GalSim, not from the renderer's own predictor:
 
@@ -29,7 +29,7 @@ import galsim
 import numpy as np
 import pytest
 
-from svgs.frames import pose_from_scenario
+from svgs_sim.svgs.frames import pose_from_scenario
 
 pytestmark = pytest.mark.render
 
@@ -40,8 +40,8 @@ HALF_PX = {5.0: 4, 20.0: 3, 40.0: 2}
 
 @pytest.fixture(scope="module")
 def sweep():
-    from camera.phone import PhoneCamera
-    from render.api import Renderer
+    from svgs_sim.camera.phone import PhoneCamera
+    from svgs_sim.render.api import Renderer
 
     phone = PhoneCamera("galaxy-nexus")
     out = {}
@@ -118,9 +118,9 @@ def test_spots_follow_a_subpixel_sweep(sweep, range_m):
 def test_the_old_order_fails_the_same_sweep(sweep):
     """The test can fail: the PSF applied after binning the spots into pixels (the order the
     issue found, with its Gaussian core) leaves a staircase in the same residuals."""
-    from camera.phone import PhoneCamera
-    from camera.phone.optics import apply_psf
-    from render.api import Renderer
+    from svgs_sim.camera.phone import PhoneCamera
+    from svgs_sim.camera.phone.optics import apply_psf
+    from svgs_sim.render.api import Renderer
 
     _, psf, ids = sweep[20.0]
     glare = PhoneCamera("galaxy-nexus").params.glare
@@ -153,7 +153,7 @@ def _binned_centroid(img):
 
 
 def _path_versus_guided(range_m, spp):
-    from render.api import Renderer
+    from svgs_sim.render.api import Renderer
 
     R, t = pose_from_scenario(range_m, roll_deg=1.0, pitch_deg=-1.0, yaw_deg=1.0)
     opts = {"focus_distance_m": float(np.linalg.norm(t)), "body": "none"}

@@ -6,10 +6,10 @@ import json
 import numpy as np
 import pytest
 
-from cli.main import main
+from svgs_sim.cli.main import main
 
 SOLVE_KEYS = {"ok", "reason", "state", "R_cam_target", "t_cam_target_m", "targets_px", "n_blobs", "residual_rms_px"}
-#: The documented JSON state keys, written out: an independent check of svgs.frames.STATE_KEYS.
+#: The documented JSON state keys, written out: an independent check of svgs_sim.svgs.frames.STATE_KEYS.
 STATE_KEYS = {"x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg"}
 needs_mitsuba = pytest.mark.skipif(importlib.util.find_spec("mitsuba") is None, reason="Mitsuba is not installed")
 

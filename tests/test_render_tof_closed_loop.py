@@ -1,4 +1,4 @@
-"""The ToF closed loop (sim/tof_closed_loop.py): render -> AMCW frames -> pipeline -> pose, checked
+"""The ToF closed loop (svgs_sim/sim/tof_closed_loop.py): render -> AMCW frames -> pipeline -> pose, checked
 against a reference the loop does not compute (the pattern's pinhole projection and the pose written
 out by hand), and the three paths that run it - ``svgs tof render-and-solve``, the stability run and
 the study's ``tof`` trials - giving the same frames for the same seed."""
@@ -13,7 +13,7 @@ import pytest
 if importlib.util.find_spec("mitsuba") is None:
     pytest.skip("Mitsuba is not installed (the 'render' extra)", allow_module_level=True)
 
-from svgs.errors import InputError  # noqa: E402
+from svgs_sim.base.errors import InputError  # noqa: E402
 
 pytestmark = pytest.mark.render
 
@@ -27,13 +27,13 @@ PAPER_MM, PAPER_DEG = 2.0, 0.13
 
 @pytest.fixture(scope="module")
 def head_on():
-    from sim.tof_closed_loop import TofScenario, render
+    from svgs_sim.sim.tof_closed_loop import TofScenario, render
 
     return render(TofScenario(range_m=1.0, spp=16, seed=3))
 
 
 def test_the_scenario_is_typed_and_refuses_bad_input():
-    from sim.tof_closed_loop import TofScenario
+    from svgs_sim.sim.tof_closed_loop import TofScenario
 
     sc = TofScenario(range_m=2.0)
     assert sc.spp is None and sc.ambient_lux is None and sc.integration_time_s is None  # None: the default
@@ -50,7 +50,7 @@ def test_the_pose_is_the_one_written_out(head_on):
 
 
 def test_the_closed_loop_recovers_the_pose_within_the_papers_accuracy(head_on):
-    from sim.tof_closed_loop import noise_free_frame, pipeline, solve, solve_frames
+    from svgs_sim.sim.tof_closed_loop import noise_free_frame, pipeline, solve, solve_frames
 
     cam, tgt = head_on.camera, head_on.target
     # the marker face centres through a pinhole (the profile has no distortion), by hand
@@ -70,13 +70,13 @@ def test_the_closed_loop_recovers_the_pose_within_the_papers_accuracy(head_on):
         cos = (np.trace(sol.R_cam_target @ R_HEAD_ON.T) - 1) / 2
         ang_deg = np.degrees(np.arccos(np.clip(cos, -1, 1)))
         assert d_mm < PAPER_MM and ang_deg < PAPER_DEG
-        # the loop states its errors through sim.metrics: the same numbers
+        # the loop states its errors through svgs_sim.sim.metrics: the same numbers
         assert r.errors["pos_err_norm_m"] * 1e3 == pytest.approx(d_mm, abs=1e-6)
         assert r.errors["rot_err_deg"] == pytest.approx(ang_deg, abs=1e-4)
 
 
 def test_frames_do_not_depend_on_where_the_stream_starts(head_on):
-    from sim.tof_closed_loop import expose
+    from svgs_sim.sim.tof_closed_loop import expose
 
     a = list(expose(head_on, 4))
     b = list(expose(head_on, 4, start=2))
@@ -88,11 +88,11 @@ def test_frames_do_not_depend_on_where_the_stream_starts(head_on):
 def test_cli_stability_and_study_trials_agree_frame_for_frame(tmp_path, capsys):
     """The same seed: ``svgs tof render-and-solve``, ``svgs tof stability`` and the ``tof`` trials of the
     study engine (a trial alone replays the frames before it) give the same frames."""
-    from cli.main import main
-    from sim.tof_stability import COLUMNS
-    from sim.tof_trial import TofTrialScenario, tof_group, tof_trial
-    from sim.tof_stability import stability_scenario
-    from svgs.frames import STATE_KEYS
+    from svgs_sim.cli.main import main
+    from svgs_sim.sim.tof_stability import COLUMNS
+    from svgs_sim.sim.tof_trial import TofTrialScenario, tof_group, tof_trial
+    from svgs_sim.sim.tof_stability import stability_scenario
+    from svgs_sim.svgs.frames import STATE_KEYS
 
     n, seed = 4, 5
     base = ["--range", "3", "--frames", str(n), "--seed", str(seed), "--spp", "8"]
@@ -125,13 +125,13 @@ def test_cli_stability_and_study_trials_agree_frame_for_frame(tmp_path, capsys):
 
 def test_the_study_engine_stores_a_run_as_the_stability_run_computes_it(tmp_path):
     """A run as trials of the ``tof`` kind through the resumable store (in this process) reads back
-    to the numbers of :func:`sim.tof_stability.run_stability` on the same render; a rerun runs nothing."""
-    from sim.tof_closed_loop import render
-    from sim.tof_stability import run_stability, stability_scenario
-    from sim.tof_trial import TofTrialScenario
-    from sim.trials import get_trial_kind
-    from studies.execution import ExecutorSpec, run_stored_study
-    from studies.tof_study import runs_from_rows, study_trials
+    to the numbers of :func:`svgs_sim.sim.tof_stability.run_stability` on the same render; a rerun runs nothing."""
+    from svgs_sim.sim.tof_closed_loop import render
+    from svgs_sim.sim.tof_stability import run_stability, stability_scenario
+    from svgs_sim.sim.tof_trial import TofTrialScenario
+    from svgs_sim.sim.trials import get_trial_kind
+    from svgs_sim.studies.execution import ExecutorSpec, run_stored_study
+    from svgs_sim.studies.tof_study import runs_from_rows, study_trials
 
     sc = stability_scenario(5.712, seed=2, spp=8)
     first = TofTrialScenario(sc, 5.712, 3, 0, (("persistence_window", 2),), "plate", "one run")

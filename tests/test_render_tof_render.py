@@ -6,13 +6,14 @@ import importlib.util
 import numpy as np
 import pytest
 
-if importlib.util.find_spec("mitsuba") is None:  # not imported here: render.variant picks the LLVM first
+if importlib.util.find_spec("mitsuba") is None:  # not imported here: svgs_sim.render.variant picks the LLVM first
     pytest.skip("Mitsuba is not installed (the 'render' extra)", allow_module_level=True)
 
-from camera.amcw import TofSensor, phasor_depth_m, unambiguous_range_m  # noqa: E402
-from render.tof import TofRenderer  # noqa: E402
-from svgs.errors import InputError  # noqa: E402
-from svgs.frames import pose_from_scenario  # noqa: E402
+from svgs_sim.assets import ASSETS_DIR  # noqa: E402
+from svgs_sim.camera.amcw import TofSensor, phasor_depth_m, unambiguous_range_m  # noqa: E402
+from svgs_sim.render.tof import TofRenderer  # noqa: E402
+from svgs_sim.base.errors import InputError  # noqa: E402
+from svgs_sim.svgs.frames import pose_from_scenario  # noqa: E402
 
 pytestmark = pytest.mark.render
 
@@ -99,11 +100,10 @@ def test_amplitude_falls_as_inverse_square_and_matches_the_radiometry(plate):
 
 
 def _sheeting_row(name):
-    """The published table of a sheeting, read straight from the asset (not through render.tof.retro)."""
+    """The published table of a sheeting, read straight from the asset (not through svgs_sim.render.tof.retro)."""
     import tomllib
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[1] / "assets" / "materials" / "retroreflective-sheeting.toml"
+    
+    path = ASSETS_DIR / "materials" / "retroreflective-sheeting.toml"
     with open(path, "rb") as fh:
         return next(t for t in tomllib.load(fh)["sheeting"] if t["name"] == name)
 
@@ -218,13 +218,13 @@ def test_multipath_from_a_wall_lengthens_the_depth():
 
 
 def _cam():
-    from tof import load_camera
+    from svgs_sim.tof import load_camera
 
     return load_camera("tof-epc660")
 
 
 def test_centroids_of_rendered_markers_within_the_paper_figure():
-    import tof
+    from svgs_sim import tof
 
     r = TofRenderer(spp=64)
     R, t = pose_from_scenario(0.697, 0.0022, -0.0105, -0.38, -2.65, -2.53)
@@ -262,7 +262,7 @@ def test_bad_poses_and_profiles(plate):
 
 # ---------------------------------------------------------------------- issue 23: the sampler
 def test_sobol_points_are_owen_scrambled_joe_kuo_sobol():
-    """The per-pixel sequence (render/tof/sobol.py): unscrambled, the points of scipy's Sobol'
+    """The per-pixel sequence (svgs_sim/render/tof/sobol.py): unscrambled, the points of scipy's Sobol'
     (Joe-Kuo direction numbers; scipy lists them in Gray-code order); the Dr.Jit points equal
     the numpy twin; scrambled, the first 2^k points of a seed are still a net: one point in
     every 1/2^k interval of each dimension, one in every elementary box of area 2^-k of the
@@ -270,7 +270,7 @@ def test_sobol_points_are_owen_scrambled_joe_kuo_sobol():
     pair (dims 2, 3: a (1, k, 2)-net)."""
     from scipy.stats import qmc
 
-    from render.tof import sobol
+    from svgs_sim.render.tof import sobol
 
     TofRenderer(scene_options=PLATE, spp=1)  # chooses the JIT variant (before drjit is imported here)
     import drjit as dr
@@ -306,7 +306,7 @@ def test_sobol_points_are_owen_scrambled_joe_kuo_sobol():
 def test_rim_band_is_the_blur_and_half_pixel_around_the_projected_rims():
     """Head-on, each marker face projects to a circle: the rim pixels are those whose centre
     lies within blur + sqrt(2)/2 + margin of it (to the 0.25 px spacing of the rim points)."""
-    from render.tof.camera import RIM_MARGIN_PX
+    from svgs_sim.render.tof.camera import RIM_MARGIN_PX
 
     r = TofRenderer()
     R, t = pose_from_scenario(2.0)
@@ -345,7 +345,7 @@ def _marker_flux(rd, r, R, t):
     within 3 px of its blurred image and nearer to its rim than to any other (W m^-2), and that
     sum predicted from the sheeting's R_A, the emitters' irradiance (cos^m / d^2) and the plate
     (Lambertian) seen around the face (the face hides the plate behind it)."""
-    from render.tof.retro import load_sheeting
+    from svgs_sim.render.tof.retro import load_sheeting
 
     cam, ill, geo = r.camera, r.illumination, r.geometry
     v, u = np.mgrid[0:cam.height, 0:cam.width]

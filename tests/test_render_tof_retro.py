@@ -1,16 +1,16 @@
-"""The sheeting tables of render/tof/retro.py (numpy side; the rendered radiometry is in
+"""The sheeting tables of svgs_sim/render/tof/retro.py (numpy side; the rendered radiometry is in
 tests/test_render_tof_render.py)."""
 
 import tomllib
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from render.tof.retro import SHEETING_FILE, load_sheeting, sheeting_names
-from svgs.errors import InputError
+from svgs_sim.assets import ASSETS_DIR
+from svgs_sim.render.tof.retro import SHEETING_FILE, load_sheeting, sheeting_names
+from svgs_sim.base.errors import InputError
 
-RAW = tomllib.loads((Path(__file__).resolve().parents[1] / "assets" / "materials" / "retroreflective-sheeting.toml").read_text())
+RAW = tomllib.loads((ASSETS_DIR / "materials" / "retroreflective-sheeting.toml").read_text())
 
 
 def test_the_file_the_module_reads_is_the_asset():

@@ -1,10 +1,10 @@
-"""The AMCW 4-tap pixel model (camera/amcw.py): numpy only, no rendering."""
+"""The AMCW 4-tap pixel model (svgs_sim/camera/amcw.py): numpy only, no rendering."""
 
 import numpy as np
 import pytest
 
-from camera.amcw import RenderedTof, TofSensor, phase_noise_rad, phasor_depth_m, unambiguous_range_m
-from svgs.errors import InputError
+from svgs_sim.camera.amcw import RenderedTof, TofSensor, phase_noise_rad, phasor_depth_m, unambiguous_range_m
+from svgs_sim.base.errors import InputError
 
 C_LIGHT_M_S = 299_792_458.0  # exact (SI); the test's own value, not the code's
 
@@ -102,7 +102,7 @@ def test_the_datasheet_distance_noise_figure_at_250_lsb():
     """EPC660 datasheet 9.5: about 2.5 cm (1 sigma) at ~250 LSB amplitude, no ambient (12 MHz
     default). The profile's demodulation contrast was derived from this figure, so this checks
     the chain (sensitivity -> gain -> taps -> noise) reproduces it."""
-    from tof import load_camera
+    from svgs_sim.tof import load_camera
 
     s = TofSensor.from_camera(load_camera("tof-epc660"), modulation_frequency_hz=12e6, ambient_lux=0.0)
     rd = flat(2.0, radiance=1.0, f=12e6)
@@ -160,7 +160,7 @@ def test_frames_are_seeded():
 
 
 def test_profile_and_bad_parameters():
-    from tof import load_camera
+    from svgs_sim.tof import load_camera
 
     s = TofSensor.from_camera(load_camera("tof-epc660"))
     assert s.modulation_frequency_hz == 10e6 and s.integration_time_s is None and s.ambient_lux == 1000.0

@@ -1,6 +1,6 @@
 """Variant selection: the decision logic with faked probes, and a real LLVM-15 fallback.
 
-The decision (:func:`render.variant.decide`, :func:`render.variant.pick_llvm`) is pure, so
+The decision (:func:`svgs_sim.render.variant.decide`, :func:`svgs_sim.render.variant.pick_llvm`) is pure, so
 an LLVM-15-only machine is simulated by faking the facts; the last test loads this
 machine's real LLVM 15 (Debian 12 ships it) in a subprocess, where Dr.Jit would abort on
 the first kernel, and checks that the renderer falls back to scalar and renders.
@@ -14,14 +14,14 @@ from pathlib import Path
 
 import pytest
 
-from render.variant import (
+from svgs_sim.render.variant import (
     MIN_LLVM_MAJOR,
     VARIANT_FOR_BACKEND,
     decide,
     llvm_major_from_path,
     pick_llvm,
 )
-from svgs.errors import InputError
+from svgs_sim.base.errors import InputError
 
 REPO = Path(__file__).resolve().parents[1]
 ALL = ["scalar_rgb", "llvm_ad_mono", "llvm_ad_rgb", "cuda_ad_mono"]
@@ -106,11 +106,11 @@ _SCRIPT = r"""
 import json, os, sys
 import numpy as np
 import drjit  # imported first, with DRJIT_LIBLLVM_PATH -> LLVM 15, as on a plain Debian 12
-from render import select_variant
+from svgs_sim.render import select_variant
 info = select_variant()
-from render.api import Renderer
-from svgs.profiles import Camera, Pattern
-from svgs.frames import pose_from_scenario
+from svgs_sim.render.api import Renderer
+from svgs_sim.base.profiles import Camera, Pattern
+from svgs_sim.svgs.frames import pose_from_scenario
 cam = Camera(name="tiny", width=16, height=16, fx=2450.0, fy=2450.0, cx=7.5, cy=7.5,
              tables={"optics": {"focal_length_m": 0.00343, "f_number": 2.4, "focus_distance_m": 1.8},
                      "flash": {"led_offsets_m": [[0.004, 0, 0]], "emitter_diameter_m": 0.0012,

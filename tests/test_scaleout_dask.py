@@ -1,9 +1,9 @@
 """Scale-out (issue 23): a rendered campaign gives the same rows on a local process pool and on
 a Dask LocalCluster.
 
-The campaign is the one ``svgs campaign --camera galaxy-nexus`` runs (``studies.campaign``:
+The campaign is the one ``svgs campaign --camera galaxy-nexus`` runs (``svgs_sim.studies.campaign``:
 the phone on the test stand, the paper's calibration practice, the ``render`` trial kind of
-:mod:`sim.render_trial` - a full-frame Mitsuba render at the renderer's default sampling, the
+:mod:`svgs_sim.sim.render_trial` - a full-frame Mitsuba render at the renderer's default sampling, the
 phone model, the detector, the solver and the sensor's CRLB), made tiny: two ranges, two
 trials per range, two exposures of each rendered stand setting (4 trials, 2 renders). The
 campaign's focal-length calibration (rendered frames, in this process) is made once and is
@@ -33,7 +33,7 @@ REL_TOL = 1e-9
 
 
 def _campaign(tmp_path):
-    from studies.campaign import campaign_trials, make_config, rendered_paper_calibration
+    from svgs_sim.studies.campaign import campaign_trials, make_config, rendered_paper_calibration
 
     config = make_config("galaxy-nexus", ranges_m=(5.0, 15.0), trials_per_range=2, exposures_per_render=2, seed=23,
                          trial_kind="render", calibration="paper")
@@ -42,8 +42,8 @@ def _campaign(tmp_path):
 
 
 def _run(config, trials, out_dir, spec, chunk_size):
-    from sim.render_trial import RENDER
-    from studies.execution import run_stored_study
+    from svgs_sim.sim.render_trial import RENDER
+    from svgs_sim.studies.execution import run_stored_study
 
     store, stats = run_stored_study(RENDER, trials, out_dir, config.manifest(), spec, chunk_size=chunk_size,
                                     progress=False)
@@ -81,8 +81,8 @@ def differences(rows, ref_rows, timings) -> list:
 @pytest.mark.slow
 def test_rendered_campaign_same_rows_on_process_pool_and_dask(tmp_path):
     pytest.importorskip("distributed", reason="the 'dask' extra is not installed")
-    from sim.render_trial import RENDER_TIMING_OUTPUTS
-    from studies.execution import ExecutorSpec
+    from svgs_sim.sim.render_trial import RENDER_TIMING_OUTPUTS
+    from svgs_sim.studies.execution import ExecutorSpec
 
     timings = (*LOOP_TIMINGS, *RENDER_TIMING_OUTPUTS)
     config, trials = _campaign(tmp_path)
@@ -133,8 +133,8 @@ def test_scheduler_window_keeps_every_worker_busy(tmp_path):
     pytest.importorskip("distributed", reason="the 'dask' extra is not installed")
     from distributed import LocalCluster
 
-    from sim.trials import TrialKind, register_trial_kind
-    from studies.execution import ExecutorSpec, Trial, run_stored_study
+    from svgs_sim.sim.trials import TrialKind, register_trial_kind
+    from svgs_sim.studies.execution import ExecutorSpec, Trial, run_stored_study
 
     kind = register_trial_kind(TrialKind("test-scaleout-sleep", _sleep_trial, ("y",), {}, text_keys=(),
                                          module=__name__))

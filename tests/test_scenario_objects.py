@@ -4,15 +4,15 @@ write the results store's rows (old rows with their -1/0 sentinels included)."""
 import numpy as np
 import pytest
 
-from svgs.errors import InputError
-from svgs.profiles import Camera
+from svgs_sim.base.errors import InputError
+from svgs_sim.base.profiles import Camera
 
 
 @pytest.fixture
 def camera_reads(monkeypatch):
     """Counts :meth:`Camera.load` calls that read a profile file (a name or a path; a Camera
     passed in is returned as is and reads nothing), per profile."""
-    import svgs.profiles as profiles
+    import svgs_sim.base.profiles as profiles
 
     reads: dict = {}
     orig = Camera.load.__func__
@@ -32,8 +32,8 @@ def camera_reads(monkeypatch):
 
 def test_the_closed_loop_reads_each_profile_once(camera_reads):
     """Scenario, its true lens, the frame's camera, the solver's pipeline: one read."""
-    from sim.closed_loop import Scenario
-    from svgs.pipeline import solve_image
+    from svgs_sim.sim.closed_loop import Scenario
+    from svgs_sim.svgs.pipeline import solve_image
     from synth_svgs import synth_frame
 
     sc = Scenario(camera="galaxy-nexus", range_m=10.0, roll_deg=3.0, lens_pp_offset_px=(1.0, 0.0))
@@ -49,7 +49,7 @@ def test_the_closed_loop_reads_each_profile_once(camera_reads):
 
 @pytest.mark.render
 def test_render_and_solve_reads_the_camera_profile_once(camera_reads, tmp_path, capsys):
-    from cli.main import main
+    from svgs_sim.cli.main import main
 
     rc = main(["render-and-solve", "--camera", "galaxy-nexus", "--range", "10", "--spp", "2", "--roi-spp", "8",
                "--seed", "1", "--json", "--out", str(tmp_path / "out")])
@@ -58,7 +58,7 @@ def test_render_and_solve_reads_the_camera_profile_once(camera_reads, tmp_path, 
 
 
 def test_stand_scenario_has_a_rail_position_not_a_range():
-    from sim.closed_loop import Scenario
+    from svgs_sim.sim.closed_loop import Scenario
 
     s = Scenario(camera="galaxy-nexus", mount="stand", rail_m=5.0)
     assert s.range_m is None and s.rail_m == 5.0 and s.distance_m == 5.0
@@ -72,7 +72,7 @@ def test_stand_scenario_has_a_rail_position_not_a_range():
 
 
 def test_geometric_scenario_is_typed_and_reads_its_rows():
-    from sim.trials import GeometricScenario, geometric_scenario
+    from svgs_sim.sim.trials import GeometricScenario, geometric_scenario
 
     s = geometric_scenario(camera="galaxy-nexus", range_m=6.0, stand=1.0, truth_rail=1.0, sigma_px=0.3,
                            labels={"pose_index": 4})
@@ -88,7 +88,7 @@ def test_geometric_scenario_is_typed_and_reads_its_rows():
 
 
 def test_render_scenario_reads_old_rows_with_sentinels():
-    from sim.render_trial import RenderKey, RenderScenario, render_key, render_trial_scenario
+    from svgs_sim.sim.render_trial import RenderKey, RenderScenario, render_key, render_trial_scenario
 
     defaults = RenderScenario(camera="galaxy-nexus")
     assert defaults.to_row() == dict(render_trial_scenario(camera="galaxy-nexus"))
@@ -111,7 +111,7 @@ def test_render_scenario_reads_old_rows_with_sentinels():
 
 
 def test_no_private_names_of_sim_used_outside_sim():
-    """Studies and the CLI use sim's public names (no sim.trials._camera, sim.render_trial._frame)."""
+    """Studies and the CLI use sim's public names (no svgs_sim.sim.trials._camera, svgs_sim.sim.render_trial._frame)."""
     import ast
     from pathlib import Path
 

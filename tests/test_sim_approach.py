@@ -4,7 +4,7 @@ stream, the command's outputs and its resumption.
 The physics references are analytic: a uniform smear's centroid and variance, a rolling
 shutter's row delay, the photons of a binned pixel, the auto-exposure's fixed point from the
 metering solver. The sensor's frame is checked against the isolated-pose chain
-(:func:`sim.closed_loop.render_scenario` + :func:`sim.closed_loop.expose_and_solve`), which it
+(:func:`svgs_sim.sim.closed_loop.render_scenario` + :func:`svgs_sim.sim.closed_loop.expose_and_solve`), which it
 must equal: keeping the renderer, the sensor and the exposure between frames is a saving of
 time, never a change of numbers. Rendered tests use the Galaxy Nexus scaled to 648 x 486."""
 
@@ -14,10 +14,10 @@ import json
 import numpy as np
 import pytest
 
-from cli.main import main
-from sim.approach import ApproachSensor, Trajectory, check_visible, scenario_from_pose
-from sim.closed_loop import Scenario
-from svgs import Camera, InputError
+from svgs_sim.cli.main import main
+from svgs_sim.sim.approach import ApproachSensor, Trajectory, check_visible, scenario_from_pose
+from svgs_sim.sim.closed_loop import Scenario
+from svgs_sim.svgs import Camera, InputError
 
 
 def _rows(path):
@@ -82,7 +82,7 @@ def test_frame_rate_limits_the_exposure_and_the_readout():
 def test_a_pose_out_of_view_is_a_dropout_not_an_error(nexus):
     """In a user's loop a target that leaves the field of view gives ok=False, reason out_of_view
     (nothing rendered), and the stream goes on."""
-    from svgs.frames import pose_from_scenario
+    from svgs_sim.svgs.frames import pose_from_scenario
 
     s = ApproachSensor("galaxy-nexus")
     R, t = pose_from_scenario(5.0, 20.0, 0.0)  # 20 m to the side at 5 m
@@ -99,8 +99,8 @@ def test_missing_trajectory_file(tmp_path):
 
 def test_state_file_gives_the_paper_pose_at_its_knots(tmp_path):
     """A paper-state row is the camera's position in the target frame: its pose is
-    svgs.frames.state_to_pose's, whatever the interpolation between knots."""
-    from svgs.frames import state_to_pose
+    svgs_sim.svgs.frames.state_to_pose's, whatever the interpolation between knots."""
+    from svgs_sim.svgs.frames import state_to_pose
 
     rows = [(0.0, 0.1, -0.2, 12.0, 2.0, -3.0, 5.0), (4.0, 0.0, 0.05, 6.0, 0.0, 1.0, 0.0)]
     text = "t_s,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg\n" + "".join(",".join(map(str, r)) + "\n" for r in rows)
@@ -114,7 +114,7 @@ def test_state_file_gives_the_paper_pose_at_its_knots(tmp_path):
 
 
 def test_stand_file_uses_the_test_stand_chain(tmp_path):
-    from sim.stand import TestStand
+    from svgs_sim.sim.stand import TestStand
 
     text = "t_s,rail_m,stage_m,roll_deg,pitch_deg,yaw_deg\n0,10,0.1,0,5,-10\n2,8,0,0,0,0\n"
     traj = Trajectory.load(_write(tmp_path / "s.csv", text))
@@ -128,7 +128,7 @@ def test_stand_file_uses_the_test_stand_chain(tmp_path):
 
 
 def test_scenario_from_pose_round_trips(nexus):
-    from svgs.frames import pose_from_scenario
+    from svgs_sim.svgs.frames import pose_from_scenario
 
     R, t = pose_from_scenario(7.0, 0.2, -0.3, 4.0, -6.0, 20.0)
     sc = scenario_from_pose(R, t, Scenario())
@@ -155,7 +155,7 @@ def test_frame_times_and_their_limit():
 def test_global_shutter_smear_is_uniform_about_the_timestamp():
     """A spot moving at v px/s exposed for T s: the samples spread uniformly over v*T about the
     spot's position at the timestamp (mean unchanged, variance (vT)^2/12)."""
-    from camera.rendered import PointFlux
+    from svgs_sim.camera.rendered import PointFlux
 
     n = 200000
     pts = PointFlux(np.full(n, 100.0), np.full(n, 50.0), np.ones(n))
@@ -168,7 +168,7 @@ def test_global_shutter_smear_is_uniform_about_the_timestamp():
 
 def test_rolling_shutter_delays_rows_by_the_readout():
     """Zero exposure: a sample on row v is taken (v - (H - 1) / 2) / H * readout after the centre row."""
-    from camera.rendered import PointFlux
+    from svgs_sim.camera.rendered import PointFlux
 
     H, readout, vel = 1000, 0.03, 50.0
     rows = np.array([0.0, 499.5, 999.0])
@@ -182,8 +182,8 @@ def test_rolling_shutter_delays_rows_by_the_readout():
 def test_binned_preview_collects_the_photons_of_its_pixels():
     """The preview's pixel gets the light of s^2 picture pixels (same radiance, same lens): the lab
     flux summed over the frame is the same in both streams."""
-    from camera.phone.preview import binned_camera
-    from sim.closed_loop import lab_flux
+    from svgs_sim.camera.phone.preview import binned_camera
+    from svgs_sim.sim.closed_loop import lab_flux
 
     full = Camera.load("galaxy-nexus")
     prev = binned_camera(full, 648, 486)
@@ -200,9 +200,9 @@ def test_binned_preview_takes_its_phone_s_app_threshold(tmp_path):
     """The preview stream is the same phone running the same app: the detector's threshold is the
     phone's (assets/app/svgs-app.toml: 64 for the Galaxy Nexus, 200 for the Amaze), not the default
     for unknown cameras, also after the preview profile went through a file."""
-    from camera.phone.preview import binned_camera
-    from svgs.app import settings
-    from svgs.pipeline import camera_threshold
+    from svgs_sim.camera.phone.preview import binned_camera
+    from svgs_sim.svgs.app import settings
+    from svgs_sim.svgs.pipeline import camera_threshold
 
     img = np.zeros((4, 4), np.uint8)
     for name in ("galaxy-nexus", "htc-amaze-4g"):
@@ -217,8 +217,8 @@ def test_binned_preview_takes_its_phone_s_app_threshold(tmp_path):
 def test_stream_auto_exposure_step_response():
     """Linear regime (nothing clips): each step takes ``gain`` of the log error away, so after k
     steps the error is (1 - gain)^k of the start's, whatever the scene."""
-    from camera.phone.isp import AE_STREAM_GAIN, stream_exposure
-    from camera.phone.params import ExposureParams, SensorParams
+    from svgs_sim.camera.phone.isp import AE_STREAM_GAIN, stream_exposure
+    from svgs_sim.camera.phone.params import ExposureParams, SensorParams
 
     sensor = SensorParams()
     exp = ExposureParams(target_level=0.18, min_exposure_s=1e-6, max_exposure_s=10.0, min_iso=100.0, max_iso=100.0)
@@ -231,9 +231,9 @@ def test_stream_auto_exposure_step_response():
 
 def test_stream_auto_exposure_settles_where_the_one_shot_does():
     """The carried-over exposure converges on a static scene to the phone's one-shot solution
-    (camera.phone.isp.ExposureSolver.solve), from a start 8x too long."""
-    from camera.phone.isp import ExposureSolver, exposure_limits, next_exposure, split_exposure
-    from camera.phone.params import ExposureParams, SensorParams
+    (svgs_sim.camera.phone.isp.ExposureSolver.solve), from a start 8x too long."""
+    from svgs_sim.camera.phone.isp import ExposureSolver, exposure_limits, next_exposure, split_exposure
+    from svgs_sim.camera.phone.params import ExposureParams, SensorParams
 
     sensor = SensorParams()
     exp = ExposureParams(metering="mean", target_level=0.18)
@@ -252,7 +252,7 @@ def test_stream_auto_exposure_settles_where_the_one_shot_does():
 def test_sensor_frame_equals_the_isolated_pose_chain(small_camera):
     """Frame 0 of a stream (no motion) is render_scenario + expose_and_solve with the same seeds
     and exposure: the kept renderer, sensor and lab factor change no number."""
-    from sim.closed_loop import expose_and_solve, render_scenario
+    from svgs_sim.sim.closed_loop import expose_and_solve, render_scenario
 
     traj = Trajectory.straight(6.0, 4.0, 2.0, attitude_deg=(0.0, 3.0, -5.0))
     sensor = ApproachSensor(small_camera, seed=5, motion=False, crlb=False, keep_images=True)
@@ -376,8 +376,8 @@ def test_approach_bad_trajectory_file_exits_2(tmp_path, capsys):
 @pytest.mark.render
 def test_a_pattern_file_is_solved_with_its_own_geometry(small_camera, tmp_path):
     """A pattern given as a .toml path (not a bundled name) is the one the solver uses."""
-    from svgs import Pattern
-    from svgs.frames import pose_from_scenario
+    from svgs_sim.base.profiles import Pattern
+    from svgs_sim.svgs.frames import pose_from_scenario
 
     src = Pattern.load("svgs-3u").source
     from pathlib import Path

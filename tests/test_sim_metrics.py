@@ -1,9 +1,9 @@
-"""sim.metrics: the one pose-error function, against hand-computed errors."""
+"""svgs_sim.sim.metrics: the one pose-error function, against hand-computed errors."""
 
 import numpy as np
 import pytest
 
-from sim.metrics import ERR_KEYS, POSE_ERROR_KEYS, error_columns, no_pose_errors, pose_errors, state_error
+from svgs_sim.sim.metrics import ERR_KEYS, POSE_ERROR_KEYS, error_columns, no_pose_errors, pose_errors, state_error
 
 
 def test_names_say_what_they_are():

@@ -4,10 +4,10 @@ and plain vector algebra, not against the chain's own code."""
 import numpy as np
 import pytest
 
-from sim.stand import TestStand, sample_in_view, targets_in_view
-from svgs.errors import InputError
-from svgs.frames import pose_from_scenario, pose_to_state
-from svgs.profiles import Pattern
+from svgs_sim.sim.stand import TestStand, sample_in_view, targets_in_view
+from svgs_sim.base.errors import InputError
+from svgs_sim.svgs.frames import pose_from_scenario, pose_to_state
+from svgs_sim.base.profiles import Pattern
 
 
 def _camera_position(R, t):
@@ -57,7 +57,7 @@ def test_gimbal_angles_about_the_perspective_centre_move_the_image_as_a_pinhole_
 
 def test_each_gimbal_angle_alone_is_the_same_angle_of_the_truth_state():
     """The gimbal is named as the paper names the attitude: roll, pitch, yaw alone give the same
-    roll, pitch, yaw of the truth state (svgs.frames)."""
+    roll, pitch, yaw of the truth state (svgs_sim.svgs.frames)."""
     stand = TestStand()
     s0 = stand.state(10.0)
     for i, k in enumerate(("roll_deg", "pitch_deg", "yaw_deg")):
@@ -134,7 +134,7 @@ def test_bad_stand_input_is_refused(nexus, pattern):
 
 
 def test_scenario_on_the_stand_turns_the_phone():
-    from sim.closed_loop import Scenario
+    from svgs_sim.sim.closed_loop import Scenario
 
     s = Scenario(range_m=10.0, pitch_deg=8.0, yaw_deg=10.0, roll_deg=10.0, mount="stand", stage_m=0.05)
     R, t = s.pose()
@@ -154,7 +154,7 @@ def test_render_and_solve_on_the_stand(capsys):
     light) is solved, and the truth is the stand's."""
     import json
 
-    from cli.main import main
+    from svgs_sim.cli.main import main
 
     rc = main(["render-and-solve", "--camera", "galaxy-nexus", "--range", "10", "--mount", "stand", "--pitch", "8",
                "--yaw", "10", "--roll", "10", "--json"])

@@ -10,10 +10,10 @@ from html.parser import HTMLParser
 import numpy as np
 import pytest
 
-from assets.papers import SVGS_2014_CSV, svgs_2014_results
-from studies.campaign import PAPER_RANGES_M, campaign_trials, make_config, summarize
-from cli.main import main
-from svgs.errors import InputError
+from svgs_sim.assets.papers import SVGS_2014_CSV, svgs_2014_results
+from svgs_sim.studies.campaign import PAPER_RANGES_M, campaign_trials, make_config, summarize
+from svgs_sim.cli.main import main
+from svgs_sim.base.errors import InputError
 
 CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                   "--disable-background-networking", "--disable-component-update", "--disable-sync"]
@@ -31,8 +31,8 @@ def test_paper_tables_come_from_assets():
 def test_campaign_design_follows_the_sensor_mount_envelope():
     """The phone on the stand: settings drawn over the gimbal's envelope, kept in view, each
     rendered once and exposed exposures_per_render times; the target's range is the rail's."""
-    from sim.stand import TestStand, targets_in_view
-    from svgs import Camera, Pattern
+    from svgs_sim.sim.stand import TestStand, targets_in_view
+    from svgs_sim.base.profiles import Camera, Pattern
 
     cfg = make_config("htc-amaze-4g", trials_per_range=200, seed=1)
     assert cfg.trial_kind == "render" and cfg.calibration == "paper" and cfg.poses_per_range == 50
@@ -87,7 +87,7 @@ def test_paper_calibration_is_drawn_once_per_campaign():
 
 
 def test_other_cameras_need_ranges(tmp_path):
-    from svgs import Camera
+    from svgs_sim.base.profiles import Camera
 
     path = Camera.load("galaxy-nexus").replace(name="modern-phone").save(tmp_path / "modern-phone.toml")
     with pytest.raises(InputError, match="give the test ranges"):

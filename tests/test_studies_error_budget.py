@@ -8,8 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from cli.main import main
-from studies.error_budget import (
+from svgs_sim.cli.main import main
+from svgs_sim.studies.error_budget import (
     VARIANT_NAMES,
     applicable_variants,
     attribute,
@@ -17,7 +17,7 @@ from studies.error_budget import (
     centroid_statistics,
     variant_statistics,
 )
-from svgs.frames import STATE_KEYS
+from svgs_sim.svgs.frames import STATE_KEYS
 
 
 def _table(errors_by_variant: dict, r: float = 10.0) -> dict:
@@ -155,7 +155,7 @@ def test_error_budget_end_to_end(tmp_path, capsys):
     assert variants.count("baseline") == 2 and variants.count("no_sensor_noise") == 1
     # every variant that changes something for this camera in this lab: its profile codes a colour
     # JPEG at 4:2:0 with no NR or sharpening; the lab's sourced errors are on
-    from sim.lab import lab_errors
+    from svgs_sim.sim.lab import lab_errors
 
     lab = {k: v for k, v in lab_errors().items() if v > 0}
     assert set(variants) == {"baseline", *(v.name for v in applicable_variants("galaxy-nexus", lab))}

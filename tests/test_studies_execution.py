@@ -11,12 +11,12 @@ import time
 
 import pytest
 
-from studies.campaign import campaign_trials, make_config
-from studies.execution import (ExecutorSpec, Trial, executor_spec, make_tasks, open_executor, run_study)
-from studies.store import ResultStore, read_rows
-from sim.trials import GEOMETRIC, TrialKind, register_trial_kind
-from cli.main import main
-from svgs.errors import InputError
+from svgs_sim.studies.campaign import campaign_trials, make_config
+from svgs_sim.studies.execution import (ExecutorSpec, Trial, executor_spec, make_tasks, open_executor, run_study)
+from svgs_sim.studies.store import ResultStore, read_rows
+from svgs_sim.sim.trials import GEOMETRIC, TrialKind, register_trial_kind
+from svgs_sim.cli.main import main
+from svgs_sim.base.errors import InputError
 from study_helpers import sigkill_after_rows
 
 
@@ -50,7 +50,7 @@ def test_identical_numbers_inline_process_pool_and_dask(tmp_path):
 #: KILL_AT-th row: the kill lands mid-campaign at a known point, with no polling and no
 #: timing window (the earlier version polled the CSV and raced the run).
 KILL_AT = 100
-_KILL_CHILD = sigkill_after_rows(KILL_AT, "from cli.main import main\nsys.exit(main(sys.argv[1:]))")
+_KILL_CHILD = sigkill_after_rows(KILL_AT, "from svgs_sim.cli.main import main\nsys.exit(main(sys.argv[1:]))")
 
 
 @pytest.mark.slow
@@ -86,14 +86,14 @@ def test_sigkill_halfway_then_rerun_completes_without_duplicates(tmp_path):
 _MARK_CHILD = """
 import os, sys
 from pathlib import Path
-from studies.store import ResultStore
+from svgs_sim.studies.store import ResultStore
 _append = ResultStore.append
 def append(self, rows):
     n = _append(self, rows)
     Path(os.environ["SVGS_TEST_MARKER"]).touch()
     return n
 ResultStore.append = append
-from cli.main import main
+from svgs_sim.cli.main import main
 sys.exit(main(sys.argv[1:]))
 """
 
@@ -182,7 +182,7 @@ def test_die_with_parent_falls_back_to_a_watchdog_without_prctl(monkeypatch, cap
     import logging
     import threading
 
-    from studies import execution
+    from svgs_sim.studies import execution
 
     def no_prctl():
         raise OSError(38, "Function not implemented")
@@ -190,7 +190,7 @@ def test_die_with_parent_falls_back_to_a_watchdog_without_prctl(monkeypatch, cap
     monkeypatch.setattr(execution, "_set_pdeathsig_sigkill", no_prctl)
     started = []
     monkeypatch.setattr(threading.Thread, "start", lambda self: started.append(self.name))
-    with caplog.at_level(logging.DEBUG, logger="studies.execution"):
+    with caplog.at_level(logging.DEBUG, logger="svgs_sim.studies.execution"):
         assert execution.die_with_parent(os.getppid()) == "watchdog"
     assert started == ["svgs-parent-watch"]
     assert "watching the parent pid" in caplog.text
@@ -218,9 +218,9 @@ def _echo_group(scenarios, seeds):
 
 
 def test_run_task_rows_ids_scenario_outputs_and_one_warm_up():
-    """studies.execution.run_task: the kind's outputs under the trial's id, seed and scenario; a render
+    """svgs_sim.studies.execution.run_task: the kind's outputs under the trial's id, seed and scenario; a render
     group goes to run_group, a lone trial to run_trial; the kind warms up once per process."""
-    from studies.execution import run_task, warm_up_worker
+    from svgs_sim.studies.execution import run_task, warm_up_worker
 
     kind = register_trial_kind(TrialKind("test-echo", _echo, ("y", "s", "grouped"), {}, text_keys=(),
                                          run_group=_echo_group, render_key=lambda s: s["range_m"],
@@ -254,7 +254,7 @@ def test_a_failing_trial_raises_and_keeps_finished_rows(tmp_path):
 
 
 def _inline():
-    from studies.execution import InlineExecutor
+    from svgs_sim.studies.execution import InlineExecutor
 
     return InlineExecutor()
 

@@ -6,10 +6,10 @@ import json
 import numpy as np
 import pytest
 
-from cli.main import main
-from sim.render_trial import merge_margin_dn
-from studies.merge_range import PHYSICS, crossing, make_config
-from svgs.errors import InputError
+from svgs_sim.cli.main import main
+from svgs_sim.sim.render_trial import merge_margin_dn
+from svgs_sim.studies.merge_range import PHYSICS, crossing, make_config
+from svgs_sim.base.errors import InputError
 
 
 def _two_gaussians(sep_px, sigma_px=3.0, peak=200.0, shape=(64, 96)):

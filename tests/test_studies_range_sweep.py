@@ -9,11 +9,11 @@ import json
 import numpy as np
 import pytest
 
-from cli.main import main
-from studies import exposure_study, range_sweep
-from studies.execution import ExecutorSpec
-from studies.store import RESULTS, read_rows
-from svgs import InputError
+from svgs_sim.cli.main import main
+from svgs_sim.studies import exposure_study, range_sweep
+from svgs_sim.studies.execution import ExecutorSpec
+from svgs_sim.studies.store import RESULTS, read_rows
+from svgs_sim.base.errors import InputError
 
 #: Columns that are wall times (they differ from run to run).
 TIMINGS = ("wall_s", "cpu_s", "expose_s", "solve_s")
@@ -56,7 +56,7 @@ def test_range_sweep_same_rows_inline_and_on_two_processes_and_resumes(small_cam
         assert len({r["seed"] for r in rows}) == 3  # three noise draws
     assert ref[0]["true_z_m"] == pytest.approx(5.0, abs=1e-12)
 
-    # trials.jsonl: one record per trial, the error vectors of sim.metrics, and the summary agrees
+    # trials.jsonl: one record per trial, the error vectors of svgs_sim.sim.metrics, and the summary agrees
     recs = [json.loads(ln) for ln in (tmp_path / "inline" / "trials.jsonl").read_text().splitlines()]
     assert len(recs) == 12
     solved = [x for x in recs if x["ok"]]
@@ -86,7 +86,7 @@ def test_exposure_study_same_rows_inline_and_on_two_processes_and_resumes(small_
     remedies = ["baseline", "nd=1", "exposure=0.001", "spacing=1.5"]
     cfg = exposure_study.make_config(small_camera, [5.0, 12.0], remedies, trials=2, seed=3)
     trials = exposure_study.exposure_study_trials(cfg)
-    from sim.render_trial import render_key
+    from svgs_sim.sim.render_trial import render_key
 
     # remedies that keep the scene share one render per range; the wider pattern renders its own
     assert len({render_key(t.scenario) for t in trials}) == 2 * 2

@@ -18,13 +18,13 @@ from pathlib import Path
 
 import pytest
 
-from studies.execution import ExecutorSpec, Trial, run_stored_study
-from studies.seeding import design_rng, trial_seed
-from studies.store import RESULTS, read_rows
+from svgs_sim.studies.execution import ExecutorSpec, Trial, run_stored_study
+from svgs_sim.studies.seeding import design_rng, trial_seed
+from svgs_sim.studies.store import RESULTS, read_rows
 from study_helpers import sigkill_after_rows
 
 #: Columns that are timings (wall clock, CPU, the exposure's and the solve's wall time): the
-#: only ones allowed to differ between runs (sim.render_trial.RENDER_TIMING_OUTPUTS + the loop's).
+#: only ones allowed to differ between runs (svgs_sim.sim.render_trial.RENDER_TIMING_OUTPUTS + the loop's).
 TIMINGS = ("wall_s", "cpu_s", "expose_s", "solve_s")
 #: (range_m, roll_deg, pitch_deg, yaw_deg) of the rendered poses.
 POSES = ((10.0, 2.0, -1.5, 3.0), (20.0, -2.0, 1.0, -4.0))
@@ -42,9 +42,9 @@ def study_trials(seed: int = STUDY_SEED) -> list:
 
     Returns
     -------
-    list of :class:`studies.execution.Trial`
+    list of :class:`svgs_sim.studies.execution.Trial`
     """
-    from sim.render_trial import render_trial_scenario
+    from svgs_sim.sim.render_trial import render_trial_scenario
 
     trials = []
     for pk, (range_m, roll_deg, pitch_deg, yaw_deg) in enumerate(POSES):
@@ -61,7 +61,7 @@ def study_trials(seed: int = STUDY_SEED) -> list:
 
 def run_render_study(out_dir, spec: ExecutorSpec, chunk_size: int = 1):
     """Run (or resume) the study into ``out_dir`` on ``spec``; returns the run's RunStats (None: nothing to do)."""
-    from sim.render_trial import RENDER
+    from svgs_sim.sim.render_trial import RENDER
 
     _, stats = run_stored_study(RENDER, study_trials(), out_dir, MANIFEST, spec,
                                 chunk_size=chunk_size, progress=False)
@@ -121,7 +121,7 @@ def test_rendered_trials_identical_inline_process_pool_and_dask(reference, tmp_p
 KILL_AT = 1
 ROWS_AT_KILL = 2
 _KILL_CHILD = sigkill_after_rows(KILL_AT, """
-from studies.execution import ExecutorSpec
+from svgs_sim.studies.execution import ExecutorSpec
 from test_studies_render_scale import run_render_study
 run_render_study(sys.argv[2], ExecutorSpec(sys.argv[3], 2), chunk_size=1)
 """, path_arg=True)

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from studies.sensitivity import (SensitivityConfig, Varied, analyze_morris, analyze_sobol, make_config,
+from svgs_sim.studies.sensitivity import (SensitivityConfig, Varied, analyze_morris, analyze_sobol, make_config,
                                  morris_design, ranking, sobol_design)
-from studies.store import read_rows
-from cli.main import main
-from svgs.errors import InputError
+from svgs_sim.studies.store import read_rows
+from svgs_sim.cli.main import main
+from svgs_sim.base.errors import InputError
 
 
 def _config(method, n, d=3, lo=-np.pi, hi=np.pi):
@@ -110,8 +110,8 @@ def test_sobol_over_seven_parameters_ranks_them(tmp_path, capsys):
     assert html.count("data:image/png;base64,") >= 4 and "<table>" in html and "svgs sensitivity" in html
 
     cfg = make_config("galaxy-nexus", vary, fixed=["pitch_deg=10"], n=32)
-    from studies.sensitivity import analyze, sensitivity_trials
-    from studies.store import read_table
+    from svgs_sim.studies.sensitivity import analyze, sensitivity_trials
+    from svgs_sim.studies.store import read_table
 
     _, layout = sensitivity_trials(cfg)
     res = analyze(read_table(out / "results.csv"), cfg, layout)

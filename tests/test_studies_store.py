@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from studies.seeding import design_rng, trial_seed
-from studies.store import ResultStore, read_rows, read_table
-from svgs.errors import InputError
+from svgs_sim.studies.seeding import design_rng, trial_seed
+from svgs_sim.studies.store import ResultStore, read_rows, read_table
+from svgs_sim.base.errors import InputError
 
 COLS = ["trial_id", "seed", "camera", "value", "ok", "reason"]
 
@@ -228,7 +228,7 @@ def test_a_torn_last_line_is_still_repaired_silently(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_a_campaign_rerun_sets_a_garbage_line_aside_and_completes(tmp_path, capsys):
-    from cli.main import main
+    from svgs_sim.cli.main import main
 
     def campaign(out):
         return main(["campaign", "--camera", "galaxy-nexus", "--trial-kind", "geometric", "--trials", "3",

@@ -4,11 +4,11 @@ render grouping, failures, registry and scenario validation."""
 import numpy as np
 import pytest
 
-from studies.seeding import trial_seed
-from sim.trials import (GEOMETRIC, geometric_group, geometric_render_key, geometric_scenario, geometric_trial,
+from svgs_sim.studies.seeding import trial_seed
+from svgs_sim.sim.trials import (GEOMETRIC, geometric_group, geometric_render_key, geometric_scenario, geometric_trial,
                         get_trial_kind)
-from svgs.frames import STATE_KEYS
-from svgs.errors import InputError
+from svgs_sim.svgs.frames import STATE_KEYS
+from svgs_sim.base.errors import InputError
 
 
 def test_noise_free_trial_recovers_the_pose_exactly():
@@ -97,15 +97,15 @@ def test_bad_scenarios_are_input_errors():
 def test_one_rendered_trial_kind_for_every_study():
     """``render`` is the rendered kind of the campaign, sensitivity, range sweep and exposure study;
     its defaults are the campaign's render (seed 0, pattern as it is, no ND, default spp, the app's threshold)."""
-    from sim.render_trial import (
+    from svgs_sim.sim.render_trial import (
         RENDER,
         render_key,
         render_trial_scenario,
         threshold_parameter,
     )
-    from sim.trials import KIND_MODULES, build_scenario, known_trial_kinds
+    from svgs_sim.sim.trials import KIND_MODULES, build_scenario, known_trial_kinds
 
-    assert KIND_MODULES == ("sim.render_trial", "sim.tof_trial") and "closed-loop" not in known_trial_kinds()
+    assert KIND_MODULES == ("svgs_sim.sim.render_trial", "svgs_sim.sim.tof_trial") and "closed-loop" not in known_trial_kinds()
     assert get_trial_kind("render") is RENDER
     s = build_scenario(RENDER, {"camera": "galaxy-nexus", "range_m": 8.0})
     assert (s["render_seed"], s["pattern_scale"], s["target_scale"], s["spp"], s["roi_spp"], s["threshold"]) == \

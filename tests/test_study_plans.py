@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from studies.execution import COST_TABLE_S, LONG_STUDY_S, ExecutorSpec, cpu_cores, plan_study
+from svgs_sim.studies.execution import COST_TABLE_S, LONG_STUDY_S, ExecutorSpec, cpu_cores, plan_study
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def _svgs(args, tmp_path, timeout=60):
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     t0 = time.perf_counter()
-    p = subprocess.run([sys.executable, "-m", "cli.main", *args], cwd=tmp_path, env=env, capture_output=True,
+    p = subprocess.run([sys.executable, "-m", "svgs_sim.cli.main", *args], cwd=tmp_path, env=env, capture_output=True,
                        text=True, timeout=timeout)
     return p, time.perf_counter() - t0
 
@@ -85,7 +85,7 @@ def test_huge_campaign_plan_only_within_a_second_writes_nothing(tmp_path):
 def test_huge_campaign_prints_its_plan_within_a_second_before_any_trial(tmp_path):
     """Without --plan-only: the plan line comes first and fast; the run is then killed."""
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, "-u", "-m", "cli.main", "campaign", "--camera", "galaxy-nexus",
+    proc = subprocess.Popen([sys.executable, "-u", "-m", "svgs_sim.cli.main", "campaign", "--camera", "galaxy-nexus",
                              "--trial-kind", "geometric", "--trials", "10000000", "--processes", "0",
                              "--out", str(tmp_path / "c")], cwd=tmp_path, env=env, stderr=subprocess.PIPE, text=True)
     try:
@@ -124,7 +124,7 @@ def test_study_plan_only(args, head, tmp_path):
 def test_a_long_render_is_announced_before_it_starts():
     """``--spp 1000000 --full-frame`` is ~5e12 samples: hours at the demo's rate, said before the
     render; the demo's own render (2e7 samples, 1.8 s) is not announced."""
-    from cli.render import LONG_RENDER_S, RENDER_SAMPLES_PER_S, render_cost_warning
+    from svgs_sim.cli.render import LONG_RENDER_S, RENDER_SAMPLES_PER_S, render_cost_warning
 
     assert render_cost_warning(2592, 1944, 4, 64, 4) is None  # the demo
     line = render_cost_warning(2592, 1944, 1_000_000, 64, 4, full_frame=True)
@@ -142,7 +142,7 @@ def test_svgs_render_says_a_long_render_before_starting(tmp_path):
     import subprocess
     import time
 
-    proc = subprocess.Popen([sys.executable, "-m", "cli.main", "render", "--camera", "galaxy-nexus", "--range", "5",
+    proc = subprocess.Popen([sys.executable, "-m", "svgs_sim.cli.main", "render", "--camera", "galaxy-nexus", "--range", "5",
                              "--spp", "1000000", "--full-frame", "--out", str(tmp_path / "r")],
                             stderr=subprocess.PIPE, text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
     try:

@@ -6,8 +6,8 @@ import cv2
 import numpy as np
 import pytest
 
-from cli.main import main
-from svgs.frames import pose_from_scenario, pose_to_state
+from svgs_sim.cli.main import main
+from svgs_sim.svgs.frames import pose_from_scenario, pose_to_state
 from synth_svgs import synth_frame
 
 KEYS = {"ok", "reason", "state", "R_cam_target", "t_cam_target_m", "targets_px", "n_blobs", "residual_rms_px"}

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from svgs.detect import GATES, Blobs, auto_threshold, detect_blobs
-from svgs.errors import InputError
+from svgs_sim.svgs.detect import GATES, Blobs, auto_threshold, detect_blobs
+from svgs_sim.base.errors import InputError
 from synth_svgs import draw_elliptical_spots, draw_gaussian_spots, noise_field, quantize
 
 
@@ -177,7 +177,7 @@ def test_fixed_and_otsu_thresholds():
     assert len(detect_blobs(img, threshold=20)) == 2
     b = detect_blobs(img, threshold="otsu")
     assert len(b) >= 1 and 0 <= b.threshold_used < 100
-    from svgs.detect import app_level
+    from svgs_sim.svgs.detect import app_level
 
     assert detect_blobs(img).threshold_used == app_level(img.dtype)  # no option: the app's level, not the automatic rule
 

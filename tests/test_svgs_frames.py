@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from svgs.errors import InputError
-from svgs.frames import (
+from svgs_sim.base.errors import InputError
+from svgs_sim.svgs.frames import (
     angles_from_rotation,
     pose_from_scenario,
     pose_to_state,

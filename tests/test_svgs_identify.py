@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from svgs import Camera, Pattern
-from svgs.detect import detect_blobs
-from svgs.errors import InputError
-from svgs.identify import (GATE_MARGIN_DEG, GATE_MARGIN_LATERAL, GATE_MARGIN_RANGE, PAPER_ENVELOPE, Envelope,
+from svgs_sim.base.profiles import Camera, Pattern
+from svgs_sim.svgs.detect import detect_blobs
+from svgs_sim.base.errors import InputError
+from svgs_sim.svgs.identify import (GATE_MARGIN_DEG, GATE_MARGIN_LATERAL, GATE_MARGIN_RANGE, PAPER_ENVELOPE, Envelope,
                            Identification, identify, pattern_gates)
-from svgs.result import REASONS, Failure
+from svgs_sim.svgs.result import REASONS, Failure
 from synth_svgs import random_envelope_pose, synth_frame
 
 
@@ -82,7 +82,7 @@ def _max_baseline(range_m, lateral_fraction, max_angles_deg, n_starts=6):
 
     from scipy.optimize import minimize
 
-    from svgs.frames import D_CAM_PHOTO, rotation_from_angles
+    from svgs_sim.svgs.frames import D_CAM_PHOTO, rotation_from_angles
 
     P = Pattern.load("svgs-3u").points_m[:2]
     am = np.deg2rad(max_angles_deg)
@@ -188,7 +188,7 @@ def test_verify_off_uses_geometry_only(nexus, pattern):
 
 def test_narrow_envelope_rejects_poses_outside_it(nexus, pattern):
     """Gates follow the envelope: a 30 m pose is not found with a 1-5 m envelope."""
-    from svgs.frames import pose_from_scenario
+    from svgs_sim.svgs.frames import pose_from_scenario
 
     uv = nexus.project_target(pattern.points_m, *pose_from_scenario(30.0))
     assert identify(uv, nexus, pattern)
@@ -270,7 +270,7 @@ def test_failure_reasons(nexus, pattern):
 
 
 def _merged_frame(camera, pattern, range_m, sigma_px):
-    from svgs.frames import pose_from_scenario
+    from svgs_sim.svgs.frames import pose_from_scenario
 
     R, t = pose_from_scenario(range_m, 0.0, 0.0, 10.0, -10.0, 5.0)
     return synth_frame(camera, pattern, R, t, sigma_px=sigma_px, peak=600.0, read_noise=1.0, seed=1)
@@ -289,7 +289,7 @@ def test_merged_spots_into_one_blob(nexus, pattern):
 
 def test_two_spots_merged_leave_three_blobs(nexus, pattern):
     """Targets 3 and 4 are the closest pair; with a moderate PSF only they merge."""
-    from svgs.frames import pose_from_scenario
+    from svgs_sim.svgs.frames import pose_from_scenario
 
     R, t = pose_from_scenario(30.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     uv = nexus.project_target(pattern.points_m, R, t)
@@ -306,7 +306,7 @@ def test_two_spots_merged_leave_three_blobs(nexus, pattern):
 
 
 def test_three_separate_spots_are_too_few_not_merged(nexus, pattern):
-    from svgs.frames import pose_from_scenario
+    from svgs_sim.svgs.frames import pose_from_scenario
 
     R, t = pose_from_scenario(3.0)
     f = synth_frame(nexus, pattern.__class__(name="three-of-four", ids=pattern.ids, points_m=pattern.points_m), R, t,
@@ -370,7 +370,7 @@ def test_every_stand_attitude_in_view_is_identified_among_distractors(camera, ra
     """The paper's stand turns the phone (roll/pitch +/-25 deg, yaw +/-45 deg about the line of
     sight): the target can sit anywhere in the field of view. Every setting that keeps it in
     view is identified, with the right labels, beside four distractor spots far from it."""
-    from sim.stand import TestStand, sample_in_view
+    from svgs_sim.sim.stand import TestStand, sample_in_view
 
     cam, pat = Camera.load(camera), Pattern.load("svgs-3u")
     stand = TestStand()
@@ -399,8 +399,8 @@ def test_the_envelope_edges_are_identified_among_distractors(camera, ranges):
     with the right labels."""
     import itertools
 
-    from sim.stand import TestStand, targets_in_view
-    from svgs.frames import pose_from_scenario
+    from svgs_sim.sim.stand import TestStand, targets_in_view
+    from svgs_sim.svgs.frames import pose_from_scenario
 
     cam, pat = Camera.load(camera), Pattern.load("svgs-3u")
     stand = TestStand()

@@ -1,9 +1,9 @@
-"""The overlay picture (svgs/overlay.py) and its centroid ellipses."""
+"""The overlay picture (svgs_sim/svgs/overlay.py) and its centroid ellipses."""
 
 import numpy as np
 import pytest
 
-from svgs.overlay import centroid_sigma_from_image, crop_box, render_overlay, window_centroid
+from svgs_sim.svgs.overlay import centroid_sigma_from_image, crop_box, render_overlay, window_centroid
 
 
 def spot_image(centres, shape=(120, 160), sigma_psf=1.3, peak=400.0, background=20.0):

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from svgs import Camera, Pattern, ProfileError
-from svgs.profiles import CAMERAS_DIR
+from svgs_sim.svgs import Camera, Pattern, ProfileError
+from svgs_sim.base.profiles import CAMERAS_DIR
 
 
 def test_shipped_profiles_load(nexus):
@@ -115,7 +115,7 @@ def _flat(tables, skip=("sources", "fitted")):
 
 
 def _overlays():
-    from svgs.profiles import CAMERAS_DIR
+    from svgs_sim.base.profiles import CAMERAS_DIR
 
     return sorted((CAMERAS_DIR / "fitted").glob("*.toml"))
 
@@ -233,8 +233,8 @@ def test_lab_overlay_is_a_physical_fit():
     fitted to, lies in its plausible range with its prior, and loads both ways."""
     import tomllib
 
-    from assets import ASSETS_DIR
-    from sim.lab import load_lab
+    from svgs_sim.assets import ASSETS_DIR
+    from svgs_sim.sim.lab import load_lab
 
     base = tomllib.loads((ASSETS_DIR / "labs" / "msfc-frl.toml").read_text())
     over = tomllib.loads((ASSETS_DIR / "labs" / "fitted" / "msfc-frl.toml").read_text())

@@ -5,13 +5,13 @@ import numpy as np
 import pytest
 
 from conftest import random_envelope_poses
-from svgs import InputError, solve_centroids
-from svgs.frames import pose_from_scenario, pose_to_state, rotation_angle_deg
+from svgs_sim.svgs import InputError, solve_centroids
+from svgs_sim.svgs.frames import pose_from_scenario, pose_to_state, rotation_angle_deg
 
 
 # ------------------------------------------------------------------ reference model
 # The paper-state az/el model in plain numpy, independent of the compiled kernel
-# (svgs._lm_kernel), as the reference its covariance is checked against.
+# (svgs_sim.svgs._lm_kernel), as the reference its covariance is checked against.
 def _rotations_and_derivatives(angles):
     """M = R3(psi) R2(theta) R1(phi) and its derivatives, element by element.
 
@@ -217,7 +217,7 @@ def test_bad_points(nexus, pattern, pts, match):
 def test_kernel_covariance_equals_analytic_paper_state_crlb(nexus, pattern):
     """The covariance the compiled kernel reports (iteration parameters mapped to the paper's
     state) equals (J^T Sigma^-1 J)^-1 built from the analytic paper-state Jacobian."""
-    from svgs.solver import azel_pixel_jacobian
+    from svgs_sim.svgs.solver import azel_pixel_jacobian
 
     for range_m in (2.0, 15.0, 35.0):
         R, t = pose_from_scenario(range_m, 0.1 * range_m, 0.05 * range_m, -20, 15, 40)
@@ -244,8 +244,8 @@ def test_model_jacobian_matches_finite_differences(pattern):
 def test_the_compiled_measurements_match_the_profile_undistortion_and_finite_differences():
     """Issue 14 item 9: the measurements kernel (undistortion and the analytic whitening
     Jacobian) against the profile's own Newton undistortion and central differences of it."""
-    from svgs.profiles import Camera
-    from svgs.solver import _measurements, azel_from_normalized
+    from svgs_sim.base.profiles import Camera
+    from svgs_sim.svgs.solver import _measurements, azel_from_normalized
 
     cam = Camera.load("galaxy-nexus").replace(dist=np.array([0.08, -0.21, 4e-4, -3e-4, 0.12]))
     rng = np.random.default_rng(4)
@@ -261,7 +261,7 @@ def test_the_compiled_measurements_match_the_profile_undistortion_and_finite_dif
 
 def test_one_frame_and_the_same_frame_in_a_batch_give_the_same_pose(nexus, pattern):
     """The single-frame short path (issue 14 item 9) and the batch path agree."""
-    from svgs.frames import pose_from_scenario
+    from svgs_sim.svgs.frames import pose_from_scenario
 
     rng = np.random.default_rng(9)
     for k in range(20):

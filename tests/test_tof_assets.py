@@ -5,9 +5,9 @@ import itertools
 import numpy as np
 import pytest
 
-from svgs.errors import ProfileError
-from svgs.profiles import Camera, Pattern
-from tof.camera import line_of_sight, load_camera, load_target, points_from_depth
+from svgs_sim.base.errors import ProfileError
+from svgs_sim.base.profiles import Camera, Pattern
+from svgs_sim.tof.camera import line_of_sight, load_camera, load_target, points_from_depth
 
 
 def test_epc660_profile_matches_the_paper_optics():

@@ -6,14 +6,14 @@ import cv2
 import numpy as np
 import pytest
 
-from cli.main import main
-from svgs.frames import pose_from_scenario
-from tof import load_camera, load_target
+from svgs_sim.cli.main import main
+from svgs_sim.svgs.frames import pose_from_scenario
+from svgs_sim.tof import load_camera, load_target
 from synth_tof import synth_frame
 
-#: The keys ``svgs solve --json`` prints (cli.main), which ``svgs tof solve --json`` shares.
+#: The keys ``svgs solve --json`` prints (svgs_sim.cli.main), which ``svgs tof solve --json`` shares.
 SOLVE_KEYS = {"ok", "reason", "state", "R_cam_target", "t_cam_target_m", "targets_px", "n_blobs", "residual_rms_px"}
-#: The documented JSON state keys, written out: an independent check of svgs.frames.STATE_KEYS.
+#: The documented JSON state keys, written out: an independent check of svgs_sim.svgs.frames.STATE_KEYS.
 STATE_KEYS = {"x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg"}
 
 

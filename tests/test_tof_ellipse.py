@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from tof.camera import load_camera
-from tof.ellipse import (centre_correction_px, circle_poses_from_conic, conic_center, detect_ellipse_arcs,
+from svgs_sim.tof.camera import load_camera
+from svgs_sim.tof.ellipse import (centre_correction_px, circle_poses_from_conic, conic_center, detect_ellipse_arcs,
                          ellipse_to_conic, fit_ellipse, fit_ellipse_subpixel, level_crossings, project_circle_conic,
                          projected_circle_centre)
 

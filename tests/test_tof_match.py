@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from svgs.errors import InputError
-from svgs.frames import rotation_angle_deg
-from tof.camera import load_target
-from tof.match import compatibility, match_points, softassign
-from tof.pose import is_degenerate, refine_line_of_sight, weighted_svd_pose
+from svgs_sim.base.errors import InputError
+from svgs_sim.svgs.frames import rotation_angle_deg
+from svgs_sim.tof.camera import load_target
+from svgs_sim.tof.match import compatibility, match_points, softassign
+from svgs_sim.tof.pose import is_degenerate, refine_line_of_sight, weighted_svd_pose
 from synth_tof import random_pose, synth_marker_points
 
 

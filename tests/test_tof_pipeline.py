@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from svgs.errors import InputError
-from svgs.frames import pose_from_scenario, rotation_angle_deg
-from tof import TofPipeline, load_camera, load_target, solve_frame
+from svgs_sim.base.errors import InputError
+from svgs_sim.svgs.frames import pose_from_scenario, rotation_angle_deg
+from svgs_sim.tof import TofPipeline, load_camera, load_target, solve_frame
 from synth_tof import synth_frame
 
 

@@ -19,13 +19,14 @@ import numpy as np
 import pytest
 import tomli_w
 
-from cli.main import main
-from svgs.profiles import CAMERAS_DIR, PATTERNS_DIR
+from svgs_sim.assets import ASSETS_DIR
+from svgs_sim.cli.main import main
+from svgs_sim.base.profiles import CAMERAS_DIR, PATTERNS_DIR
 
 TOF_CAMERA = CAMERAS_DIR / "tof-epc660.toml"
 TOF_PATTERN = PATTERNS_DIR / "tof-8.toml"
 #: The sheeting tables the renderer knows, read from the asset itself.
-SHEETING_FILE = Path(__file__).resolve().parents[1] / "assets" / "materials" / "retroreflective-sheeting.toml"
+SHEETING_FILE = ASSETS_DIR / "materials" / "retroreflective-sheeting.toml"
 SHEETINGS = [t["name"] for t in tomllib.loads(SHEETING_FILE.read_text(encoding="utf-8"))["sheeting"]]
 
 
@@ -90,7 +91,7 @@ def _warm():
     """Import what the ToF commands import first, so the time measured is the check's."""
     import importlib
 
-    for module in ("cli.tof", "cli.tof_render", "cli.tof_stability", "sim.tof_closed_loop", "render.tof.camera"):
+    for module in ("svgs_sim.cli.tof", "svgs_sim.cli.tof_render", "svgs_sim.cli.tof_stability", "svgs_sim.sim.tof_closed_loop", "svgs_sim.render.tof.camera"):
         importlib.import_module(module)
 
 
@@ -190,10 +191,10 @@ EDGE_PATTERN = {
 
 
 def test_values_at_the_edges_of_their_ranges_are_accepted(tmp_path):
-    from camera.amcw import TofSensor
-    from render.tof.camera import Illumination
-    from render.tof.scene import TofSceneOptions, resolve_geometry
-    from tof.camera import depth_kind, load_camera, load_target
+    from svgs_sim.camera.amcw import TofSensor
+    from svgs_sim.render.tof.camera import Illumination
+    from svgs_sim.render.tof.scene import TofSceneOptions, resolve_geometry
+    from svgs_sim.tof.camera import depth_kind, load_camera, load_target
 
     cam = load_camera(_write(tmp_path, TOF_CAMERA, EDGE_CAMERA, "edge-camera.toml"), render=True)
     sensor = TofSensor.from_camera(cam)
@@ -208,13 +209,13 @@ def test_values_at_the_edges_of_their_ranges_are_accepted(tmp_path):
 
 
 def test_the_shared_tof_tables_agree_with_their_users():
-    """The allowed values live in svgs.profile_schema; the models that read the tables agree."""
+    """The allowed values live in svgs_sim.base.profile_schema; the models that read the tables agree."""
     from dataclasses import fields
 
-    from camera.amcw import TofSensor
-    from render.tof import retro, scene
-    from render.tof.camera import Illumination
-    from svgs import profile_schema as ps
+    from svgs_sim.camera.amcw import TofSensor
+    from svgs_sim.render.tof import retro, scene
+    from svgs_sim.render.tof.camera import Illumination
+    from svgs_sim.base import profile_schema as ps
 
     assert list(ps.SHEETINGS) == SHEETINGS == retro.sheeting_names()
     assert scene.MATERIALS is ps.TOF_MATERIALS

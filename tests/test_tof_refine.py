@@ -7,10 +7,10 @@ import pytest
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from svgs.frames import rotation_angle_deg
-from tof.camera import load_target
-from tof.pipeline import PipelineParams
-from tof.pose import REFINE_MAX_ITER, REFINE_TOL_PAPER_M, refine_line_of_sight, weighted_svd_pose
+from svgs_sim.svgs.frames import rotation_angle_deg
+from svgs_sim.tof.camera import load_target
+from svgs_sim.tof.pipeline import PipelineParams
+from svgs_sim.tof.pose import REFINE_MAX_ITER, REFINE_TOL_PAPER_M, refine_line_of_sight, weighted_svd_pose
 from synth_tof import random_pose
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from cli.main import main
+from svgs_sim.cli.main import main
 
 if importlib.util.find_spec("mitsuba") is None:
     pytest.skip("Mitsuba is not installed (the 'render' extra)", allow_module_level=True)
@@ -32,7 +32,7 @@ def test_json_schema_and_the_paper_table_at_5712_mm(capsys, tmp_path):
     rc, d = run_json(capsys, "--range", "5.712", *FAST, "--out", str(tmp_path / "run"))
     assert rc == 0
     assert d["range_m"] == 5.712 and d["frames"] == 12 and 0 < d["solved"] <= 12
-    assert d["spp"] == 16 and d["rim_spp"] == 16 * 64  # the marker rims get 64x (render.tof.camera)
+    assert d["spp"] == 16 and d["rim_spp"] == 16 * 64  # the marker rims get 64x (svgs_sim.render.tof.camera)
     for k in ("average", "maximum", "minimum", "fluctuation", "std", "truth"):
         assert set(d[k]) == set(COLUMNS)
     # Table 2 of the paper, as published (assets/data/tof_2022_stability.csv)
@@ -87,7 +87,7 @@ def test_an_output_path_that_is_a_file_is_refused_and_nothing_written(capsys, tm
 
 def test_python_m_cli_tof_stability_is_the_command():
     repo = Path(__file__).resolve().parents[1]
-    p = subprocess.run([sys.executable, "-m", "cli.tof_stability", "--range", "5.712", "--frames", "2", "--spp", "8",
+    p = subprocess.run([sys.executable, "-m", "svgs_sim.cli.tof_stability", "--range", "5.712", "--frames", "2", "--spp", "8",
                         "--json"], cwd=repo, capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     d = json.loads(p.stdout)

@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 from skimage.morphology import reconstruction
 
-from svgs.errors import InputError
-from tof.active import active_pixel_set
-from tof.blobs import blobs_from_mask, eccentricity_from_cov, find_blobs
-from tof.centroid import coverage_centroids
-from tof.log_filter import filter_active_set, nlog_at, nlog_image, nlog_kernel
-from tof.temporal import PersistenceCounter, RecursiveMedianDepth, median3
+from svgs_sim.base.errors import InputError
+from svgs_sim.tof.active import active_pixel_set
+from svgs_sim.tof.blobs import blobs_from_mask, eccentricity_from_cov, find_blobs
+from svgs_sim.tof.centroid import coverage_centroids
+from svgs_sim.tof.log_filter import filter_active_set, nlog_at, nlog_image, nlog_kernel
+from svgs_sim.tof.temporal import PersistenceCounter, RecursiveMedianDepth, median3
 
 
 def _disk_image(shape, centres, radii, levels, ss=8, bg=0.0):

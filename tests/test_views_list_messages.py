@@ -6,9 +6,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from studies.calibration.convergence import Detections, check_views_list
-from svgs.errors import InputError
-from svgs.profiles import load_camera
+from svgs_sim.studies.calibration.convergence import Detections, check_views_list
+from svgs_sim.base.errors import InputError
+from svgs_sim.base.profiles import load_camera
 
 
 def _detections(n_found: int, n_skipped: int = 0) -> Detections:

@@ -3,7 +3,7 @@
 For each phone and range the target is rendered once (Mitsuba, the stand's attitude 0.5 deg off
 the exact facing), exposed ``--exposures`` times through the phone model (its own exposure), and
 every exposure is detected at the app's threshold with each centroid rule
-(:data:`svgs.app.CENTROIDS`), identified and solved. Per rule and range it prints
+(:data:`svgs_sim.svgs.app.CENTROIDS`), identified and solved. Per rule and range it prints
 
 - the solved fraction (consistent solutions) and the failures,
 - the mean |x| and |pitch| errors against the truth (the pose the image was made at),
@@ -11,7 +11,7 @@ every exposure is detected at the app's threshold with each centroid rule
   centres sit a few px from the pattern points at 1 m, ~12/R px, which every rule shares),
 - the centroids' scatter over the noise draws, px (RMS over targets and axes of each target's
   standard deviation), and the CRLB efficiency ``CRLB^2 / scatter^2`` (1: the bound is reached)
-  with the simulated sensor's bound at the true positions (:func:`sim.crlb.centroid_crlb_px`).
+  with the simulated sensor's bound at the true positions (:func:`svgs_sim.sim.crlb.centroid_crlb_px`).
 
 Usage::
 
@@ -35,13 +35,13 @@ RANGES = {"htc-amaze-4g": (1.0, 2.0, 4.0, 6.5), "galaxy-nexus": (5.0, 10.0, 20.0
 
 
 def measure(camera: str, range_m: float, exposures: int, seed: int = 0) -> list[dict]:
-    from sim.closed_loop import Scenario, render_scenario, solver_camera
-    from sim.crlb import centroid_crlb_px
-    from svgs.app import CENTROIDS
-    from svgs.detect import detect_blobs
-    from svgs.frames import pose_to_state
-    from svgs.pipeline import camera_threshold, solve_image
-    from svgs.profiles import Pattern
+    from svgs_sim.sim.closed_loop import Scenario, render_scenario, solver_camera
+    from svgs_sim.sim.crlb import centroid_crlb_px
+    from svgs_sim.svgs.app import CENTROIDS
+    from svgs_sim.svgs.detect import detect_blobs
+    from svgs_sim.svgs.frames import pose_to_state
+    from svgs_sim.svgs.pipeline import camera_threshold, solve_image
+    from svgs_sim.base.profiles import Pattern
 
     sc = Scenario(camera=camera, range_m=range_m, roll_deg=0.5, pitch_deg=0.5)
     frame = render_scenario(sc, seed=seed)

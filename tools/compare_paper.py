@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from assets.papers import svgs_2014_results
-from svgs.frames import STATE_KEYS
+from svgs_sim.assets.papers import svgs_2014_results
+from svgs_sim.svgs.frames import STATE_KEYS
 
 KEYS = STATE_KEYS
 

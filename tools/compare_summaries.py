@@ -19,7 +19,7 @@ import math
 
 
 #: Statistic names of summaries made before the renaming -> their names now (the same as
-#: ``studies.campaign.RENAMED_STATISTICS``; kept here so that the tool needs nothing of the project).
+#: ``svgs_sim.studies.campaign.RENAMED_STATISTICS``; kept here so that the tool needs nothing of the project).
 RENAMED_STATISTICS = {"abs_mean_error": "abs_bias", "rms_error": "rms"}
 
 

@@ -1,7 +1,7 @@
 """How much each stage of the phone's image path moves the spot centroids and the pose (issue
 24, deliverable 1): a findings table for ``docs/camera-model.md``, not a fit.
 
-One render per range of the nominal scene (``sim.closed_loop.Scenario(camera, range_m)``: the
+One render per range of the nominal scene (``svgs_sim.sim.closed_loop.Scenario(camera, range_m)``: the
 fitted profile, the lab's light), then ``--seeds`` exposures (noise seeds 0..n-1, the same
 draws for every configuration: common random numbers) through each configuration of the ISP,
 each solved by the app's chain. Per configuration and range it prints
@@ -67,7 +67,7 @@ def configurations(isp):
 
 def centroids(row, frame, pattern):
     """The identified targets' centroids minus their true projections, (N, 2) px (NaN: unsolved)."""
-    from sim.closed_loop import solver_camera
+    from svgs_sim.sim.closed_loop import solver_camera
 
     sol = row["_solution"]
     if not sol:
@@ -83,9 +83,9 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, default=6, help="exposures (noise seeds) per configuration (default 6)")
     ap.add_argument("--camera", default="galaxy-nexus", help="phone profile (default galaxy-nexus)")
     args = ap.parse_args(argv)
-    from camera.phone import ALL_STAGES
-    from sim.closed_loop import Scenario, expose_and_solve, render_scenario
-    from svgs.profiles import Pattern
+    from svgs_sim.camera.phone import ALL_STAGES
+    from svgs_sim.sim.closed_loop import Scenario, expose_and_solve, render_scenario
+    from svgs_sim.base.profiles import Pattern
 
     print(f"{args.camera}: {args.seeds} exposures per configuration; centroids px per axis, pose m / deg")
     for r in args.ranges:

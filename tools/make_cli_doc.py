@@ -11,8 +11,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from cli.json_out import SCHEMAS  # noqa: E402
-from cli.main import build_parser  # noqa: E402
+from svgs_sim.cli.json_out import SCHEMAS  # noqa: E402
+from svgs_sim.cli.main import build_parser  # noqa: E402
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "cli.md"
 
@@ -48,15 +48,15 @@ def _render() -> str:
             "sensor measured nothing, e.g. every pixel saturated; the reason is printed), 2 bad input or usage. An "
             "error is one line on stderr that names the command: `svgs calibrate focal: error: ...` (exit 2), "
             "`svgs tof stability: no solution (saturated): ...` (exit 1)."), "",
-           ("Every argument is checked before any work starts (`cli/validate.py`): output locations (a writable "
+           ("Every argument is checked before any work starts (`svgs_sim/cli/validate.py`): output locations (a writable "
             "folder, or a file where the metavar says `.toml`), seeds (0 to 2^32 - 1), counts (>= 1; samples per "
-            "pixel at most 2^24), finite numbers, physical quantities within physical bounds (`svgs/limits.py`, "
+            "pixel at most 2^24), finite numbers, physical quantities within physical bounds (`svgs_sim/base/limits.py`, "
             "the table the study parameters of `sensitivity --vary`/`--fixed` take too), ranges (positive, distinct, inside the sensor's "
             "physical envelope: for a phone, closer than where the pattern spans fewer than 4 px; for the ToF "
             "camera 0.27-15 m) and the kind of camera profile. A bad input exits 2 with one line naming it and "
             "writes nothing."), "",
            ("`--json`: every command that takes it prints exactly one JSON object on stdout (tables, status lines "
-           "and progress bars go to stderr). Its object is shown after the command's help (`cli/json_out.py`); "
+           "and progress bars go to stderr). Its object is shown after the command's help (`svgs_sim/cli/json_out.py`); "
            "the study commands (range-sweep, exposure-study, campaign, sensitivity, calibrate study) write NaN as "
            "`null` and also write the object to their folder's `summary.json`. A refused run (exit 2) prints "
            "`{\"ok\": false, \"error\": \"...\"}` instead, a simulated physical failure (exit 1) "
@@ -72,7 +72,7 @@ def _render() -> str:
                     "```", SCHEMAS[name].rstrip(), "```", ""]
     missing = sorted(set(SCHEMAS) - {name for name, _ in _walk(parser, "svgs")})
     if missing:
-        raise SystemExit(f"cli.json_out.SCHEMAS names unknown commands: {missing}")
+        raise SystemExit(f"svgs_sim.cli.json_out.SCHEMAS names unknown commands: {missing}")
     return "\n".join(out)
 
 

@@ -3,7 +3,7 @@
 Reads a campaign run with ``--budget`` (``DIR/results.csv``) and prints Markdown tables: per
 range and component the simulated statistic over the paper's, and for each mechanism its
 contribution ``sqrt(s_base^2 - s_without^2)`` (the part of the baseline that goes when it goes,
-in quadrature: ``studies.error_budget``) over the paper's value, with a 90 % interval from a
+in quadrature: ``svgs_sim.studies.error_budget``) over the paper's value, with a 90 % interval from a
 paired bootstrap over the stand settings (a setting's exposures stay together; the baseline and
 the variant are resampled alike: common random numbers).
 
@@ -24,9 +24,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from assets.papers import svgs_2014_results  # noqa: E402
-from studies.error_budget import SOURCE_LABELS  # noqa: E402
-from svgs.frames import STATE_KEYS  # noqa: E402
+from svgs_sim.assets.papers import svgs_2014_results  # noqa: E402
+from svgs_sim.studies.error_budget import SOURCE_LABELS  # noqa: E402
+from svgs_sim.svgs.frames import STATE_KEYS  # noqa: E402
 
 #: The mechanisms of issue 24 (the image path and the lab), the default selection.
 ISSUE_24 = ("no_jpeg", "no_chroma_subsampling", "no_cfa", "no_stand_error", "no_rail_error", "no_turbulence")

@@ -12,11 +12,12 @@ Run::
 (``NAME.stdout``; the ``--json`` objects) and output folder. ``--svgs`` is the command that starts
 the CLI (default: the ``svgs`` console script beside this Python), so the same list runs against
 an older checkout: ``PYTHONPATH=OLD_CHECKOUT python tools/nothing_moves.py run OUT --svgs
-"python -m cli.main"``.
+"python -m MAIN"`` with that checkout's CLI module as ``MAIN`` (``cli.main`` before 0.2.0).
 
 ``compare`` walks both trees and compares every file: JSON and JSON-lines objects key by key and
-CSV files cell by cell after dropping the keys and columns of :data:`DROPPED_KEYS` (wall times and
-versions, which are expected to differ), ``.npy`` arrays bit for bit, PNG images pixel by pixel
+CSV files cell by cell after dropping the keys and columns of :data:`DROPPED_KEYS` (wall and CPU
+times and versions, which are expected to differ), HTML reports as text with the time they were
+made and the project's version masked (:data:`MASKED_TEXT`), ``.npy`` arrays bit for bit, PNG images pixel by pixel
 (their metadata may name a library version), any other file byte for byte. It prints one line per
 difference and exits 1 if there is any, 0 if the runs are identical.
 """
@@ -28,6 +29,7 @@ import csv
 import io
 import json
 import os
+import re
 import shlex
 import subprocess
 import sys
@@ -36,14 +38,18 @@ from pathlib import Path
 
 import numpy as np
 
-#: Keys (JSON) and columns (CSV) that hold wall times, dates or software versions: dropped before
-#: comparing, wherever they occur. Nothing else is dropped.
-DROPPED_KEYS = frozenset({
-    "wall_s", "elapsed_s", "render_s", "expose_s", "solve_s", "time_s", "timing", "timings",
-    "wall_time_s", "started", "finished", "created", "updated", "version", "versions",
-    "svgs_sim_version", "mitsuba_version", "drjit_version", "python", "platform", "host",
-    "seconds", "per_trial_s", "eta_s", "duration_s",
-})
+#: Keys (JSON) and columns (CSV) that hold wall times, CPU times or software versions: dropped
+#: before comparing, wherever they occur. Nothing else is dropped.
+DROPPED_KEYS = frozenset({"timings_s", "cpu_s", "wall_s", "frames_s", "render_s", "expose_s", "solve_s",
+                          "elapsed_s", "versions"})
+
+#: Text in HTML reports that names the time it was made, its wall times or the project's version:
+#: masked.
+MASKED_TEXT = (
+    (re.compile(r"Generated \d{4}-\d\d-\d\dT\d\d:\d\d:\d\d[^ <]*"), "Generated TIME"),
+    (re.compile(r"(Wall time of the trials: |\d trials in )[\d.]+ (s|min|h)\b"), r"\1TIME"),
+    (re.compile(r'(<td class="t">svgs-sim</td><td class="t">)[^<]*'), r"\1VERSION"),
+)
 
 #: The commands: (name, arguments after ``svgs``). Two poses per phone for the renders; the
 #: output folder of a command is ``OUT/NAME`` when the command writes one.
@@ -149,6 +155,18 @@ def compare_file(a: Path, b: Path, rel: str) -> list[str]:
         x, y = cv2.imread(str(a), cv2.IMREAD_UNCHANGED), cv2.imread(str(b), cv2.IMREAD_UNCHANGED)
         if x is None or y is None or x.shape != y.shape or not np.array_equal(x, y):
             out.append(f"{rel}: pixels differ")
+    elif suffix == ".html":
+        x, y = a.read_text(), b.read_text()
+        for rx, repl in MASKED_TEXT:
+            x, y = rx.sub(repl, x), rx.sub(repl, y)
+        if x != y:
+            import difflib
+
+            # by sentence-sized pieces (a report is megabytes of base64 figures: never by character)
+            xs, ys = re.split(r"(?<=[>.;])", x), re.split(r"(?<=[>.;])", y)
+            for op, i1, i2, j1, j2 in difflib.SequenceMatcher(None, xs, ys, autojunk=False).get_opcodes():
+                if op != "equal":
+                    out.append(f"{rel}: text differs: {''.join(xs[i1:i2])[:160]!r} -> {''.join(ys[j1:j2])[:160]!r}")
     elif a.read_bytes() != b.read_bytes():
         out.append(f"{rel}: bytes differ")
     return out
@@ -187,7 +205,8 @@ def main(argv=None) -> int:
     for line in diffs:
         print(line)
     n_files = sum(1 for p in args.old.rglob("*") if p.is_file())
-    print(f"{len(diffs)} differences over {n_files} files (dropped keys: {', '.join(sorted(DROPPED_KEYS))})")
+    print(f"{len(diffs)} differences over {n_files} files (dropped keys: {', '.join(sorted(DROPPED_KEYS))}; "
+          "masked in HTML: the generation time, wall times, the svgs-sim version)")
     return 1 if diffs else 0
 
 

@@ -47,11 +47,11 @@ def _centroid(img, cu, cv, h=HALF):
 def curves(name: str) -> dict:
     import galsim
 
-    from camera.phone import Exposer, PhoneCamera
-    from camera.phone.cfa import luminance
-    from camera.rendered import PointFlux
-    from svgs.detect import detect_blobs
-    from svgs.profiles import Camera
+    from svgs_sim.camera.phone import Exposer, PhoneCamera
+    from svgs_sim.camera.phone.cfa import luminance
+    from svgs_sim.camera.rendered import PointFlux
+    from svgs_sim.svgs.detect import detect_blobs
+    from svgs_sim.base.profiles import Camera
 
     cam = Camera.load(name)
     base = PhoneCamera(cam)

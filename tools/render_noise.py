@@ -3,11 +3,11 @@ against the sensor's own centroid Cramer-Rao bound (issue 23, deliverable 3).
 
 The scene of the demo (Galaxy Nexus, 10 m, roll 5, pitch -3, yaw 10 deg, the lab's light),
 rendered with ``--seeds`` render seeds at each number of guided samples per virtual source
-(``render.constants.DEFAULT_SPOT_SAMPLES`` is the default). For every spot, the centroid of
+(``svgs_sim.render.constants.DEFAULT_SPOT_SAMPLES`` is the default). For every spot, the centroid of
 its samples (their radiance-weighted film position: what the deterministic optics carry to
 the image unchanged) is taken per seed; the scatter across seeds is the render's noise on
 that spot, px per axis. It is printed beside the frame's centroid CRLB (the shot, read and
-quantisation noise of one exposure, ``sim.crlb``) with their ratio and the render time.
+quantisation noise of one exposure, ``svgs_sim.sim.crlb``) with their ratio and the render time.
 
 Run: ``.venv/bin/python tools/render_noise.py [--seeds 8] [--samples 65536 262144]``
 """
@@ -54,13 +54,13 @@ def main(argv=None):
     ap.add_argument("--range", type=float, default=10.0, dest="range_m", help="range, m (default 10)")
     ap.add_argument("--camera", default="galaxy-nexus", help="phone profile (default galaxy-nexus)")
     ap.add_argument("--sampler", nargs="+", default=None, choices=("sobol", "kronecker", "independent"),
-                    help="how the guided samples are placed (render.spots; default: the renderer's default)")
+                    help="how the guided samples are placed (svgs_sim.render.spots; default: the renderer's default)")
     args = ap.parse_args(argv)
-    from render import render_flux
-    from render.constants import DEFAULT_SPOT_SAMPLER, DEFAULT_SPOT_SAMPLES
-    from sim.closed_loop import Scenario, expose_and_solve, render_scenario
-    from sim.crlb import centroid_crlb_px
-    from svgs.profiles import Pattern
+    from svgs_sim.render import render_flux
+    from svgs_sim.render.constants import DEFAULT_SPOT_SAMPLER, DEFAULT_SPOT_SAMPLES
+    from svgs_sim.sim.closed_loop import Scenario, expose_and_solve, render_scenario
+    from svgs_sim.sim.crlb import centroid_crlb_px
+    from svgs_sim.base.profiles import Pattern
 
     scen = Scenario(camera=args.camera, range_m=args.range_m, roll_deg=5, pitch_deg=-3, yaw_deg=10)
     fr = render_scenario(scen, seed=0)

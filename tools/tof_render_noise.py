@@ -19,7 +19,7 @@ the threshold moves a centroid by a step (the same happens under the sensor's ow
 
 ``--sampler`` picks the renderer's sample generator (``sobol``, the default, or the earlier
 ``r2``) and ``--rim-spp-factor`` the factor on ``--spp`` for the pixels on the marker rims
-(default the renderer's; 1: uniform), for the before/after comparison (:mod:`render.tof.camera`).
+(default the renderer's; 1: uniform), for the before/after comparison (:mod:`svgs_sim.render.tof.camera`).
 ``--spp`` is the samples per pixel of the traced box (the rim pixels get the factor times more);
 the sensor's reference render is the last ``--spp`` entry with a 4x larger factor.
 
@@ -59,10 +59,10 @@ def _parse_args(argv):
 
 def main(argv=None):
     args = _parse_args(argv)
-    from camera.amcw import TofSensor
-    from render.tof.camera import DEFAULT_RIM_SPP_FACTOR, TofRenderer
-    from svgs.frames import pose_from_scenario
-    from tof import TofPipeline, load_camera, load_target
+    from svgs_sim.camera.amcw import TofSensor
+    from svgs_sim.render.tof.camera import DEFAULT_RIM_SPP_FACTOR, TofRenderer
+    from svgs_sim.svgs.frames import pose_from_scenario
+    from svgs_sim.tof import TofPipeline, load_camera, load_target
 
     camera = load_camera("tof-epc660", render=True)
     target = load_target("tof-8")

@@ -5,14 +5,14 @@ The detector on a synthetic image
 An 8-bit frame of the Galaxy Nexus's size with Gaussian spots drawn (pixel-integrated) at the
 target's projected centroids, read noise and one bright distractor, all seeded. The SVGS
 detector (the app's brightness threshold, the blobs' centroids), the target identification
-and the solver recover the pose: :func:`svgs.solve_image` end to end.
+and the solver recover the pose: :func:`svgs_sim.svgs.solve_image` end to end.
 """
 
 import matplotlib.pyplot as plt
 import numpy as np
 from scipy.special import erf
 
-import svgs
+from svgs_sim import svgs
 
 camera = svgs.Camera.load("galaxy-nexus")
 pattern = svgs.Pattern.load("svgs-3u")

@@ -11,7 +11,7 @@ Cramer-Rao bound (the ``std`` of the solution).
 import matplotlib.pyplot as plt
 import numpy as np
 
-import svgs
+from svgs_sim import svgs
 
 camera = svgs.Camera.load("galaxy-nexus")
 pattern = svgs.Pattern.load("svgs-3u")

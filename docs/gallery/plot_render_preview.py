@@ -3,7 +3,7 @@ One render at preview size
 ==========================
 
 Mitsuba ray-traces the SVGS 3U target's corner-cube retroreflectors under the phone's flash
-(:func:`render.api.render_flux`): the photon flux reaching each pixel, here for the Galaxy
+(:func:`svgs_sim.render.api.render_flux`): the photon flux reaching each pixel, here for the Galaxy
 Nexus's camera scaled to a 648 x 486 preview stream, the target 6 m away. The CPU variant
 (LLVM) renders it in seconds; the truth records where each target's spot centre lies.
 """
@@ -11,8 +11,8 @@ Nexus's camera scaled to a 648 x 486 preview stream, the target 6 m away. The CP
 import matplotlib.pyplot as plt
 import numpy as np
 
-import svgs
-from render.api import render_flux
+from svgs_sim import svgs
+from svgs_sim.render.api import render_flux
 
 camera = svgs.Camera.load("galaxy-nexus").scaled(648, 486)
 R_cam_target, t_cam_target_m = svgs.pose_from_scenario(6.0, 0.1, 0.05, roll_deg=3, pitch_deg=-2, yaw_deg=8)

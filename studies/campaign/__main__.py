@@ -1,6 +1,0 @@
-"""``python -m studies.campaign rebuild DIR [DIR ...]`` (:func:`studies.campaign.run.main`)."""
-
-from .run import main
-
-if __name__ == "__main__":  # importing it (the API reference's autosummary) runs nothing
-    raise SystemExit(main())

@@ -1,0 +1,79 @@
+"""Exceptions for bad input and for simulated physical failures.
+
+Bad input (a missing file, a profile with a NaN, a degenerate point set) raises
+:class:`InputError`, a :class:`ValueError` whose message names the input and what was
+wrong. The CLI maps it to exit code 2. Failures of *estimation* (no consistent set of
+blobs, a diverged solve) are not exceptions: they are falsy result objects, see
+:mod:`svgs_sim.svgs.result`. A *simulated* sensor that measures nothing at all (every pixel
+saturated by the light it was given) raises :class:`SimulationFailure`: the input was
+valid, the physics failed; the CLI maps it to exit code 1 (no solution) with its reason.
+"""
+
+from __future__ import annotations
+
+
+class InputError(ValueError):
+    """Bad input: the message names the input and what was wrong with it."""
+
+
+class ProfileError(InputError):
+    """A camera profile or target pattern that cannot be used."""
+
+
+class SimulationFailure(RuntimeError):
+    """A simulated physical failure: valid input, but the simulated sensor measured nothing usable.
+
+    Not bad input (that is :class:`InputError`, exit 2): the scene and the sensor were what the
+    user asked for, and the physics left nothing to measure (e.g. the ambient light saturated
+    every pixel). The CLI prints the message and exits 1, as for an unsolved pose.
+
+    Parameters
+    ----------
+    message : str
+        What failed and why, for people (the numbers that made it fail).
+    reason : str
+        A short machine-readable code (``"saturated"``, ``"no_signal"``).
+    """
+
+    def __init__(self, message: str, reason: str):
+        super().__init__(message)
+        self.reason = str(reason)
+
+
+def check_finite_positive(value, name: str, *, allow_zero: bool = False) -> float:
+    """Return ``float(value)`` if it is a finite positive number, else raise.
+
+    Parameters
+    ----------
+    value : object
+        The value to check.
+    name : str
+        Name of the input, used in the error message (e.g. ``"intrinsics.fx"``).
+    allow_zero : bool
+        Accept exactly zero as well.
+
+    Returns
+    -------
+    float
+    """
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: expected a number, got {value!r}") from None
+    if v != v or v in (float("inf"), float("-inf")):
+        raise InputError(f"{name}: expected a finite number, got {value!r}")
+    if v < 0 or (v == 0 and not allow_zero):
+        word = "non-negative" if allow_zero else "positive"
+        raise InputError(f"{name}: expected a {word} number, got {value!r}")
+    return v
+
+
+def check_finite(value, name: str) -> float:
+    """Return ``float(value)`` if it is a finite number, else raise :class:`InputError`."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: expected a number, got {value!r}") from None
+    if v != v or v in (float("inf"), float("-inf")):
+        raise InputError(f"{name}: expected a finite number, got {value!r}")
+    return v

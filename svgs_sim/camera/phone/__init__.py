@@ -1,0 +1,518 @@
+"""The phone camera model: photon flux -> the image a phone would deliver.
+
+Flux (photons/s/px, from :mod:`render`; the retro spots as sub-pixel point samples) -> lens
+PSF (Airy + aberration core, glare wings, ghosts; :mod:`svgs_sim.camera.phone.optics`), integrated over
+each pixel -> Bayer mosaic (:mod:`svgs_sim.camera.phone.cfa`) -> exposure (auto or manual) -> sensor
+in electrons (shot, dark, DSNU/PRNU, blooming) -> readout (read noise, gain, black level,
+ADC) = **raw** (DN) -> ISP (white balance, demosaic, noise reduction, tone curve, sharpening,
+8 bits, downscale, JPEG; :mod:`svgs_sim.camera.phone.isp`) = **image** (uint8, the luminance the app
+thresholds). No Mitsuba here: it runs on any flux image.
+
+Render once, expose many: :class:`Exposer` holds one noise-free flux, applies the optics and
+meters the scene once, and then makes as many exposures (noise draws, exposure or gain
+changes) as asked, each from its own seed.
+
+Stages (``stages=``): ``glare`` (optics PSF; off: a perfect lens), ``cfa`` (the profile's
+colour filter array; off, or ``[cfa] pattern = "none"``: mono), ``shot``, ``dark``, ``fpn``
+(DSNU and PRNU), ``read``, ``bloom`` (off: plain full-well clipping), ``adc`` (quantise and
+clip; off: float DN), ``nr`` (the ISP's noise reduction, ``[isp] nr_sigma_px`` > 0), ``tone``
+(off: linear), ``sharpen`` (unsharp mask, ``[isp] sharpen_amount`` > 0), ``u8`` (the delivered
+image in 8 bits; off: a float32 image on the same 0-255 scale, and no JPEG), ``downscale``,
+``chroma`` (a colour JPEG's chroma subsampled as ``[isp] jpeg_subsampling``; off: 4:4:4),
+``jpeg``. The optics stages (``glare``, ``cfa``) are fixed per :class:`Exposer`; the others
+may change per exposure (:meth:`Exposer.expose`'s ``stages``), and so may the ISP's
+parameters and the demosaic (its ``isp`` and ``demosaic``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from svgs_sim.base.errors import InputError
+
+from svgs_sim.camera.phone.isp import (
+    ExposureSolver,
+    auto_exposure,
+    downscale,
+    jpeg_roundtrip,
+    luma,
+    noise_reduction,
+    tone_lut,
+    unsharp_mask,
+)
+from svgs_sim.camera.phone.cfa import channel_map, linear_bgr, luminance, response_map, tone_bgr, tone_image
+from svgs_sim.camera.phone.optics import apply_psf, compose, core_image, core_psf, core_share, glare_image, wings_coarse
+from svgs_sim.camera.phone.psf import PIXEL_KERNEL_RADIUS_PX, splat_patches, support_box
+from svgs_sim.camera.phone.params import (
+    ALL_STAGES,
+    NOISE_STAGES,
+    OPTICS_STAGES,
+    IspParams,
+    PhoneParams,
+    check_demosaic,
+    check_stages,
+)
+from svgs_sim.camera.phone.sensor import bloom, electrons, fixed_patterns, readout
+from svgs_sim.camera.tonemap import gamma_u8
+
+__all__ = ["PhoneCamera", "Exposer", "Exposure", "PhoneParams", "ALL_STAGES", "NOISE_STAGES", "OPTICS_STAGES"]
+
+
+@dataclass
+class Exposure:
+    """One exposure of the phone camera.
+
+    Attributes
+    ----------
+    raw_dn : ndarray, float32, shape (H, W)
+        ADC output before the ISP (integers when the ``adc`` stage is on), full resolution.
+    image : ndarray, uint8, shape (h, w)
+        What the phone delivered (after tone curve, downscale, JPEG).
+    exposure_s, iso : float
+    gain_dn_per_e : float
+        System gain K.
+    info : dict
+        Auto-exposure result, blooming statistics, stages, seed.
+    electrons : ndarray, float32, shape (H, W), optional
+        Charge after blooming, before read noise (kept with ``keep_electrons=True``).
+    """
+
+    raw_dn: np.ndarray
+    image: np.ndarray
+    exposure_s: float
+    iso: float
+    gain_dn_per_e: float
+    info: dict = field(default_factory=dict)
+    electrons: np.ndarray | None = None
+
+
+#: Optical images of backgrounds that stay from frame to frame (:meth:`PhoneCamera.optics`),
+#: by unit array and phone model; a few entries at most.
+_BACKGROUND_CACHE: dict = {}
+
+
+class PhoneCamera:
+    """A camera profile's sensor, optics and ISP.
+
+    Parameters
+    ----------
+    camera : svgs.Camera or str
+    params : PhoneParams, optional
+        Defaults to the profile's ``[sensor]``, ``[glare]``, ``[exposure]``, ``[isp]`` tables.
+    point_method : str
+        ``"grid"`` (default): the points are convolved with the PSF deterministically;
+        ``"monte-carlo"``: by PSF draws (the earlier path, the reference of the tests).
+    backend : str or svgs_sim.camera.backend.Backend, optional
+        Array backend of the optics' convolutions (:data:`svgs_sim.camera.backend.BACKENDS`; default
+        ``$SVGS_ARRAY_BACKEND``, else the CPU).
+    """
+
+    def __init__(self, camera, params: PhoneParams | None = None, *, point_method: str = "grid", backend=None):
+        from svgs_sim.camera.backend import get_backend
+
+        from svgs_sim.base.profiles import Camera
+
+        from svgs_sim.camera.phone.optics import POINT_METHODS
+
+        self.camera = Camera.load(camera)
+        self.params = params if params is not None else PhoneParams.from_camera(self.camera)
+        if point_method not in POINT_METHODS:
+            raise InputError(f"point_method: expected one of {POINT_METHODS}, got {point_method!r}")
+        #: How the point samples meet the lens PSF (:data:`svgs_sim.camera.phone.optics.POINT_METHODS`).
+        self.point_method = point_method
+        try:
+            #: The array backend of the optics (:class:`svgs_sim.camera.backend.Backend`).
+            self.backend = get_backend(backend)
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
+        self._fpn = None
+
+    @property
+    def shape(self):
+        return (self.camera.height, self.camera.width)
+
+    def fixed_patterns(self):
+        if self._fpn is None:
+            self._fpn = fixed_patterns(self.params.sensor, self.shape)
+        return self._fpn
+
+    def core_psf(self):
+        """The lens' core PSF (:class:`svgs_sim.camera.phone.psf.CorePSF`): Airy (x) aberration."""
+        p = self.params
+        return core_psf(p.f_number, p.band_nm, p.sensor.pixel_pitch_m, p.glare.aberration_sigma_px)
+
+    def optics(self, flux_ph_s: np.ndarray, points=None, *, seed: int = 0, cfa: bool | None = None,
+               background=None) -> np.ndarray:
+        """The optical image: the lens PSF applied to a flux image (photons/s/px, already
+        integrated over pixels) and to point samples at sub-pixel positions
+        (:class:`svgs_sim.camera.rendered.PointFlux`), integrated over pixels. ``seed`` seeds the
+        Monte Carlo convolution of the points.
+
+        With the colour filter array (``cfa``: default, the profile's ``[cfa]``), each pixel
+        gets its channel's image (Airy pattern at the channel's wavelength) times its
+        channel's response: the mosaic the pixels see. Returns float32 (H, W).
+
+        ``background = (scale, unit)``: light ``scale * unit`` (photons/s/px, ``unit`` an
+        (H, W) array that stays the same from frame to frame, e.g. the lab's light per unit
+        radiance) added to ``flux_ph_s``. The optics are linear: the optical image of ``unit``
+        is made once and kept (for that very array), then scaled."""
+        p = self.params
+        pp = (self.camera.cx, self.camera.cy)
+        use_cfa = p.cfa.enabled if cfa is None else (bool(cfa) and p.cfa.enabled)
+        bg = None
+        if background is not None:
+            scale, unit = background
+            scale = float(scale)
+            if scale != 0.0:
+                bg = self._background_optics(unit, use_cfa)
+        if not use_cfa:
+            out = apply_psf(flux_ph_s, p.glare, self.core_psf(), pp, points=points, rng=np.random.default_rng(seed),
+                            method=self.point_method, backend=self.backend)
+            if bg is not None:
+                out += (scale * bg).astype(np.float32)
+            return out
+        out = self.core_mosaic(flux_ph_s, points, seed=seed)
+        if not p.glare.ghosts:  # core, wings, background and response in one pass
+            eta = p.glare.veiling_fraction
+            wc, s = (wings_coarse(flux_ph_s, p.glare, points, self.backend) if eta > 0 else (np.zeros((1, 1)), 1))
+            return compose(out, core_share(p.glare), wc, s, max(eta, 0.0), response_map(p.cfa, self.shape),
+                           None if bg is None else (scale, bg))
+        out *= core_share(p.glare)
+        g = glare_image(flux_ph_s, p.glare, pp, points, self.backend)
+        if g is not None:
+            out += g
+        if bg is not None:
+            out += scale * bg
+        out *= response_map(p.cfa, self.shape)
+        return out.astype(np.float32)
+
+    def _background_optics(self, unit, use_cfa: bool) -> np.ndarray:
+        """The optical image of a background that stays (before the CFA's responses), kept per
+        array and phone model (shared by the phones of isolated frames: the lab's factor is one
+        array per camera): float64 (H, W), read-only."""
+        cache = _BACKGROUND_CACHE
+        key = (id(unit), bool(use_cfa), self.params, self.camera.cx, self.camera.cy, self.backend.name,
+               self.point_method)
+        hit = cache.get(key)
+        if hit is None or hit[0] is not unit:
+            u = np.ascontiguousarray(unit, np.float32)  # checked by the caller (check_background)
+            p = self.params
+            pp = (self.camera.cx, self.camera.cy)
+            if use_cfa:
+                img = self.core_mosaic(u)
+                img *= core_share(p.glare)
+                g = glare_image(u, p.glare, pp, backend=self.backend)
+                if g is not None:
+                    img += g
+            else:
+                img = apply_psf(u, p.glare, self.core_psf(), pp, backend=self.backend).astype(np.float64)
+            img.setflags(write=False)
+            if len(cache) >= 4:
+                cache.clear()
+            hit = (unit, img)
+            cache[key] = hit
+        return hit[1]
+
+    def core_mosaic(self, flux_ph_s: np.ndarray, points=None, *, seed: int = 0, origin=(0, 0),
+                    min_draws: int | None = None, gradient: bool = False, value: bool = True):
+        """The lens' core PSF through the colour filter array: each pixel gets its channel's
+        image (the Airy pattern at the channel's wavelength (x) the aberration Gaussian) of the
+        flux and the points, unit share, before the channel responses (float64, the flux's shape).
+
+        ``origin``: the frame pixel ``(x0, y0)`` of the flux's top-left pixel, when it is a
+        window of the frame (the mosaic's phase); ``min_draws``: the points' PSF draws per
+        channel (:func:`svgs_sim.camera.phone.optics.core_image`). ``seed`` seeds the three channels'
+        Monte Carlo convolutions (``point_method="monte-carlo"``). ``gradient``: the points only
+        (the flux must be zero), with the grid method: a tuple ``(image, d_du, d_dv)``, the
+        derivatives with respect to a common shift of the points (for the Cramer-Rao bound);
+        with ``value=False`` as well, only ``(d_du, d_dv)``."""
+        p = self.params
+        H, W = np.shape(flux_ph_s)
+        x0, y0 = int(origin[0]) % 2, int(origin[1]) % 2
+        chan = channel_map(p.cfa.pattern, (H + 2, W + 2))[y0:y0 + H, x0:x0 + W]  # the mosaic repeats every 2 px
+        cores = [core_psf(p.f_number, p.band_nm, p.sensor.pixel_pitch_m, p.glare.aberration_sigma_px,
+                          wavelength_nm=p.cfa.wavelength_nm[c]) for c in range(3)]
+        has_points = points is not None and len(points) > 0
+        if self.point_method == "monte-carlo" and not gradient:
+            out = np.zeros((H, W))
+            seeds = np.random.SeedSequence(int(seed)).spawn(3)
+            for c, core in enumerate(cores):
+                img = core_image(flux_ph_s, core, points, np.random.default_rng(seeds[c]), min_draws=min_draws,
+                                 method="monte-carlo", backend=self.backend)
+                np.copyto(out, img, where=chan == c)
+            return out
+        if gradient and np.any(flux_ph_s):
+            raise ValueError("core_mosaic: gradient=True takes the points only (the flux must be zero)")
+        n_out = (3 if value else 2) if gradient else 1
+        outs = [np.zeros((H, W)) for _ in range(n_out)]
+        f = np.ascontiguousarray(flux_ph_s, np.float32)
+        box = None if gradient else support_box(f, PIXEL_KERNEL_RADIUS_PX)
+        if box is not None:  # the pixel images: over their support only
+            y0, y1, x0, x1 = box
+            sub, sel = outs[0][y0:y1, x0:x1], chan[y0:y1, x0:x1]
+            win = np.ascontiguousarray(f[y0:y1, x0:x1])
+            for c, core in enumerate(cores):
+                np.copyto(sub, core.convolve(win, backend=self.backend), where=sel == c)
+        if has_points:
+            # each spot's three channel images at once, each pixel taking its channel's
+            for ys, xs, patches in splat_patches(cores, points.u_px, points.v_px, points.rate_ph_s, (H, W),
+                                                 gradient=gradient, value=value or not gradient):
+                h, w = patches[0][0].shape
+                sel = chan[ys:ys + h, xs:xs + w]
+                for k, out in enumerate(outs):
+                    out[ys:ys + h, xs:xs + w] += np.choose(sel, [patches[c][k] for c in range(3)])
+        return tuple(outs) if gradient else outs[0]
+
+    def uses_cfa(self, stages) -> bool:
+        """Whether exposures with these stages go through the colour filter array."""
+        return self.params.cfa.enabled and "cfa" in stages
+
+    def check_points(self, points):
+        """Validate point samples (None passes)."""
+        if points is None:
+            return None
+        from svgs_sim.camera.rendered import PointFlux
+
+        if not isinstance(points, PointFlux):
+            raise InputError(f"points: expected a svgs_sim.camera.rendered.PointFlux, got {type(points).__name__}")
+        if len(points) and not (np.all(np.isfinite(points.u_px)) and np.all(np.isfinite(points.v_px))
+                                and np.all(np.isfinite(points.rate_ph_s)) and points.rate_ph_s.min() >= 0):
+            raise InputError("points: expected finite positions and finite, non-negative photons per second")
+        return points
+
+    def check_background(self, background):
+        """Validate ``(scale, unit)`` of a background (None passes); the unit image is checked
+        once per array."""
+        if background is None:
+            return None
+        try:
+            scale, unit = background
+            scale = float(scale)
+        except (TypeError, ValueError):
+            raise InputError("background: expected (scale, unit image)") from None
+        if not np.isfinite(scale) or scale < 0:
+            raise InputError(f"background: expected a finite, non-negative scale, got {scale!r}")
+        checked = self.__dict__.setdefault("_checked_backgrounds", {})
+        if checked.get(id(unit)) is not unit:
+            self.check_flux(unit)
+            if len(checked) >= 4:
+                checked.clear()
+            checked[id(unit)] = unit
+        return scale, unit
+
+    def check_flux(self, flux_ph_s) -> np.ndarray:
+        f = np.asarray(flux_ph_s)
+        if f.shape != self.shape:
+            raise InputError(f"flux: shape {f.shape} does not match camera {self.camera.name!r} {self.shape}")
+        if not np.issubdtype(f.dtype, np.number) or not np.all(np.isfinite(f)) or f.min() < 0:
+            raise InputError("flux: expected finite, non-negative photons per second per pixel")
+        return f.astype(np.float32, copy=False)
+
+    def exposer(self, flux_ph_s, *, points=None, stages=ALL_STAGES, optics_seed: int = 0,
+                background=None) -> "Exposer":
+        return Exposer(self, flux_ph_s, points=points, stages=stages, optics_seed=optics_seed, background=background)
+
+    def expose(self, flux_ph_s, *, points=None, seed: int = 0, exposure_s=None, iso=None, stages=ALL_STAGES,
+               keep_electrons=False):
+        """One exposure of a flux image (convenience for ``exposer(flux).expose(...)``)."""
+        return self.exposer(flux_ph_s, points=points, stages=stages, optics_seed=seed).expose(
+            seed=seed, exposure_s=exposure_s, iso=iso, keep_electrons=keep_electrons)
+
+
+class Exposer:
+    """Render once, expose many: optics and metering done once for a flux image.
+
+    Parameters
+    ----------
+    phone : PhoneCamera
+    flux_ph_s : ndarray, shape (H, W)
+        Noise-free photon flux, photons per second per pixel (before the lens PSF), of the
+        light already integrated over pixels (the diffuse part of a render).
+    points : svgs_sim.camera.rendered.PointFlux, optional
+        Light at exact sub-pixel film positions (a render's retro spots), not in ``flux_ph_s``.
+    stages : sequence of str
+        Pipeline stages that are on (see the module docstring).
+    optics_seed : int
+        Seed of the Monte Carlo convolution of the points with the PSF.
+    background : (float, ndarray (H, W)), optional
+        ``(scale, unit)``: light ``scale * unit`` photons/s/px added to ``flux_ph_s``, whose
+        optical image the phone keeps for that ``unit`` array (:meth:`PhoneCamera.optics`).
+    """
+
+    def __init__(self, phone: PhoneCamera, flux_ph_s, *, points=None, stages=ALL_STAGES, optics_seed: int = 0,
+                 background=None):
+        self.phone = phone
+        self.stages = check_stages(stages)
+        f = phone.check_flux(flux_ph_s)
+        pts = phone.check_points(points)
+        bg = phone.check_background(background)
+        self.cfa = phone.uses_cfa(self.stages)
+        if "glare" in self.stages:
+            self.flux_optics = phone.optics(f, pts, seed=optics_seed, cfa=self.cfa, background=bg)
+        else:  # a perfect lens: each point counts in its own pixel
+            self.flux_optics = f.copy() if pts is None else (f + pts.binned(f.shape)).astype(np.float32)
+            if bg is not None:
+                self.flux_optics += np.float32(bg[0]) * bg[1]
+            if self.cfa:
+                self.flux_optics *= response_map(phone.params.cfa, f.shape)
+        self._solver = None
+        p = phone.params
+        self._lut = tone_lut(p.sensor, p.isp.gamma, "tone" in self.stages)
+
+    def auto_exposure(self):
+        """(exposure_s, iso, info) chosen by the phone's auto-exposure for this scene."""
+        p = self.phone.params
+        if self._solver is None:
+            self._solver = ExposureSolver.from_flux(self.flux_optics, p.sensor, p.exposure.metering)
+        return auto_exposure(self.flux_optics, p.sensor, p.exposure, self._solver)
+
+    @property
+    def meter(self) -> ExposureSolver:
+        """The phone's meter on this scene (:class:`svgs_sim.camera.phone.isp.ExposureSolver`): the metered
+        level against the exposure product, from the noise-free signal."""
+        if self._solver is None:
+            self.auto_exposure()
+        return self._solver
+
+    def metered_level(self, exposure_s: float, iso: float) -> float:
+        """What the phone's meter reads on this scene at given settings: the weighted linear
+        level (0..1, full-well clipping included) of the noise-free signal."""
+        return self.meter.level(float(exposure_s) * float(iso) / self.phone.params.sensor.base_iso)
+
+    def settings(self, exposure_s=None, iso=None):
+        """Resolve the exposure: explicit values, the profile's manual values, or auto-exposure."""
+        p = self.phone.params
+        info = {}
+        if exposure_s is None and iso is None and p.exposure.mode == "auto":
+            exposure_s, iso, info = self.auto_exposure()
+            info["mode"] = "auto"
+        else:
+            exposure_s = p.exposure.exposure_s if exposure_s is None else exposure_s
+            iso = p.exposure.iso if iso is None else iso
+            info["mode"] = "manual"
+        for name, v in (("exposure_s", exposure_s), ("iso", iso)):
+            try:
+                fv = float(v)
+            except (TypeError, ValueError):
+                raise InputError(f"{name}: expected a number, got {v!r}") from None
+            if not np.isfinite(fv) or fv <= 0:
+                raise InputError(f"{name}: impossible exposure setting {v!r} (must be a positive finite number)")
+        if float(exposure_s) > 60.0:
+            raise InputError(f"exposure_s: impossible exposure of {exposure_s} s for a phone camera (> 60 s)")
+        return float(exposure_s), float(iso), info
+
+    def expose(self, *, seed: int = 0, exposure_s=None, iso=None, keep_electrons=False, stages=None, isp=None,
+               demosaic=None) -> Exposure:
+        """One exposure with its own noise draw.
+
+        Parameters
+        ----------
+        seed : int
+            Seeds shot, dark and read noise (fixed patterns come from the camera's serial).
+        exposure_s, iso : float, optional
+            Override the profile's exposure (manual or auto).
+        keep_electrons : bool
+            Keep the charge image (after blooming) in the result.
+        stages : sequence of str, optional
+            The stages of this exposure (default the exposer's); the optics stages
+            (``glare``, ``cfa``) must be the exposer's, since its optical image is made.
+        isp : svgs_sim.camera.phone.params.IspParams, optional
+            The ISP of this exposure (JPEG quality, chroma sampling and block grid, noise
+            reduction, sharpening, tone, downscale) instead of the profile's ``[isp]``.
+        demosaic : str, optional
+            The demosaic of this exposure (:data:`svgs_sim.camera.phone.params.DEMOSAIC_METHODS`) instead
+            of the profile's ``[cfa] demosaic``.
+
+        Returns
+        -------
+        Exposure
+        """
+        p = self.phone.params
+        sp = p.sensor
+        st = self.stages
+        if stages is not None:
+            st = check_stages(stages)
+            if tuple(s for s in OPTICS_STAGES if s in st) != tuple(s for s in OPTICS_STAGES if s in self.stages):
+                raise InputError(f"stages: the optics stages ({', '.join(OPTICS_STAGES)}) are fixed by the exposer "
+                                 f"({', '.join(s for s in OPTICS_STAGES if s in self.stages) or 'none'})")
+        if isp is None:
+            isp = p.isp
+        elif not isinstance(isp, IspParams):
+            raise InputError(f"isp: expected a svgs_sim.camera.phone.params.IspParams, got {type(isp).__name__}")
+        method = p.cfa.demosaic if demosaic is None else check_demosaic(demosaic)
+        t, iso, info = self.settings(exposure_s, iso)
+        prnu, dsnu = self.phone.fixed_patterns()
+        e = electrons(self.flux_optics, sp, t, prnu, dsnu, seed, shot="shot" in st, dark="dark" in st, fpn="fpn" in st)
+        if "bloom" in st:
+            info["bloom"] = bloom(e, sp.full_well_e, sp.anti_blooming_drain, sp.bloom_direction)
+        else:
+            np.minimum(e, sp.full_well_e, out=e)
+        g = isp.gamma if "tone" in st else 0.0
+        same_lut = isp.gamma == p.isp.gamma and ("tone" in st) == ("tone" in self.stages)
+        lut = self._lut if same_lut else tone_lut(sp, isp.gamma, "tone" in st)
+        nr = "nr" in st and isp.nr_sigma_px > 0
+        sharpen = "sharpen" in st and isp.sharpen_amount > 0
+        colour = self.cfa and isp.jpeg_subsampling != "gray"
+        legacy = not (nr or sharpen or colour)  # the luminance image through the one-pass paths
+        raw, img = readout(e, sp, iso, seed, read="read" in st, adc="adc" in st,
+                           lut=None if (self.cfa or not legacy) else lut)
+        if legacy:
+            if self.cfa:  # white balance, demosaic, luminance; then the tone curve
+                if "adc" in st:
+                    img = tone_image(raw, p.cfa, sp.black_level_dn, sp.white_dn, lut, method)
+                else:
+                    img = gamma_u8(luminance(raw, p.cfa, sp.black_level_dn, sp.white_dn, method), g)
+            if "u8" not in st:  # the same tone curve, not quantised: float32 on the 0-255 scale
+                lin = (luminance(raw, p.cfa, sp.black_level_dn, sp.white_dn, method) if self.cfa
+                       else np.clip((raw - sp.black_level_dn) / (sp.white_dn - sp.black_level_dn), 0, 1))
+                img = (255.0 * (np.asarray(lin, np.float64) ** (1.0 / g) if g > 0 else lin)).astype(np.float32)
+            elif img is None:
+                img = gamma_u8(np.clip((raw - sp.black_level_dn) / (sp.white_dn - sp.black_level_dn), 0, 1), g)
+        else:
+            img = self._isp_image(raw, isp, method, g, nr=nr, sharpen=sharpen, colour=colour, u8="u8" in st)
+        if "downscale" in st and isp.output_width > 0:
+            img = downscale(img, isp.output_width, isp.output_height)
+        if "jpeg" in st and "u8" in st and isp.jpeg_quality > 0:
+            sub = (isp.jpeg_subsampling if "chroma" in st else "4:4:4") if colour else "gray"
+            img = jpeg_roundtrip(img, isp.jpeg_quality, sub, isp.jpeg_grid_offset_px)
+        if img.ndim == 3:  # the app reads the colour picture's luma
+            img = luma(img)
+        info.update({"seed": int(seed), "stages": list(st), "demosaic": method if self.cfa else None})
+        return Exposure(raw, img, t, iso, sp.gain_dn_per_e(iso), info, e if keep_electrons else None)
+
+    def _isp_image(self, raw, isp, method: str, gamma: float, *, nr: bool, sharpen: bool, colour: bool,
+                   u8: bool) -> np.ndarray:
+        """The ISP's image with noise reduction, sharpening or a colour output: linear image
+        (demosaiced and white-balanced with the mosaic) -> noise reduction -> [luminance, unless
+        ``colour``] -> tone curve -> sharpening of the luminance -> 8 bits (unless ``u8`` is off).
+
+        Returns
+        -------
+        ndarray, shape (H, W) or (H, W, 3) (``colour``: BGR); uint8, or float32 on the 0-255 scale
+        """
+        p = self.phone.params
+        sp = p.sensor
+        black, white = sp.black_level_dn, sp.white_dn
+        if colour and not nr:
+            if u8 and not sharpen:  # rounded in the tables: the same numbers in one pass
+                return tone_bgr(raw, p.cfa, black, white, gamma, method, u8=True)
+            toned = tone_bgr(raw, p.cfa, black, white, gamma, method)
+        else:
+            if self.cfa:
+                lin = linear_bgr(raw, p.cfa, black, white, method)
+            else:
+                lin = np.clip((raw - black) / (white - black), 0, 1).astype(np.float32)
+            if nr:
+                lin = np.clip(noise_reduction(lin, isp.nr_sigma_px, isp.nr_range), 0.0, 1.0)
+            if self.cfa and not colour:
+                lin = luma(lin)
+            lin64 = np.asarray(lin, np.float64)
+            toned = (255.0 * (lin64 ** (1.0 / gamma) if gamma > 0 else lin64)).astype(np.float32)
+        if sharpen:  # the luminance sharpened; a colour image's chroma kept (the same step on B, G and R)
+            y = luma(toned) if toned.ndim == 3 else toned
+            d = unsharp_mask(y, isp.sharpen_amount, isp.sharpen_sigma_px) - y
+            toned = toned + (d[..., None] if toned.ndim == 3 else d)
+        np.clip(toned, 0.0, 255.0, out=toned)
+        return np.rint(toned).astype(np.uint8) if u8 else toned.astype(np.float32)

@@ -1,0 +1,219 @@
+"""The ``svgs`` command line: one registry of every sub-command.
+
+:data:`COMMANDS` lists each command module and the group it belongs to (``None`` for a
+top-level command, ``"calibrate"`` or ``"tof"`` for ``svgs calibrate ...`` / ``svgs tof ...``).
+A command module exposes ``register(subparsers)``, which adds its parsers to the sub-parsers
+it is given, and imports nothing heavy at module level: the handlers import the renderer,
+studies or calibration code when they run, so ``svgs solve`` on a photo loads only
+:mod:`svgs` (checked by ``tests/test_architecture.py``).
+
+Exit codes (:mod:`svgs_sim.cli.exit_codes`): 0 solved / done, 1 no solution or a simulated physical
+failure (:class:`svgs_sim.base.errors.SimulationFailure`; the reason is printed), 2 bad input or usage,
+130 interrupted.
+
+Errors: one line on stderr, ``svgs <command> [<subcommand>]: error: <message>`` - the prefix
+names the command that was run (``svgs calibrate focal``), for argparse's usage errors as for
+an :class:`~svgs_sim.base.errors.InputError`; ``svgs <command>: no solution (<reason>): <message>`` for a
+simulated failure. With ``--json`` the same message also goes to stdout as exactly one JSON
+object, ``{"ok": false, "error": "..."}`` (exit 2), or ``{"ok": false, "reason": "...",
+"error": "..."}`` for a simulated failure (exit 1), ``{"ok": false, "signal": "SIGINT", "error":
+"..."}`` for an interrupt (exit 130; 143 for SIGTERM; :func:`svgs_sim.cli.signals.report_interrupt`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+
+from svgs_sim.cli.exit_codes import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_NO_SOLUTION
+from svgs_sim.cli.signals import interruptible
+from svgs_sim.base.errors import InputError, SimulationFailure
+
+#: Command groups: name -> (help, description, dest, metavar).
+GROUPS = {
+    "calibrate": (
+        "calibrate a camera: focal length from the target at known ranges, or full intrinsics from boards",
+        "Camera calibration. 'focal': the paper's focal length from spot spacings at known ranges. 'board': "
+        "full intrinsics and distortion from chessboard, ChArUco or circle-grid images. 'render-board': "
+        "rendered calibration sets. 'study': how calibrations converge and what their errors cost.",
+        "calibrate_command", "METHOD"),
+    "tof": (
+        "time-of-flight sensor (Zhu et al. 2022): pose from gray + depth frames",
+        "Time-of-flight sensor commands (second seed, Zhu et al. 2022).",
+        "tof_command", "TOF_COMMAND"),
+}
+
+#: Every command module, in help order: (group or None, module, the commands it adds).
+COMMANDS = (
+    (None, "svgs_sim.cli.solve", ("solve",)),
+    (None, "svgs_sim.cli.render", ("render", "doctor")),
+    (None, "svgs_sim.cli.sim", ("render-and-solve", "range-sweep")),
+    (None, "svgs_sim.cli.exposure", ("exposure-study",)),
+    ("calibrate", "svgs_sim.cli.calibrate", ("focal", "board")),
+    ("calibrate", "svgs_sim.cli.calibrate_study", ("render-board", "study")),
+    ("tof", "svgs_sim.cli.tof", ("solve",)),
+    ("tof", "svgs_sim.cli.tof_render", ("render-and-solve",)),
+    ("tof", "svgs_sim.cli.tof_stability", ("stability", "study")),
+    (None, "svgs_sim.cli.studies", ("campaign", "sensitivity")),
+    (None, "svgs_sim.cli.approach", ("approach",)),
+)
+
+
+def _selected(argv) -> set[str] | None:
+    """The command modules needed to parse ``argv``, or None for all of them.
+
+    ``svgs solve IMAGE ...`` needs only :mod:`svgs_sim.cli.solve`: a command module may import the
+    library it drives while it builds its parser (a default, a list of choices), so building
+    only the invoked command keeps ``svgs solve`` free of renderer, study and calibration code.
+    ``svgs --help`` and anything unrecognised build every command."""
+    words = [a for a in (argv or []) if not a.startswith("-")]
+    if not words:
+        return None
+    first = words[0]
+    mods = {m for g, m, names in COMMANDS if (g is None and first in names) or g == first}
+    return mods or None
+
+
+class UsageError(Exception):
+    """An argparse usage error, raised (instead of exiting) by :class:`Parser` so that
+    :func:`main` can report it with ``--json``; ``parser`` is the (sub)parser that failed."""
+
+    def __init__(self, parser: argparse.ArgumentParser, message: str):
+        super().__init__(message)
+        self.parser = parser
+
+
+class Parser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose usage errors raise :class:`UsageError` (its subparsers too)."""
+
+    def error(self, message):
+        raise UsageError(self, message)
+
+
+def build_parser(argv=None) -> argparse.ArgumentParser:
+    """The ``svgs`` parser: every registered command, or only those that ``argv`` invokes."""
+    parser = Parser(
+        prog="svgs",
+        description="Smartphone Video Guidance Sensor simulator: render, expose, detect, solve.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    groups: dict[str, argparse._SubParsersAction] = {}
+    selected = _selected(argv)
+    for group, module, _names in COMMANDS:
+        if selected is not None and module not in selected:
+            continue
+        target = sub
+        if group is not None:
+            if group not in groups:
+                help_, description, dest, metavar = GROUPS[group]
+                gp = sub.add_parser(group, help=help_, description=description)
+                groups[group] = gp.add_subparsers(dest=dest, metavar=metavar)
+                groups[group].required = True
+            target = groups[group]
+        importlib.import_module(module).register(target)
+    return parser
+
+
+def iter_commands(parser: argparse.ArgumentParser, prefix: tuple = ()):
+    """Every command's parser below ``parser``: ``(words, parser)`` pairs, e.g.
+    ``(("calibrate", "focal"), <parser>)``, the groups included, depth first (for the tests and the
+    docs that walk every option)."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield prefix + (name,), sub
+                yield from iter_commands(sub, prefix + (name,))
+
+
+def leaf_parser(parser: argparse.ArgumentParser, args) -> argparse.ArgumentParser:
+    """The (sub)parser of the command that ``args`` ran (``svgs calibrate focal``'s parser)."""
+    p = parser
+    for key in ("command", "calibrate_command", "tof_command"):
+        name = getattr(args, key, None)
+        if not name:
+            continue
+        sub = next((a for a in p._actions if isinstance(a, argparse._SubParsersAction)), None)
+        if sub is None or name not in sub.choices:
+            break
+        p = sub.choices[name]
+    return p
+
+
+def report_error(prog: str, message: str, as_json: bool, reason: str | None = None) -> None:
+    """One line on stderr, ``PROG: error: MESSAGE`` (bad input) or ``PROG: no solution (REASON):
+    MESSAGE`` (a simulated failure); with ``as_json`` also one JSON object on stdout,
+    ``{"ok": false, "error": MESSAGE}`` (plus ``"reason"`` for a simulated failure)."""
+    line = " ".join(str(message).split())  # one line, whatever the message held
+    head = "error" if reason is None else f"no solution ({reason})"
+    print(f"{prog}: {head}: {line}", file=sys.stderr, flush=True)
+    if as_json:
+        obj = {"ok": False, **({"reason": reason} if reason is not None else {}), "error": line}
+        print(json.dumps(obj), file=sys.stdout, flush=True)
+
+
+def _parse(parser: argparse.ArgumentParser, argv: list):
+    """``parser.parse_args(argv)``, but an unrecognised argument is reported by the sub-command's parser."""
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        leaf_parser(parser, args).error(f"unrecognized arguments: {' '.join(extra)}")
+    return args
+
+
+def main(argv=None) -> int:
+    """Run the CLI; returns the exit code.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments. None: ``sys.argv[1:]``, and the call is the program itself (the ``svgs``
+        script, ``python -m svgs_sim.cli.main``), so an interrupt may end the process from a watchdog
+        thread (:mod:`svgs_sim.sim.hard_stop`); with a list (tests, in-process callers) it never does.
+    """
+    as_program = argv is None
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(argv)
+    try:
+        args = _parse(parser, argv)
+    except UsageError as exc:  # usage errors: exit 2, named by the sub-command's parser
+        exc.parser.print_usage(sys.stderr)
+        report_error(exc.parser.prog, str(exc), "--json" in argv)
+        return EXIT_BAD_INPUT
+    except SystemExit as exc:  # --help, --version: exit 0
+        return int(exc.code or 0)
+    prog = leaf_parser(parser, args).prog  # "svgs calibrate focal"
+    as_json = bool(getattr(args, "json", False))
+    try:
+        from svgs_sim.cli.validate import check_args
+
+        check_args(args, parser)  # every argument checked before any work (exit 2)
+        if args.command != "doctor":
+            from svgs_sim.cli.compile_kernels import kernels_cached
+
+            if not kernels_cached():  # a fresh install that skipped `make`: say why the first call waits
+                print("compiling the solver and camera kernels (first run only, ~20 s; cached for later runs) ...",
+                      file=sys.stderr, flush=True)
+        # Ctrl-C and SIGTERM: one line, exit 130 / 143 (svgs_sim.cli.signals); run as the program, within a
+        # second even inside a render (a watchdog that may end the process: never in-process)
+        args.func = interruptible(args, hard_stop=as_program)
+        return int(args.func(args))
+    except InputError as exc:
+        report_error(prog, str(exc), as_json)
+        return EXIT_BAD_INPUT
+    except SimulationFailure as exc:  # valid input, the simulated physics measured nothing: no solution
+        report_error(prog, str(exc), as_json, reason=exc.reason)
+        return EXIT_NO_SOLUTION
+    except KeyboardInterrupt as exc:  # before the command's handler started
+        from svgs_sim.cli.signals import report_interrupt
+
+        report_interrupt(prog.removeprefix("svgs "), exc, as_json)
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:  # output piped into a program that stopped reading (e.g. head)
+        sys.stderr.close()
+        return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

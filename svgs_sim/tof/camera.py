@@ -1,0 +1,220 @@
+"""ToF camera geometry and the marker target: profile loaders and lines of sight.
+
+The ToF camera's geometry is a :class:`svgs_sim.base.profiles.Camera` (pinhole + OpenCV distortion);
+its ``[tof]`` table says what the depth image holds. The marker target is a
+:class:`svgs_sim.base.profiles.Pattern` whose ``[[target]]`` tables also give each marker's
+``diameter_m`` and ``standoff_m``.
+
+Depth convention
+    ``depth_kind = "radial"`` (default, what an AMCW camera measures): the distance from the
+    optical centre along the pixel's line of sight, so a marker seen at unit line of sight
+    ``e`` and depth ``rho`` sits at ``p_cam = rho * e``. ``depth_kind = "z"``: the coordinate
+    along the boresight, ``p_cam = z * (xn, yn, 1)``.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from svgs_sim.base.errors import InputError, ProfileError
+from svgs_sim.base.profile_schema import DEPTH_KINDS, TARGET_KEYS, TOF_CAMERA_TABLES
+from svgs_sim.base.profiles import Camera, Pattern
+
+#: Default ToF camera profile (``assets/cameras/tof-epc660.toml``).
+DEFAULT_CAMERA = "tof-epc660"
+#: Default marker target (``assets/patterns/tof-8.toml``).
+DEFAULT_PATTERN = "tof-8"
+#: The ToF sensor's range envelope, m: the paper's design range 0.27-15 m (section 2.2), within
+#: the 15 m unambiguous range of its 10 MHz modulation (``--range``, range lists, sensitivity bounds).
+DESIGN_RANGE_M = (0.27, 15.0)
+
+
+#: Tables that only a phone (SVGS) camera profile has.
+PHONE_TABLES = ("flash", "cfa", "isp", "glare", "exposure")
+#: What the ToF renderer and pixel model read from a profile.
+RENDER_TABLES = ("tof", "optics", "illumination", "noise")
+
+
+def load_camera(name_or_path=DEFAULT_CAMERA, *, render: bool = False) -> Camera:
+    """Load a ToF camera profile (by name or path).
+
+    A geometry-only profile (``[intrinsics]``, optional ``[distortion]`` and ``[tof]``) is
+    accepted for solving real frames; ``render=True`` also needs the tables the renderer and
+    the pixel model read (:data:`RENDER_TABLES`).
+
+    Returns
+    -------
+    Camera
+
+    Raises
+    ------
+    ProfileError
+        A value of the profile refused when it is loaded (:meth:`svgs_sim.base.profiles.Camera.load`
+        checks ``[tof]``, ``[noise]``, ``[illumination]`` with the rest); a phone profile (it has
+        a ``[flash]``/``[cfa]``... table: an SVGS camera, not a ToF one), or ``render=True`` and
+        a table missing.
+    """
+    cam = Camera.load(name_or_path)
+    phone = [t for t in PHONE_TABLES if t in cam.tables]
+    if phone:
+        raise ProfileError(f"camera {cam.name!r} is a phone (SVGS) profile (it has [{phone[0]}]), not a ToF camera; "
+                           f"ToF commands need a ToF profile such as {DEFAULT_CAMERA!r}")
+    if render:
+        missing = [t for t in RENDER_TABLES if not isinstance(cam.tables.get(t), dict)]
+        if missing:
+            raise ProfileError(f"camera {cam.name!r}: rendering the ToF camera needs the table(s) "
+                               f"{['[' + m + ']' for m in missing]} (see {DEFAULT_CAMERA!r})")
+    return cam
+
+
+def depth_kind(camera: Camera) -> str:
+    """What the camera's depth image holds: ``"radial"`` (default) or ``"z"``
+    (:data:`svgs_sim.base.profile_schema.DEPTH_KINDS`; checked by the profile's entry, for cameras
+    built in code: a loaded profile passed the check already)."""
+    t = camera.tables.get("tof", {})
+    kind = t.get("depth_kind", "radial") if isinstance(t, dict) else "radial"
+    try:
+        return TOF_CAMERA_TABLES["tof"]["depth_kind"].check(kind, f"camera {camera.name!r}: [tof] depth_kind")
+    except InputError as exc:
+        raise ProfileError(str(exc)) from None
+
+
+def line_of_sight(camera: Camera, uv_px) -> np.ndarray:
+    """Unit line-of-sight vectors in the OpenCV camera frame (paper eq. 9).
+
+    Parameters
+    ----------
+    camera : Camera
+    uv_px : array_like, shape (..., 2)
+        Pixel coordinates (distorted, as measured).
+
+    Returns
+    -------
+    e_cam : ndarray, shape (..., 3)
+        Unit vectors, z > 0.
+    """
+    xy = camera.pixels_to_normalized(np.asarray(uv_px, float))
+    v = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], -1)
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def points_from_depth(camera: Camera, uv_px, depth_m, kind: str | None = None) -> np.ndarray:
+    """3-D points in the camera frame from pixel positions and depths (paper eq. 8).
+
+    Parameters
+    ----------
+    camera : Camera
+    uv_px : array_like, shape (..., 2)
+    depth_m : array_like, shape (...)
+        Radial range or z depth (see ``kind``), metres.
+    kind : {"radial", "z"}, optional
+        Default: the camera's ``tof.depth_kind``.
+
+    Returns
+    -------
+    p_cam_m : ndarray, shape (..., 3)
+    """
+    kind = depth_kind(camera) if kind is None else kind
+    if kind not in DEPTH_KINDS:
+        raise InputError(f"kind: expected one of {DEPTH_KINDS}, got {kind!r}")
+    d = np.asarray(depth_m, float)[..., None]
+    if kind == "radial":
+        return line_of_sight(camera, uv_px) * d
+    xy = camera.pixels_to_normalized(np.asarray(uv_px, float))
+    return np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], -1) * d
+
+
+@dataclass(frozen=True)
+class MarkerTarget:
+    """The ToF marker target: a pattern plus each marker's size and standoff.
+
+    Attributes
+    ----------
+    pattern : Pattern
+        Marker ids and face centres in the target frame, metres.
+    diameter_m : ndarray, shape (N,)
+    standoff_m : ndarray, shape (N,)
+        Height of each marker face above the plate.
+    normal_target : ndarray, shape (3,)
+        Unit normal of the marker faces (and the plate) in the target frame.
+    plate : dict
+        The ``[plate]`` table (``width_m``, ``height_m``, ``albedo``...), may be empty.
+    marker : dict
+        The ``[marker]`` table, may be empty.
+    """
+
+    pattern: Pattern
+    diameter_m: np.ndarray
+    standoff_m: np.ndarray
+    normal_target: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+    plate: dict = field(default_factory=dict)
+    marker: dict = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return self.pattern.n
+
+    @property
+    def ids(self) -> np.ndarray:
+        return self.pattern.ids
+
+    @property
+    def points_m(self) -> np.ndarray:
+        return self.pattern.points_m
+
+    @property
+    def radius_m(self) -> np.ndarray:
+        return self.diameter_m / 2.0
+
+
+def load_target(name_or_path=DEFAULT_PATTERN) -> MarkerTarget:
+    """Load a marker target: a pattern TOML with ``diameter_m`` per ``[[target]]``.
+
+    ``standoff_m`` defaults to the marker's ``z_m``. A pattern without per-target diameters
+    may give one in a ``[marker]`` or ``[reflector]`` table (``diameter_m``).
+
+    Raises
+    ------
+    ProfileError
+        A value of the pattern refused when it is loaded (:meth:`svgs_sim.base.profiles.Pattern.load`
+        checks every ``[[target]]``, ``[plate]``, ``[marker]`` and ``[reflector]`` value); a
+        marker without a diameter, or a diameter out of range (a pattern built in code).
+    """
+    if isinstance(name_or_path, MarkerTarget):
+        return name_or_path
+    pattern = Pattern.load(name_or_path)
+    raw = {}
+    if pattern.source and Path(pattern.source).is_file():
+        with open(pattern.source, "rb") as fh:
+            raw = tomllib.load(fh)
+    by_id = {int(t["id"]): t for t in raw.get("target", []) if isinstance(t, dict) and "id" in t}
+    default_d = None
+    for tab in ("marker", "reflector"):
+        t = pattern.tables.get(tab)
+        if isinstance(t, dict) and "diameter_m" in t:
+            default_d = t["diameter_m"]
+            break
+    diam, stand = [], []
+    for tid, p in zip(pattern.ids, pattern.points_m):
+        t = by_id.get(int(tid), {})
+        d = t.get("diameter_m", default_d)
+        if d is None:
+            raise ProfileError(f"pattern {pattern.name!r}: target {tid} has no diameter_m (and no [marker] diameter_m)")
+        try:  # a loaded file passed this check already; a pattern built in code may not have
+            diam.append(TARGET_KEYS["diameter_m"].check(d, f"pattern {pattern.name!r}: target {tid} diameter_m"))
+        except InputError as exc:
+            raise ProfileError(str(exc)) from None
+        stand.append(float(t.get("standoff_m", p[2])))
+    plate = pattern.tables.get("plate", {})
+    marker = pattern.tables.get("marker", {})
+    return MarkerTarget(
+        pattern=pattern,
+        diameter_m=np.asarray(diam),
+        standoff_m=np.asarray(stand),
+        plate=plate if isinstance(plate, dict) else {},
+        marker=marker if isinstance(marker, dict) else {},
+    )
