@@ -89,7 +89,7 @@ def test_paper_calibration_is_drawn_once_per_campaign():
 def test_other_cameras_need_ranges(tmp_path):
     from svgs_sim.base.profiles import Camera
 
-    path = Camera.load("galaxy-nexus").replace(name="modern-phone").save(tmp_path / "modern-phone.toml")
+    path = Camera.load("galaxy-nexus").replace(name="modern-phone", key="modern-phone").save(tmp_path / "modern-phone.toml")
     with pytest.raises(InputError, match="give the test ranges"):
         make_config(str(path))
     assert make_config(str(path), ranges_m=(2.0, 8.0)).ranges_m == (2.0, 8.0)

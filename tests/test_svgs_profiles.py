@@ -1,3 +1,5 @@
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -187,10 +189,13 @@ def test_profiles_without_overlay_load_the_same_either_way():
 
 
 def _write_profile(tmp_path, overlay_body):
+    """A user's profile ``c.toml`` of the camera keyed ``my-phone``, with its overlay beside it
+    (``fitted/<key>.toml``)."""
     (tmp_path / "fitted").mkdir()
-    (tmp_path / "c.toml").write_text("[intrinsics]\nwidth = 64\nheight = 48\nfx = 50\nfy = 50\ncx = 31.5\ncy = 23.5\n"
+    (tmp_path / "c.toml").write_text('key = "my-phone"\n'
+                                     "[intrinsics]\nwidth = 64\nheight = 48\nfx = 50\nfy = 50\ncx = 31.5\ncy = 23.5\n"
                                      "[glare]\nveiling_fraction = 0.03\n")
-    (tmp_path / "fitted" / "c.toml").write_text(overlay_body)
+    (tmp_path / "fitted" / "my-phone.toml").write_text(overlay_body)
     return tmp_path / "c.toml"
 
 
@@ -200,6 +205,7 @@ FIT_OK = ('[[fit]]\nkey = "glare.veiling_fraction"\nvalue = 0.05\nfitted_to = "T
 
 def test_user_profile_with_overlay(tmp_path):
     path = _write_profile(tmp_path, FIT_OK)
+    assert Camera.load(path).key == "my-phone"
     assert Camera.load(path).tables["glare"]["veiling_fraction"] == 0.05
     assert Camera.load(path, fitted=False).tables["glare"]["veiling_fraction"] == 0.03
     # a saved fitted camera keeps its values and its record; loading it again changes nothing
@@ -247,3 +253,44 @@ def test_lab_overlay_is_a_physical_fit():
         assert "PRIOR" in base["sources"]["ambient"] and "fitted/" in base["sources"]["ambient"]
     assert load_lab()["ambient_radiance_w_m2_sr"] == over["fit"][0]["value"]
     assert load_lab(fitted=False)["ambient_radiance_w_m2_sr"] == base["lab"]["ambient_radiance_w_m2_sr"]
+
+
+def test_the_overlay_is_chosen_by_the_key_not_the_file_or_display_name(tmp_path):
+    """The overlay is ``fitted/<key>.toml``: an overlay named after the file is not the camera's,
+    and a profile without a key has none."""
+    path = _write_profile(tmp_path, FIT_OK)
+    (tmp_path / "fitted" / "my-phone.toml").rename(tmp_path / "fitted" / "c.toml")
+    assert Camera.load(path).tables["glare"]["veiling_fraction"] == 0.03
+    keyless = tmp_path / "keyless.toml"
+    keyless.write_text(path.read_text().replace('key = "my-phone"\n', ""))
+    (tmp_path / "fitted" / "keyless.toml").write_text(FIT_OK)
+    cam = Camera.load(keyless)
+    assert cam.key is None and "fitted" not in cam.tables
+
+
+def test_a_copy_under_another_name_is_the_same_camera(tmp_path):
+    """A copy of a shipped profile with another display name, anywhere on disk: the same key, so
+    the same fitted overlay (from the package) and the same app threshold."""
+    from svgs_sim.svgs.app import settings
+    from svgs_sim.svgs.pipeline import camera_threshold
+
+    src = Camera.load("galaxy-nexus", fitted=False).source
+    copy = tmp_path / "elsewhere" / "my-copy.toml"
+    copy.parent.mkdir()
+    copy.write_text(Path(src).read_text().replace('name = "galaxy-nexus"', 'name = "my-copy"'))
+    a, b = Camera.load("galaxy-nexus"), Camera.load(copy)
+    assert b.name == "my-copy" and b.key == a.key == "galaxy-nexus"
+    assert b.tables["fitted"] == a.tables["fitted"] and b.tables["fitted"]
+    img = np.zeros((a.height, a.width), np.uint8)
+    assert camera_threshold(img, b) == camera_threshold(img, a) == settings().threshold_for("galaxy-nexus") == 64
+    assert settings().threshold_source("galaxy-nexus") == "by_camera[galaxy-nexus]"
+    assert settings().threshold_source(None) == "default"
+
+
+@pytest.mark.parametrize("key", ["Galaxy Nexus", "", "-x", 3])
+def test_a_bad_key_is_refused(tmp_path, key):
+    path = tmp_path / "c.toml"
+    path.write_text(f"key = {key!r}\n".replace("'", '"') if isinstance(key, str) else f"key = {key}\n")
+    path.write_text(path.read_text() + "[intrinsics]\nwidth = 64\nheight = 48\nfx = 50\nfy = 50\ncx = 31.5\ncy = 23.5\n")
+    with pytest.raises(ProfileError, match="key"):
+        Camera.load(path, fitted=False)

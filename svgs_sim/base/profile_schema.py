@@ -420,7 +420,7 @@ PHONE_DEFAULTS = {"sensor": {"adc_bits": 10, "black_level_dn": 64.0},
 #: Top-level keys and tables a camera profile may have.
 #: ``calibration`` (what :mod:`calibration` estimated) and ``preview`` (a preview stream's
 #: record, :mod:`svgs_sim.camera.phone.preview`) are written by this project's own tools.
-CAMERA_KEYS = ("name", "description", "intrinsics", "distortion", "sources", "fitted", "calibration", "preview",
+CAMERA_KEYS = ("name", "key", "description", "intrinsics", "distortion", "sources", "fitted", "calibration", "preview",
                *PHONE_TABLES, *RENDER_TABLES, *TOF_CAMERA_TABLES)
 
 #: Pattern tables and keys.

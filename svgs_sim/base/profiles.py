@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import copy
 import os
+import re
 import tomllib
 from dataclasses import dataclass, field
 import functools
@@ -40,8 +41,10 @@ PATTERNS_DIR = ASSETS_DIR / "patterns"
 
 DISTORTION_KEYS = ("k1", "k2", "p1", "p2", "k3")
 
-#: Folder, beside a camera profile, of its fitted overlay (same file name).
+#: Folder of fitted overlays: beside a profile, and the package's ``assets/cameras/fitted``.
 FITTED_DIRNAME = "fitted"
+#: A camera key: lower-case letters, digits and dashes (``galaxy-nexus``).
+KEY_RE = re.compile(r"[a-z0-9][a-z0-9-]*")
 #: Fields every ``[[fit]]`` entry of an overlay must have.
 FIT_FIELDS = ("key", "value", "fitted_to", "range", "range_source")
 #: Tables an overlay may not change: the solve geometry is calibrated, never fitted.
@@ -99,22 +102,34 @@ def _read_toml(path: Path, kind: str) -> dict:
 _TOML_CACHE: dict = {}
 
 
-def fitted_overlay_path(profile_path) -> Path | None:
-    """The fitted overlay of a camera profile file, or None when it has none.
+def fitted_overlay_path(profile_path, key: str | None = None) -> Path | None:
+    """The fitted overlay of a profile file, or None when it has none.
 
     Parameters
     ----------
     profile_path : str or Path
-        A camera profile (``.../<name>.toml``).
+        A profile (``.../<name>.toml``).
+    key : str, optional
+        The profile's :attr:`Camera.key` (a camera profile's identity). Given, the overlay is
+        ``fitted/<key>.toml`` beside the profile or else in the package's
+        ``assets/cameras/fitted/``: a copy of a profile, wherever it lies and whatever its
+        display name, gets the overlay of the camera it describes. None: ``fitted/<file name>``
+        beside the profile (a lab).
 
     Returns
     -------
     Path or None
-        ``.../fitted/<name>.toml`` if that file exists.
+        The overlay file, if it exists.
     """
     p = Path(profile_path)
-    o = p.parent / FITTED_DIRNAME / p.name
-    return o if o.is_file() else None
+    if key is None:
+        o = p.parent / FITTED_DIRNAME / p.name
+        return o if o.is_file() else None
+    for folder in (p.parent / FITTED_DIRNAME, CAMERAS_DIR / FITTED_DIRNAME):
+        o = folder / f"{key}.toml"
+        if o.is_file():
+            return o
+    return None
 
 
 def read_fitted_overlay(path, base: dict | None = None) -> list[dict]:
@@ -199,6 +214,15 @@ def apply_fitted(data: dict, fits: list[dict], overlay_name: str = "") -> dict:
     return out
 
 
+def _camera_overlay(path: Path, data: dict) -> Path | None:
+    """The fitted overlay a camera profile's data calls for: by its ``key``; none when the data
+    already records fitted values (a saved camera whose overlay was applied) or has no key."""
+    key = data.get("key")
+    if "fitted" in data or not isinstance(key, str):
+        return None
+    return fitted_overlay_path(path, key)
+
+
 @dataclass(frozen=True)
 class Camera:
     """A camera's geometry (pinhole + Brown-Conrady distortion, OpenCV conventions).
@@ -209,6 +233,7 @@ class Camera:
     Attributes
     ----------
     name : str
+        The display name (free: a copy of a profile may carry any).
     width, height : int
         Image size, pixels.
     fx, fy, cx, cy : float
@@ -219,6 +244,11 @@ class Camera:
         Every other table of the profile (sensor, optics, flash, isp, sources...).
     source : str
         Where the profile was loaded from.
+    key : str or None
+        The camera's identity (the profile's top-level ``key``): it, not the display name,
+        chooses the SVGS app's per-camera settings (:meth:`svgs_sim.svgs.app.AppSettings.threshold_for`),
+        the fitted overlay (:func:`fitted_overlay_path`) and the lab's per-phone values. None: a
+        camera the project has no per-camera values for.
     """
 
     name: str
@@ -231,8 +261,12 @@ class Camera:
     dist: np.ndarray = field(default_factory=lambda: np.zeros(5))
     tables: dict = field(default_factory=dict)
     source: str = ""
+    key: str | None = None
 
     def __post_init__(self):
+        if self.key is not None and not (isinstance(self.key, str) and KEY_RE.fullmatch(self.key)):
+            raise ProfileError(f"camera {self.name!r}: key must be lower-case letters, digits and '-' "
+                               f"(the camera's identity, e.g. 'galaxy-nexus'), got {self.key!r}")
         for k in ("width", "height"):
             v = getattr(self, k)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v <= 0:
@@ -275,8 +309,9 @@ class Camera:
             return name_or_path
         path = _resolve(name_or_path, CAMERAS_DIR, "camera profile")
         data = _read_toml(path, "camera profile")
-        overlay = fitted_overlay_path(path) if fitted else None
+        overlay = _camera_overlay(path, data) if fitted else None
         if overlay is not None:
+            cls.from_dict(data, source=str(path), default_name=path.stem)  # the file's own values checked too
             data = apply_fitted(data, read_fitted_overlay(overlay, data), f"{FITTED_DIRNAME}/{overlay.name}")
         return cls.from_dict(data, source=str(path), default_name=path.stem)
 
@@ -310,7 +345,7 @@ class Camera:
         if unknown:
             raise ProfileError(f"camera {name!r}: unknown [distortion] keys {sorted(unknown)}; expected {DISTORTION_KEYS}")
         dist = [_wrap(check_finite, dist_t.get(k, 0.0), f"camera {name!r}: distortion.{k}") for k in DISTORTION_KEYS]
-        tables = {k: v for k, v in data.items() if k not in ("name", "intrinsics", "distortion")}
+        tables = {k: v for k, v in data.items() if k not in ("name", "key", "intrinsics", "distortion")}
         return cls(
             name=name,
             width=intr["width"],
@@ -322,11 +357,14 @@ class Camera:
             dist=np.array(dist),
             tables=tables,
             source=source,
+            key=data.get("key"),
         )
 
     def to_dict(self) -> dict:
         """The TOML structure of this profile."""
         out = {"name": self.name}
+        if self.key is not None:
+            out["key"] = self.key
         for k, v in self.tables.items():
             if not isinstance(v, dict):
                 out[k] = v
@@ -352,7 +390,7 @@ class Camera:
 
     def replace(self, **changes) -> "Camera":
         """A copy with some fields changed (e.g. ``fx=...``)."""
-        d = {k: getattr(self, k) for k in ("name", "width", "height", "fx", "fy", "cx", "cy", "dist", "tables", "source")}
+        d = {k: getattr(self, k) for k in ("name", "width", "height", "fx", "fy", "cx", "cy", "dist", "tables", "source", "key")}
         d.update(changes)
         return Camera(**d)
 
@@ -625,7 +663,7 @@ def load_camera(name_or_path, *, fitted: bool = True) -> Camera:
     if isinstance(name_or_path, Camera):
         return name_or_path
     path = _resolve(name_or_path, CAMERAS_DIR, "camera profile")
-    overlay = fitted_overlay_path(path) if fitted else None
+    overlay = _camera_overlay(path, _read_toml(path, "camera profile")) if fitted else None
     stamp = path.stat().st_mtime_ns + (overlay.stat().st_mtime_ns if overlay is not None else 0)
     return _cached_camera(str(path), stamp, bool(fitted))
 

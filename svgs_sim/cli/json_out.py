@@ -88,11 +88,16 @@ _SOLUTION = f"""\
 _ERRORS = ('"pos_err_vec_m": [float x3] | null, "att_err_vec_deg": [float x3] | null,\n'
            ' "pos_err_norm_m": float | null, "rot_err_deg": float | null')
 
+_DETECTOR = ('"detector": {"camera_key": str | null, "threshold": float | str,   # 8-bit DN for the app\'s\n'
+             '              "threshold_source": str,   # "app by_camera[KEY]", "app default" or "given"\n'
+             '              "fitted_overlay": str | null}')   # the camera's overlay (fitted/KEY.toml)
+
 #: The JSON object of each command's ``--json`` (for the study commands also DIR/summary.json), as
 #: shown in docs/cli.md after the command's help.
 SCHEMAS = {
     "svgs solve": f"""\
 {_SOLUTION},
+ {_DETECTOR},
  # solved: "iterations": int, "crlb_std": {{...state keys}}, "crlb_sigma_px": float
  # unsolved: "message": str, "details": {{...}}}}""",
     "svgs render": """\
@@ -112,6 +117,7 @@ SCHEMAS = {
  "residual_rms_px": float | null, "chi2": float | null, "chi2_dof": int | null,
  "p_value": float | null,                      # the consistency test (svgs_sim.svgs.app); reason "inconsistent" below alpha
  {_ERRORS},
+ {_DETECTOR},
  "crlb": {{"centroid_sigma_px": float, "per_spot_sigma_px": {{target: [su, sv]}},
           "crlb_std": {{...state keys, m and deg}}}} | null,   # Cramer-Rao 1-sigma from the simulated sensor
  "outputs": {{file: path}}}}                  # with --out""",

@@ -169,7 +169,10 @@ def _render_and_solve(args, scen, thr) -> int:
             print("  the Cramer-Rao bound of the simulated sensor ...", file=sys.stderr, flush=True)
         crlb = frame_crlb(frame, exposer, row)
     paths = write_outputs(Path(args.out), frame, row, crlb, thr) if args.out else {}
+    from svgs_sim.svgs.pipeline import describe_detector, detector_settings
+
     out = {k: v for k, v in row.items() if not k.startswith("_")}
+    out["detector"] = detector_settings(frame.camera, thr)
     out["crlb"] = crlb
     out["render_s"] = frame.render_s
     out["outputs"] = paths
@@ -179,6 +182,7 @@ def _render_and_solve(args, scen, thr) -> int:
         t = row["truth_state"]
         print(f"truth:    {state_line(t)}")
         print(f"exposure: {row['exposure_s'] * 1e3:.3f} ms at ISO {row['iso']:.0f}; blobs found: {row['n_blobs']}")
+        print(describe_detector(out["detector"]))
         if row["ok"]:
             print_state_table(row, crlb)
             note = bound_line(row, crlb, frame.truth, frame.pattern)

@@ -159,7 +159,10 @@ def _solve(args, image, camera, pattern, thr) -> int:
     blobs = detect_blobs(image, threshold=thr)  # once: for the solve and for the overlay
     result = solve_image(image, camera, pattern, threshold=thr, sigma_px=args.sigma_px, blobs=blobs,
                          consistency_sigma_px=args.consistency_sigma_px)
+    from svgs_sim.svgs.pipeline import describe_detector, detector_settings
+
     d = solution_json(result)
+    d["detector"] = detector_settings(camera, parse_threshold(args.threshold))
     if args.out:
         out = Path(args.out)
         d["outputs"] = {"overlay": write_solution_overlay(out / "overlay.png", image, camera, pattern, result, thr,
@@ -170,6 +173,7 @@ def _solve(args, image, camera, pattern, thr) -> int:
         print(json.dumps(d))
     else:
         print_solution(result)
+        print(describe_detector(d["detector"]))
         for v in (d.get("outputs") or {}).values():
             print(f"wrote {v}")
     return EXIT_OK if result else EXIT_NO_SOLUTION

@@ -63,12 +63,14 @@ def _load(name: str, fitted: bool) -> tuple:
     return tuple(out.items()), tuple((data.get("fitted") or {}).keys())
 
 
-def stand_misalignment_deg(camera_name: str, name: str = DEFAULT_LAB, *, fitted: bool = True) -> tuple:
+def stand_misalignment_deg(camera_key: str | None, name: str = DEFAULT_LAB, *, fitted: bool = True) -> tuple:
     """The phone's (roll, pitch, yaw) in the stand's holder, deg, from the lab's ``[stand]``
-    table (``<phone>_misalignment_yaw_deg``, the phone's name with ``-`` as ``_``); (0, 0, 0)
-    for a phone the lab does not list."""
+    table (``<key>_misalignment_yaw_deg``, the camera profile's ``key`` with ``-`` as ``_``);
+    (0, 0, 0) for a phone the lab does not list or a camera without a key."""
     lab = load_lab(name, fitted=fitted)
-    key = f"stand.{str(camera_name).replace('-', '_')}_misalignment_yaw_deg"
+    if camera_key is None:
+        return (0.0, 0.0, 0.0)
+    key = f"stand.{str(camera_key).replace('-', '_')}_misalignment_yaw_deg"
     return (0.0, 0.0, float(lab.get(key, 0.0)))
 
 

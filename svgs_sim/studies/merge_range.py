@@ -132,7 +132,7 @@ def make_config(camera: str, *, ranges_m=None, vary=None, exposures: int = 2, se
             from svgs_sim.base.profiles import Camera
 
             app = settings()
-            t = app.threshold_for(Camera.load(camera).name)
+            t = app.threshold_for(Camera.load(camera).key)
             lo, hi = max(app.threshold_range_dn[0], 0.85 * t), min(app.threshold_range_dn[1], 1.25 * t)
         if rng:
             try:

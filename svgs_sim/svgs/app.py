@@ -58,9 +58,15 @@ class AppSettings:
     sigma_px: float
     alpha: float
 
-    def threshold_for(self, camera_name: str | None) -> float:
-        """The app's threshold for a camera profile's test set-up, DN (the default for others)."""
-        return float(self.threshold_by_camera.get(str(camera_name), self.threshold_dn))
+    def threshold_for(self, camera_key: str | None) -> float:
+        """The app's threshold for a camera's test set-up, DN, by the camera profile's ``key``
+        (:attr:`svgs_sim.base.profiles.Camera.key`); the default for a camera without one or
+        one the settings do not list."""
+        return float(self.threshold_by_camera.get(str(camera_key), self.threshold_dn))
+
+    def threshold_source(self, camera_key: str | None) -> str:
+        """Where :meth:`threshold_for` took its value: ``"by_camera[KEY]"`` or ``"default"``."""
+        return f"by_camera[{camera_key}]" if camera_key in self.threshold_by_camera else "default"
 
 
 @functools.lru_cache(maxsize=None)

@@ -243,12 +243,67 @@ def camera_threshold(image, camera, threshold=None):
     from .detect import app_level
 
     if threshold is None or (isinstance(threshold, str) and threshold == "app"):
-        cam = load_camera(camera)
-        preview = cam.tables.get("preview")
-        # a phone's binned preview stream (svgs_sim.camera.phone.preview) is the same phone and app
-        name = preview.get("of", cam.name) if isinstance(preview, dict) else cam.name
-        return app_level(np.asarray(image).dtype, settings().threshold_for(name))
+        return app_level(np.asarray(image).dtype, settings().threshold_for(camera_key(camera)))
     return threshold
+
+
+def detector_settings(camera, threshold=None) -> dict:
+    """What the detector was given for a camera, for every output to say: the camera's key, the
+    brightness threshold and where it came from, and the fitted overlay its profile applied.
+
+    Parameters
+    ----------
+    camera : Camera or str
+    threshold : None, "app", "auto", "otsu" or float
+        As the command took it (None and "app": the app's threshold for the camera).
+
+    Returns
+    -------
+    dict
+        ``{"camera_key": str | None, "threshold": float | str, "threshold_source": str,
+        "fitted_overlay": str | None}``: ``threshold`` in 8-bit DN for the app's (the image's
+        own units for a level given by the user); ``threshold_source`` ``"app by_camera[KEY]"``,
+        ``"app default"`` or ``"given"``; ``fitted_overlay`` the overlay file (``fitted/KEY.toml``).
+    """
+    from .app import settings
+
+    key = camera_key(camera)
+    fitted = load_camera(camera).tables.get("fitted") or {}
+    overlays = sorted({e.get("overlay") for e in fitted.values() if isinstance(e, dict) and e.get("overlay")})
+    if threshold is None or (isinstance(threshold, str) and threshold == "app"):
+        level, source = settings().threshold_for(key), f"app {settings().threshold_source(key)}"
+    else:
+        level, source = threshold, "given"
+    return {"camera_key": key, "threshold": level, "threshold_source": source,
+            "fitted_overlay": ", ".join(overlays) or None}
+
+
+def describe_detector(settings: dict) -> str:
+    """One line of :func:`detector_settings` for the text output."""
+    thr = settings["threshold"]
+    thr = f"{thr:g} DN" if isinstance(thr, (int, float)) else str(thr)
+    return (f"detector: threshold {thr} ({settings['threshold_source']}); camera key {settings['camera_key']}; "
+            f"fitted overlay {settings['fitted_overlay'] or 'none'}")
+
+
+def camera_key(camera) -> str | None:
+    """The key that chooses the app's per-camera settings for ``camera``: its profile's ``key``
+    (a binned preview stream keeps its phone's, :mod:`svgs_sim.camera.phone.preview`), never its
+    display name; None for a camera without one.
+
+    Parameters
+    ----------
+    camera : Camera or str
+
+    Returns
+    -------
+    str or None
+    """
+    cam = load_camera(camera)
+    if cam.key is not None:
+        return cam.key
+    preview = cam.tables.get("preview")
+    return None if not isinstance(preview, dict) else preview.get("of")
 
 
 def solve_image(
@@ -361,4 +416,4 @@ def inconsistent_failure(sol) -> Failure:
                     **c.to_json()})
 
 
-__all__ = ["load_image", "exif_orientation", "apply_exif_orientation", "EXIF_ORIENTATIONS", "solve_image", "camera_threshold", "check_image_matches_camera", "inconsistent_failure", "Failure"]
+__all__ = ["load_image", "exif_orientation", "apply_exif_orientation", "EXIF_ORIENTATIONS", "solve_image", "camera_threshold", "camera_key", "detector_settings", "describe_detector", "check_image_matches_camera", "inconsistent_failure", "Failure"]

@@ -620,7 +620,7 @@ def run_calibration_study(camera, out_dir, *, views_list=DEFAULT_VIEWS_LIST, see
     finally:
         runner.close()
     t4 = table4_comparison([r for r in pose_rows if r["case"] in floor and not (r["case"] == "exact" and r["noise_px"] == 0)],
-                           phone=paper_phone(s.nominal.name))
+                           phone=paper_phone(s.nominal.key))
     from .focal import centroid_noise
 
     cams = {k: cam_json(c) for k, c in {**believed, "true": s.camera_true, "nominal": s.nominal}.items()}

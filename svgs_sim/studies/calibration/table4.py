@@ -16,9 +16,10 @@ from .common import STATE_COLS
 PAPER_PHONES = {"galaxy-nexus": ("Table 4", "Table 5", "Galaxy Nexus"), "htc-amaze-4g": ("Table 2", "Table 3", "Amaze 4G")}
 
 
-def paper_phone(camera_name: str):
-    """The paper's phone a camera profile stands for (name or a resized variant), else None."""
-    return next((p for p in PAPER_PHONES if str(camera_name).startswith(p)), None)
+def paper_phone(camera_key: str | None):
+    """The paper's phone a camera stands for, by its profile's ``key`` (a resized variant keeps
+    its phone's key), else None."""
+    return camera_key if camera_key in PAPER_PHONES else None
 
 
 def power_law_exponent(ranges_m, values) -> float:

@@ -148,7 +148,7 @@ def make_config(camera: str, *, ranges_m=None, trials_per_range: int = 200, seed
     kind = get_trial_kind(trial_kind)
     if kind.name not in ("render", "geometric"):
         raise InputError(f"--trial-kind: the campaign runs 'render' or 'geometric' trials, got {trial_kind!r}")
-    rs = _check_ranges_m(ranges_m, cam.name, kind)
+    rs = _check_ranges_m(ranges_m, cam.key, kind)
     trials_per_range = _count_option(trials_per_range, "--trials")
     exposures_per_render = _count_option(exposures_per_render, "--exposures-per-render")
     if "sigma_px" in kind.parameters:
@@ -158,7 +158,7 @@ def make_config(camera: str, *, ranges_m=None, trials_per_range: int = 200, seed
     if misalignment_deg is None:
         from svgs_sim.sim.lab import stand_misalignment_deg
 
-        misalignment_deg = stand_misalignment_deg(cam.name)
+        misalignment_deg = stand_misalignment_deg(cam.key)
     mis = tuple(float(x) for x in misalignment_deg)
     TestStand(misalignment_deg=mis)  # InputError beyond +/-10 deg
     if budget and kind.name != "render":
@@ -172,15 +172,16 @@ def make_config(camera: str, *, ranges_m=None, trials_per_range: int = 200, seed
                           budget=bool(budget), lab_errors=_campaign_lab_errors(_lab_errors(), kind.name, lab_errors))
 
 
-def _check_ranges_m(ranges_m, camera_name: str, kind) -> list[float]:
+def _check_ranges_m(ranges_m, camera_key: str | None, kind) -> list[float]:
     """The campaign's test ranges, checked against the trial kind's ``range_m`` parameter.
 
     Parameters
     ----------
     ranges_m : sequence of float or None
-        Test ranges (m); None: the paper's for ``camera_name``.
-    camera_name : str
-        The loaded camera's name (to look up :data:`PAPER_RANGES_M`).
+        Test ranges (m); None: the paper's for the camera ``camera_key``.
+    camera_key : str or None
+        The loaded camera's key (:attr:`svgs_sim.base.profiles.Camera.key`, to look up
+        :data:`PAPER_RANGES_M`).
     kind : TrialKind
         The trial kind whose ``range_m`` parameter checks each range.
 
@@ -190,10 +191,10 @@ def _check_ranges_m(ranges_m, camera_name: str, kind) -> list[float]:
         The checked ranges (m), in the given order; :class:`InputError` when empty or repeated.
     """
     if ranges_m is None:
-        if camera_name not in PAPER_RANGES_M:
-            raise InputError(f"--ranges: camera {camera_name!r} is not one of the paper's phones "
+        if camera_key not in PAPER_RANGES_M:
+            raise InputError(f"--ranges: camera key {camera_key!r} is not one of the paper's phones "
                              f"({', '.join(PAPER_RANGES_M)}); give the test ranges")
-        ranges_m = PAPER_RANGES_M[camera_name]
+        ranges_m = PAPER_RANGES_M[camera_key]
     rs = []
     for r in ranges_m:
         rs.append(kind.parameters["range_m"].check(r, "--ranges"))

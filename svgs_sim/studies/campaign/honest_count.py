@@ -107,7 +107,7 @@ def _fit_use(key: str, phone: str) -> FitUse | None:
 def _paper_ranges(config: CampaignConfig) -> list[float]:
     from svgs_sim.base.profiles import load_camera
 
-    phone = load_camera(config.camera).name
+    phone = load_camera(config.camera).key
     paper = svgs_2014_results()
     return [float(r) for r in config.ranges_m if (phone, "mean_error", float(r)) in paper]
 
@@ -172,7 +172,7 @@ def fitted_values_table(config: CampaignConfig, table: dict | None = None) -> li
     from svgs_sim.base.profiles import apply_fitted, fitted_overlay_path, read_fitted_overlay
 
     cam = load_camera(config.camera)
-    phone = cam.name
+    phone = cam.key
     rows = []
     for key, entry in (cam.tables.get("fitted") or {}).items():
         use = _fit_use(key, phone)
@@ -314,5 +314,5 @@ def campaign_verdicts(config: CampaignConfig, summary: list[dict], budget: dict 
     b = budget or {}
     verdicts = cell_verdicts(summary, b.get("attribution"), b.get("variant_stats"), b.get("centroids"),
                              fitted_cells=fitted_cells(rows))
-    phone = load_camera(config.camera).name
+    phone = load_camera(config.camera).key
     return [{**v, "table": paper_table(phone, v["statistic"])} for v in verdicts]

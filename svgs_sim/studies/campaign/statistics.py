@@ -37,7 +37,7 @@ def summarize(table: dict, config: CampaignConfig, paper: dict | None = None) ->
     from svgs_sim.base.profiles import load_camera
 
     paper = svgs_2014_results() if paper is None else paper
-    phone = load_camera(config.camera).name
+    phone = load_camera(config.camera).key
     out = []
     if "variant" in table:
         base = np.array([str(v) == "baseline" for v in table["variant"]])

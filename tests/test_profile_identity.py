@@ -1,0 +1,70 @@
+"""A profile is read once and known by its key: along one ``svgs render-and-solve`` and one short
+``svgs approach`` each TOML file is opened at most once (an audit hook on ``open`` in a process
+that runs the console script's entry point), and a copy of a profile under another display name
+is the same camera (the same threshold, overlay and solution)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from svgs_sim.base.profiles import Camera
+from svgs_sim.cli.main import main
+
+#: Runs the ``svgs`` console script's entry point (found with importlib.metadata) with an audit
+#: hook that counts every open of a ``.toml`` file; prints the counts as JSON on stderr's last line.
+AUDITED = """\
+import collections, json, sys
+from importlib.metadata import entry_points
+opens = collections.Counter()
+def hook(event, args):
+    if event == "open" and isinstance(args[0], (str, bytes)) and str(args[0]).endswith(".toml"):
+        opens[str(args[0])] += 1
+sys.addaudithook(hook)
+(ep,) = [e for e in entry_points(group="console_scripts") if e.name == "svgs"]
+sys.argv = ["svgs", *sys.argv[1:]]
+try:
+    rc = ep.load()()
+except SystemExit as exc:
+    rc = exc.code
+print(json.dumps({"rc": rc, "opens": opens}), file=sys.stderr)
+"""
+
+
+def _audited(args, cwd) -> dict:
+    p = subprocess.run([sys.executable, "-c", AUDITED, *args], cwd=cwd, capture_output=True, text=True, timeout=600)
+    return json.loads(p.stderr.strip().splitlines()[-1])
+
+
+@pytest.mark.slow
+@pytest.mark.render
+def test_each_toml_file_is_opened_at_most_once(tmp_path):
+    ras = _audited(["render-and-solve", "--camera", "galaxy-nexus", "--range", "10", "--seed", "1"], tmp_path)
+    appr = _audited(["approach", "--camera", "galaxy-nexus", "--from", "10", "--to", "8", "--duration", "2",
+                     "--fps", "1", "--out", str(tmp_path / "approach"), "--no-progress"], tmp_path)
+    for run in (ras, appr):
+        assert run["rc"] == 0
+        names = {Path(p).name for p in run["opens"]}
+        assert {"galaxy-nexus.toml", "svgs-3u.toml", "svgs-app.toml"} <= names  # the hook sees the reads
+        assert max(run["opens"].values()) == 1, run["opens"]
+
+
+@pytest.mark.slow
+@pytest.mark.render
+def test_a_copied_profile_under_another_name_renders_and_solves_the_same(tmp_path, capsys):
+    src = Path(Camera.load("galaxy-nexus", fitted=False).source)
+    copy = tmp_path / "my-copy.toml"
+    copy.write_text(src.read_text().replace('name = "galaxy-nexus"', 'name = "my-copy"'))
+    runs = []
+    for camera in ("galaxy-nexus", str(copy)):
+        assert main(["render-and-solve", "--camera", camera, "--range", "10", "--seed", "1", "--json"]) == 0
+        runs.append(json.loads(capsys.readouterr().out))
+    a, b = runs
+    assert a["detector"] == b["detector"] == {"camera_key": "galaxy-nexus", "threshold": 64.0,
+                                              "threshold_source": "app by_camera[galaxy-nexus]",
+                                              "fitted_overlay": "fitted/galaxy-nexus.toml"}
+    assert a["state"] == b["state"] and a["exposure_s"] == b["exposure_s"]
