@@ -60,7 +60,7 @@ def test_the_closed_loop_recovers_the_pose_within_the_papers_accuracy(head_on):
     assert nf
     for i, k in enumerate(tgt.ids):
         assert np.hypot(*(np.asarray(nf.targets_px[int(k)]) - uv[i])) < 0.3, k  # sub-pixel centroids
-        assert nf.targets_range_m[int(k)] == pytest.approx(np.linalg.norm(P[i]), abs=0.01)  # depth = slant range
+        assert nf.targets_slant_range_m[int(k)] == pytest.approx(np.linalg.norm(P[i]), abs=0.01)  # depth = slant range
     results, _ = solve_frames(head_on, 3)
     for r in results:
         sol = r.solution

@@ -125,8 +125,8 @@ def test_line_of_sight_refinement_fixes_depth_errors(target):
             assert np.abs(fp.t_cam_target_m - t).max() < 1e-6
     # with a depth weight the fixed point blends the ranges back in: both methods agree
     lam = np.full(target.n, 0.2)
-    a = refine_line_of_sight(target.points_m, e, R0, t0, range_m=rho, depth_weight=lam)
-    b = refine_line_of_sight(target.points_m, e, R0, t0, range_m=rho, depth_weight=lam, method="fixed-point",
+    a = refine_line_of_sight(target.points_m, e, R0, t0, slant_range_m=rho, depth_weight=lam)
+    b = refine_line_of_sight(target.points_m, e, R0, t0, slant_range_m=rho, depth_weight=lam, method="fixed-point",
                              max_iter=20000, tol=1e-13)
     assert np.abs(a.t_cam_target_m - b.t_cam_target_m).max() < 1e-8
     with pytest.raises(InputError, match="range_m"):

@@ -136,7 +136,7 @@ def print_solution(result, out=None) -> None:
     print(f"  markers matched: {len(result.targets_px)} of {result.n_blobs} candidates; "
           f"reprojection residual {result.residual_rms_px:.3f} px RMS, 3-D residual {1e3 * result.residual_rms_m:.2f} mm RMS", file=out)
     for tid, uv in result.targets_px.items():
-        print(f"  marker {tid}: u {uv[0]:.3f}  v {uv[1]:.3f} px  range {result.targets_range_m[tid]:.4f} m", file=out)
+        print(f"  marker {tid}: u {uv[0]:.3f}  v {uv[1]:.3f} px  range {result.targets_slant_range_m[tid]:.4f} m", file=out)
 
 
 def cmd_solve(args) -> int:

@@ -100,8 +100,8 @@ class TofSolution(Solved):
     t_cam_target_m : ndarray, shape (3,)
     targets_px : dict
         Marker id -> ``[u, v]`` measured (corrected) centre of each matched marker.
-    targets_range_m : dict
-        Marker id -> measured range (radial).
+    targets_slant_range_m : dict
+        Marker id -> measured slant range (along the marker's line of sight), m.
     n_blobs : int
         Candidate reflectors found.
     residual_rms_px : float
@@ -120,7 +120,7 @@ class TofSolution(Solved):
     R_cam_target: np.ndarray
     t_cam_target_m: np.ndarray
     targets_px: dict
-    targets_range_m: dict
+    targets_slant_range_m: dict
     n_blobs: int
     residual_rms_px: float
     residual_rms_m: float
@@ -140,7 +140,7 @@ class TofSolution(Solved):
             "n_blobs": int(self.n_blobs),
             "residual_rms_px": float(self.residual_rms_px),
             "iterations": int(self.iterations),
-            "targets_range_m": {str(k): float(v) for k, v in self.targets_range_m.items()},
+            "targets_slant_range_m": {str(k): float(v) for k, v in self.targets_slant_range_m.items()},
             "residual_rms_m": float(self.residual_rms_m),
             "timings_s": {k: float(v) for k, v in self.timings_s.items()},
         }
@@ -317,7 +317,7 @@ class TofPipeline:
         rho_a = self._to_range(cands.depth_m[a], e_a)
         if P.refine:
             gn = P.refine_method == "gauss-newton"
-            r = refine_line_of_sight(pts, e_a, R, t, weights=1 / sig_perp[a] ** 2, range_m=rho_a, depth_weight=lam,
+            r = refine_line_of_sight(pts, e_a, R, t, weights=1 / sig_perp[a] ** 2, slant_range_m=rho_a, depth_weight=lam,
                                      method=P.refine_method, tol=REFINE_TOL if gn else P.refine_tol_m,
                                      max_iter=None if gn else P.refine_max_iter)
             R, t, iters = r.R_cam_target, r.t_cam_target_m, r.iterations
@@ -337,7 +337,7 @@ class TofPipeline:
         return TofSolution(
             state=pose_to_state(R, t), R_cam_target=R, t_cam_target_m=t,
             targets_px={int(k): uv[n].tolist() for n, k in enumerate(ids)},
-            targets_range_m={int(k): float(rho_a[n]) for n, k in enumerate(ids)},
+            targets_slant_range_m={int(k): float(rho_a[n]) for n, k in enumerate(ids)},
             n_blobs=int(cands.n), residual_rms_px=rms_px, residual_rms_m=rms_m, iterations=int(iters),
             timings_s=dict(T), candidates=cands,
         )

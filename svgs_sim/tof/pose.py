@@ -131,7 +131,7 @@ def _rotvec_to_matrix(w):
     return np.eye(3) + np.sin(th) * K + (1 - np.cos(th)) * (K @ K)
 
 
-def refine_line_of_sight(points_target_m, los_cam, R0, t0, *, weights=None, range_m=None, depth_weight=0.0,
+def refine_line_of_sight(points_target_m, los_cam, R0, t0, *, weights=None, slant_range_m=None, depth_weight=0.0,
                          method: str = "gauss-newton", tol: float = REFINE_TOL,
                          max_iter: int | None = None) -> Refinement:
     """Iterative line-of-sight reprojection refinement (paper section 5.2).
@@ -144,8 +144,8 @@ def refine_line_of_sight(points_target_m, los_cam, R0, t0, *, weights=None, rang
     R0, t0 : array_like, shapes (3, 3), (3,)
         Starting pose (the SVD solution).
     weights : array_like, shape (N,), optional
-    range_m : array_like, shape (N,), optional
-        Measured ranges ``rho_i`` along the lines of sight (needed when ``depth_weight > 0``).
+    slant_range_m : array_like, shape (N,), optional
+        Measured slant ranges ``rho_i`` along the lines of sight (needed when ``depth_weight > 0``).
     depth_weight : float or array_like, shape (N,)
         ``lambda_i`` in [0, 1]; 0 is the paper's scheme.
     method : {"gauss-newton", "fixed-point"}
@@ -172,9 +172,9 @@ def refine_line_of_sight(points_target_m, los_cam, R0, t0, *, weights=None, rang
     if np.any(lam < 0) or np.any(lam > 1):
         raise InputError("depth_weight: expected values in [0, 1]")
     if np.any(lam > 0):
-        if range_m is None:
-            raise InputError("range_m: needed when depth_weight > 0")
-        rho = np.asarray(range_m, float)
+        if slant_range_m is None:
+            raise InputError("slant_range_m: needed when depth_weight > 0")
+        rho = np.asarray(slant_range_m, float)
     else:
         rho = np.zeros(n)
     w = np.ones(n) if weights is None else np.asarray(weights, float)
