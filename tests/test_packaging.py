@@ -24,7 +24,7 @@ def wheel(tmp_path_factory) -> zipfile.ZipFile:
     src.mkdir()
     for name in ("pyproject.toml", "README.md"):
         shutil.copy(ROOT / name, src / name)
-    shutil.copytree(ROOT / "svgs_sim", src / "svgs_sim", ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(ROOT / "svgs_sim", src / "svgs_sim", ignore=shutil.ignore_patterns("__pycache__", ".*"))
     p = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
                         str(src), "-w", str(tmp / "dist")], capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stdout + p.stderr
@@ -45,7 +45,7 @@ def test_the_wheel_holds_every_data_file_and_module(wheel):
     modules) is in the wheel."""
     names = set(wheel.namelist())
     want = {str(p.relative_to(ROOT)) for p in (ROOT / "svgs_sim").rglob("*")
-            if p.is_file() and "__pycache__" not in p.parts}
+            if p.is_file() and "__pycache__" not in p.parts and not any(x.startswith(".") for x in p.parts)}
     assert len(want) > 150
     assert want - names == set()
 

@@ -182,7 +182,7 @@ def test_die_with_parent_falls_back_to_a_watchdog_without_prctl(monkeypatch, cap
     import logging
     import threading
 
-    from svgs_sim.studies import execution
+    from svgs_sim.studies.execution import parent_watch as execution
 
     def no_prctl():
         raise OSError(38, "Function not implemented")

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from svgs_sim.studies.execution import COST_TABLE_S, StudyPlan, _duration, cpu_cores
+from svgs_sim.studies.execution.plan import COST_TABLE_S, StudyPlan, _duration, cpu_cores
 
 #: A geometric board set (``--geometric``): the sample rays shared by its views, once, s per megapixel.
 GEOMETRIC_BOARD_SETUP_S_PER_MPX = 3.3
