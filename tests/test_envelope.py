@@ -16,7 +16,7 @@ from svgs_sim.sim.approach.trajectory import Trajectory, check_envelope
 from svgs_sim.studies.sensitivity import make_config
 from svgs_sim.base.errors import InputError
 from svgs_sim.svgs.frames import pose_from_scenario
-from svgs_sim.svgs.identify import ATTITUDE_LIMITS_DEG, MAX_FILL, MIN_SPAN_PX, check_range_m, range_envelope_m
+from svgs_sim.svgs.envelope import ATTITUDE_LIMITS_DEG, MAX_FILL, MIN_SPAN_PX, check_range_m, range_envelope_m
 from svgs_sim.base.profiles import load_camera, load_pattern
 from svgs_sim.sim.trials import GEOMETRIC_PARAMETERS
 

@@ -100,7 +100,7 @@ def test_an_absurd_vary_high_is_refused_before_any_work(kind, name, warm, tmp_pa
     lines = [ln for ln in cap.err.splitlines() if ln.strip()]
     assert rc == 2 and len(lines) == 1 and cap.out == "", cap.err
     assert f"--vary {name} HIGH" in lines[0] and "Traceback" not in cap.err, lines[0]
-    if name == "range_m":  # the camera's envelope (svgs_sim.svgs.identify.range_envelope_m)
+    if name == "range_m":  # the camera's envelope (svgs_sim.svgs.envelope.range_envelope_m)
         assert "allowed" in lines[0] and " m)" in lines[0], lines[0]
     else:
         assert p.domain() in lines[0], lines[0]

@@ -6,8 +6,9 @@ import pytest
 from svgs_sim.base.profiles import Camera, Pattern
 from svgs_sim.svgs.detect import detect_blobs
 from svgs_sim.base.errors import InputError
-from svgs_sim.svgs.identify import (GATE_MARGIN_DEG, GATE_MARGIN_LATERAL, GATE_MARGIN_RANGE, PAPER_ENVELOPE, Envelope,
-                           Identification, identify, pattern_gates)
+from svgs_sim.svgs.identify import (GATE_MARGIN_DEG, GATE_MARGIN_LATERAL, GATE_MARGIN_RANGE, Identification, identify,
+                                    pattern_gates)
+from svgs_sim.svgs.envelope import PAPER_ENVELOPE, Envelope
 from svgs_sim.svgs.result import REASONS, Failure
 from synth_svgs import random_envelope_pose, synth_frame
 

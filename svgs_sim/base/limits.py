@@ -10,14 +10,14 @@ them.
 The bounds lie far beyond any phone, lab or ToF camera the simulator models; they keep absurd
 numbers (1e308, a trillion samples per pixel) from overflowing the solver and the calibrations
 or from starting a render that would never end. Ranges and attitudes are bounded by the
-sensor's envelope instead (:func:`svgs_sim.svgs.identify.range_envelope_m`,
-:data:`svgs_sim.svgs.identify.ATTITUDE_LIMITS_DEG`); :data:`RANGE_LIMIT_M` only caps it for any profile.
+sensor's envelope instead (:func:`svgs_sim.svgs.envelope.range_envelope_m`,
+:data:`svgs_sim.svgs.envelope.ATTITUDE_LIMITS_DEG`); :data:`RANGE_LIMIT_M` only caps it for any profile.
 """
 
 from __future__ import annotations
 
 #: Largest range along the boresight any scenario takes, m. The envelope of the bundled phones
-#: ends below 200 m (:func:`svgs_sim.svgs.identify.range_envelope_m`: the 3U pattern then spans
+#: ends below 200 m (:func:`svgs_sim.svgs.envelope.range_envelope_m`: the 3U pattern then spans
 #: ``MIN_SPAN_PX`` pixels); this leaves room for a profile with a 5x longer lens or a 5x wider
 #: pattern. The camera's own envelope is checked on top of it wherever a camera is known.
 RANGE_LIMIT_M = 1000.0

@@ -13,11 +13,11 @@ the argument names (one vocabulary across the commands, ``docs/architecture.md``
   passes (some defaults are 0 for "none");
 - ranges (``--range``, ``--ranges``, ``--focal-ranges``, ``--pose-ranges``, ``--from``, ``--to``): positive, finite,
   distinct, and inside the command's physical envelope, whose reason the message states - for
-  the phone sensor :func:`svgs_sim.svgs.identify.range_envelope_m` (beyond it the pattern spans fewer than
+  the phone sensor :func:`svgs_sim.svgs.envelope.range_envelope_m` (beyond it the pattern spans fewer than
   :data:`MIN_SPAN_PX` pixels and its spots merge into one; trajectory files and sensitivity
   bounds take the same), for the ToF camera the paper's 0.27-15 m (``svgs_sim.tof.camera.DESIGN_RANGE_M``);
 - every float argument: a physical bound (:data:`BOUNDS`; attitudes within
-  :data:`svgs_sim.svgs.identify.ATTITUDE_LIMITS_DEG`), so no absurd number (1e308) reaches the solver;
+  :data:`svgs_sim.svgs.envelope.ATTITUDE_LIMITS_DEG`), so no absurd number (1e308) reaches the solver;
 - the camera profile's kind: a ToF profile for ``svgs tof ...``, a phone profile elsewhere.
 
 A failed check raises :class:`svgs_sim.base.errors.InputError` naming the input (exit 2, one line,
@@ -30,8 +30,8 @@ import math
 from pathlib import Path
 
 from svgs_sim.base.errors import InputError
-from svgs_sim.svgs.identify import MIN_SPAN_PX  # noqa: F401 - re-exported (the module notes name it)
-from svgs_sim.svgs.identify import check_attitude_deg, check_range_m, range_envelope_m
+from svgs_sim.svgs.envelope import MIN_SPAN_PX  # noqa: F401 - re-exported (the module notes name it)
+from svgs_sim.svgs.envelope import check_attitude_deg, check_range_m, range_envelope_m
 from svgs_sim.base.limits import INPUT_BOUNDS, INT_BOUNDS
 
 #: Integer arguments that count something (>= 1).
@@ -52,7 +52,7 @@ NON_NEGATIVE = {"sigma_px", "range_sigma_m", "merge_px", "jitter_deg", "jitter_m
 #: parameters (:class:`svgs_sim.sim.trials.Parameter`) take their bounds from too. Far beyond any phone,
 #: lab or ToF camera the simulator models, they keep absurd numbers (1e308) from overflowing the
 #: solver and the calibrations. Ranges and attitudes are bounded by the envelope instead
-#: (:func:`svgs_sim.svgs.identify.range_envelope_m`, :data:`svgs_sim.svgs.identify.ATTITUDE_LIMITS_DEG`);
+#: (:func:`svgs_sim.svgs.envelope.range_envelope_m`, :data:`svgs_sim.svgs.envelope.ATTITUDE_LIMITS_DEG`);
 #: tests/test_messages.py fails on a float option with neither.
 BOUNDS = INPUT_BOUNDS
 #: Attitude arguments (dest -> the envelope's angle).
@@ -110,7 +110,7 @@ def parse_range_list(text, flag: str) -> list[float]:
 
 
 def phone_range_envelope_m(camera, pattern) -> tuple[float, float]:
-    """(near, far) ranges of the phone sensor (m): :func:`svgs_sim.svgs.identify.range_envelope_m`."""
+    """(near, far) ranges of the phone sensor (m): :func:`svgs_sim.svgs.envelope.range_envelope_m`."""
     return range_envelope_m(camera, pattern)
 
 

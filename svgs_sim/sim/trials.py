@@ -35,7 +35,7 @@ import numpy as np
 from svgs_sim.sim.metrics import ERR_KEYS, POS_ERR_NORM_M, ROT_ERR_DEG, error_columns, state_m_deg
 from svgs_sim.base.errors import InputError
 from svgs_sim.svgs.frames import STATE_KEYS
-from svgs_sim.svgs.identify import ATTITUDE_LIMITS_DEG
+from svgs_sim.svgs.envelope import ATTITUDE_LIMITS_DEG
 from svgs_sim.base.limits import RANGE_LIMIT_M, bounds
 
 #: Modules that may register more trial kinds; imported when an unknown name is asked for

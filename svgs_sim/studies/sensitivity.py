@@ -193,10 +193,10 @@ def make_config(camera: str, vary, *, fixed=None, method: str = "sobol", n: int 
 
 def range_envelope_check(kind: TrialKind, camera: str, pattern: str):
     """``check(name, value, what)``: a ``range_m`` bound (or fixed range) inside the envelope
-    ``--range`` takes - the phone's :func:`svgs_sim.svgs.identify.range_envelope_m` for the phone's kinds,
+    ``--range`` takes - the phone's :func:`svgs_sim.svgs.envelope.range_envelope_m` for the phone's kinds,
     the paper's design range for the ToF kind - else :class:`InputError` naming ``what``; other
     parameters pass (their own domain is checked after it)."""
-    from svgs_sim.svgs.identify import check_range_m
+    from svgs_sim.svgs.envelope import check_range_m
 
     def check(name: str, x: float, what: str) -> None:
         if name != "range_m":

@@ -11,7 +11,7 @@ import numpy as np
 
 from svgs_sim.base.errors import InputError
 from svgs_sim.svgs.frames import D_CAM_PHOTO, STATE_KEYS, state_to_pose
-from svgs_sim.svgs.identify import ATTITUDE_LIMITS_DEG, check_attitude_deg, check_range_m
+from svgs_sim.svgs.envelope import ATTITUDE_LIMITS_DEG, check_attitude_deg, check_range_m
 from svgs_sim.base.profiles import load_camera, load_pattern
 
 from svgs_sim.sim.closed_loop import Scenario
@@ -254,7 +254,7 @@ class Trajectory:
 
 def check_envelope(trajectory: Trajectory, camera, pattern) -> None:
     """Refuse a trajectory with a knot outside the envelope ``--range`` and ``--roll/--pitch/--yaw``
-    take (:func:`svgs_sim.svgs.identify.range_envelope_m`, :data:`svgs_sim.svgs.identify.ATTITUDE_LIMITS_DEG`).
+    take (:func:`svgs_sim.svgs.envelope.range_envelope_m`, :data:`svgs_sim.svgs.envelope.ATTITUDE_LIMITS_DEG`).
 
     Between knots the fields are interpolated linearly, so the knots bound every frame. The
     range is the boresight range (``mount="target"``) or the rail position (``"stand"``).
