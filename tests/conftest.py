@@ -54,11 +54,12 @@ def pattern():
 @pytest.fixture(scope="session")
 def small_camera(tmp_path_factory):
     """The Galaxy Nexus profile scaled to 648 x 486 (the same lens delivering a quarter-size
-    image): a path to its .toml, for rendered tests that need frames of about a second."""
+    image): a path to its .toml, for rendered tests that need frames of about a second. Its own
+    key: not the Galaxy Nexus's test set-up, so the app's default threshold."""
     from svgs_sim.base.profiles import Camera
 
     path = tmp_path_factory.mktemp("cam") / "nexus-small.toml"
-    Camera.load("galaxy-nexus").scaled(648, 486).replace(name="nexus-small").save(path)
+    Camera.load("galaxy-nexus").scaled(648, 486).replace(name="nexus-small", key="nexus-small").save(path)
     return str(path)
 
 

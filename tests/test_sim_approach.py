@@ -294,7 +294,7 @@ def test_overlapped_render_changes_no_number(small_camera):
 def small_auto_camera(tmp_path_factory):
     """The small Galaxy Nexus without its fitted manual exposure: the prior's auto-exposure."""
     path = tmp_path_factory.mktemp("cam") / "nexus-small-auto.toml"
-    Camera.load("galaxy-nexus", fitted=False).scaled(648, 486).replace(name="nexus-small-auto").save(path)
+    Camera.load("galaxy-nexus", fitted=False).scaled(648, 486).replace(name="nexus-small-auto", key="nexus-small-auto").save(path)
     return str(path)
 
 

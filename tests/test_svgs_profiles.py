@@ -294,3 +294,12 @@ def test_a_bad_key_is_refused(tmp_path, key):
     path.write_text(path.read_text() + "[intrinsics]\nwidth = 64\nheight = 48\nfx = 50\nfy = 50\ncx = 31.5\ncy = 23.5\n")
     with pytest.raises(ProfileError, match="key"):
         Camera.load(path, fitted=False)
+
+
+def test_a_saved_unfitted_camera_reads_back_unfitted(tmp_path):
+    """``load(save(camera))`` is the camera: an unfitted camera with a key is written with an empty
+    ``[fitted]`` record, so its overlay is not applied when the file is read back."""
+    cam = Camera.load("galaxy-nexus", fitted=False)
+    back = Camera.load(cam.save(tmp_path / "unfitted.toml"))
+    assert back.key == "galaxy-nexus" and not back.tables.get("fitted")
+    assert back.tables["exposure"] == cam.tables["exposure"] != Camera.load("galaxy-nexus").tables["exposure"]

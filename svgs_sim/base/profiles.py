@@ -365,6 +365,10 @@ class Camera:
         out = {"name": self.name}
         if self.key is not None:
             out["key"] = self.key
+            if "fitted" not in self.tables:
+                # the values are complete as they stand (an unfitted camera): reading the file back
+                # applies no overlay, so load(save(camera)) is the camera
+                out["fitted"] = {}
         for k, v in self.tables.items():
             if not isinstance(v, dict):
                 out[k] = v
