@@ -169,6 +169,9 @@ def test_chessboard_recovers_known_intrinsics(chess_views):
     # what a camera rotation cannot absorb: focal-length and distortion errors (measured 0.22 px)
     err = mapping_error_px(TRUE, cal.to_camera(), align="rotation")
     assert np.sqrt(np.mean(err**2)) < 0.4
+    # recalibrated from a base profile: the same phone, so the same key (the app's settings, its overlay)
+    assert cal.to_camera().key is None
+    assert cal.to_camera(name="recal", base=TRUE.replace(key="my-phone")).key == "my-phone"
     # the estimate agrees with the truth within 4.5 of its own standard deviations (Gaussian,
     # fixed seeds; the former extra +0.5 px allowance had no derivation)
     assert abs(cal.fx - TRUE.fx) < 4.5 * cal.std["fx"]  # measured 2.9 sigma (0.54 px, sigma 0.19 px)

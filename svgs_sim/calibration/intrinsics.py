@@ -129,7 +129,8 @@ class Calibration:
         ----------
         name : str
         base : Camera, optional
-            Keep this profile's other tables (sensor, optics...); its image size must match.
+            Keep this profile's other tables (sensor, optics...) and its key (the same phone,
+            recalibrated); its image size must match.
 
         Returns
         -------
@@ -155,7 +156,7 @@ class Calibration:
             **{f"std_{k}": float(v) for k, v in self.std.items()},
         }
         return Camera(name=name, width=int(w), height=int(h), fx=self.fx, fy=self.fy, cx=self.cx, cy=self.cy,
-                      dist=np.asarray(self.dist, float), tables=tables)
+                      dist=np.asarray(self.dist, float), tables=tables, key=None if base is None else base.key)
 
     def to_json(self) -> dict:
         """JSON-ready dict (non-finite numbers become ``None``)."""
