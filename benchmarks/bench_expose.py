@@ -77,7 +77,7 @@ def main(argv=None):
           f"(target >= 10); of which exposure {m_exp * 1e3:.0f} ms, detect+solve {statistics.median(solve_only) * 1e3:.0f} ms")
     # the same in a dark lab (ambient 0, the scene of this benchmark before the lab's light was
     # fitted): every background pixel then draws a Poisson of ~0 e- instead of ~3 e-
-    dark = render_scenario(scen.replace(ambient_radiance_w_m2_sr=0.0), seed=0)
+    dark = render_scenario(scen.replace(scene=scen.scene.replace(ambient_radiance_w_m2_sr=0.0)), seed=0)
     dex = dark.exposer()
     expose_and_solve(dark, dex, seed=0)
     dark_t = []
@@ -87,7 +87,7 @@ def main(argv=None):
         dark_t.append(time.perf_counter() - t0)
     m_dark = statistics.median(dark_t)
     print(f"    dark lab (ambient 0): median {m_dark * 1e3:.0f} ms = {1 / m_dark:.1f} frames/s; "
-          f"lit lab (the default, {scen.ambient_radiance_w_m2_sr:g} W m^-2 sr^-1): {1 / m_ours:.1f} frames/s")
+          f"lit lab (the default, {scen.scene.ambient_radiance_w_m2_sr:g} W m^-2 sr^-1): {1 / m_ours:.1f} frames/s")
     print(f"    exposure alone: ours {m_exp * 1e3:.0f} ms (PSF cached, Poisson, bloom, read, ADC, tone, JPEG) vs numpy peer "
           f"{m_peer * 1e3:.0f} ms (Poisson, clip, read, ADC only): ratio peer/ours {m_peer / m_exp:.2f}")
 

@@ -7,6 +7,7 @@ import pytest
 
 from svgs_sim.studies.exposure_study import parse_remedy
 from svgs_sim.sim.closed_loop import Scenario, expose_and_solve, pose_errors, render_scenario
+from svgs_sim.sim.scene import Scene
 from svgs_sim.svgs import InputError, Pattern
 from svgs_sim.cli.main import main
 
@@ -110,7 +111,9 @@ def test_scenario_validation():
     with pytest.raises(InputError, match="range_m"):
         Scenario(range_m=0)
     with pytest.raises(InputError, match="backdrop_reflectance"):
-        Scenario(backdrop_reflectance=2)
+        Scene(backdrop_reflectance=2)
+    with pytest.raises(InputError, match="scene: expected a svgs_sim.sim.scene.Scene"):
+        Scenario(scene=3.0)
     with pytest.raises(InputError, match="focus_distance_m"):
         Scenario(focus_distance_m=-1)
 

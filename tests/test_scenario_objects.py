@@ -100,7 +100,7 @@ def test_render_scenario_reads_old_rows_with_sentinels():
                trial_id=1, seed=2, ok=False)
     s = RenderScenario.from_row(old)
     assert (s.spp, s.roi_spp, s.f_number, s.jpeg_quality, s.glare_veiling_fraction) == (None, 64, None, None, None)
-    assert (s.threshold, s.exposure_s, s.iso, s.demosaic, s.backdrop_distance_m) == ("otsu", None, None,
+    assert (s.threshold, s.exposure_s, s.iso, s.demosaic, s.scene.backdrop_distance_m) == ("otsu", None, None,
                                                                                       "edge_aware", None)
     assert s.label_dict == {"variant": "no_jpeg"}
     assert {k: s[k] for k in defaults.to_row()} == {k: old[k] for k in defaults.to_row()}  # the row unchanged

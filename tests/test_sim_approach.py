@@ -17,6 +17,7 @@ import pytest
 from svgs_sim.cli.main import main
 from svgs_sim.sim.approach import ApproachSensor, Trajectory, check_visible, scenario_from_pose
 from svgs_sim.sim.closed_loop import Scenario
+from svgs_sim.sim.scene import Scene
 from svgs_sim.svgs import Camera, InputError
 
 
@@ -187,7 +188,7 @@ def test_binned_preview_collects_the_photons_of_its_pixels():
 
     full = Camera.load("galaxy-nexus")
     prev = binned_camera(full, 648, 486)
-    sc = Scenario(backdrop_distance_m=None, ambient_radiance_w_m2_sr=0.01)
+    sc = Scenario(scene=Scene(backdrop_distance_m=None, ambient_radiance_w_m2_sr=0.01))
     a, _ = lab_flux(full, sc)
     b, _ = lab_flux(prev, sc)
     assert b.sum() == pytest.approx(a.sum(), rel=0.01)

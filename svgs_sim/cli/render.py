@@ -17,7 +17,8 @@ from svgs_sim.base.errors import InputError
 
 def register(sub) -> None:
     """Add the ``render`` and ``doctor`` sub-commands to an argparse subparsers object."""
-    from svgs_sim.cli.sim import add_ambient_arg, add_focus_arg
+    from svgs_sim.cli.sim import add_focus_arg
+    from svgs_sim.sim.scene import add_scene_options
 
     p = sub.add_parser(
         "render",
@@ -48,9 +49,7 @@ def register(sub) -> None:
     add_focus_arg(p)
     p.add_argument("--full-frame", action="store_true", help="render the whole frame at --spp, no windows")
     p.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
-    p.add_argument("--backdrop-m", type=float, default=None,
-                   help="grey backdrop this far behind the target, m (default 3; 0 = none); added to flux.npy")
-    add_ambient_arg(p)
+    add_scene_options(p)  # --backdrop-m, --ambient: the scene around the target (added to flux.npy)
     p.add_argument("--exposure-s", type=float, default=None, help="exposure time of image.png (default: the phone's)")
     p.add_argument("--iso", type=float, default=None, help="ISO of image.png (default: the phone's)")
     p.add_argument("--no-expose", action="store_true", help="write only the flux (no raw.npy / image.png)")
@@ -140,13 +139,12 @@ def _render(args, camera, pattern, R, t) -> int:
     with hard_stop.scope():  # Ctrl-C stops the render within a second (nothing is written yet)
         res = r.render(R, t, seed=args.seed, full_frame=args.full_frame)
     res.truth["command"] = {k: v for k, v in vars(args).items() if k != "func"}
-    from svgs_sim.cli.sim import resolve_ambient
-    from svgs_sim.sim.closed_loop import DEFAULT_BACKDROP_DISTANCE_M, Scenario, lab_flux
+    from svgs_sim.sim.closed_loop import Scenario, lab_flux
+    from svgs_sim.sim.scene import scene_from_args
 
-    back = DEFAULT_BACKDROP_DISTANCE_M if args.backdrop_m is None else (None if args.backdrop_m == 0 else args.backdrop_m)
     scen = Scenario(camera=args.camera, pattern=args.pattern, range_m=args.range_m,
                     target_x_m=args.target_x_m, target_y_m=args.target_y_m, roll_deg=args.roll, pitch_deg=args.pitch,
-                    yaw_deg=args.yaw, backdrop_distance_m=back, ambient_radiance_w_m2_sr=resolve_ambient(args))
+                    yaw_deg=args.yaw, scene=scene_from_args(args))
     lab, lab_info = lab_flux(camera, scen)
     res.flux = res.flux + lab
     if res.flux_diffuse is not None:

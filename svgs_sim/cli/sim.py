@@ -37,14 +37,9 @@ def add_focus_arg(p) -> None:
                    "locks on it; svgs render and render-and-solve form the same image)")
 
 
-def add_ambient_arg(p) -> None:
-    """``--ambient``, shared by the commands that render the lab (default: the lab's light)."""
-    p.add_argument("--ambient", type=float, default=None,
-                   help="ambient scene radiance from room lights, W m^-2 sr^-1 in band (default: the lab's, "
-                   "0.028, fitted in assets/labs/fitted/msfc-frl.toml; 0: lights off)")
-
-
 def _scene_args(p, with_range=True):
+    from svgs_sim.sim.scene import add_scene_options  # not at module level: `svgs solve` loads no sim code
+
     p.add_argument("--camera", required=True, help="camera profile name or .toml path (needs [optics] and [flash])")
     p.add_argument("--pattern", default="svgs-3u", help="target pattern (default svgs-3u)")
     if with_range:
@@ -53,9 +48,7 @@ def _scene_args(p, with_range=True):
         p.add_argument(flag, dest=dest, type=float, default=0.0, help=text)
     p.add_argument("--spp", type=int, default=None, help="samples per pixel, full frame (default 4; the background is dark and diffuse)")
     p.add_argument("--roi-spp", type=int, default=None, help="samples per pixel in the windows around the spots (default 64, the guided method's)")
-    p.add_argument("--backdrop-m", type=float, default=None,
-                   help="distance of a grey backdrop behind the target (m; default 3; 0 = none)")
-    add_ambient_arg(p)
+    add_scene_options(p)  # --backdrop-m, --ambient: the scene around the target (svgs_sim.sim.scene)
     add_focus_arg(p)
     p.add_argument("--threshold", default=None, help="detector threshold: 'app' (the app's brightness threshold for the camera, assets/app/svgs-app.toml; the default), a level in image counts, 'auto' or 'otsu'")
     p.add_argument("--exposure-s", type=float, default=None, help="exposure time, s (default: the phone's automatic exposure)")
@@ -64,16 +57,16 @@ def _scene_args(p, with_range=True):
 
 
 def _scenario(args, range_m=None):
-    from svgs_sim.sim.closed_loop import DEFAULT_BACKDROP_DISTANCE_M, Scenario
+    from svgs_sim.sim.closed_loop import Scenario
+    from svgs_sim.sim.scene import scene_from_args
 
-    back = DEFAULT_BACKDROP_DISTANCE_M if args.backdrop_m is None else (None if args.backdrop_m == 0 else args.backdrop_m)
     distance = args.range_m if range_m is None else range_m
     # on the test stand (--mount stand) --range is the gimbal's rail position
     where = {"rail_m": distance} if getattr(args, "mount", "target") == "stand" else {"range_m": distance}
     return Scenario(
         camera=args.camera, pattern=args.pattern, **where,
         target_x_m=args.target_x_m, target_y_m=args.target_y_m, roll_deg=args.roll_deg, pitch_deg=args.pitch_deg, yaw_deg=args.yaw_deg,
-        backdrop_distance_m=back, ambient_radiance_w_m2_sr=resolve_ambient(args), spp=args.spp, roi_spp=args.roi_spp,
+        scene=scene_from_args(args), spp=args.spp, roi_spp=args.roi_spp,
         focus_distance_m=getattr(args, "focus_m", None),
         **({"mount": args.mount, "stage_m": args.stage_m} if hasattr(args, "mount") else {}),
     )
@@ -223,7 +216,7 @@ def range_sweep_json(cfg, table, stats, out: Path) -> dict:
 def cmd_range_sweep(args) -> int:
     from svgs_sim.cli.json_out import emit, text_to_stderr
     from svgs_sim.cli.studies import announce_plan, executor_from_args, print_run_stats
-    from svgs_sim.sim.closed_loop import DEFAULT_BACKDROP_DISTANCE_M
+    from svgs_sim.sim.scene import scene_from_args
     from svgs_sim.studies.range_sweep import format_table, make_config, run_range_sweep
 
     _check_camera_renderable(args.camera)
@@ -231,11 +224,8 @@ def cmd_range_sweep(args) -> int:
     spec = executor_from_args(args)
     scene = {"pattern": args.pattern, "threshold": _threshold(args.threshold), "target_x_m": args.target_x_m,
              "target_y_m": args.target_y_m, "roll_deg": args.roll_deg, "pitch_deg": args.pitch_deg,
-             "yaw_deg": args.yaw_deg,
-             "backdrop_distance_m": DEFAULT_BACKDROP_DISTANCE_M if args.backdrop_m is None else args.backdrop_m,
-             "ambient_radiance_w_m2_sr": resolve_ambient(args), "spp": -1 if args.spp is None else args.spp,
-             "roi_spp": -1 if args.roi_spp is None else args.roi_spp,
-             "exposure_s": args.exposure_s or 0.0, "iso": args.iso or 0.0}
+             "yaw_deg": args.yaw_deg, "scene": scene_from_args(args), "spp": args.spp, "roi_spp": args.roi_spp,
+             "exposure_s": args.exposure_s or None, "iso": args.iso or None}
     cfg = make_config(args.camera, ranges, trials=args.trials, poses=args.poses, jitter_deg=args.jitter_deg,
                       jitter_m=args.jitter_m, seed=args.seed, **scene)
     from svgs_sim.cli.outdir import output_folder
@@ -291,15 +281,6 @@ def register(sub) -> None:
                    "the same object is written to summary.json")
     add_executor_options(p, plan_only=True)
     p.set_defaults(func=cmd_range_sweep)
-
-
-def resolve_ambient(args) -> float:
-    """``--ambient``, or the lab's fitted ambient radiance (W m^-2 sr^-1) when not given."""
-    if args.ambient is None:
-        from svgs_sim.sim.closed_loop import DEFAULT_AMBIENT_RADIANCE_W_M2_SR
-
-        return DEFAULT_AMBIENT_RADIANCE_W_M2_SR
-    return args.ambient
 
 
 def print_state_table(row, crlb) -> None:

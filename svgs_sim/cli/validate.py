@@ -53,7 +53,9 @@ NON_NEGATIVE = {"sigma_px", "range_sigma_m", "merge_px", "jitter_deg", "jitter_m
 #: lab or ToF camera the simulator models, they keep absurd numbers (1e308) from overflowing the
 #: solver and the calibrations. Ranges and attitudes are bounded by the envelope instead
 #: (:func:`svgs_sim.svgs.envelope.range_envelope_m`, :data:`svgs_sim.svgs.envelope.ATTITUDE_LIMITS_DEG`);
-#: tests/test_messages.py fails on a float option with neither.
+#: tests/test_messages.py fails on a float option with neither (:func:`option_bounds`). An option
+#: may carry its own as ``action.bounds``: the scene's (:func:`svgs_sim.sim.scene.add_scene_options`),
+#: declared with the quantity.
 BOUNDS = INPUT_BOUNDS
 #: Attitude arguments (dest -> the envelope's angle).
 ATTITUDES = {"roll": "roll_deg", "pitch": "pitch_deg", "yaw": "yaw_deg", "roll_deg": "roll_deg",
@@ -130,6 +132,12 @@ def _command(args) -> str:
     return " ".join(words)
 
 
+def option_bounds(action):
+    """The physical bounds ``(low, high, unit)`` of a float option: :data:`BOUNDS` by its dest, else
+    the option's own ``bounds`` attribute; None if neither."""
+    return BOUNDS.get(action.dest) or getattr(action, "bounds", None)
+
+
 def check_args(args, parser) -> None:
     """Check ``args`` (a parsed namespace of ``parser``) by the rules of the module notes.
 
@@ -172,7 +180,7 @@ def check_args(args, parser) -> None:
                 if dest in ATTITUDES:
                     check_attitude_deg(ATTITUDES[dest], x, flag)
                     continue
-                b = BOUNDS.get(dest)
+                b = option_bounds(a)
                 if b is not None and not (b[0] <= x <= b[1] and not (dest in POSITIVE and x == b[0] == 0)):
                     raise InputError(f"{flag}: expected {_interval(dest, b)}, got {x!r}")
                 if b is None and dest in POSITIVE and x <= 0:

@@ -29,15 +29,7 @@ from svgs_sim.sim.metrics import no_pose_errors, pose_errors
 from svgs_sim.svgs.frames import pose_from_scenario, pose_to_state, state_dict
 from svgs_sim.base.profiles import Camera, Pattern, load_camera, load_pattern
 
-from svgs_sim.sim.lab import load_lab
-
-#: Default lab (:mod:`svgs_sim.sim.lab`, ``assets/labs/msfc-frl.toml``): a matt grey backdrop 3 m
-#: behind the target (ASSUMPTION) and a dimly lit room, its ambient radiance fitted to the
-#: Amaze 4G's merging range (``assets/labs/fitted/msfc-frl.toml``).
-_LAB = load_lab()
-DEFAULT_BACKDROP_DISTANCE_M = _LAB["backdrop_distance_m"]
-DEFAULT_BACKDROP_REFLECTANCE = _LAB["backdrop_reflectance"]
-DEFAULT_AMBIENT_RADIANCE_W_M2_SR = _LAB["ambient_radiance_w_m2_sr"]
+from svgs_sim.sim.scene import Scene
 
 
 def _camera_key(camera: Camera) -> tuple:
@@ -75,11 +67,9 @@ class Scenario:
         (:data:`svgs_sim.svgs.frames.STATE_KEYS`), which is in the target frame.
     roll_deg, pitch_deg, yaw_deg : float
         The paper's attitude (x-y-z sequence), degrees.
-    backdrop_distance_m : float or None
-        Distance of a Lambertian backdrop behind the target origin (None: no backdrop).
-    backdrop_reflectance : float
-    ambient_radiance_w_m2_sr : float
-        Uniform scene radiance from room lighting, in the camera band.
+    scene : Scene
+        The scene around the target (:class:`svgs_sim.sim.scene.Scene`; default the paper's lab:
+        a grey backdrop behind the target, the room's light).
     focus_distance_m : float or None
         Where the lens is focused, m. None: the phone's autofocus locks on the target (the
         distance to the target origin); both phones of the paper had autofocus.
@@ -121,9 +111,7 @@ class Scenario:
     roll_deg: float = 0.0
     pitch_deg: float = 0.0
     yaw_deg: float = 0.0
-    backdrop_distance_m: float | None = DEFAULT_BACKDROP_DISTANCE_M
-    backdrop_reflectance: float = DEFAULT_BACKDROP_REFLECTANCE
-    ambient_radiance_w_m2_sr: float = DEFAULT_AMBIENT_RADIANCE_W_M2_SR
+    scene: Scene = Scene()
     focus_distance_m: float | None = None
     spp: int | None = None
     roi_spp: int | None = None
@@ -171,17 +159,12 @@ class Scenario:
             raise InputError("stage_m: only the test stand (mount='stand') has a translation stage")
         if not np.isfinite(float(self.stage_m)) or abs(float(self.stage_m)) > 1.0:
             raise InputError(f"stage_m: expected a finite stage position within +/-1 m, got {self.stage_m!r}")
-        for k in ("target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg", "backdrop_reflectance",
-                  "ambient_radiance_w_m2_sr"):
+        for k in ("target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg"):
             check_finite(getattr(self, k), k)
-        if not 0 <= self.backdrop_reflectance <= 1:
-            raise InputError(f"backdrop_reflectance: expected 0..1, got {self.backdrop_reflectance!r}")
-        if self.ambient_radiance_w_m2_sr < 0:
-            raise InputError(f"ambient_radiance_w_m2_sr: expected >= 0, got {self.ambient_radiance_w_m2_sr!r}")
+        if not isinstance(self.scene, Scene):
+            raise InputError(f"scene: expected a svgs_sim.sim.scene.Scene, got {self.scene!r}")
         if self.focus_distance_m is not None and not (np.isfinite(self.focus_distance_m) and self.focus_distance_m > 0):
             raise InputError(f"focus_distance_m: expected a positive distance or None (autofocus), got {self.focus_distance_m!r}")
-        if self.backdrop_distance_m is not None and not (np.isfinite(self.backdrop_distance_m) and self.backdrop_distance_m > 0):
-            raise InputError(f"backdrop_distance_m: expected a positive distance or None, got {self.backdrop_distance_m!r}")
         if (self.spp is not None and int(self.spp) < 0) or (self.roi_spp is not None and int(self.roi_spp) < 1):
             raise InputError(f"spp/roi_spp: expected spp >= 0 and roi_spp >= 1, got {self.spp}, {self.roi_spp}")
         object.__setattr__(self, "_lens", self._true_lens())
@@ -285,7 +268,12 @@ class Scenario:
     def to_json(self) -> dict:
         """The fields as JSON values; the profiles by name (``camera``, ``pattern``) and by the
         file they were read from (``camera_source``, ``pattern_source``)."""
-        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.init}
+        out = {}
+        for f in dataclasses.fields(self):
+            if f.name == "scene":
+                out.update(self.scene.to_json())  # flat: one name per quantity
+            elif f.init:
+                out[f.name] = getattr(self, f.name)
         out["camera"], out["pattern"] = self.camera.name, self.pattern.name
         out["camera_source"], out["pattern_source"] = self.camera.source, self.pattern.source
         for k in ("misalignment_deg", "stand_error", "lens_pp_offset_px"):
@@ -413,14 +401,15 @@ def lab_flux(camera: Camera, scenario: Scenario, factor: np.ndarray | None = Non
 
     optics = Optics.from_camera(camera)
     flash = Flash.from_camera(camera, optics.band_nm)
-    L = float(scenario.ambient_radiance_w_m2_sr)
+    scene = scenario.scene
+    L = float(scene.ambient_radiance_w_m2_sr)
     info = {"ambient_radiance_w_m2_sr": L}
-    if scenario.backdrop_distance_m is not None:
-        D = scenario.distance_m + scenario.backdrop_distance_m
+    if scene.backdrop_distance_m is not None:
+        D = scenario.distance_m + scene.backdrop_distance_m
         n_led = len(flash.led_offsets_m)
-        Lb = scenario.backdrop_reflectance * n_led * flash.radiant_intensity_w_sr / (np.pi * D * D)
+        Lb = scene.backdrop_reflectance * n_led * flash.radiant_intensity_w_sr / (np.pi * D * D)
         L += Lb
-        info.update({"backdrop_distance_from_camera_m": D, "backdrop_reflectance": scenario.backdrop_reflectance,
+        info.update({"backdrop_distance_from_camera_m": D, "backdrop_reflectance": scene.backdrop_reflectance,
                      "backdrop_radiance_w_m2_sr": Lb})
     info["radiance_w_m2_sr"] = L
     if L == 0:

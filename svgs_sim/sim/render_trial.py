@@ -43,7 +43,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from svgs_sim.sim.closed_loop import DEFAULT_AMBIENT_RADIANCE_W_M2_SR, DEFAULT_BACKDROP_DISTANCE_M
+from svgs_sim.sim.scene import Scene, scene_parameters
 from svgs_sim.sim.metrics import (
     ATT_ERR_VEC_DEG,
     ERR_KEYS,
@@ -74,11 +74,7 @@ THRESHOLD_APP, THRESHOLD_OTSU, THRESHOLD_AUTO = 0.0, -1.0, -2.0
 
 RENDER_PARAMETERS = {
     **{k: GEOMETRIC_PARAMETERS[k] for k in _POSE},
-    "backdrop_distance_m": Parameter("backdrop_distance_m", "m", "grey backdrop behind the target (0: none)",
-                                     DEFAULT_BACKDROP_DISTANCE_M, True, **bounds("backdrop_m")),
-    "ambient_radiance_w_m2_sr": Parameter("ambient_radiance_w_m2_sr", "W m^-2 sr^-1",
-                                          "uniform ambient scene radiance from room lights, in band (default: the lab's, svgs_sim.sim.lab)",
-                                          DEFAULT_AMBIENT_RADIANCE_W_M2_SR, True, **bounds("ambient")),
+    **scene_parameters(),  # the scene around the target, declared once (svgs_sim.sim.scene)
     "spp": Parameter("spp", "1", "samples per pixel of the full frame (-1: the renderer's default)", -1.0, True,
                      lower=-1.0, upper=MAX_SPP),
     "roi_spp": Parameter("roi_spp", "1", "samples per pixel in the spot windows (-1: the renderer's default)", -1.0,
@@ -246,14 +242,13 @@ class RenderScenario(PoseScenario):
     """A ``render`` trial's scenario (:data:`RENDER_PARAMETERS`; the row view, the pose, the
     stand and the solver's calibration errors: :class:`svgs_sim.sim.trials.TrialScenario`,
     :class:`svgs_sim.sim.trials.PoseScenario`). None: the profile's, the renderer's or the phone's own
-    value (the row holds the old sentinel: -1, or 0 for ``exposure_s``, ``iso`` and
-    ``backdrop_distance_m``).
+    value (the row holds the old sentinel: -1, or 0 for ``exposure_s`` and ``iso``).
 
     Attributes
     ----------
-    backdrop_distance_m : float or None
-        A grey backdrop this far behind the target (None: none).
-    ambient_radiance_w_m2_sr : float
+    scene : svgs_sim.sim.scene.Scene
+        The scene around the target (its trial parameters are row columns of their own,
+        :func:`svgs_sim.sim.scene.scene_parameters`).
     spp, roi_spp : int or None
         Samples per pixel of the full frame and the spot windows (None: the renderer's).
     render_seed : int
@@ -281,8 +276,7 @@ class RenderScenario(PoseScenario):
     exposure_compensation_ev : float
     """
 
-    backdrop_distance_m: float | None = DEFAULT_BACKDROP_DISTANCE_M
-    ambient_radiance_w_m2_sr: float = DEFAULT_AMBIENT_RADIANCE_W_M2_SR
+    scene: Scene = Scene()
     spp: int | None = None
     roi_spp: int | None = None
     render_seed: int = 0
@@ -314,7 +308,8 @@ class RenderScenario(PoseScenario):
     exposure_compensation_ev: float = 0.0
 
     KIND: ClassVar[str] = "render"
-    _OPTIONAL: ClassVar[dict] = {"backdrop_distance_m": 0.0, "spp": -1.0, "roi_spp": -1.0, "exposure_s": 0.0,
+    _PARTS: ClassVar[dict] = {"scene": Scene}
+    _OPTIONAL: ClassVar[dict] = {"spp": -1.0, "roi_spp": -1.0, "exposure_s": 0.0,
                                  "iso": 0.0, "jpeg_quality": -1.0, "f_number": -1.0, "glare_veiling_fraction": -1.0,
                                  "glare_wing_exponent": -1.0}
     _INTS: ClassVar[tuple] = ("spp", "roi_spp", "render_seed", "jpeg_quality", "jpeg_grid_offset_u_px",
@@ -379,8 +374,7 @@ class RenderKey:
     lens_k1: float
     f_number: float | None
     led_offset_scale: float
-    backdrop_distance_m: float | None
-    ambient_radiance_w_m2_sr: float
+    scene: Scene
     spp: int | None
     roi_spp: int | None
     render_seed: int
@@ -400,8 +394,7 @@ class RenderKey:
                         **dict(self.pose), lens_pp_offset_px=(self.lens_pp_u_px, self.lens_pp_v_px),
                         lens_k1=self.lens_k1,
                         camera_overrides=camera_overrides(self.camera, self.f_number, self.led_offset_scale),
-                        backdrop_distance_m=self.backdrop_distance_m,
-                        ambient_radiance_w_m2_sr=self.ambient_radiance_w_m2_sr, spp=self.spp, roi_spp=self.roi_spp)
+                        scene=self.scene, spp=self.spp, roi_spp=self.roi_spp)
 
 
 def render_trial_scenario(labels: dict | None = None, **values) -> RenderScenario:

@@ -313,6 +313,9 @@ class TrialScenario(Mapping):
     labels: tuple = ()
 
     KIND: ClassVar[str] = ""
+    #: Typed parts (field name -> class with ``row_values()`` and ``from_row(values)``, e.g. the
+    #: :class:`svgs_sim.sim.scene.Scene`): their row parameters are theirs, decoded into one object.
+    _PARTS: ClassVar[dict] = {}
     _OPTIONAL: ClassVar[dict] = {}
     _INTS: ClassVar[tuple] = ()
     _BOOLS: ClassVar[tuple] = ()
@@ -344,6 +347,13 @@ class TrialScenario(Mapping):
             if f.name in ("camera", "pattern", "labels") or not f.init:
                 continue
             v = getattr(self, f.name)
+            if f.name in self._PARTS:
+                part = self._PARTS[f.name]
+                if isinstance(v, Mapping):
+                    object.__setattr__(self, f.name, part(**v))
+                elif not isinstance(v, part):
+                    raise InputError(f"{f.name}: expected a {part.__module__}.{part.__name__}, got {v!r}")
+                continue
             if v is None or isinstance(v, str):
                 continue
             if f.name in self._BOOLS:
@@ -367,6 +377,10 @@ class TrialScenario(Mapping):
     def _decode(cls, values: dict) -> dict:
         """Field values of the row values of the kind's parameters (sentinels to None...)."""
         out = {}
+        values = dict(values)
+        for name, part in cls._PARTS.items():
+            keys = part().row_values()
+            out[name] = part.from_row({k: values.pop(k) for k in keys if k in values})
         for k, v in values.items():
             if k in cls._OPTIONAL and v == cls._OPTIONAL[k]:
                 out[k] = None
@@ -387,9 +401,18 @@ class TrialScenario(Mapping):
         return {k: self._row_value(k) for k in self.kind().parameters}
 
     def _row_value(self, key: str) -> float:
-        """The row value of one parameter (the field of that name; None: its sentinel)."""
-        v = getattr(self, key)
-        return float(self._OPTIONAL[key]) if v is None else float(v)
+        """The row value of one parameter (the field of that name, or a part's; None: its sentinel)."""
+        for name in self._PARTS:
+            part_row = getattr(self, name).row_values()
+            if key in part_row:
+                return part_row[key]
+        return self.row_code(key, getattr(self, key))
+
+    @classmethod
+    def row_code(cls, key: str, value) -> float:
+        """How the results row writes ``value`` of the field ``key`` (None: the row's code for
+        "the default"; the flat row exists only in the results store's codec)."""
+        return float(cls._OPTIONAL[key]) if value is None else float(value)
 
     # ------------------------------------------------------------------ rows
     def to_row(self) -> dict:

@@ -24,17 +24,20 @@ Outputs in the study directory
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from svgs_sim.sim.closed_loop import DEFAULT_AMBIENT_RADIANCE_W_M2_SR, DEFAULT_BACKDROP_DISTANCE_M
 from svgs_sim.base.errors import InputError
+from svgs_sim.sim.scene import Scene
 from svgs_sim.svgs.frames import STATE_KEYS
 
 from .seeding import check_seed, design_rng, trial_seed
 from .tail import run_rendered_study, write_dict_csv
+
+#: The render options a sweep may force (None: the renderer's or the phone's own).
+_ROW_OPTIONS = ("spp", "roi_spp", "exposure_s", "iso")
 
 #: Pose keys of the scenario that a pose's jitter moves, with the jitter option that scales each.
 JITTER_KEYS = (("target_x_m", "jitter_m"), ("target_y_m", "jitter_m"), ("roll_deg", "jitter_deg"), ("pitch_deg", "jitter_deg"),
@@ -61,13 +64,14 @@ class RangeSweepConfig:
         ``auto``, ``otsu`` or a level.
     target_x_m, target_y_m, roll_deg, pitch_deg, yaw_deg : float
         The nominal pose besides the range (the target's lateral offset, the paper's attitude).
-    backdrop_distance_m : float
-        0: no backdrop.
-    ambient_radiance_w_m2_sr : float
-    spp, roi_spp : int
-        -1: the renderer's default.
-    exposure_s, iso : float
-        Forced on the phone (0: its auto-exposure).
+    scene : svgs_sim.sim.scene.Scene
+        The scene around the target (default: the paper's lab).
+    spp, roi_spp : int or None
+        Samples per pixel of the full frame and the spot windows (None: the renderer's).
+    exposure_s : float or None
+        Exposure time forced on the phone, s (None: its auto-exposure).
+    iso : float or None
+        ISO forced on the phone (None: its auto-exposure).
     """
 
     camera: str
@@ -84,17 +88,30 @@ class RangeSweepConfig:
     roll_deg: float = 0.0
     pitch_deg: float = 0.0
     yaw_deg: float = 0.0
-    backdrop_distance_m: float = DEFAULT_BACKDROP_DISTANCE_M
-    ambient_radiance_w_m2_sr: float = DEFAULT_AMBIENT_RADIANCE_W_M2_SR
-    spp: int = -1
-    roi_spp: int = -1
-    exposure_s: float = 0.0
-    iso: float = 0.0
+    scene: Scene = field(default_factory=Scene)
+    spp: int | None = None
+    roi_spp: int | None = None
+    exposure_s: float | None = None
+    iso: float | None = None
 
     def manifest(self) -> dict:
-        d = asdict(self)
+        """The results store's manifest: the fields as a render trial's row writes them (the
+        scene's parameters flat, None as the row's code), so a study folder of 0.1 resumes."""
+        d = {k: v for k, v in asdict(self).items() if k != "scene"}
         d["ranges_m"] = [float(r) for r in self.ranges_m]
-        return {"study": "range-sweep", "trial_kind": "render", **d}
+        at = list(d).index("spp")
+        row = self.row_options()
+        items = list(d.items())
+        items[at:] = [*self.scene.row_values().items(), *((k, row[k]) for k in _ROW_OPTIONS)]
+        return {"study": "range-sweep", "trial_kind": "render", **dict(items)}
+
+    def row_options(self) -> dict:
+        """``spp``, ``roi_spp``, ``exposure_s`` and ``iso`` as a render trial's row writes them
+        (the results store's codec: None as -1 or 0)."""
+        from svgs_sim.sim.render_trial import RenderScenario
+
+        out = {k: RenderScenario.row_code(k, getattr(self, k)) for k in _ROW_OPTIONS}
+        return {**out, "spp": int(out["spp"]), "roi_spp": int(out["roi_spp"])}
 
     @property
     def n_trials(self) -> int:
@@ -118,7 +135,7 @@ def _nonneg(value, flag: str) -> float:
 
 
 def make_config(camera: str, ranges_m, *, trials: int = 20, poses: int = 1, jitter_deg: float = 1.0,
-                jitter_m: float = 0.01, seed: int = 0, **scene) -> RangeSweepConfig:
+                jitter_m: float = 0.01, seed: int = 0, **options) -> RangeSweepConfig:
     """A validated :class:`RangeSweepConfig` (:class:`InputError` naming the option on bad input).
 
     Parameters
@@ -127,14 +144,16 @@ def make_config(camera: str, ranges_m, *, trials: int = 20, poses: int = 1, jitt
         Camera profile name or path (needs ``[optics]`` and ``[flash]``).
     ranges_m : sequence of float
         Positive, distinct ranges.
-    **scene
-        Other :class:`RangeSweepConfig` fields (pattern, threshold, nominal pose, lab,
-        samples per pixel, forced exposure).
+    **options
+        Other :class:`RangeSweepConfig` fields (pattern, threshold, nominal pose, ``scene``,
+        samples per pixel, forced exposure; None: the default).
     """
     from svgs_sim.sim.render_trial import check_threshold, render_trial_scenario
 
-    if "threshold" in scene:
-        scene["threshold"] = check_threshold(scene["threshold"])
+    if "threshold" in options:
+        options["threshold"] = check_threshold(options["threshold"])
+    if not isinstance(options.get("scene", Scene()), Scene):
+        raise InputError(f"scene: expected a svgs_sim.sim.scene.Scene, got {options['scene']!r}")
     rs = [float(r) for r in ranges_m]
     if not rs:
         raise InputError("--ranges: no range given")
@@ -142,7 +161,7 @@ def make_config(camera: str, ranges_m, *, trials: int = 20, poses: int = 1, jitt
         raise InputError(f"--ranges: repeated range in {rs}")
     cfg = RangeSweepConfig(camera=str(camera), ranges_m=tuple(rs), trials=_count(trials, "--trials"),
                            poses=_count(poses, "--poses"), jitter_deg=_nonneg(jitter_deg, "--jitter-deg"),
-                           jitter_m=_nonneg(jitter_m, "--jitter-m"), seed=check_seed(seed), **scene)
+                           jitter_m=_nonneg(jitter_m, "--jitter-m"), seed=check_seed(seed), **options)
     for r in rs:  # validates every scenario value now, before any work (InputError)
         render_trial_scenario(**_fixed(cfg), range_m=r)
     return cfg
@@ -151,9 +170,9 @@ def make_config(camera: str, ranges_m, *, trials: int = 20, poses: int = 1, jitt
 def _fixed(cfg: RangeSweepConfig) -> dict:
     from svgs_sim.sim.render_trial import threshold_parameter
 
-    keys = ("camera", "pattern", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg", "backdrop_distance_m",
-            "ambient_radiance_w_m2_sr", "spp", "roi_spp", "exposure_s", "iso")
-    return {**{k: getattr(cfg, k) for k in keys}, "threshold": threshold_parameter(cfg.threshold)}
+    keys = ("camera", "pattern", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg")
+    return {**{k: getattr(cfg, k) for k in keys}, **cfg.scene.row_values(), **cfg.row_options(),
+            "threshold": threshold_parameter(cfg.threshold)}
 
 
 def range_sweep_trials(cfg: RangeSweepConfig) -> list:

@@ -1,0 +1,251 @@
+"""The scene around the target - what lights it and what lies behind it - declared once.
+
+Every SVGS scenario holds one frozen :class:`Scene`: the closed loop's
+:class:`svgs_sim.sim.closed_loop.Scenario`, the render trial's
+:class:`svgs_sim.sim.render_trial.RenderScenario` (and so every campaign, sensitivity study and
+range sweep) and the range sweep's configuration. Each field is declared here once, as a
+:func:`quantity` with its unit, meaning, domain and default; the rest of the house derives
+from that declaration:
+
+- the render trial's row parameters (:func:`scene_parameters`; a sensitivity study may vary
+  each, a results store holds each in a column of its own),
+- the CLI options of the commands that render a scene (:func:`add_scene_options`,
+  :func:`scene_from_args`), their bounds and their help,
+- the JSON record of a scenario (:meth:`Scene.to_json`, flat in ``truth.json``),
+- the render cache's key (a Scene is hashable: equal scenes share one render).
+
+So a new scene parameter is one field here and the code that uses its value (see
+``docs/architecture.md``). Today the scene is the paper's lab (:mod:`svgs_sim.sim.lab`): a grey
+backdrop behind the target and the room's light; the on-orbit issue adds the sun, the Earth and
+the target's body.
+
+>>> from svgs_sim.sim.scene import Scene
+>>> Scene().backdrop_distance_m            # the lab's (assets/labs/msfc-frl.toml)
+3.0
+>>> Scene(backdrop_distance_m=None).row_values()["backdrop_distance_m"]   # the results row's code for None
+0.0
+>>> Scene(backdrop_distance_m=-1)
+Traceback (most recent call last):
+...
+svgs_sim.base.errors.InputError: backdrop_distance_m: expected > 0 and <= 1000 m (or None for none), got -1 - grey backdrop behind the target
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from svgs_sim.base.errors import InputError
+from svgs_sim.base.limits import INPUT_BOUNDS
+from svgs_sim.sim.lab import load_lab
+
+#: The paper's lab (:mod:`svgs_sim.sim.lab`, ``assets/labs/msfc-frl.toml``): a matt grey backdrop
+#: 3 m behind the target (ASSUMPTION) and a dimly lit room, its ambient radiance fitted to the
+#: Amaze 4G's merging range (``assets/labs/fitted/msfc-frl.toml``). The defaults of :class:`Scene`.
+LAB = load_lab()
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """The declaration of one scene parameter (the metadata of a :class:`Scene` field).
+
+    Attributes
+    ----------
+    unit : str
+        ``"1"`` for a dimensionless number.
+    meaning : str
+        One sentence for reports, ``--help`` and error messages.
+    lower, upper : float or None
+        The physical domain (inclusive unless ``lower_open``).
+    lower_open : bool
+    none_means : str or None
+        What None means (the field may then be None), e.g. ``"no backdrop"``.
+    row_none : float or None
+        How a results row and a CLI option write None (with ``none_means``).
+    trial : bool
+        A parameter of the render trial (a row column, varied by a sensitivity study) and a CLI
+        option of the commands that render a scene.
+    flag : str or None
+        The CLI option (default ``--`` and the field's name with dashes).
+    help : str or None
+        The CLI option's help (default the meaning, the unit and the default).
+    """
+
+    unit: str
+    meaning: str
+    lower: float | None = None
+    upper: float | None = None
+    lower_open: bool = False
+    none_means: str | None = None
+    row_none: float | None = None
+    trial: bool = True
+    flag: str | None = None
+    help: str | None = None
+
+
+def quantity(default, **declaration) -> Any:
+    """A :class:`Scene` field: its ``default`` and its :class:`Quantity` (keyword arguments)."""
+    return field(default=default, metadata={"quantity": Quantity(**declaration)})
+
+
+def _domain(q: Quantity) -> str:
+    unit = "" if q.unit in ("", "1") else f" {q.unit}"
+    if q.lower is not None and q.upper is not None:
+        lo = f"> {q.lower:g} and <= {q.upper:g}" if q.lower_open else f"{q.lower:g} to {q.upper:g}"
+        out = f"{lo}{unit}"
+    elif q.lower is not None:
+        out = f"{'>' if q.lower_open else '>='} {q.lower:g}{unit}"
+    else:
+        out = f"a finite number{unit}"
+    return out + (f" (or None for {q.none_means})" if q.none_means else "")
+
+
+@dataclass(frozen=True)
+class Scene:
+    """The scene around the target (frozen, hashable; the defaults are the paper's lab).
+
+    Attributes
+    ----------
+    backdrop_distance_m : float or None
+        A grey Lambertian backdrop this far behind the target origin, m (None: no backdrop).
+    backdrop_reflectance : float
+        The backdrop's Lambertian reflectance, 0-1 (not a trial parameter: the lab's).
+    ambient_radiance_w_m2_sr : float
+        Uniform scene radiance from the room's lights in the camera's band, W m^-2 sr^-1.
+    """
+
+    backdrop_distance_m: float | None = quantity(
+        LAB["backdrop_distance_m"], unit="m", meaning="grey backdrop behind the target",
+        lower=0.0, upper=INPUT_BOUNDS["backdrop_m"][1], lower_open=True, none_means="none", row_none=0.0,
+        flag="--backdrop-m", help="distance of a grey backdrop behind the target (m; default 3; 0 = none)")
+    backdrop_reflectance: float = quantity(
+        LAB["backdrop_reflectance"], unit="1", meaning="the backdrop's Lambertian reflectance", lower=0.0, upper=1.0,
+        trial=False)
+    ambient_radiance_w_m2_sr: float = quantity(
+        LAB["ambient_radiance_w_m2_sr"], unit="W m^-2 sr^-1",
+        meaning="uniform ambient scene radiance from room lights, in band (default: the lab's, svgs_sim.sim.lab)",
+        lower=0.0, upper=INPUT_BOUNDS["ambient"][1], flag="--ambient",
+        help="ambient scene radiance from room lights, W m^-2 sr^-1 in band (default: the lab's, 0.028, fitted in "
+        "assets/labs/fitted/msfc-frl.toml; 0: lights off)")
+
+    def __post_init__(self):
+        for f in dataclasses.fields(self):
+            q = f.metadata["quantity"]
+            v = getattr(self, f.name)
+            if v is None and q.none_means:
+                continue
+            object.__setattr__(self, f.name, check_quantity(f.name, q, v))
+
+    @staticmethod
+    def quantities() -> dict:
+        """Field name -> :class:`Quantity`, in declaration order."""
+        return {f.name: f.metadata["quantity"] for f in dataclasses.fields(Scene)}
+
+    def replace(self, **changes) -> "Scene":
+        """A copy with fields changed (checked again)."""
+        return dataclasses.replace(self, **changes)
+
+    def to_json(self) -> dict:
+        """The fields as JSON values (None as null)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+    def row_values(self) -> dict:
+        """The trial parameters as a results row writes them (None as the quantity's ``row_none``)."""
+        out = {}
+        for name, q in self.quantities().items():
+            if q.trial:
+                v = getattr(self, name)
+                out[name] = float(q.row_none) if v is None else float(v)
+        return out
+
+    @classmethod
+    def from_row(cls, values: dict) -> "Scene":
+        """The scene of a row's values (missing trial parameters at their defaults; ``row_none``
+        read as None)."""
+        kw = {}
+        for name, q in cls.quantities().items():
+            if q.trial and name in values:
+                v = float(values[name])
+                kw[name] = None if (q.none_means and v == q.row_none) else v
+        return cls(**kw)
+
+
+def check_quantity(name: str, q: Quantity, value) -> float:
+    """``float(value)`` within the quantity's domain, else :class:`InputError` naming ``name``."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name}: expected {_domain(q)}, got {value!r}") from None
+    bad = (not np.isfinite(v) or (q.lower is not None and (v < q.lower or (q.lower_open and v == q.lower)))
+           or (q.upper is not None and v > q.upper))
+    if bad:
+        raise InputError(f"{name}: expected {_domain(q)}, got {value!r} - {q.meaning}")
+    return v
+
+
+def scene_parameters() -> dict:
+    """The render trial's row parameters of the scene (:class:`svgs_sim.sim.trials.Parameter`,
+    name -> parameter, in declaration order): every :class:`Quantity` with ``trial``. A row writes
+    None as ``row_none``, which the parameter's domain then includes."""
+    from svgs_sim.sim.trials import Parameter
+
+    default = Scene()
+    out = {}
+    for name, q in Scene.quantities().items():
+        if not q.trial:
+            continue
+        d = getattr(default, name)
+        lower, lower_open = q.lower, q.lower_open
+        meaning = q.meaning
+        if q.none_means:
+            meaning = f"{meaning} ({q.row_none:g}: {q.none_means})"
+            if q.row_none == q.lower:
+                lower_open = False
+        out[name] = Parameter(name, q.unit, meaning, float(q.row_none if d is None else d), True, lower=lower,
+                              upper=q.upper, lower_open=lower_open)
+    return out
+
+
+def _dest(flag: str) -> str:
+    return flag.lstrip("-").replace("-", "_")
+
+
+def _flag(name: str, q: Quantity) -> str:
+    return q.flag or "--" + name.replace("_", "-")
+
+
+def add_scene_options(parser) -> None:
+    """The scene's CLI options (one per trial :class:`Quantity`; default: the scene's). Each option
+    carries its quantity's domain as ``action.bounds`` (``(low, high, unit)``, checked by
+    :func:`svgs_sim.cli.validate.check_args` before any work)."""
+    default = Scene()
+    for name, q in Scene.quantities().items():
+        if not q.trial:
+            continue
+        text = q.help
+        if text is None:
+            d = getattr(default, name)
+            unit = "" if q.unit in ("", "1") else f", {q.unit}"
+            text = f"{q.meaning}{unit} (default {d if d is None else f'{d:g}'}" + (
+                f"; {q.row_none:g}: {q.none_means})" if q.none_means else ")")
+        action = parser.add_argument(_flag(name, q), type=float, default=None, help=text)
+        # the option's physical bounds, read by svgs_sim.cli.validate.check_args before any work
+        action.bounds = (-np.inf if q.lower is None else q.lower, np.inf if q.upper is None else q.upper,
+                         "" if q.unit == "1" else q.unit)
+
+
+def scene_from_args(args, base: Scene | None = None) -> Scene:
+    """The :class:`Scene` of the options of :func:`add_scene_options` (an option not given keeps
+    ``base``'s value, default the scene's own; an optional quantity's ``row_none`` is None)."""
+    base = base or Scene()
+    kw = {}
+    for name, q in Scene.quantities().items():
+        if not q.trial:
+            continue
+        v = getattr(args, _dest(_flag(name, q)), None)
+        if v is not None:
+            kw[name] = None if (q.none_means and v == q.row_none) else v
+    return base.replace(**kw) if kw else base

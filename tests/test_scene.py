@@ -1,0 +1,129 @@
+"""The scene part (svgs_sim.sim.scene): declared once, it reaches the row, the CLI and the render
+key by itself, and random scenarios round-trip exactly through the results store's flat row."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from svgs_sim.base.errors import InputError
+from svgs_sim.cli.main import build_parser, main
+from svgs_sim.sim.closed_loop import Scenario
+from svgs_sim.sim.lab import load_lab
+from svgs_sim.sim.render_trial import RENDER_PARAMETERS, RenderScenario, render_key, render_trial_scenario
+from svgs_sim.sim.scene import Scene, scene_from_args
+from svgs_sim.studies.range_sweep import make_config
+
+RENDERING_COMMANDS = (("render",), ("render-and-solve",), ("range-sweep",))
+
+
+def _random_scene(rng) -> Scene:
+    kw = {}
+    for name, q in Scene.quantities().items():
+        hi = min(q.upper, 50.0)
+        v = float(rng.uniform(q.lower, hi))
+        if q.lower_open and v == q.lower:
+            v = hi
+        kw[name] = None if (q.none_means and rng.random() < 0.3) else v
+    for name, q in Scene.quantities().items():
+        if not q.trial:  # not a row column: the lab's
+            kw[name] = getattr(Scene(), name)
+    return Scene(**kw)
+
+
+def _random_render_scenario(rng) -> RenderScenario:
+    return RenderScenario(
+        camera="galaxy-nexus", range_m=float(rng.uniform(1.0, 30.0)), roll_deg=float(rng.uniform(-10, 10)),
+        scene=_random_scene(rng), spp=None if rng.random() < 0.5 else int(rng.integers(1, 64)),
+        roi_spp=None if rng.random() < 0.5 else int(rng.integers(1, 256)),
+        exposure_s=None if rng.random() < 0.5 else float(rng.uniform(1e-4, 0.05)),
+        render_seed=int(rng.integers(2**31)))
+
+
+def test_the_defaults_are_the_labs():
+    lab = load_lab()
+    s = Scene()
+    assert (s.backdrop_distance_m, s.backdrop_reflectance, s.ambient_radiance_w_m2_sr) == \
+        (lab["backdrop_distance_m"], lab["backdrop_reflectance"], lab["ambient_radiance_w_m2_sr"])
+    assert Scenario().scene == s and RenderScenario(camera="galaxy-nexus").scene == s
+
+
+def test_random_scenes_round_trip_exactly_through_the_row():
+    rng = np.random.default_rng(20261205)
+    for _ in range(300):
+        s = _random_scene(rng)
+        assert Scene.from_row(s.row_values()) == s
+        r = _random_render_scenario(rng)
+        row = r.to_row()
+        assert all(isinstance(v, float) for k, v in row.items() if k not in ("camera", "pattern")), row  # floats
+        back = RenderScenario.from_row(row)
+        assert back == r, (r, back)
+        assert render_key(back) == render_key(r)
+        assert render_trial_scenario(**row) == r
+
+
+def test_every_trial_quantity_is_a_row_column_an_option_and_a_key_field():
+    params = Scene.quantities()
+    trial = [n for n, q in params.items() if q.trial]
+    assert trial and set(trial) <= set(RENDER_PARAMETERS)
+    for name in trial:
+        p, q = RENDER_PARAMETERS[name], params[name]
+        assert (p.unit, p.lower, p.upper) == (q.unit, q.lower, q.upper)
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command").choices
+    for (cmd,) in RENDERING_COMMANDS:
+        flags = {s: a for a in sub[cmd]._actions for s in a.option_strings}
+        for name in trial:
+            q = params[name]
+            flag = q.flag or "--" + name.replace("_", "-")
+            assert flag in flags, (cmd, flag)
+            lo, hi, _ = flags[flag].bounds
+            assert (lo, hi) == (q.lower, q.upper)
+    # a different scene is a different render (the key holds the part)
+    a = RenderScenario(camera="galaxy-nexus")
+    assert render_key(a) != render_key(dataclasses.replace(a, scene=a.scene.replace(ambient_radiance_w_m2_sr=0.0)))
+
+
+def test_the_cli_builds_the_scene_none_from_its_code():
+    parser = build_parser()
+    args = parser.parse_args(["render-and-solve", "--camera", "galaxy-nexus", "--range", "10", "--backdrop-m", "0",
+                              "--ambient", "0.5"])
+    assert scene_from_args(args) == Scene(backdrop_distance_m=None, ambient_radiance_w_m2_sr=0.5)
+    args = parser.parse_args(["render-and-solve", "--camera", "galaxy-nexus", "--range", "10"])
+    assert scene_from_args(args) == Scene()
+
+
+@pytest.mark.parametrize("kw, words", [
+    (dict(backdrop_distance_m=-1.0), ("backdrop_distance_m", "> 0 and <= 1000 m", "None for none")),
+    (dict(backdrop_distance_m=0.0), ("backdrop_distance_m", "> 0")),
+    (dict(backdrop_reflectance=1.5), ("backdrop_reflectance", "0 to 1")),
+    (dict(ambient_radiance_w_m2_sr=math.nan), ("ambient_radiance_w_m2_sr", "W m^-2 sr^-1")),
+    (dict(ambient_radiance_w_m2_sr="dark"), ("ambient_radiance_w_m2_sr", "'dark'")),
+])
+def test_a_bad_scene_is_refused_naming_the_field_and_its_domain(kw, words):
+    with pytest.raises(InputError) as e:
+        Scene(**kw)
+    for w in words:
+        assert w in str(e.value), (w, str(e.value))
+    assert "(-1" not in str(e.value) and " -1:" not in str(e.value)  # no sentinel in the message
+
+
+def test_the_cli_refuses_a_scene_out_of_its_domain_before_any_work(capsys, tmp_path):
+    rc = main(["render-and-solve", "--camera", "galaxy-nexus", "--range", "10", "--ambient", "-1",
+               "--out", str(tmp_path / "o")])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "--ambient" in err and "W m^-2 sr^-1" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_range_sweep_config_holds_a_scene_and_writes_the_old_manifest():
+    cfg = make_config("galaxy-nexus", [5.0, 10.0], scene=Scene(backdrop_distance_m=None))
+    m = cfg.manifest()
+    # the manifest of 0.1 (flat row values) so an old folder resumes
+    assert (m["backdrop_distance_m"], m["ambient_radiance_w_m2_sr"], m["spp"], m["exposure_s"]) == \
+        (0.0, load_lab()["ambient_radiance_w_m2_sr"], -1, 0.0)
+    assert cfg.spp is None and cfg.exposure_s is None
+    with pytest.raises(InputError, match="scene"):
+        make_config("galaxy-nexus", [5.0], scene={"backdrop_distance_m": 1.0})
