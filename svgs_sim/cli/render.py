@@ -17,7 +17,7 @@ from svgs_sim.base.errors import InputError
 
 def register(sub) -> None:
     """Add the ``render`` and ``doctor`` sub-commands to an argparse subparsers object."""
-    from svgs_sim.cli.sim import add_focus_arg
+    from svgs_sim.cli.sim import POSE_ARGS, add_focus_arg
     from svgs_sim.sim.scene import add_scene_options
 
     p = sub.add_parser(
@@ -32,13 +32,8 @@ def register(sub) -> None:
     p.add_argument("--camera", required=True, help="camera profile name or .toml path (needs [optics] and [flash])")
     p.add_argument("--pattern", default="svgs-3u", help="target pattern name or .toml path (default: svgs-3u)")
     p.add_argument("--range", dest="range_m", type=float, required=True, help="range along the boresight, m")
-    p.add_argument("--x", dest="target_x_m", type=float, default=0.0,
-                   help="lateral offset of the target origin from the boresight, camera right, m (default 0)")
-    p.add_argument("--y", dest="target_y_m", type=float, default=0.0,
-                   help="lateral offset of the target origin from the boresight, camera up, m (default 0)")
-    p.add_argument("--roll", type=float, default=0.0, help="roll (phi), deg (default 0)")
-    p.add_argument("--pitch", type=float, default=0.0, help="pitch (theta), deg (default 0)")
-    p.add_argument("--yaw", type=float, default=0.0, help="yaw (psi), deg (default 0)")
+    for flag, dest, text in POSE_ARGS:  # the pose options of every rendering command, declared once
+        p.add_argument(flag, dest=dest, type=float, default=0.0, help=text)
     p.add_argument("--spp", type=int, default=None, help="samples per pixel of the background (default 4)")
     p.add_argument("--roi-spp", type=int, default=None, help="samples per pixel in the windows around the spots (default 64 with --method guided, 4096 with path)")
     p.add_argument("--spot-samples", type=int, default=None, help="guided samples per spot strategy (default 16384, placed by the 4-D R4 sequence)")
@@ -79,7 +74,8 @@ def cmd_render(args) -> int:
     pattern = Pattern.load(args.pattern)
     if not (args.range_m == args.range_m) or args.range_m <= 0:
         raise InputError(f"--range: expected a positive range in metres, got {args.range_m}")
-    R, t = pose_from_scenario(args.range_m, args.target_x_m, args.target_y_m, args.roll, args.pitch, args.yaw)
+    R, t = pose_from_scenario(args.range_m, args.target_x_m, args.target_y_m, args.roll_deg, args.pitch_deg,
+                              args.yaw_deg)
     if args.focus_m is not None and not (np.isfinite(args.focus_m) and args.focus_m > 0):
         raise InputError(f"--focus-m: expected a positive distance in metres, got {args.focus_m}")
     from svgs_sim.cli.outdir import output_folder
@@ -143,8 +139,8 @@ def _render(args, camera, pattern, R, t) -> int:
     from svgs_sim.sim.scene import scene_from_args
 
     scen = Scenario(camera=args.camera, pattern=args.pattern, range_m=args.range_m,
-                    target_x_m=args.target_x_m, target_y_m=args.target_y_m, roll_deg=args.roll, pitch_deg=args.pitch,
-                    yaw_deg=args.yaw, scene=scene_from_args(args))
+                    target_x_m=args.target_x_m, target_y_m=args.target_y_m, roll_deg=args.roll_deg,
+                    pitch_deg=args.pitch_deg, yaw_deg=args.yaw_deg, scene=scene_from_args(args))
     lab, lab_info = lab_flux(camera, scen)
     res.flux = res.flux + lab
     if res.flux_diffuse is not None:

@@ -58,8 +58,7 @@ NON_NEGATIVE = {"sigma_px", "range_sigma_m", "merge_px", "jitter_deg", "jitter_m
 #: declared with the quantity.
 BOUNDS = INPUT_BOUNDS
 #: Attitude arguments (dest -> the envelope's angle).
-ATTITUDES = {"roll": "roll_deg", "pitch": "pitch_deg", "yaw": "yaw_deg", "roll_deg": "roll_deg",
-             "pitch_deg": "pitch_deg", "yaw_deg": "yaw_deg"}
+ATTITUDES = {"roll_deg": "roll_deg", "pitch_deg": "pitch_deg", "yaw_deg": "yaw_deg"}
 
 #: Comma-separated range lists (m).
 RANGE_LISTS = {"ranges", "focal_ranges", "pose_ranges"}

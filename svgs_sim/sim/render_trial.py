@@ -346,17 +346,17 @@ class RenderScenario(PoseScenario):
     def _validate(self, row: dict) -> None:
         super()._validate(row)
         if self.roi_spp == 0:
-            raise InputError("roi_spp: expected >= 1 (or -1: the renderer's default), got 0")
+            raise InputError("roi_spp: expected >= 1 (or None: the renderer's default), got 0")
         if self.jpeg_quality == 0:
-            raise InputError("jpeg_quality: expected 1-100 (or -1: the profile's), got 0 (the JPEG is switched off "
+            raise InputError("jpeg_quality: expected 1-100 (or None: the profile's), got 0 (the JPEG is switched off "
                              "with jpeg = 0)")
         if self.f_number is not None and self.f_number < 1.0:
-            raise InputError(f"f_number: expected -1 (the profile's) or an f-number >= 1, got {self.f_number:g}")
+            raise InputError(f"f_number: expected an f-number >= 1 (or None: the profile's), got {self.f_number:g}")
         if self.glare_wing_exponent is not None and self.glare_wing_exponent <= 1.0:
-            raise InputError(f"glare_wing_exponent: expected -1 (the profile's) or > 1, got "
+            raise InputError(f"glare_wing_exponent: expected > 1 (or None: the profile's), got "
                              f"{self.glare_wing_exponent:g}")
         if self.glare_veiling_fraction is not None and self.glare_veiling_fraction < 0:
-            raise InputError(f"glare_veiling_fraction: expected -1 (the profile's) or 0..0.5, got "
+            raise InputError(f"glare_veiling_fraction: expected 0 to 0.5 (or None: the profile's), got "
                              f"{self.glare_veiling_fraction:g}")
 
 
