@@ -46,10 +46,14 @@ def test_each_toml_file_is_opened_at_most_once(tmp_path):
     ras = _audited(["render-and-solve", "--camera", "galaxy-nexus", "--range", "10", "--seed", "1"], tmp_path)
     appr = _audited(["approach", "--camera", "galaxy-nexus", "--from", "10", "--to", "8", "--duration", "2",
                      "--fps", "1", "--out", str(tmp_path / "approach"), "--no-progress"], tmp_path)
-    for run in (ras, appr):
+    render = _audited(["render", "--camera", "galaxy-nexus", "--range", "10", "--seed", "1",
+                       "--out", str(tmp_path / "render")], tmp_path)  # the same route as render-and-solve
+    for run in (ras, appr, render):
         assert run["rc"] == 0
         names = {Path(p).name for p in run["opens"]}
-        assert {"galaxy-nexus.toml", "svgs-3u.toml", "svgs-app.toml"} <= names  # the hook sees the reads
+        assert {"galaxy-nexus.toml", "svgs-3u.toml"} <= names  # the hook sees the reads
+        if run is not render:
+            assert "svgs-app.toml" in names  # the detector's settings (svgs render detects nothing)
         assert max(run["opens"].values()) == 1, run["opens"]
 
 

@@ -49,11 +49,11 @@ def exposure_study_json(cfg, stats, out: Path) -> dict:
 
 def cmd_exposure_study(args) -> int:
     from svgs_sim.cli.json_out import emit, text_to_stderr
-    from svgs_sim.cli.sim import _check_camera_renderable, _parse_ranges
+    from svgs_sim.cli.sim import check_camera_renderable, _parse_ranges
     from svgs_sim.cli.studies import announce_plan, executor_from_args, print_run_stats
     from svgs_sim.studies.exposure_study import make_config, run_exposure_study
 
-    _check_camera_renderable(args.camera)
+    check_camera_renderable(args.camera)
     ranges = _parse_ranges(args.ranges)
     spec = executor_from_args(args)
     if args.trials < 1:

@@ -17,8 +17,7 @@ from svgs_sim.base.errors import InputError
 
 def register(sub) -> None:
     """Add the ``render`` and ``doctor`` sub-commands to an argparse subparsers object."""
-    from svgs_sim.cli.sim import POSE_ARGS, add_focus_arg
-    from svgs_sim.sim.scene import add_scene_options
+    from svgs_sim.cli.sim import scenario_args
 
     p = sub.add_parser(
         "render",
@@ -26,27 +25,18 @@ def register(sub) -> None:
         description="Render the noise-free photon flux (photons/s/pixel in the camera band) of the target "
         "pattern lit by the phone's flash, seen by the phone's camera, with Mitsuba 3. Writes DIR/flux.npy "
         "(float32, full frame), DIR/preview.png (tone-mapped) and DIR/truth.json (pose, state, targets_px, "
-        "every physical parameter used). Range is along the boresight to the target origin (m); attitude "
-        "(deg) and lateral offsets as in 'svgs solve'. Exit 0 done, 2 bad input.",
+        "every physical parameter used) and, unless --no-expose, the phone's exposure of it: DIR/raw.npy and "
+        "DIR/image.png, the image 'svgs render-and-solve' solves for the same options and seed (one route: "
+        "svgs_sim.sim.closed_loop.render_scenario). Range is along the boresight to the target origin (m); "
+        "attitude (deg) and lateral offsets as in 'svgs solve'. Exit 0 done, 2 bad input.",
     )
-    p.add_argument("--camera", required=True, help="camera profile name or .toml path (needs [optics] and [flash])")
-    p.add_argument("--pattern", default="svgs-3u", help="target pattern name or .toml path (default: svgs-3u)")
-    p.add_argument("--range", dest="range_m", type=float, required=True, help="range along the boresight, m")
-    for flag, dest, text in POSE_ARGS:  # the pose options of every rendering command, declared once
-        p.add_argument(flag, dest=dest, type=float, default=0.0, help=text)
-    p.add_argument("--spp", type=int, default=None, help="samples per pixel of the background (default 4)")
-    p.add_argument("--roi-spp", type=int, default=None, help="samples per pixel in the windows around the spots (default 64 with --method guided, 4096 with path)")
+    scenario_args(p, with_threshold=False)  # the options of render-and-solve, declared once
     p.add_argument("--spot-samples", type=int, default=None, help="guided samples per spot strategy (default 16384, placed by the 4-D R4 sequence)")
     p.add_argument("--reflector", default=None, help="'solid', 'hollow' or a model name (default: the pattern's)")
     p.add_argument("--body", default=None, choices=("plate", "3u", "none"), help="target body (default plate)")
     p.add_argument("--method", default="guided", choices=("guided", "path"),
                    help="'guided' (default) or 'path' (brute force, the reference; slow beyond a few metres)")
-    add_focus_arg(p)
     p.add_argument("--full-frame", action="store_true", help="render the whole frame at --spp, no windows")
-    p.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
-    add_scene_options(p)  # --backdrop-m, --ambient: the scene around the target (added to flux.npy)
-    p.add_argument("--exposure-s", type=float, default=None, help="exposure time of image.png (default: the phone's)")
-    p.add_argument("--iso", type=float, default=None, help="ISO of image.png (default: the phone's)")
     p.add_argument("--no-expose", action="store_true", help="write only the flux (no raw.npy / image.png)")
     p.add_argument("--out", required=True, help="output folder (created if missing)")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
@@ -65,23 +55,16 @@ def register(sub) -> None:
 
 
 def cmd_render(args) -> int:
-    from svgs_sim.svgs.frames import pose_from_scenario
-    from svgs_sim.base.profiles import Camera, Pattern
-
-    camera = Camera.load(args.camera)
-    for table in ("optics", "flash"):
-        camera.table(table)  # ProfileError naming the missing table, before any heavy import
-    pattern = Pattern.load(args.pattern)
-    if not (args.range_m == args.range_m) or args.range_m <= 0:
-        raise InputError(f"--range: expected a positive range in metres, got {args.range_m}")
-    R, t = pose_from_scenario(args.range_m, args.target_x_m, args.target_y_m, args.roll_deg, args.pitch_deg,
-                              args.yaw_deg)
-    if args.focus_m is not None and not (np.isfinite(args.focus_m) and args.focus_m > 0):
-        raise InputError(f"--focus-m: expected a positive distance in metres, got {args.focus_m}")
     from svgs_sim.cli.outdir import output_folder
+    from svgs_sim.cli.sim import check_camera_renderable, scenario_from_args
+    from svgs_sim.sim.closed_loop import RenderOptions
 
+    check_camera_renderable(args.camera)  # ProfileError naming a missing [optics] or [flash], before any heavy import
+    scen = scenario_from_args(args)  # the scenario of render-and-solve: pose, scene, samples, focus (InputError naming the input)
+    options = RenderOptions(method=args.method, reflector=args.reflector, body=args.body,
+                            spot_samples=args.spot_samples, full_frame=args.full_frame)
     with output_folder(args.out):  # made and probed before the render; removed again if refused
-        return _render(args, camera, pattern, R, t)
+        return _render(args, scen, options)
 
 
 #: Samples per second the renderer draws on this kind of machine (LLVM, two cores): the demo
@@ -112,69 +95,65 @@ def render_cost_warning(width_px: int, height_px: int, spp: int, roi_spp: int, n
             "Ctrl-C stops it")
 
 
-def _render(args, camera, pattern, R, t) -> int:
-    """``svgs render`` once its inputs are checked and ``--out`` is ready."""
-    from svgs_sim.render.api import Renderer
-    from svgs_sim.render.constants import DEFAULT_ROI_SPP, DEFAULT_ROI_SPP_PATH, DEFAULT_SPOT_SAMPLES, DEFAULT_SPP
+def _render(args, scen, options) -> int:
+    """``svgs render`` once its inputs are checked and ``--out`` is ready: the closed loop's
+    render (:func:`svgs_sim.sim.closed_loop.render_scenario`, as ``render-and-solve``) and, unless
+    ``--no-expose``, the phone's exposure of it (:meth:`svgs_sim.sim.closed_loop.Frame.exposer`)."""
+    from pathlib import Path
 
-    focus = float(np.linalg.norm(t)) if args.focus_m is None else float(args.focus_m)  # autofocus, as render-and-solve
-    opts = {"focus_distance_m": focus} if args.body is None else {"body": args.body, "focus_distance_m": focus}
-    spp = DEFAULT_SPP if args.spp is None else args.spp
-    roi_spp = args.roi_spp if args.roi_spp is not None else (DEFAULT_ROI_SPP if args.method == "guided" else DEFAULT_ROI_SPP_PATH)
-    r = Renderer(camera, pattern, reflector=args.reflector, scene_options=opts, spp=spp, roi_spp=roi_spp,
-                 spot_samples=args.spot_samples or DEFAULT_SPOT_SAMPLES, method=args.method)
-    warn = render_cost_warning(camera.width, camera.height, spp, roi_spp, int(pattern.n), args.full_frame)
+    from svgs_sim.render.api import write_preview
+    from svgs_sim.render.constants import DEFAULT_ROI_SPP, DEFAULT_ROI_SPP_PATH, DEFAULT_SPP
+    from svgs_sim.sim import hard_stop
+    from svgs_sim.sim.closed_loop import render_scenario
+
+    camera, pattern = scen.camera, scen.pattern
+    spp = DEFAULT_SPP if scen.spp is None else scen.spp
+    roi_spp = scen.roi_spp if scen.roi_spp is not None else (DEFAULT_ROI_SPP if options.method == "guided"
+                                                            else DEFAULT_ROI_SPP_PATH)
+    warn = render_cost_warning(camera.width, camera.height, spp, roi_spp, int(pattern.n), options.full_frame)
     if warn:
         print(f"svgs render: {warn}", file=sys.stderr, flush=True)
+    with hard_stop.scope():  # Ctrl-C stops the render within a second (nothing is written yet)
+        frame = render_scenario(scen, seed=args.seed, options=options)
     from svgs_sim.render.variant import is_fallback
 
-    if r.variant.notice and not is_fallback(r.variant.requested, r.variant.name):  # a fallback: said by select_variant
-        print(f"svgs render: note: {r.variant.notice}", file=sys.stderr)
-    from svgs_sim.sim import hard_stop
-
-    with hard_stop.scope():  # Ctrl-C stops the render within a second (nothing is written yet)
-        res = r.render(R, t, seed=args.seed, full_frame=args.full_frame)
-    res.truth["command"] = {k: v for k, v in vars(args).items() if k != "func"}
-    from svgs_sim.sim.closed_loop import Scenario, lab_flux
-    from svgs_sim.sim.scene import scene_from_args
-
-    scen = Scenario(camera=args.camera, pattern=args.pattern, range_m=args.range_m,
-                    target_x_m=args.target_x_m, target_y_m=args.target_y_m, roll_deg=args.roll_deg,
-                    pitch_deg=args.pitch_deg, yaw_deg=args.yaw_deg, scene=scene_from_args(args))
-    lab, lab_info = lab_flux(camera, scen)
-    res.flux = res.flux + lab
-    if res.flux_diffuse is not None:
-        res.flux_diffuse = res.flux_diffuse + lab
-    res.truth["lab"] = lab_info
-    res.truth["focus_distance_m"] = focus
+    info = frame.truth["render"]
+    if info.get("variant_notice") and not is_fallback(info.get("variant_requested"), info["variant"]):
+        print(f"svgs render: note: {info['variant_notice']}", file=sys.stderr)  # a fallback: said by select_variant
+    truth = dict(frame.truth)
+    truth["command"] = {k: v for k, v in vars(args).items() if k != "func"}
+    out = Path(args.out)
+    np.save(out / "flux.npy", frame.flux.astype(np.float32))
+    paths = {"flux": str(out / "flux.npy"), "truth": str(out / "truth.json"), "preview": str(out / "preview.png")}
+    if frame.points is not None and frame.target_diffuse is not None:  # the film before the lens PSF
+        lab = frame.lab if frame.lab is not None else np.float32(0.0)
+        np.save(out / "flux_diffuse.npy", (frame.target_diffuse + lab).astype(np.float32))
+        frame.points.save(out / "points.npz")
+        paths.update({"flux_diffuse": str(out / "flux_diffuse.npy"), "points": str(out / "points.npz")})
     if not args.no_expose:
         import cv2
 
-        from svgs_sim.camera.phone import PhoneCamera
+        ex = frame.exposer().expose(seed=args.seed, exposure_s=args.exposure_s, iso=args.iso)
+        truth["exposure"] = {"exposure_s": ex.exposure_s, "iso": ex.iso, "gain_dn_per_e": ex.gain_dn_per_e,
+                             **{k: v for k, v in ex.info.items()}}
+        np.save(out / "raw.npy", ex.raw_dn.astype(np.float32))
+        cv2.imwrite(str(out / "image.png"), ex.image)
+        paths.update({"raw": str(out / "raw.npy"), "image": str(out / "image.png")})
+    from svgs_sim.cli.solve import json_default
 
-        flux, points = res.film()
-        ex = PhoneCamera(camera).expose(flux, points=points, seed=args.seed, exposure_s=args.exposure_s, iso=args.iso)
-        res.truth["exposure"] = {"exposure_s": ex.exposure_s, "iso": ex.iso, "gain_dn_per_e": ex.gain_dn_per_e,
-                                 **{k: v for k, v in ex.info.items()}}
-    paths = res.save(args.out)
-    if not args.no_expose:
-        from pathlib import Path
-
-        np.save(Path(args.out) / "raw.npy", ex.raw_dn.astype(np.float32))
-        cv2.imwrite(str(Path(args.out) / "image.png"), ex.image)
-        paths.update({"raw": str(Path(args.out) / "raw.npy"), "image": str(Path(args.out) / "image.png")})
+    (out / "truth.json").write_text(json.dumps(truth, indent=2, default=json_default))
+    write_preview(out / "preview.png", frame.flux)
     summary = {
         "out": paths,
-        "variant": r.variant.name,
-        "total_flux_photons_per_s": float(res.flux.sum(dtype="float64")),
-        "targets_px": res.truth["targets_px"],
-        "timings_s": res.timings_s,
+        "variant": info["variant"],
+        "total_flux_photons_per_s": float(frame.flux.sum(dtype="float64")),
+        "targets_px": truth["targets_px"],
+        "timings_s": info.get("timings_s", {}),
     }
     if args.json:
         print(json.dumps(summary))
     else:
-        print(f"rendered {camera.name} at range {args.range_m:g} m with {r.variant.name} in "
-              f"{sum(v for v in res.timings_s.values() if isinstance(v, float)):.2f} s")
+        print(f"rendered {camera.name} at range {scen.distance_m:g} m with {info['variant']} in {frame.render_s:.2f} s")
         for k, v in paths.items():
             print(f"  {k:8s} {v}")
     return 0

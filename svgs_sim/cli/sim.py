@@ -37,26 +37,34 @@ def add_focus_arg(p) -> None:
                    "locks on it; svgs render and render-and-solve form the same image)")
 
 
-def _scene_args(p, with_range=True):
+def scenario_args(p, with_range=True, with_threshold=True) -> None:
+    """The options of a rendered scenario, declared once for ``svgs render``, ``render-and-solve``
+    and ``range-sweep``: camera, pattern, range, pose, samples per pixel, the scene
+    (:func:`svgs_sim.sim.scene.add_scene_options`), focus, the detector's threshold, a forced
+    exposure and the seed; :func:`scenario_from_args` builds the scenario of them."""
     from svgs_sim.sim.scene import add_scene_options  # not at module level: `svgs solve` loads no sim code
 
     p.add_argument("--camera", required=True, help="camera profile name or .toml path (needs [optics] and [flash])")
-    p.add_argument("--pattern", default="svgs-3u", help="target pattern (default svgs-3u)")
+    p.add_argument("--pattern", default="svgs-3u", help="target pattern name or .toml path (default svgs-3u)")
     if with_range:
         p.add_argument("--range", dest="range_m", type=float, required=True, help="range along the boresight to the target origin (m)")
     for flag, dest, text in POSE_ARGS:
         p.add_argument(flag, dest=dest, type=float, default=0.0, help=text)
     p.add_argument("--spp", type=int, default=None, help="samples per pixel, full frame (default 4; the background is dark and diffuse)")
-    p.add_argument("--roi-spp", type=int, default=None, help="samples per pixel in the windows around the spots (default 64, the guided method's)")
+    p.add_argument("--roi-spp", type=int, default=None, help="samples per pixel in the windows around the spots "
+                   "(default 64, the guided method's; 4096 with svgs render --method path)")
     add_scene_options(p)  # --backdrop-m, --ambient: the scene around the target (svgs_sim.sim.scene)
     add_focus_arg(p)
-    p.add_argument("--threshold", default=None, help="detector threshold: 'app' (the app's brightness threshold for the camera, assets/app/svgs-app.toml; the default), a level in image counts, 'auto' or 'otsu'")
+    if with_threshold:
+        p.add_argument("--threshold", default=None, help="detector threshold: 'app' (the app's brightness threshold for the camera, assets/app/svgs-app.toml; the default), a level in image counts, 'auto' or 'otsu'")
     p.add_argument("--exposure-s", type=float, default=None, help="exposure time, s (default: the phone's automatic exposure)")
     p.add_argument("--iso", type=float, default=None, help="ISO, ISO 12232 arithmetic speed (default: the phone's automatic ISO)")
     p.add_argument("--seed", type=int, default=0, help="random seed (render and noise); same seed, same numbers (default 0)")
 
 
-def _scenario(args, range_m=None):
+def scenario_from_args(args, range_m=None):
+    """The :class:`svgs_sim.sim.closed_loop.Scenario` of a rendering command's options (the pose,
+    the scene, samples per pixel, focus; the stand with ``--mount stand``)."""
     from svgs_sim.sim.closed_loop import Scenario
     from svgs_sim.sim.scene import scene_from_args
 
@@ -78,7 +86,9 @@ def _threshold(text):
     return parse_threshold(text)
 
 
-def _check_camera_renderable(name):
+def check_camera_renderable(name):
+    """The camera profile ``name``, refused (ProfileError naming the table) without ``[optics]``
+    or ``[flash]``, before any heavy import."""
     from svgs_sim.base.profiles import load_camera
 
     cam = load_camera(name)
@@ -127,8 +137,8 @@ def write_outputs(out: Path, frame, row, crlb=None, threshold=None) -> dict:
 def cmd_render_and_solve(args) -> int:
     from svgs_sim.cli.outdir import output_folder_if
 
-    _check_camera_renderable(args.camera)
-    scen = _scenario(args)
+    check_camera_renderable(args.camera)
+    scen = scenario_from_args(args)
     thr = _threshold(args.threshold)
     with output_folder_if(args.out):  # made and probed before the render; removed again if refused
         return _render_and_solve(args, scen, thr)
@@ -219,7 +229,7 @@ def cmd_range_sweep(args) -> int:
     from svgs_sim.sim.scene import scene_from_args
     from svgs_sim.studies.range_sweep import format_table, make_config, run_range_sweep
 
-    _check_camera_renderable(args.camera)
+    check_camera_renderable(args.camera)
     ranges = _parse_ranges(args.ranges)
     spec = executor_from_args(args)
     scene = {"pattern": args.pattern, "threshold": _threshold(args.threshold), "target_x_m": args.target_x_m,
@@ -250,7 +260,7 @@ def register(sub) -> None:
                        description="Render the target under the phone's flash (Mitsuba), expose the flux with the "
                        "phone camera model, run the SVGS detector and solver on the delivered image, and print "
                        "truth, solution and errors (pos_err_vec_m, att_err_vec_deg). Exit 0 solved, 1 no solution, 2 bad input.")
-    _scene_args(p)
+    scenario_args(p)
     p.add_argument("--mount", choices=("target", "stand"), default="target",
                    help="what --roll/--pitch/--yaw turn: 'target' (default: the target's attitude in front of the "
                    "camera) or 'stand' (the paper's test stand: the target fixed, the phone turned by the gimbal "
@@ -268,7 +278,7 @@ def register(sub) -> None:
                        "blobs found, success rate, merged-spot failures and errors, and write summary.csv, "
                        "trials.jsonl, range_sweep.png and summary.json. Trials are stored as they finish (results.csv, "
                        "manifest.json): rerunning the same command resumes; other options are refused.")
-    _scene_args(p, with_range=False)
+    scenario_args(p, with_range=False)
     p.add_argument("--ranges", required=True, help="comma-separated ranges in metres, e.g. 1,2,4,6.5,8,10; each costs one render per pose (~1-4 s) "
                    "plus --trials exposures (~0.15-0.35 s each)")
     p.add_argument("--trials", type=int, default=20, help="exposures (noise draws) per rendered pose (default 20)")

@@ -118,6 +118,7 @@ def _render_record(r, render_info: dict) -> dict:
     return {
         "variant": r.variant.name,
         "variant_notice": r.variant.notice,
+        "variant_requested": r.variant.requested,  # the argument or SVGS_MI_VARIANT; None: automatic
         "method": r.method,
         "integrator": "path" + (" (diffuse, LED as point light) + guided spot estimator" if r.method == "guided" else " (LED as disk area emitter)"),
         "spot_samples_per_strategy": r.spot_samples if r.method == "guided" else None,

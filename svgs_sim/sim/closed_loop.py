@@ -453,17 +453,75 @@ def _lab_photon_factor(camera: Camera) -> np.ndarray:
     return np.ascontiguousarray(full[: camera.height, : camera.width])
 
 
-def render_scenario(scenario: Scenario, *, seed: int = 0) -> Frame:
-    """Render a scenario: Mitsuba for the target, analytic lab light around it."""
-    from svgs_sim.render import render_flux
+@dataclass(frozen=True)
+class RenderOptions:
+    """How a scenario is rendered (not what is in it): the estimator and the target's model.
 
+    Attributes
+    ----------
+    method : {"guided", "path"}
+        The guided spot estimator (default) or brute-force path tracing (the reference; slow
+        beyond a few metres).
+    reflector : str or None
+        ``"solid"``, ``"hollow"`` or a reflector model name (None: the pattern's).
+    body : {"plate", "3u", "none"} or None
+        The target's body (None: the renderer's, a plate).
+    spot_samples : int or None
+        Guided samples per spot strategy (None: the renderer's, 16384).
+    full_frame : bool
+        Render the whole frame at the scenario's ``spp``, no spot windows.
+    """
+
+    method: str = "guided"
+    reflector: str | None = None
+    body: str | None = None
+    spot_samples: int | None = None
+    full_frame: bool = False
+
+    def __post_init__(self):
+        if self.method not in ("guided", "path"):
+            raise InputError(f"method: expected 'guided' or 'path', got {self.method!r}")
+        if self.body not in (None, "plate", "3u", "none"):
+            raise InputError(f"body: expected 'plate', '3u' or 'none' (or None: the renderer's), got {self.body!r}")
+        if self.spot_samples is not None and (isinstance(self.spot_samples, bool) or int(self.spot_samples) < 1):
+            raise InputError(f"spot_samples: expected a positive whole number (or None: the renderer's), got "
+                             f"{self.spot_samples!r}")
+
+
+def render_scenario(scenario: Scenario, *, seed: int = 0, options: RenderOptions | None = None) -> Frame:
+    """Render a scenario: Mitsuba for the target, analytic lab light around it.
+
+    The one route from a scenario to a rendered frame: ``svgs render``, ``svgs render-and-solve``,
+    the render trials of every study and the approach all come through here.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    seed : int
+        The render's Monte Carlo seed.
+    options : RenderOptions, optional
+        How to render (default: the guided estimator, the pattern's reflectors, a plate body).
+
+    Returns
+    -------
+    Frame
+    """
+    from svgs_sim.render import render_flux
+    from svgs_sim.render.constants import DEFAULT_SPOT_SAMPLES
+
+    options = options or RenderOptions()
     camera = scenario.camera_profile()
     pattern = scenario.pattern
     R, t = scenario.pose()
     t0 = time.perf_counter()
     kw = {k: int(getattr(scenario, k)) for k in ("spp", "roi_spp") if getattr(scenario, k) is not None}
     focus = scenario.focus_distance_m if scenario.focus_distance_m is not None else float(np.linalg.norm(t))
-    res = render_flux(camera, pattern, R, t, seed=int(seed), scene_options={"focus_distance_m": focus}, **kw)
+    scene_options = {"focus_distance_m": focus} if options.body is None else {"body": options.body,
+                                                                            "focus_distance_m": focus}
+    res = render_flux(camera, pattern, R, t, seed=int(seed), scene_options=scene_options, method=options.method,
+                      reflector=options.reflector, full_frame=options.full_frame,
+                      spot_samples=DEFAULT_SPOT_SAMPLES if options.spot_samples is None else int(options.spot_samples),
+                      **kw)
     factor = lab_photon_factor(camera)
     lab, info = lab_flux(camera, scenario, factor=factor)
     dt = time.perf_counter() - t0
