@@ -123,3 +123,34 @@ def test_no_private_names_of_sim_used_outside_sim():
                 if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("sim"):
                     bad += [f"{path.name}: {node.module}.{a.name}" for a in node.names if a.name.startswith("_")]
     assert not bad, bad
+
+
+def test_the_pose_fields_are_declared_once():
+    """The target's pose besides its range (svgs_sim.sim.target_pose.TargetPose) is declared in one
+    class; every scenario inherits it (an AST scan of the package for annotated class fields)."""
+    import ast
+    from pathlib import Path
+
+    import svgs_sim
+    from svgs_sim.sim.closed_loop import Scenario
+    from svgs_sim.sim.render_trial import RenderScenario
+    from svgs_sim.sim.target_pose import POSE_FIELDS, TargetPose
+    from svgs_sim.sim.tof_closed_loop import TofScenario
+    from svgs_sim.sim.trials import GeometricScenario
+    from svgs_sim.studies.range_sweep import RangeSweepConfig
+
+    root = Path(svgs_sim.__file__).parent
+    where = {}
+    for path in root.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ClassDef):
+                for item in node.body:
+                    if isinstance(item, ast.AnnAssign) and isinstance(item.target, ast.Name) \
+                            and item.target.id in POSE_FIELDS:
+                        where.setdefault(item.target.id, []).append(f"{path.relative_to(root)}:{node.name}")
+    # classes whose angle fields are not a pose: the envelope's limits, a calibration frame's measured roll
+    other_meanings = {"svgs/envelope.py:Envelope", "calibration/focal.py:ImageFocal"}
+    where = {k: [c for c in v if c not in other_meanings] for k, v in where.items()}
+    assert where == {name: ["sim/target_pose.py:TargetPose"] for name in POSE_FIELDS}, where
+    for cls in (Scenario, RenderScenario, GeometricScenario, TofScenario, RangeSweepConfig):
+        assert issubclass(cls, TargetPose), cls

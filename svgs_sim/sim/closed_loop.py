@@ -30,6 +30,7 @@ from svgs_sim.svgs.frames import pose_from_scenario, pose_to_state, state_dict
 from svgs_sim.base.profiles import Camera, Pattern, load_camera, load_pattern
 
 from svgs_sim.sim.scene import Scene
+from svgs_sim.sim.target_pose import TargetPose
 
 
 def _camera_key(camera: Camera) -> tuple:
@@ -39,7 +40,7 @@ def _camera_key(camera: Camera) -> tuple:
 
 
 @dataclass(frozen=True, eq=False)
-class Scenario:
+class Scenario(TargetPose):
     """One simulated situation (what a test stand would set up).
 
     The profiles travel as objects: ``camera`` and ``pattern`` may be given as names or paths
@@ -61,12 +62,9 @@ class Scenario:
         defaults to 10; :class:`svgs_sim.sim.stand.TestStand`). For callers that still give a stand's rail
         position as ``range_m``, a stand scenario with ``range_m`` and no ``rail_m`` takes it as
         ``rail_m``.
-    target_x_m, target_y_m : float
-        Lateral offsets of the target origin from the boresight (right, up in the paper's
-        camera frame), m. Not the camera position ``x_m``, ``y_m`` of the paper state
-        (:data:`svgs_sim.svgs.frames.STATE_KEYS`), which is in the target frame.
-    roll_deg, pitch_deg, yaw_deg : float
-        The paper's attitude (x-y-z sequence), degrees.
+    target_x_m, target_y_m, roll_deg, pitch_deg, yaw_deg : float
+        The target's pose besides its range (keyword-only, declared once in
+        :class:`svgs_sim.sim.target_pose.TargetPose`): lateral offsets, m, and the paper's attitude, deg.
     scene : Scene
         The scene around the target (:class:`svgs_sim.sim.scene.Scene`; default the paper's lab:
         a grey backdrop behind the target, the room's light).
@@ -106,11 +104,6 @@ class Scenario:
     camera: Camera | str = "galaxy-nexus"
     pattern: Pattern | str = "svgs-3u"
     range_m: float | None = None
-    target_x_m: float = 0.0
-    target_y_m: float = 0.0
-    roll_deg: float = 0.0
-    pitch_deg: float = 0.0
-    yaw_deg: float = 0.0
     scene: Scene = Scene()
     focus_distance_m: float | None = None
     spp: int | None = None

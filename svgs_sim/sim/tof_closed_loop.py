@@ -34,6 +34,7 @@ import numpy as np
 from svgs_sim.sim.metrics import no_pose_errors, pose_errors, state_error
 from svgs_sim.base.errors import InputError, SimulationFailure, check_finite
 from svgs_sim.svgs.frames import pose_from_scenario, pose_to_state
+from svgs_sim.sim.target_pose import TargetPose
 
 #: Second entry of the noise stream's seed ``[seed, NOISE_STREAM]`` (the stability runs' since
 #: issue 23, kept so the committed ToF report does not move).
@@ -58,7 +59,7 @@ def _optional(value, name: str, kind=float, positive: bool = True, allow_zero: b
 
 
 @dataclass(frozen=True)
-class TofScenario:
+class TofScenario(TargetPose):
     """One ToF situation: what is rendered and how the sensor sees it.
 
     Attributes
@@ -69,11 +70,9 @@ class TofScenario:
         Marker target name or path (:func:`svgs_sim.tof.load_target`).
     range_m : float
         Along the boresight to the target origin (the plate centre), m.
-    target_x_m, target_y_m : float
-        Lateral offsets of the target origin from the boresight (right, up in the paper's
-        camera frame), m; not the camera position ``x_m``, ``y_m`` of the paper state.
-    roll_deg, pitch_deg, yaw_deg : float
-        The paper's attitude (x-y-z sequence), deg.
+    target_x_m, target_y_m, roll_deg, pitch_deg, yaw_deg : float
+        The target's pose besides its range (keyword-only, declared once in
+        :class:`svgs_sim.sim.target_pose.TargetPose`): lateral offsets, m, and the paper's attitude, deg.
     seed : int
         The render's Monte Carlo seed, and the noise stream's (``[seed, NOISE_STREAM]``).
     spp, rim_spp_factor : int or None
@@ -92,11 +91,6 @@ class TofScenario:
     camera: str = "tof-epc660"
     pattern: str = "tof-8"
     range_m: float = 1.0
-    target_x_m: float = 0.0
-    target_y_m: float = 0.0
-    roll_deg: float = 0.0
-    pitch_deg: float = 0.0
-    yaw_deg: float = 0.0
     seed: int = 0
     spp: int | None = None
     rim_spp_factor: int | None = None

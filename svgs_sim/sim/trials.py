@@ -37,6 +37,7 @@ from svgs_sim.base.errors import InputError
 from svgs_sim.svgs.frames import STATE_KEYS
 from svgs_sim.svgs.envelope import ATTITUDE_LIMITS_DEG
 from svgs_sim.base.limits import RANGE_LIMIT_M, bounds
+from svgs_sim.sim.target_pose import TargetPose
 
 #: Modules that may register more trial kinds; imported when an unknown name is asked for
 #: (a module that is not installed is skipped). The render-and-solve trial of the campaign,
@@ -494,7 +495,7 @@ class TrialScenario(Mapping):
 
 
 @dataclass(frozen=True, eq=False)
-class PoseScenario(TrialScenario):
+class PoseScenario(TrialScenario, TargetPose):
     """The pose, the stand and the solver's calibration errors, shared by the geometric and the
     render kinds (see :data:`GEOMETRIC_PARAMETERS` for each one's meaning and unit).
 
@@ -505,6 +506,8 @@ class PoseScenario(TrialScenario):
     rail_m : float or None
         The gimbal pivot's rail position, m (``mount="stand"``, required); the row's
         ``range_m`` column holds it with ``stand = 1``.
+    target_x_m, target_y_m, roll_deg, pitch_deg, yaw_deg : float
+        The pose besides the range (keyword-only, :class:`svgs_sim.sim.target_pose.TargetPose`).
     mount : {"target", "stand"}
         What the angles turn (the row's ``stand``: 0 or 1).
     truth_actual, truth_stand, truth_rail : bool
@@ -516,11 +519,6 @@ class PoseScenario(TrialScenario):
 
     range_m: float | None = None
     rail_m: float | None = None
-    target_x_m: float = 0.0
-    target_y_m: float = 0.0
-    roll_deg: float = 0.0
-    pitch_deg: float = 0.0
-    yaw_deg: float = 0.0
     mount: str = "target"
     stage_m: float = 0.0
     misalign_roll_deg: float = 0.0

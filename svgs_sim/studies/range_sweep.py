@@ -31,6 +31,7 @@ import numpy as np
 
 from svgs_sim.base.errors import InputError
 from svgs_sim.sim.scene import Scene
+from svgs_sim.sim.target_pose import TargetPose
 from svgs_sim.svgs.frames import STATE_KEYS
 
 from .seeding import check_seed, design_rng, trial_seed
@@ -45,7 +46,7 @@ JITTER_KEYS = (("target_x_m", "jitter_m"), ("target_y_m", "jitter_m"), ("roll_de
 
 
 @dataclass(frozen=True)
-class RangeSweepConfig:
+class RangeSweepConfig(TargetPose):
     """What a range sweep computes (its manifest); how it runs is not part of it.
 
     Attributes
@@ -63,7 +64,7 @@ class RangeSweepConfig:
         ``app`` (the app's brightness threshold for the camera, :mod:`svgs_sim.svgs.app`; default),
         ``auto``, ``otsu`` or a level.
     target_x_m, target_y_m, roll_deg, pitch_deg, yaw_deg : float
-        The nominal pose besides the range (the target's lateral offset, the paper's attitude).
+        The nominal pose besides the range (keyword-only, :class:`svgs_sim.sim.target_pose.TargetPose`).
     scene : svgs_sim.sim.scene.Scene
         The scene around the target (default: the paper's lab).
     spp, roi_spp : int or None
@@ -83,11 +84,6 @@ class RangeSweepConfig:
     seed: int = 0
     pattern: str = "svgs-3u"
     threshold: str = "app"
-    target_x_m: float = 0.0
-    target_y_m: float = 0.0
-    roll_deg: float = 0.0
-    pitch_deg: float = 0.0
-    yaw_deg: float = 0.0
     scene: Scene = field(default_factory=Scene)
     spp: int | None = None
     roi_spp: int | None = None
