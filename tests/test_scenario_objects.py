@@ -154,3 +154,24 @@ def test_the_pose_fields_are_declared_once():
     assert where == {name: ["sim/target_pose.py:TargetPose"] for name in POSE_FIELDS}, where
     for cls in (Scenario, RenderScenario, GeometricScenario, TofScenario, RangeSweepConfig):
         assert issubclass(cls, TargetPose), cls
+
+
+def test_the_tof_kind_has_a_typed_scenario_that_is_its_row():
+    """The `tof` kind registers its typed scenario: the engine gets a TofTrialScenario (its row
+    view for the store), and a stored row reads back as the same object."""
+    from dataclasses import replace
+
+    from svgs_sim.sim.tof_closed_loop import TofScenario
+    from svgs_sim.sim.tof_trial import TofTrialScenario
+    from svgs_sim.sim.trials import build_scenario, get_trial_kind
+
+    kind = get_trial_kind("tof")
+    assert kind.scenario_type is TofTrialScenario
+    ts = TofTrialScenario(TofScenario(range_m=0.697, yaw_deg=3.0, spp=64, ambient_lux=500.0), 0.697, 10, 4,
+                          (("max_active_pixels", 300),), "plate", "run-a")
+    row = dict(ts)
+    assert row == ts.to_row() and row["frame"] == 4 and row["yaw_deg"] == 3.0 and row["render_seed"] == 0
+    assert build_scenario(kind, row) == ts and TofTrialScenario.from_row(row) == ts
+    assert ts.run_key() == replace(ts, frame=9, run="other").run_key()  # the frames of one run share a render
+    with pytest.raises(InputError, match="frame"):
+        replace(ts, frame=10)

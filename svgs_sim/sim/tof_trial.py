@@ -27,6 +27,7 @@ Rows (:data:`TOF_OUTPUTS`)
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields
 
 from svgs_sim.sim.metrics import ERR_KEYS, POS_ERR_NORM_M, state_m_deg
@@ -63,8 +64,11 @@ def chunk_frames(longest_run: int, chunk_size: int | None = None) -> int:
 
 
 @dataclass(frozen=True)
-class TofTrialScenario:
-    """Frame ``frame`` of a stability run (typed; :meth:`to_row` / :meth:`from_row` for the store).
+class TofTrialScenario(Mapping):
+    """Frame ``frame`` of a stability run: the ``tof`` kind's typed scenario (registered as its
+    :attr:`svgs_sim.sim.trials.TrialKind.scenario_type`). As a mapping it is its results-store row
+    (:meth:`to_row`, the codec; :meth:`from_row` reads one back), so the study engine and the store
+    take it as they take the other kinds' scenarios.
 
     Attributes
     ----------
@@ -99,6 +103,22 @@ class TofTrialScenario:
             TOF_PARAMETERS[k].check(getattr(self, k), k)
         if not 0 <= int(self.frame) < int(self.frames):
             raise InputError(f"frame: expected 0..{int(self.frames) - 1}, got {self.frame!r}")
+        object.__setattr__(self, "_row", self.to_row())
+
+    # the row view (read-only): the results store's codec
+    def __getitem__(self, key):
+        return self._row[key]
+
+    def __iter__(self):
+        return iter(self._row)
+
+    def __len__(self):
+        return len(self._row)
+
+    @classmethod
+    def from_values(cls, values, labels=None) -> "TofTrialScenario":
+        """The scenario of row values (:meth:`from_row`; ``labels``: more of its columns, e.g. ``run``)."""
+        return cls.from_row({**values, **(labels or {})})
 
     def run_key(self) -> tuple:
         """What decides the run's frames (everything but the frame and the label)."""
@@ -118,7 +138,10 @@ class TofTrialScenario:
 
     @classmethod
     def from_row(cls, row) -> "TofTrialScenario":
-        """The typed scenario of a row of :meth:`to_row` (extra keys are ignored)."""
+        """The typed scenario of a row of :meth:`to_row` (extra keys are ignored; a
+        :class:`TofTrialScenario` is returned as it is)."""
+        if isinstance(row, cls):
+            return row
         names = {f.name for f in fields(TofScenario)} - {"seed", "scene_options"}
         kw = {k: row[k] for k in names if k in row}
         for k in ("spp", "rim_spp_factor", "max_bounces"):
@@ -237,6 +260,7 @@ TOF = register_trial_kind(TrialKind(
     description="one frame of a ToF stability run: Mitsuba render of the marker target (AMCW phasors), the sensor's "
                 "noisy frames, the ToF pipeline in sequence (svgs_sim.sim.tof_closed_loop)",
     module=__name__,
+    scenario_type=TofTrialScenario,
 ))
 
 __all__ = ["TOF", "TOF_OUTPUTS", "TofTrialScenario", "trial_rows", "tof_trial", "tof_group", "cached_render", "CHUNK_FRAMES", "chunk_frames"]

@@ -187,7 +187,7 @@ def study_trials(runs) -> list:
     trials = []
     for _, _, first, _ in runs:
         for k in range(first.frames):
-            trials.append(Trial(len(trials), replace(first, frame=k).to_row(), int(first.scenario.seed)))
+            trials.append(Trial(len(trials), replace(first, frame=k), int(first.scenario.seed)))
     return trials
 
 
