@@ -327,28 +327,28 @@ def test_the_preview_stream_is_read_as_its_y_plane_not_a_jpeg():
 
 # ------------------------------------------------------------------ switches and the error budget
 def test_render_trial_switches_map_onto_the_stages():
-    from svgs_sim.sim.render_trial import _stages, render_trial_scenario
+    from svgs_sim.sim.render_trial import exposure_stages, render_trial_scenario
 
     sc = render_trial_scenario(camera="galaxy-nexus")
-    assert _stages(sc) == ALL_STAGES
+    assert exposure_stages(sc) == ALL_STAGES
     for k in ("cfa", "nr", "sharpen", "chroma", "jpeg"):
         off = render_trial_scenario(camera="galaxy-nexus", **{k: 0})
-        assert _stages(off) == tuple(s for s in ALL_STAGES if s != k)
-    assert "u8" not in _stages(render_trial_scenario(camera="galaxy-nexus", quantise=0))
+        assert exposure_stages(off) == tuple(s for s in ALL_STAGES if s != k)
+    assert "u8" not in exposure_stages(render_trial_scenario(camera="galaxy-nexus", quantise=0))
     for bad in ({"jpeg_quality": 0}, {"demosaic": 1.5}, {"jpeg_grid_offset_u_px": 16}, {"chroma": 0.5}):
         with pytest.raises(InputError, match=next(iter(bad))):
             render_trial_scenario(camera="galaxy-nexus", **bad)
 
 
 def test_render_trial_isp_choices():
-    from svgs_sim.sim.render_trial import _isp, render_trial_scenario
+    from svgs_sim.sim.render_trial import exposure_isp, render_trial_scenario
 
     class _Ex:  # what _isp reads of an exposer
         phone = PhoneCamera("galaxy-nexus")
 
-    isp, dem = _isp(_Ex, render_trial_scenario(camera="galaxy-nexus"))
+    isp, dem = exposure_isp(_Ex, render_trial_scenario(camera="galaxy-nexus"))
     assert isp is _Ex.phone.params.isp and dem is None
-    isp, dem = _isp(_Ex, render_trial_scenario(camera="galaxy-nexus", jpeg_quality=95, demosaic=3,
+    isp, dem = exposure_isp(_Ex, render_trial_scenario(camera="galaxy-nexus", jpeg_quality=95, demosaic=3,
                                                 jpeg_grid_offset_u_px=5, jpeg_grid_offset_v_px=12))
     assert isp.jpeg_quality == 95 and isp.jpeg_grid_offset_px == (5, 12) and dem == "vng"
 
