@@ -246,3 +246,97 @@ def test_no_function_is_long_without_a_reason():
         for path in sorted((ROOT / folder).rglob("*.py")):
             bad += [f"{path.relative_to(ROOT)}: {f}" for f in long_functions(path.read_text())]
     assert not bad, "functions over %d lines without a reason in the docstring:\n" % MAX_FUNCTION_LINES + "\n".join(bad)
+
+
+# ----------------------------------------------------------------------------- function-level imports
+#: Libraries slow to import or optional (and Mitsuba/Dr.Jit, which must not load before the LLVM
+#: library is chosen, svgs_sim.render.variant): a module may import them inside a function.
+HEAVY_LIBRARIES = {"mitsuba", "drjit", "matplotlib", "dask", "distributed", "Basilisk", "cupy", "cupyx", "galsim",
+                   "pvlib", "trimesh", "astropy", "numba", "scipy", "skimage", "cv2", "PIL", "sklearn", "tqdm"}
+#: Packages whose names load on first use (``__getattr__``): the renderer, so that importing it
+#: loads no Mitsuba.
+LAZY_PACKAGES = {"svgs_sim/render/__init__.py", "svgs_sim/render/tof/__init__.py"}
+#: Function-level imports that break an import cycle: (module, imported module) -> why.
+LAZY_FOR_A_CYCLE = {
+    ("svgs_sim.sim.scene", "svgs_sim.sim.trials"):
+        "the trial kinds' scenarios hold the closed loop's Scenario, which holds a Scene",
+}
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _lazy_project_imports(root: Path) -> dict:
+    """(module, imported module, names) -> [line] of the function-level imports outside the CLI, outside
+    try blocks (optional dependencies), of neither a heavy library nor a lazy package."""
+    import ast
+
+    out = {}
+    for path in sorted((root / "svgs_sim").rglob("*.py")):
+        rel = path.relative_to(root)
+        if rel.parts[1] == "cli" or rel.as_posix() in LAZY_PACKAGES:
+            continue
+        tree = ast.parse(path.read_text())
+        parents = {c: n for n in ast.walk(tree) for c in ast.iter_child_nodes(n)}
+        here = _module_name(rel)
+        for node in ast.walk(tree):
+            if not isinstance(node, (ast.Import, ast.ImportFrom)):
+                continue
+            chain, q = [], parents.get(node)
+            while q is not None:
+                chain.append(q)
+                q = parents.get(q)
+            if not any(isinstance(q, (ast.FunctionDef, ast.AsyncFunctionDef)) for q in chain):
+                continue
+            if any(isinstance(q, ast.Try) for q in chain):
+                continue
+            if isinstance(node, ast.ImportFrom) and node.level:
+                pkg = here.split(".") if path.name == "__init__.py" else here.split(".")[:-1]
+                pkg = pkg[: len(pkg) - (node.level - 1)]
+                target = ".".join(pkg + ([node.module] if node.module else []))
+            else:
+                target = node.module if isinstance(node, ast.ImportFrom) else node.names[0].name
+            if target.split(".")[0] in HEAVY_LIBRARIES:
+                continue
+            names = tuple(a.name for a in node.names) if isinstance(node, ast.ImportFrom) else ()
+            out.setdefault((here, target, names), []).append(node.lineno)
+    return out
+
+
+_NEW_HEAVY = (
+    "import importlib, sys\n"
+    "H = {heavy!r}\n"
+    "importlib.import_module({module!r})\n"
+    "before = {{m.split('.')[0] for m in sys.modules}} & H\n"
+    "mod = importlib.import_module({target!r})\n"
+    "for n in {names!r}:\n"
+    "    getattr(mod, n, None) if hasattr(mod, n) else importlib.import_module({target!r} + '.' + n)\n"
+    "print(' '.join(sorted(({{m.split('.')[0] for m in sys.modules}} & H) - before)))\n"
+)
+
+
+@pytest.mark.slow
+def test_function_level_imports_are_for_heavy_libraries_the_cli_or_a_cycle():
+    """An import inside a function outside the CLI must load a heavy library the module does not
+    load itself (measured: each pair imported in a fresh process), or break a listed cycle;
+    anything else belongs at module level. The CLI imports in its handlers (cold start)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    root = Path(__file__).resolve().parents[1]
+    lazy = _lazy_project_imports(root)
+    assert set(LAZY_FOR_A_CYCLE) <= {p[:2] for p in lazy}, LAZY_FOR_A_CYCLE  # no stale entry
+
+    def new_heavy(pair):
+        code = _NEW_HEAVY.format(heavy=HEAVY_LIBRARIES, module=pair[0], target=pair[1], names=pair[2])
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root, timeout=120)
+        assert r.returncode == 0, (pair, r.stderr[-2000:])
+        return r.stdout.split()
+
+    pairs = [p for p in lazy if p[:2] not in LAZY_FOR_A_CYCLE]
+    with ThreadPoolExecutor(2) as ex:
+        loads = dict(zip(pairs, ex.map(new_heavy, pairs)))
+    light = [f"{p[0]} line {lazy[p]}: {p[1]} {p[2]}" for p in pairs if not loads[p]]
+    assert not light, f"function-level imports that load nothing heavy (move them to module level): {light}"
+    assert len(pairs) > 10  # the scan sees the renderer's and the camera model's lazy imports

@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 
 import svgs_sim.calibration.focal
-import svgs_sim.studies.calibration.focal as study_focal
-import svgs_sim.studies.execution
+import svgs_sim.studies.campaign.paper_calibration as paper_calibration
+import svgs_sim.studies.campaign.run as campaign_run
 from svgs_sim.cli.main import main
 from svgs_sim.studies.calibration.focal import focal_frames_geometric
 from svgs_sim.studies.campaign import make_config, rendered_paper_calibration
@@ -41,7 +41,7 @@ def renders(monkeypatch):
         calls.append(list(ranges_m))
         return focal_frames_geometric(true, pat, ranges_m, exposures=exposures, seed=seed)
 
-    monkeypatch.setattr(study_focal, "focal_frames_rendered", frames)
+    monkeypatch.setattr(paper_calibration, "focal_frames_rendered", frames)  # patched where it is looked up
     return calls
 
 
@@ -90,7 +90,7 @@ def test_a_refusal_after_the_calibration_leaves_no_folder(renders, monkeypatch, 
         est = real(*a, **kw)
         return dataclasses.replace(est, f_px=1.6 * est.f_px)
 
-    monkeypatch.setattr(svgs_sim.calibration.focal, "estimate_focal", off)
+    monkeypatch.setattr(paper_calibration, "estimate_focal", off)
     out = tmp_path / "campaign"
     line = _refused(capsys, ARGS + ["--out", str(out)])
     assert "focal_error_frac" in line and renders, line
@@ -102,7 +102,7 @@ def test_an_interrupted_campaign_keeps_its_calibration(renders, monkeypatch, tmp
     def interrupted(*a, **kw):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(svgs_sim.studies.execution, "run_stored_study", interrupted)
+    monkeypatch.setattr(campaign_run, "run_stored_study", interrupted)
     out = tmp_path / "campaign"
     assert main(ARGS + ["--out", str(out)]) == 130
     capsys.readouterr()

@@ -17,14 +17,15 @@ which the model tests use.
 from __future__ import annotations
 
 import copy
+import functools
 import os
 import re
 import tomllib
 from dataclasses import dataclass, field
-import functools
 from pathlib import Path
 
 import numpy as np
+import tomli_w
 
 from ..assets import ASSETS_DIR
 from .errors import InputError, ProfileError, check_finite, check_finite_positive
@@ -384,7 +385,6 @@ class Camera:
 
     def save(self, path) -> Path:
         """Write this profile as TOML; :meth:`load` reads it back unchanged."""
-        import tomli_w
 
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -642,9 +642,6 @@ class Pattern:
         if idx.size == 0:
             raise InputError(f"pattern {self.name!r} has no target {target_id}")
         return self.points_m[idx[0]]
-
-
-
 
 
 @functools.lru_cache(maxsize=32)

@@ -8,6 +8,7 @@ the boards' layouts and object points.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -96,7 +97,6 @@ class DistinctViews:
         image : ndarray, shape (H, W) or (H, W, C)
         name : str
         """
-        import hashlib
 
         a = np.ascontiguousarray(image)
         h = hashlib.sha256(f"{a.shape}{a.dtype.str}".encode() + a.tobytes()).hexdigest()

@@ -56,11 +56,16 @@ Uncertainty and weighting
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from svgs_sim.base.errors import InputError, check_finite_positive
 from svgs_sim.base.profiles import Camera, Pattern
+from svgs_sim.svgs.identify import identify
+from svgs_sim.svgs.pipeline import camera_threshold, check_image_matches_camera, load_image
+
+from .detection import DistinctViews
 
 
 @dataclass(frozen=True)
@@ -508,15 +513,9 @@ def estimate_focal_from_images(
         Unreadable images, a size that is not the camera's, mismatched ranges, or no image
         in which the targets were identified.
     """
-    from pathlib import Path
 
     from svgs_sim.svgs.detect import detect_blobs
-    from svgs_sim.svgs.identify import identify
-    from svgs_sim.svgs.pipeline import check_image_matches_camera, load_image
 
-    from svgs_sim.svgs.pipeline import camera_threshold
-
-    from .detection import DistinctViews
 
     camera = Camera.load(camera)
     pattern = Pattern.load(pattern)

@@ -20,6 +20,7 @@ import numpy as np
 
 from svgs_sim.base.errors import InputError, check_finite_positive
 from svgs_sim.base.profiles import DISTORTION_KEYS, Camera
+from svgs_sim.svgs.pipeline import load_image
 
 from .boards import Board
 from .detection import DistinctViews, detect_views, to_gray8
@@ -488,7 +489,6 @@ def calibrate_images(images, board: Board, *, names=None, min_views: int = MIN_V
         files of each size), or fewer than ``min_views`` views with the board (the message
         lists the skipped views).
     """
-    from svgs_sim.svgs.pipeline import load_image
 
     images = list(images)
     if not images:

@@ -36,15 +36,15 @@ charge with the grayscale sensitivity.
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import asdict, dataclass, fields, replace
 
 import numpy as np
 
-from svgs_sim.base.constants import SPEED_OF_LIGHT_M_S
+from svgs_sim.base.constants import PLANCK_J_S, SPEED_OF_LIGHT_M_S
 from svgs_sim.base.errors import InputError, ProfileError, check_finite_positive
 from svgs_sim.base.profile_schema import RENDER_TABLES, TOF_CAMERA_TABLES, Num, check_table
-
 from svgs_sim.camera.rendered import RenderedFrame
 
 
@@ -103,7 +103,6 @@ class RenderedTof(RenderedFrame):
 
     def save(self, path) -> None:
         """All arrays in one ``.npz`` (truth as JSON text)."""
-        import json
 
         np.savez_compressed(path, active_radiance=self.active_radiance, phasor_radiance=self.phasor_radiance,
                             ambient_factor=self.ambient_factor, photons_per_radiance=self.photons_per_radiance,
@@ -112,7 +111,6 @@ class RenderedTof(RenderedFrame):
 
     @classmethod
     def load(cls, path) -> "RenderedTof":
-        import json
 
         with np.load(path, allow_pickle=False) as z:
             truth = json.loads(str(z["truth"]))
@@ -315,7 +313,6 @@ class TofSensor:
     # ------------------------------------------------------------------ radiometry
     @property
     def photon_energy_j(self) -> float:
-        from svgs_sim.base.constants import PLANCK_J_S
 
         return PLANCK_J_S * SPEED_OF_LIGHT_M_S / self.wavelength_m
 

@@ -21,24 +21,37 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
 from svgs_sim.base.errors import InputError, check_finite
-from svgs_sim.svgs.frames import check_pose
 from svgs_sim.base.profiles import Camera, Pattern
-
 from svgs_sim.camera.rendered import PointFlux, RenderedFrame
+from svgs_sim.camera.tonemap import encode_u8, log_stretch
+from svgs_sim.svgs.frames import check_pose
 
-from .constants import (DEFAULT_ROI_SIZE_PX, DEFAULT_ROI_SPP, DEFAULT_ROI_SPP_PATH, DEFAULT_SPOT_SAMPLER,
-                        DEFAULT_SPOT_SAMPLES, DEFAULT_SPP)
-from .spots import SPOT_SAMPLERS
+from .constants import (
+    DEFAULT_ROI_SIZE_PX,
+    DEFAULT_ROI_SPP,
+    DEFAULT_ROI_SPP_PATH,
+    DEFAULT_SPOT_SAMPLER,
+    DEFAULT_SPOT_SAMPLES,
+    DEFAULT_SPP,
+)
 from .geometry import Reflector, SceneOptions
 from .optics import Flash, Optics, pixel_normalized_grid, radiance_to_photon_rate
+from .predict import predicted_centroids_px, predicted_spots_px, virtual_sources
 from .sampling import check_spp, film_to_numpy, to_numpy
-from .windows import background_tiles, spot_windows
+from .scene import TILE_COUNTS
+from .scene import TILE_SIZE_PX as T
+from .scene import build_scene
+from .sensor import CameraModel
+from .spots import SPOT_SAMPLERS, SpotEstimator
+from .truth import svgs_frame_truth
 from .variant import select_variant
+from .windows import background_tiles, spot_windows
 
 #: Upper bound of samples in one Mitsuba pass (memory: ~100 bytes per lane).
 MAX_SAMPLES_PER_PASS = 1 << 24
@@ -85,7 +98,6 @@ class RenderResult(RenderedFrame):
     def save(self, out_dir) -> dict:
         """Write ``flux.npy``, ``truth.json`` and ``preview.png`` into ``out_dir`` (and, for the
         guided method, ``flux_diffuse.npy`` and ``points.npz``: the film before the lens PSF)."""
-        from pathlib import Path
 
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
@@ -107,7 +119,6 @@ def write_preview(path, flux: np.ndarray) -> None:
     the lit pixels and the maximum (the spots are ~1e7 x the background)."""
     import cv2
 
-    from svgs_sim.camera.tonemap import encode_u8, log_stretch
 
     cv2.imwrite(str(path), encode_u8(log_stretch(flux)))
 
@@ -164,7 +175,6 @@ class Renderer:
         self.reflector = Reflector.resolve(reflector, self.pattern)
         self.options = SceneOptions.resolve(scene_options)
         if self.options.focus_distance_m is not None:
-            from dataclasses import replace
 
             self.optics = replace(self.optics, focus_distance_m=float(self.options.focus_distance_m))
         roi = int(roi_size_px)
@@ -194,9 +204,6 @@ class Renderer:
         import drjit as dr
         import mitsuba as mi
 
-        from .scene import build_scene
-        from .sensor import CameraModel
-        from .spots import SpotEstimator
 
         self._mi, self._dr = mi, dr
         self.scene, h = build_scene(self.camera, self.pattern, self.optics, self.flash, self.reflector, self.options,
@@ -233,7 +240,6 @@ class Renderer:
         focus_distance_m : float
             Where the lens is focused, m (> 0).
         """
-        from dataclasses import replace
 
         f = float(check_finite(focus_distance_m, "focus_distance_m"))
         if f <= 0:
@@ -252,7 +258,6 @@ class Renderer:
     def predicted_spots_px(self, R_cam_target, t_cam_target_m) -> np.ndarray:
         """Geometric-optics spot centre of every target, averaged over the LEDs
         (:func:`svgs_sim.render.predict.predicted_spots_px`), shape (N, 2) px."""
-        from .predict import predicted_spots_px
 
         return predicted_spots_px(self.camera, self.flash, self.reflector, self.optics, self.target,
                                   R_cam_target, t_cam_target_m)
@@ -260,7 +265,6 @@ class Renderer:
     def predicted_centroids_px(self, R_cam_target, t_cam_target_m) -> np.ndarray:
         """Geometric-optics pixel centroid of every retro spot, binned into pixels
         (:func:`svgs_sim.render.predict.predicted_centroids_px`), shape (N, 2) px."""
-        from .predict import predicted_centroids_px
 
         return predicted_centroids_px(self.camera, self.flash, self.reflector, self.optics, self.target,
                                       R_cam_target, t_cam_target_m)
@@ -293,7 +297,6 @@ class Renderer:
 
     def _spot_image(self, R, t, seed):
         """Radiance of the flash seen through specular chains (guided estimator)."""
-        from .predict import virtual_sources
 
         V = self.target.cube_vertex_m @ R.T + t
         A = self.target.cube_axis @ R.T
@@ -357,7 +360,6 @@ class Renderer:
         """The diffuse background at ``spp``: over the tiles covering the projected scene (or the
         full frame), zeros elsewhere; float64 (H, W), and the box ``(y0, y1, x0, x1)`` that holds
         it (None when ``spp == 0``: zeros)."""
-        from .scene import TILE_COUNTS, TILE_SIZE_PX as T
 
         H, W = self.camera.height, self.camera.width
         rad = np.zeros((H, W))
@@ -530,7 +532,6 @@ class Renderer:
     # ------------------------------------------------------------------ truth
     def truth(self, R, t, targets_px, visible, spots, **render_info) -> dict:
         """The ground-truth record of a frame (JSON-serialisable; :func:`svgs_sim.render.truth.svgs_frame_truth`)."""
-        from .truth import svgs_frame_truth
 
         return svgs_frame_truth(self, R, t, targets_px, visible, spots, **render_info)
 
@@ -585,7 +586,6 @@ def render_flux(camera, pattern, R_cam_target, t_cam_target_m, *, spp: int = DEF
     A renderer per (camera, pattern, reflector, options, window size) is cached, so a
     loop of calls reuses the loaded scene and compiled kernels.
     """
-    from dataclasses import replace
 
     cam = Camera.load(camera)
     pat = Pattern.load(pattern)

@@ -35,7 +35,11 @@ import numpy as np
 from svgs_sim.base.errors import InputError, ProfileError, check_finite_positive
 from svgs_sim.base.profiles import Camera
 
+from .optics import Optics, photometry, pixel_normalized_grid, radiance_to_photon_rate
 from .sampling import film_to_numpy, round_up_power
+from .scene import film_dict
+from .sensor import PLUGIN_NAME, CameraModel, sensor_class
+from .variant import select_variant
 
 #: Samples per pixel of a board render (rounded up to a power of four for ``ldsampler``).
 DEFAULT_BOARD_SPP = 16
@@ -152,7 +156,6 @@ class BoardRenderer:
                  paper_reflectance: float = DEFAULT_PAPER_REFLECTANCE, ink_reflectance: float = DEFAULT_INK_REFLECTANCE,
                  wall_reflectance: float = DEFAULT_WALL_REFLECTANCE, wall_distance_m: float = DEFAULT_WALL_DISTANCE_M,
                  variant: str | None = None):
-        from .optics import Optics, photometry
 
         self.camera = Camera.load(camera)
         self.board = board
@@ -177,14 +180,11 @@ class BoardRenderer:
         self.wall_distance_m = check_finite_positive(wall_distance_m, "wall_distance_m")
         self.px_per_m = check_finite_positive(px_per_m, "px_per_m")
 
-        from .variant import select_variant
 
         self.variant = select_variant(variant)
         import drjit as dr
         import mitsuba as mi
 
-        from .scene import film_dict
-        from .sensor import PLUGIN_NAME, CameraModel, sensor_class
 
         self._mi, self._dr = mi, dr
         t0 = time.perf_counter()
@@ -235,7 +235,6 @@ class BoardRenderer:
     def flux_factor(self) -> np.ndarray:
         """Photons/s per pixel per unit radiance, float32 (H, W)."""
         if self._factor is None:
-            from .optics import pixel_normalized_grid, radiance_to_photon_rate
 
             xy = pixel_normalized_grid(self.camera)
             self._factor = radiance_to_photon_rate(self.camera, self.optics, self.photometry["mean_photon_energy_j"],

@@ -15,10 +15,23 @@ from pathlib import Path
 
 import numpy as np
 
-from svgs_sim.render.boards import (DEFAULT_BOARD_SPP, DEFAULT_EXPOSURE_FILL, DEFAULT_TEXELS_PER_PX, MAX_MANUAL_EXPOSURE_S,
-                           BoardRenderer, texture_px_per_m)
 from svgs_sim.base.errors import InputError, SimulationFailure
 from svgs_sim.base.profiles import Camera
+from svgs_sim.calibration.boards import Board
+from svgs_sim.calibration.synthetic import sample_board_poses
+from svgs_sim.render.boards import (
+    DEFAULT_BOARD_SPP,
+    DEFAULT_EXPOSURE_FILL,
+    DEFAULT_TEXELS_PER_PX,
+    MAX_MANUAL_EXPOSURE_S,
+    BoardRenderer,
+    texture_px_per_m,
+)
+from svgs_sim.render.optics import Optics
+from svgs_sim.render.variant import renderer_versions
+from svgs_sim.sim import hard_stop
+from svgs_sim.sim.closed_loop import solver_camera
+from svgs_sim.svgs.pipeline import load_image
 
 
 def manual_exposure(phone, exposer, fill: float = DEFAULT_EXPOSURE_FILL) -> tuple[float, float]:
@@ -113,8 +126,6 @@ class BoardSet:
     @classmethod
     def load(cls, folder) -> "BoardSet":
         """Read a set written by :meth:`save` (``svgs calibrate render-board``)."""
-        from svgs_sim.calibration.boards import Board
-        from svgs_sim.svgs.pipeline import load_image
 
         d = Path(folder)
         tp = d / "truth.json"
@@ -140,7 +151,6 @@ class BoardSet:
 def _versions() -> dict:
     import cv2
 
-    from svgs_sim.render.variant import renderer_versions
 
     return {"numpy": np.__version__, "opencv": cv2.__version__, **renderer_versions()}
 
@@ -194,7 +204,6 @@ def render_board_set(camera, board, n_views: int, *, seed: int = 0, spp: int = D
         raise InputError(f"views: expected a positive integer, got {n_views!r}") from None
     if n < 1 or n != n_views:
         raise InputError(f"views: expected a positive integer, got {n_views!r}")
-    from svgs_sim.render.optics import Optics
 
     Optics.from_camera(cam)  # fail early (ProfileError) without [optics]
     phone = PhoneCamera(cam)
@@ -209,7 +218,6 @@ def render_board_set(camera, board, n_views: int, *, seed: int = 0, spp: int = D
     e_seeds = np.random.SeedSequence(s_expose).generate_state(n, dtype=np.uint32)
     images, names, views = [], [], []
     delivered = None
-    from svgs_sim.sim import hard_stop
 
     with hard_stop.scope():  # run from the CLI, Ctrl-C stops a render within a second (nothing is written yet)
         for k in range(n):
@@ -228,7 +236,6 @@ def render_board_set(camera, board, n_views: int, *, seed: int = 0, spp: int = D
     return out
 
 
-
 def _board_poses(board, cam, n: int, poses, *, seed: int, fill, max_tilt_deg, max_roll_deg):
     """The views' poses: drawn (:func:`svgs_sim.calibration.sample_board_poses`) or given, checked.
 
@@ -237,7 +244,6 @@ def _board_poses(board, cam, n: int, poses, *, seed: int, fill, max_tilt_deg, ma
     R_cam_board : ndarray, shape (n, 3, 3)
     t_cam_board_m : ndarray, shape (n, 3)
     """
-    from svgs_sim.calibration.synthetic import sample_board_poses
 
     if poses is None:
         return sample_board_poses(board, cam, n, seed=seed, fill=fill, max_tilt_deg=max_tilt_deg,
@@ -252,7 +258,6 @@ def _board_poses(board, cam, n: int, poses, *, seed: int, fill, max_tilt_deg, ma
 def _render_view(renderer, phone, cam, board, R_cam_board, t_cam_board_m, render_seed: int, exposure_seed: int,
                  stages, exposure_fill: float, *, name: str):
     """Render one view, expose it at the manual exposure; (image, delivered camera, view record)."""
-    from svgs_sim.sim.closed_loop import solver_camera
 
     frame = renderer.render(R_cam_board, t_cam_board_m, seed=render_seed)
     t0 = time.perf_counter()

@@ -18,19 +18,23 @@ The data path of ``docs/design`` in one place::
 
 from __future__ import annotations
 
-import time
 import dataclasses
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from svgs_sim.base.errors import InputError, check_finite
-from svgs_sim.sim.metrics import no_pose_errors, pose_errors
-from svgs_sim.svgs.frames import pose_from_scenario, pose_to_state, state_dict
 from svgs_sim.base.profiles import Camera, Pattern, load_camera, load_pattern
-
+from svgs_sim.render.api import render_flux
+from svgs_sim.render.constants import DEFAULT_SPOT_SAMPLES
+from svgs_sim.render.optics import Flash, Optics, radiance_to_photon_rate
+from svgs_sim.sim.metrics import no_pose_errors, pose_errors
 from svgs_sim.sim.scene import Scene
+from svgs_sim.sim.stand import TestStand
 from svgs_sim.sim.target_pose import TargetPose
+from svgs_sim.svgs.frames import pose_from_scenario, pose_to_state, state_dict
+from svgs_sim.svgs.pipeline import solve_image
 
 
 def _camera_key(camera: Camera) -> tuple:
@@ -207,7 +211,6 @@ class Scenario(TargetPose):
         ``misalignment`` in its holder, the gimbal's and the stage's errors (``stand``), the
         rail position's (``rail``). All three: :meth:`pose`; none: :meth:`commanded_pose`."""
         if self.mount == "stand":
-            from svgs_sim.sim.stand import TestStand
 
             mis = self.misalignment_deg if misalignment else (0.0, 0.0, 0.0)
             er, ep, ey, es, _ = self.stand_error if stand else (0.0,) * 5
@@ -327,7 +330,6 @@ class Frame:
         """The phone camera model; ``glare=False``: the same phone with a glare-free lens (no
         veiling wings, no ghosts; the diffraction and aberration core kept);
         ``veiling_fraction``, ``wing_exponent``: the glare's, instead of the profile's."""
-        import dataclasses
 
         from svgs_sim.camera.phone import PhoneCamera
 
@@ -390,7 +392,6 @@ def lab_flux(camera: Camera, scenario: Scenario, factor: np.ndarray | None = Non
     plus the ambient radiance; photons per pixel through the aperture from
     :func:`lab_photon_factor`; ``factor`` is that conversion when the caller has it already.
     """
-    from svgs_sim.render.optics import Flash, Optics
 
     optics = Optics.from_camera(camera)
     flash = Flash.from_camera(camera, optics.band_nm)
@@ -434,7 +435,6 @@ def lab_photon_factor(camera: Camera) -> np.ndarray:
 def _lab_photon_factor(camera: Camera) -> np.ndarray:
     import cv2
 
-    from svgs_sim.render.optics import Flash, Optics, radiance_to_photon_rate
 
     optics = Optics.from_camera(camera)
     flash = Flash.from_camera(camera, optics.band_nm)
@@ -499,9 +499,6 @@ def render_scenario(scenario: Scenario, *, seed: int = 0, options: RenderOptions
     -------
     Frame
     """
-    from svgs_sim.render import render_flux
-    from svgs_sim.render.constants import DEFAULT_SPOT_SAMPLES
-
     options = options or RenderOptions()
     camera = scenario.camera_profile()
     pattern = scenario.pattern
@@ -601,7 +598,6 @@ def solve_exposure(frame: Frame, ex, *, threshold=None, solver_camera_profile: C
     """The SVGS chain on one exposure (:meth:`svgs_sim.camera.phone.Exposer.expose`) of a frame: the row
     of :func:`expose_and_solve` (``expose_s`` 0). ``blobs``: the image's detections when the
     caller has made them (:func:`svgs_sim.svgs.pipeline.solve_image`)."""
-    from svgs_sim.svgs.pipeline import solve_image
 
     _truth_flags(truth)
     t1 = time.perf_counter()

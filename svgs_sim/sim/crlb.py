@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from svgs_sim.camera.rendered import PointFlux
 from svgs_sim.sim.closed_loop import render_seed
 from svgs_sim.svgs.frames import STATE_KEYS
 
@@ -37,7 +38,6 @@ SHIFT_PX = 0.25
 
 
 def _shifted(points, dx, dy):
-    from svgs_sim.camera.rendered import PointFlux
 
     return PointFlux(points.u_px + dx, points.v_px + dy, points.rate_ph_s)
 
@@ -64,7 +64,6 @@ def _window_core_image(phone, cfa: bool, points, dx: float, dy: float, box, seed
     from svgs_sim.camera.phone.cfa import response_map
     from svgs_sim.camera.phone.optics import core_image, core_share
 
-    from svgs_sim.camera.rendered import PointFlux
 
     y0, y1, x0, x1 = box
     X0, Y0 = x0 - PAD_PX, y0 - PAD_PX
@@ -98,7 +97,6 @@ def _window_core_gradient(phone, cfa: bool, points, box) -> tuple[np.ndarray, np
     out, as in :func:`_window_core_image`."""
     from svgs_sim.camera.phone.cfa import response_map
     from svgs_sim.camera.phone.optics import core_share
-    from svgs_sim.camera.rendered import PointFlux
 
     y0, y1, x0, x1 = box
     X0, Y0 = x0 - PAD_PX, y0 - PAD_PX

@@ -190,6 +190,7 @@ def scene_parameters() -> dict:
     """The render trial's row parameters of the scene (:class:`svgs_sim.sim.trials.Parameter`,
     name -> parameter, in declaration order): every :class:`Quantity` with ``trial``. A row writes
     None as ``row_none``, which the parameter's domain then includes."""
+    # not at module level: a cycle (the trial kinds' scenarios hold the closed loop's Scenario, which holds a Scene)
     from svgs_sim.sim.trials import Parameter
 
     default = Scene()

@@ -27,14 +27,15 @@ from __future__ import annotations
 import functools
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from svgs_sim.sim.metrics import no_pose_errors, pose_errors, state_error
 from svgs_sim.base.errors import InputError, SimulationFailure, check_finite
-from svgs_sim.svgs.frames import pose_from_scenario, pose_to_state
+from svgs_sim.camera.amcw import TofSensor
+from svgs_sim.sim.metrics import no_pose_errors, pose_errors, state_error
 from svgs_sim.sim.target_pose import TargetPose
+from svgs_sim.svgs.frames import pose_from_scenario, pose_to_state
 
 #: Second entry of the noise stream's seed ``[seed, NOISE_STREAM]`` (the stability runs' since
 #: issue 23, kept so the committed ToF report does not move).
@@ -162,7 +163,6 @@ def load_scene(camera: str, pattern: str):
 
 def make_sensor(scenario: TofScenario, camera=None):
     """The scenario's :class:`svgs_sim.camera.amcw.TofSensor` (the profile's with its overrides)."""
-    from svgs_sim.camera.amcw import TofSensor
 
     camera = camera if camera is not None else load_scene(scenario.camera, scenario.pattern)[0]
     return TofSensor.from_camera(camera, ambient_lux=scenario.ambient_lux,
@@ -214,7 +214,6 @@ class TofRender:
     def with_sensor(self, **overrides) -> "TofRender":
         """The same render seen by the sensor with other settings (``ambient_lux``,
         ``integration_time_s``): nothing is rendered again."""
-        from dataclasses import replace
 
         if "modulation_frequency_hz" in overrides:
             raise InputError("modulation_frequency_hz: changes the render; make a new scenario")

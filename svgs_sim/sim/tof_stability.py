@@ -36,7 +36,10 @@ import time
 
 import numpy as np
 
+from svgs_sim.assets.papers import tof_2022_stability
 from svgs_sim.base.errors import InputError
+from svgs_sim.sim.metrics import ROT_ERR_DEG, state_m_deg
+from svgs_sim.sim.tof_closed_loop import TofScenario, noise_free_frame, pipeline, solve, solve_frames
 
 #: Our columns, in the paper's order (see the module docstring).
 COLUMNS = ("target_x_cam_mm", "target_y_cam_mm", "target_z_cam_mm", "roll_deg", "pitch_deg", "yaw_deg")
@@ -75,7 +78,6 @@ def stability_scenario(range_m: float, **kw):
     -------
     svgs_sim.sim.tof_closed_loop.TofScenario
     """
-    from svgs_sim.sim.tof_closed_loop import TofScenario
 
     key = paper_range_mm(range_m)
     if key is not None:
@@ -111,7 +113,6 @@ def pose_columns(R, t, truth_state, state_err_m_deg=None, point_m=None) -> np.nd
     point_m : (3,), optional
         Reported point in the target frame (default the origin).
     """
-    from svgs_sim.sim.metrics import state_m_deg
 
     p = np.zeros(3) if point_m is None else np.asarray(point_m, float)
     pos = np.asarray(R, float) @ p + np.asarray(t, float)
@@ -136,7 +137,6 @@ def statistics(cols) -> dict:
 def paper_statistics(range_mm) -> dict:
     """The paper's tables at a range: ``{table_id: {statistic: {column: value}}}`` under our
     :data:`COLUMNS` (empty off its ranges)."""
-    from svgs_sim.assets.papers import tof_2022_stability
 
     if range_mm is None:
         return {}
@@ -159,7 +159,6 @@ def frame_row(result, tof_render, point_m) -> dict:
     point_m : (3,)
         :func:`reference_point_m`.
     """
-    from svgs_sim.sim.metrics import ROT_ERR_DEG
 
     res = result.solution
     row = {"frame": result.frame, "ok": bool(res), "reason": None if res else res.reason,
@@ -186,7 +185,6 @@ def run_info(tof_render, overrides, point_m) -> dict:
     columns and the noise-free frame through the pipeline (``nf_*``: the centroid errors against
     the projected face centres, px, and the pose error per column - the bias part of the
     single-frame error)."""
-    from svgs_sim.sim.tof_closed_loop import noise_free_frame, pipeline, solve
 
     clean = noise_free_frame(tof_render)
     truth = tof_render.truth_state
@@ -270,7 +268,6 @@ def run_stability(tof_render, range_m: float, frames: int, *, pipeline: dict | N
     dict
         :func:`assemble_run`.
     """
-    from svgs_sim.sim.tof_closed_loop import solve_frames
 
     frames = check_frames(frames)
     pt = reference_point_m(tof_render.target, reference)

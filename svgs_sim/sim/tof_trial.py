@@ -28,13 +28,14 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 
-from svgs_sim.sim.metrics import ERR_KEYS, POS_ERR_NORM_M, state_m_deg
-from svgs_sim.sim.tof_closed_loop import TofScenario
-from svgs_sim.sim.tof_stability import COLUMNS, REFERENCES, RUN_INFO_KEYS
-from svgs_sim.sim.trials import Parameter, TrialKind, register_trial_kind
 from svgs_sim.base.errors import InputError
+from svgs_sim.render.variant import select_variant
+from svgs_sim.sim.metrics import ERR_KEYS, POS_ERR_NORM_M, error_columns, state_m_deg
+from svgs_sim.sim.tof_closed_loop import TofScenario, render, solve_frames
+from svgs_sim.sim.tof_stability import COLUMNS, REFERENCES, RUN_INFO_KEYS, frame_row, reference_point_m, run_info
+from svgs_sim.sim.trials import Parameter, TrialKind, register_trial_kind
 from svgs_sim.svgs.frames import STATE_KEYS
 from svgs_sim.tof.camera import DESIGN_RANGE_M
 
@@ -158,7 +159,6 @@ class TofTrialScenario(Mapping):
 def trial_rows(first: TofTrialScenario) -> list:
     """The scenario rows (:meth:`TofTrialScenario.to_row`) of every frame ``0 .. frames - 1`` of
     the run of ``first``."""
-    from dataclasses import replace
 
     return [replace(first, frame=k).to_row() for k in range(int(first.frames))]
 
@@ -172,7 +172,6 @@ MAX_CACHED_RENDERS = 24
 def cached_render(scenario: TofScenario):
     """This worker's render of ``scenario`` (rendered once per render key; the sensor's
     overrides applied to the cached render)."""
-    from svgs_sim.sim.tof_closed_loop import render
 
     key = scenario.render_key()
     if key not in _RENDERS:
@@ -187,9 +186,6 @@ def cached_render(scenario: TofScenario):
 
 def _run_rows(ts: TofTrialScenario, wanted: set) -> dict:
     """Frames ``0 .. max(wanted)`` of the run of ``ts``, solved in sequence; the rows of ``wanted``."""
-    from svgs_sim.sim.tof_closed_loop import solve_frames
-    from svgs_sim.sim.metrics import error_columns
-    from svgs_sim.sim.tof_stability import frame_row, reference_point_m, run_info
 
     tr = cached_render(ts.scenario)
     overrides = dict(ts.pipeline)
@@ -243,7 +239,6 @@ def tof_render_key(scenario: dict):
 
 
 def _warm_up():
-    from svgs_sim.render.variant import select_variant
 
     select_variant()
 

@@ -18,6 +18,7 @@ Writes into ``out``:
 from __future__ import annotations
 
 import contextlib
+import csv
 import json
 import math
 import time
@@ -26,13 +27,15 @@ from pathlib import Path
 import numpy as np
 
 from svgs_sim.base.errors import InputError
-from svgs_sim.svgs.frames import STATE_KEYS
-
+from svgs_sim.base.profiles import Camera, Pattern
 from svgs_sim.sim import hard_stop
 from svgs_sim.sim.approach import MEASUREMENT_COLUMNS, TIMING_KEYS, ApproachSensor, Trajectory, check_visible
+from svgs_sim.studies.diagnosis import FAR_ABOVE_BOUND, bound_ratios, cause_text, far_above, glint_targets_of_state
 from svgs_sim.studies.execution import StoredProgress
 from svgs_sim.studies.progress import progress_bar
 from svgs_sim.studies.store import ResultStore
+from svgs_sim.svgs.frames import STATE_KEYS
+from svgs_sim.svgs.overlay import render_overlay, solution_marks
 
 #: Range bins of the summary's RMS errors, m (edges; each bin is [lo, hi), labelled so, the last one
 #: open above: a frame at 5.0 m is in [5, 10), not in [2, 5)).
@@ -66,7 +69,6 @@ def _threshold(cfg: dict):
 
 def sensor_camera(cfg: dict):
     """The camera the sensor images through: the profile, or its binned preview stream."""
-    from svgs_sim.base.profiles import Camera
 
     if cfg["preview"]:
         from svgs_sim.camera.phone.preview import binned_camera
@@ -106,7 +108,6 @@ def _overlay(m, cam, pattern, title: str) -> np.ndarray:
     """A video frame: the delivered image's overlay, letterboxed to :data:`VIDEO_SIZE_PX`."""
     import cv2
 
-    from svgs_sim.svgs.overlay import render_overlay, solution_marks
 
     targets, reproj = solution_marks(m.solution, cam, pattern)
     pic = render_overlay(m.image, blobs_px=m.blobs_px if m.blobs_px is not None else (), targets_px=targets,
@@ -143,7 +144,6 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
     """
     import cv2
 
-    from svgs_sim.base.profiles import Pattern
 
     cam, traj, times = check_config(cfg)
     out = Path(out_dir)
@@ -272,7 +272,6 @@ def far_above_bound(rows: list[dict], cfg: dict, factor: float | None = None) ->
         front-face glint reaches the lens (:func:`svgs_sim.studies.diagnosis.front_glint_targets`);
         ``worst``: ``{"frame", "range_m", "component", "ratio"}`` of the largest ratio, or None.
     """
-    from svgs_sim.studies.diagnosis import FAR_ABOVE_BOUND, bound_ratios, far_above, glint_targets_of_state
 
     factor = FAR_ABOVE_BOUND if factor is None else float(factor)
     frames, glint, worst = [], [], None
@@ -302,7 +301,6 @@ def _float(v):
 
 def bound_line(s: dict) -> str | None:
     """The report's one line on errors far above their bound (None when there are none)."""
-    from svgs_sim.studies.diagnosis import cause_text
 
     fb = s.get("far_above_bound") or {}
     n = len(fb.get("frames") or ())
@@ -323,7 +321,6 @@ def bound_line(s: dict) -> str | None:
 def write_outputs(rows: list[dict], cfg: dict, out: Path, *, glint_frames=None) -> dict:
     """measurements.csv, the video and approach.png from the stored rows; returns their paths.
     ``glint_frames``: :func:`far_above_bound`'s, when the caller has them (else computed)."""
-    import csv
 
     paths = {}
     p = out / "measurements.csv"
@@ -407,7 +404,6 @@ def plot_approach(rows: list[dict], cfg: dict, path: Path, *, glint_frames=None)
     |error| / CRLB against range on a log scale (right), with 1 and the "far above"
     line (:data:`svgs_sim.studies.diagnosis.FAR_ABOVE_BOUND`): the bound stays visible beside errors a
     hundred times larger, and the frames at the head-on glint are marked."""
-    from svgs_sim.studies.diagnosis import FAR_ABOVE_BOUND
 
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure

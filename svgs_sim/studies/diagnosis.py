@@ -20,6 +20,10 @@ import math
 import numpy as np
 
 from svgs_sim.base.errors import InputError
+from svgs_sim.base.profiles import load_pattern
+from svgs_sim.render.geometry import Reflector, SceneOptions, build_target
+from svgs_sim.render.optics import Flash, Optics
+from svgs_sim.render.predict import virtual_sources
 from svgs_sim.svgs.frames import STATE_KEYS, state_to_pose
 
 #: An error this many times its 1-sigma CRLB or more is "far above its bound" (noise reaches
@@ -49,10 +53,6 @@ def front_glint_targets(camera, pattern, R_cam_target, t_cam_target_m) -> tuple[
     tuple of str
         Target ids (as the pattern numbers them), empty when no glint reaches the lens.
     """
-    from svgs_sim.render.geometry import Reflector, SceneOptions, build_target
-    from svgs_sim.render.optics import Flash, Optics
-    from svgs_sim.render.predict import virtual_sources
-    from svgs_sim.base.profiles import load_pattern
 
     pat = load_pattern(pattern)
     R = np.asarray(R_cam_target, float)
@@ -88,7 +88,6 @@ def glint_targets_of_truth(truth: dict, pattern) -> tuple[str, ...]:
     tuple of str
         Target ids; empty when the record holds no front-face strategy.
     """
-    from svgs_sim.base.profiles import load_pattern
 
     ids = load_pattern(pattern).ids
     hit = set()

@@ -60,7 +60,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from svgs_sim.base.profiles import Camera
+from svgs_sim.sim.trials import GEOMETRIC, build_scenario, get_trial_kind
 from svgs_sim.svgs.frames import STATE_KEYS
+
+from .execution import Trial
 
 
 @dataclass(frozen=True)
@@ -146,7 +150,6 @@ def applicable_variants(camera, lab_errors: dict | None = None) -> tuple:
     those whose ``applies`` holds for its phone model and, for the lab's sources, whose source is
     on in ``lab_errors`` (:attr:`svgs_sim.studies.campaign.CampaignConfig.lab_errors`; None: none on)."""
     from svgs_sim.camera.phone.params import PhoneParams
-    from svgs_sim.base.profiles import Camera
 
     params = PhoneParams.from_camera(Camera.load(camera))
     lab = lab_errors or {}
@@ -159,16 +162,13 @@ def variant_trials(baseline: list, config) -> list:
     values, same seed; ``variant`` label set; ids from ``len(baseline) * (v + 1)``, ``v`` the
     variant's index in :data:`VARIANTS`); the variants that do not apply to the campaign's camera
     (:func:`applicable_variants`) are left out."""
-    from svgs_sim.sim.trials import build_scenario, get_trial_kind
 
-    from .execution import Trial
 
     kind = get_trial_kind(config.trial_kind)
     N = len(baseline)
     label_keys = ("nominal_range_m", "pose_index", "exposure_index")
     keep = {v.name for v in applicable_variants(config.camera, config.lab_errors)}
     from svgs_sim.camera.phone.params import PhoneParams
-    from svgs_sim.base.profiles import Camera
 
     on = image_path_on(PhoneParams.from_camera(Camera.load(config.camera)))
     out = []
@@ -225,9 +225,7 @@ def centroid_statistics(table: dict, ranges_m) -> list[dict]:
 def geometric_trials(baseline: list, config, centroids: list[dict]) -> list:
     """Geometric trials on the baseline's settings and seeds, exact calibration, no
     misalignment, with each range's measured centroid scatter as ``sigma_px``."""
-    from svgs_sim.sim.trials import GEOMETRIC, build_scenario
 
-    from .execution import Trial
 
     sigma = {c["range_m"]: c["scatter_px"] if np.isfinite(c["scatter_px"]) else 0.0 for c in centroids}
     out = []

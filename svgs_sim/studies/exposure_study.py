@@ -33,7 +33,11 @@ from pathlib import Path
 import numpy as np
 
 from svgs_sim.base.errors import InputError
+from svgs_sim.base.profiles import Camera
+from svgs_sim.sim.metrics import POS_ERR_NORM_M, ROT_ERR_DEG
+from svgs_sim.sim.render_trial import render_trial_scenario
 
+from .execution import Trial
 from .seeding import check_seed, design_rng, trial_seed
 from .tail import run_rendered_study, write_dict_csv
 
@@ -114,7 +118,6 @@ def make_config(camera: str, ranges_m, remedies=None, *, trials: int = 5, seed: 
 
 
 def _base_iso(camera: str) -> float:
-    from svgs_sim.base.profiles import Camera
 
     cam = Camera.load(camera)
     return float((cam.tables.get("sensor") or {}).get("base_iso", 100.0))
@@ -127,9 +130,7 @@ def exposure_study_trials(cfg: ExposureStudyConfig) -> list:
     -------
     list of :class:`svgs_sim.studies.execution.Trial`
     """
-    from svgs_sim.sim.render_trial import render_trial_scenario
 
-    from .execution import Trial
 
     base_iso = _base_iso(cfg.camera)
     n_rem = len(cfg.remedies)
@@ -150,7 +151,6 @@ def exposure_study_trials(cfg: ExposureStudyConfig) -> list:
 def trial_table(rows: list[dict]) -> list[dict]:
     """The rows of ``trials.csv``: remedy, range_m, trial, ok, reason, n_blobs, exposure_s, iso,
     ``pos_err_norm_m`` and ``rot_err_deg`` (:mod:`svgs_sim.sim.metrics`; empty when unsolved)."""
-    from svgs_sim.sim.metrics import POS_ERR_NORM_M, ROT_ERR_DEG
 
     return [{"remedy": r["remedy"], "range_m": r["range_m"], "trial": r["trial"], "ok": bool(r["ok"]),
              "reason": r["reason"], "n_blobs": r["n_blobs"], "exposure_s": r["exposure_s_used"], "iso": r["iso_used"],

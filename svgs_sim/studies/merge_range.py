@@ -32,7 +32,13 @@ from pathlib import Path
 import numpy as np
 
 from svgs_sim.base.errors import InputError
+from svgs_sim.base.profiles import Camera
+from svgs_sim.sim.render_trial import RENDER, render_trial_scenario
+from svgs_sim.svgs.app import settings
 
+from .campaign import log_run, run_log
+from .execution import Trial, library_versions, run_stored_study
+from .report import Report, write_csv
 from .seeding import check_seed, trial_seed
 
 #: name -> (low, high, what the range is and where it comes from). The nominal value is the
@@ -108,7 +114,6 @@ def make_config(camera: str, *, ranges_m=None, vary=None, exposures: int = 2, se
         ``NAME`` (its :data:`PHYSICS` range) or ``NAME=LOW:HIGH``; default every parameter of
         :data:`PHYSICS`.
     """
-    from svgs_sim.sim.render_trial import RENDER, render_trial_scenario
 
     render_trial_scenario(camera=camera, pattern=pattern)  # the camera and pattern exist
     rs = []
@@ -128,8 +133,6 @@ def make_config(camera: str, *, ranges_m=None, vary=None, exposures: int = 2, se
             raise InputError(f"--vary: {name} given twice")
         lo, hi = PHYSICS[name][:2]
         if name == "threshold" and not rng:  # around this camera's app setting, within its plausible range
-            from svgs_sim.svgs.app import settings
-            from svgs_sim.base.profiles import Camera
 
             app = settings()
             t = app.threshold_for(Camera.load(camera).key)
@@ -151,9 +154,7 @@ def make_config(camera: str, *, ranges_m=None, vary=None, exposures: int = 2, se
 
 def merge_range_trials(config: MergeRangeConfig) -> list:
     """Every trial: case x range x exposure, the noise seed shared by a (range, exposure) over cases."""
-    from svgs_sim.sim.render_trial import render_trial_scenario
 
-    from .execution import Trial
 
     trials, i = [], 0
     for case, param, value in config.cases():
@@ -298,7 +299,6 @@ def margin_figure(cases: list[dict], config: MergeRangeConfig):
 
 def write_report(out_dir, config: MergeRangeConfig, cases: list[dict], eff: list[dict], *, command: str,
                  versions: dict, wall_s: float | None) -> Path:
-    from .report import Report, write_csv
 
     out_dir = Path(out_dir)
     write_csv(out_dir / "merge_ranges.csv", ["parameter", "low", "high", "merge_range_low_m", "bound_low",
@@ -351,10 +351,7 @@ def run_merge_range(config: MergeRangeConfig, out_dir, spec, *, chunk_size=None,
     -------
     (cases, effects, stats, report_path)
     """
-    from svgs_sim.sim.render_trial import RENDER
 
-    from .campaign import log_run, run_log
-    from .execution import library_versions, run_stored_study
 
     trials = merge_range_trials(config)
     store, stats = run_stored_study(RENDER, trials, out_dir, config.manifest(), spec, chunk_size=chunk_size,

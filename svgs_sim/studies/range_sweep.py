@@ -30,10 +30,21 @@ from pathlib import Path
 import numpy as np
 
 from svgs_sim.base.errors import InputError
+from svgs_sim.sim.metrics import ATT_ERR_VEC_DEG, POS_ERR_NORM_M, POS_ERR_VEC_M, ROT_ERR_DEG
+from svgs_sim.sim.render_trial import (
+    RenderScenario,
+    check_threshold,
+    render_trial_scenario,
+    threshold_parameter,
+    trial_picture,
+)
 from svgs_sim.sim.scene import Scene
 from svgs_sim.sim.target_pose import TargetPose
 from svgs_sim.svgs.frames import STATE_KEYS
+from svgs_sim.svgs.overlay import render_overlay
+from svgs_sim.svgs.pipeline import camera_threshold
 
+from .execution import Trial
 from .seeding import check_seed, design_rng, trial_seed
 from .tail import run_rendered_study, write_dict_csv
 
@@ -104,7 +115,6 @@ class RangeSweepConfig(TargetPose):
     def row_options(self) -> dict:
         """``spp``, ``roi_spp``, ``exposure_s`` and ``iso`` as a render trial's row writes them
         (the results store's codec: None as -1 or 0)."""
-        from svgs_sim.sim.render_trial import RenderScenario
 
         out = {k: RenderScenario.row_code(k, getattr(self, k)) for k in _ROW_OPTIONS}
         return {**out, "spp": int(out["spp"]), "roi_spp": int(out["roi_spp"])}
@@ -144,7 +154,6 @@ def make_config(camera: str, ranges_m, *, trials: int = 20, poses: int = 1, jitt
         Other :class:`RangeSweepConfig` fields (pattern, threshold, nominal pose, ``scene``,
         samples per pixel, forced exposure; None: the default).
     """
-    from svgs_sim.sim.render_trial import check_threshold, render_trial_scenario
 
     if "threshold" in options:
         options["threshold"] = check_threshold(options["threshold"])
@@ -164,7 +173,6 @@ def make_config(camera: str, ranges_m, *, trials: int = 20, poses: int = 1, jitt
 
 
 def _fixed(cfg: RangeSweepConfig) -> dict:
-    from svgs_sim.sim.render_trial import threshold_parameter
 
     keys = ("camera", "pattern", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg")
     return {**{k: getattr(cfg, k) for k in keys}, **cfg.scene.row_values(), **cfg.row_options(),
@@ -178,9 +186,7 @@ def range_sweep_trials(cfg: RangeSweepConfig) -> list:
     -------
     list of :class:`svgs_sim.studies.execution.Trial`
     """
-    from svgs_sim.sim.render_trial import render_trial_scenario
 
-    from .execution import Trial
 
     trials = []
     base = _fixed(cfg)
@@ -217,7 +223,6 @@ def trial_records(rows: list[dict]) -> list[dict]:
     rows : list of dict
         :meth:`svgs_sim.studies.store.ResultStore.read_rows`, sorted by ``trial_id``.
     """
-    from svgs_sim.sim.metrics import ATT_ERR_VEC_DEG, POS_ERR_NORM_M, POS_ERR_VEC_M, ROT_ERR_DEG
 
     out = []
     for r in rows:
@@ -245,7 +250,6 @@ def summarise(records) -> list[dict]:
     records : list of dict
         :func:`trial_records`.
     """
-    from svgs_sim.sim.metrics import ATT_ERR_VEC_DEG, POS_ERR_VEC_M
 
     out = []
     for r in sorted({row["range_m"] for row in records}):
@@ -338,9 +342,7 @@ def sample_overlays(path, cfg: RangeSweepConfig, panel_px: int = 420) -> str:
     reprojection (:func:`svgs_sim.svgs.overlay.render_overlay`), re-made from the trial's own seeds."""
     import cv2
 
-    from svgs_sim.sim.render_trial import trial_picture
     from svgs_sim.svgs.detect import detect_blobs
-    from svgs_sim.svgs.overlay import render_overlay
 
     trials = range_sweep_trials(cfg)
     firsts = {}
@@ -352,7 +354,6 @@ def sample_overlays(path, cfg: RangeSweepConfig, panel_px: int = 420) -> str:
         t = firsts[r]
         pic = trial_picture(t.scenario, int(t.seed))
         sol, cam, pat = pic["row"]["_solution"], pic["camera"], pic["pattern"]
-        from svgs_sim.svgs.pipeline import camera_threshold
 
         blobs = detect_blobs(pic["image"], threshold=camera_threshold(pic["image"], cam, pic["threshold"]))
         targets = {str(k): v for k, v in sol.targets_px.items()} if sol else {}

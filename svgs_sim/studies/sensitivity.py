@@ -34,10 +34,15 @@ from pathlib import Path
 import numpy as np
 
 from svgs_sim.base.errors import InputError
-
-from .seeding import check_seed, trial_seed
+from svgs_sim.base.profiles import load_camera as _camera
+from svgs_sim.base.profiles import load_pattern as _pattern
 from svgs_sim.sim.metrics import POS_ERR_NORM_M, ROT_ERR_DEG, SCALAR_ERROR_KEYS
 from svgs_sim.sim.trials import TrialKind, build_scenario, get_trial_kind
+from svgs_sim.svgs.envelope import check_range_m
+
+from .execution import Trial, library_versions, run_stored_study
+from .report import Report, write_csv
+from .seeding import check_seed, trial_seed
 
 OUTPUTS = (POS_ERR_NORM_M, ROT_ERR_DEG, "success")
 #: Outputs analysed when the trial kind has them: the rendered kind's ``merge_margin_dn`` (the
@@ -178,7 +183,6 @@ class SensitivityConfig:
 def make_config(camera: str, vary, *, fixed=None, method: str = "sobol", n: int = 256, seed: int = 0,
                 trial_kind: str = "geometric", pattern: str = "svgs-3u") -> SensitivityConfig:
     """A validated :class:`SensitivityConfig` (all checks before any work)."""
-    from svgs_sim.base.profiles import load_camera as _camera, load_pattern as _pattern
 
     kind = get_trial_kind(trial_kind)
     if method not in ("sobol", "morris"):
@@ -196,13 +200,12 @@ def range_envelope_check(kind: TrialKind, camera: str, pattern: str):
     ``--range`` takes - the phone's :func:`svgs_sim.svgs.envelope.range_envelope_m` for the phone's kinds,
     the paper's design range for the ToF kind - else :class:`InputError` naming ``what``; other
     parameters pass (their own domain is checked after it)."""
-    from svgs_sim.svgs.envelope import check_range_m
 
     def check(name: str, x: float, what: str) -> None:
         if name != "range_m":
             return
         if kind.name == "tof":
-            from svgs_sim.tof.camera import DESIGN_RANGE_M
+            from svgs_sim.tof.camera import DESIGN_RANGE_M  # not at module level: heavy (the ToF pipeline loads OpenCV)
 
             lo, hi = DESIGN_RANGE_M
             if not lo <= x <= hi:
@@ -281,7 +284,6 @@ def sensitivity_trials(config: SensitivityConfig) -> tuple[list, dict]:
     layout : dict
         Design matrices (unit and physical) for the analysis.
     """
-    from .execution import Trial
 
     kind = get_trial_kind(config.trial_kind)
     names = [v.name for v in config.varied]
@@ -441,7 +443,6 @@ def ranking(result: dict, config: SensitivityConfig, output: str = POS_ERR_NORM_
 def write_sensitivity_report(out_dir, config: SensitivityConfig, table: dict, result: dict, *, command: str,
                              versions: dict, stats=None, n_render_groups: int | None = None) -> Path:
     """``DIR/report.html`` and ``DIR/indices.csv``."""
-    from .report import Report, write_csv
 
     out_dir = Path(out_dir)
     names = [v.name for v in config.varied]
@@ -574,7 +575,6 @@ def run_sensitivity(config: SensitivityConfig, out_dir, spec, *, chunk_size=None
     -------
     (result, stats, report_path, n_render_groups)
     """
-    from .execution import library_versions, run_stored_study
 
     kind = get_trial_kind(config.trial_kind)
     trials, layout = sensitivity_trials(config)

@@ -46,6 +46,7 @@ bit-identical numbers. Empty fields are ``None``/NaN.
 from __future__ import annotations
 
 import csv
+import fcntl
 import io
 import json
 import math
@@ -489,7 +490,6 @@ class ResultStore:
             Another run holds the directory, or the header of ``results.csv`` is not this
             study's columns.
         """
-        import fcntl
 
         if self._fd is not None:
             return self

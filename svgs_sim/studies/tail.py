@@ -11,6 +11,10 @@ import csv
 from pathlib import Path
 from typing import Callable
 
+from svgs_sim.sim.trials import get_trial_kind
+
+from .execution import run_stored_study
+
 
 def run_rendered_study(trials: list, out_dir, manifest: dict, spec, write_outputs: Callable[[list], object], *,
                        description: str, chunk_size: int | None = None, progress: bool = True):
@@ -40,9 +44,7 @@ def run_rendered_study(trials: list, out_dir, manifest: dict, spec, write_output
         What ``write_outputs`` returned, and the :class:`~svgs_sim.studies.execution.RunStats` (None if
         every trial was already done).
     """
-    from svgs_sim.sim.trials import get_trial_kind
 
-    from .execution import run_stored_study
 
     store, stats = run_stored_study(get_trial_kind("render"), trials, out_dir, manifest, spec, chunk_size=chunk_size,
                                     progress=progress, description=description)

@@ -47,12 +47,14 @@ Pixel convention: OpenCV's, pixel centres at integer coordinates; ``centroid_px`
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
 from ..base.errors import InputError
+from .app import CENTROIDS, settings
 
 # ------------------------------------------------------------------ defaults (one place)
 #: Automatic threshold: background + AUTO_K_SIGMA robust sigmas...
@@ -352,7 +354,6 @@ def app_level(dtype, threshold_dn: float | None = None) -> float:
     float
         The level in the image's units.
     """
-    from .app import settings
 
     t = settings().threshold_dn if threshold_dn is None else float(threshold_dn)
     return t * 257.0 if np.dtype(dtype) == np.uint16 else t
@@ -364,7 +365,6 @@ def _resolve_threshold(gray, threshold, k_sigma, peak_fraction):
     bg, sigma = background_stats(gray)
     if threshold is None or (isinstance(threshold, str) and threshold == "app"):
         if np.issubdtype(gray.dtype, np.floating) and 0 < float(gray.max()) <= 1.0:
-            import warnings
 
             warnings.warn("a float image with values in [0, 1]: the app's brightness threshold is in 8-bit counts "
                           "(0-255), so no pixel passes it; scale the image to 0-255 or pass threshold='auto' or a "
@@ -605,7 +605,6 @@ def detect_blobs(
 def _check_options(centroid, min_area_px, max_area_px, max_blobs) -> str:
     """The centroid rule (the app's default for None; ``"component"`` -> ``"weighted"``); raise
     :class:`InputError` for a bad one or a non-positive integer gate."""
-    from .app import CENTROIDS, settings
 
     if centroid is None:
         centroid = settings().centroid

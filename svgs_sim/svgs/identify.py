@@ -43,10 +43,11 @@ from functools import lru_cache
 import numpy as np
 
 from ..base.errors import InputError
-from .frames import D_CAM_PHOTO, angles_from_rotation, rotation_from_angles
 from ..base.profiles import Camera, Pattern, load_camera, load_pattern
 from .envelope import PAPER_ENVELOPE, Envelope
+from .frames import D_CAM_PHOTO, angles_from_rotation, rotation_from_angles
 from .result import Failure
+from .solver import posit, solve_centroids
 
 # ------------------------------------------------------------------ defaults (one place)
 #: Poses sampled to build the geometric gates (plus the envelope's corners).
@@ -612,7 +613,6 @@ def _solve_candidates(pts, vsets, camera, pattern, sigma_px, max_residual_px, en
     good : ndarray of bool, shape (M,)
         Consistent: solved, within ``max_residual_px`` and inside the envelope.
     """
-    from .solver import solve_centroids
 
     batch = solve_centroids(pts[vsets], camera, pattern, sigma_px=sigma_px, max_residual_px=np.inf)
     good = _consistent(batch, max_residual_px, envelope, pose_margin_deg)
@@ -650,7 +650,6 @@ def _pick(vsets, res, good, blobs, idx_all) -> int:
 
 def _posit_residual(sets_px: np.ndarray, camera: Camera, pattern: Pattern) -> np.ndarray:
     """RMS reprojection residual (px) of POSIT poses for candidate sets (M, n, 2) -> (M,)."""
-    from .solver import posit
 
     xy = camera.pixels_to_normalized(sets_px)
     with np.errstate(all="ignore"):

@@ -5,15 +5,20 @@ threshold -> blob extraction -> target identification -> collinearity solve.
 
 from __future__ import annotations
 
+import os
 import sys
+import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from ..base.errors import InputError
 from ..base.profiles import Camera, Pattern, load_camera, load_pattern
+from .app import consistency, settings
+from .identify import identify
 from .result import Failure
-
+from .solver import solve_centroids
 
 #: EXIF ``Orientation`` tag (0x0112) values: what the viewer does to the stored pixels to show
 #: the picture upright (EXIF 2.32, section 4.6.4 A).
@@ -59,7 +64,6 @@ def exif_orientation(path, data: bytes | None = None) -> int:
         A key of :data:`EXIF_ORIENTATIONS`; 1 for a file without EXIF, an unknown value, or a
         file Pillow cannot parse (OpenCV decodes the pixels; this reads only the header).
     """
-    import warnings
 
     try:
         if not _may_hold_exif(Path(path).read_bytes() if data is None else data):
@@ -185,9 +189,6 @@ def _decode_quietly(data: np.ndarray):
     said : str
         The captured lines, joined by "; " (empty when none).
     """
-    import os
-    import sys
-    import tempfile
 
     import cv2
 
@@ -239,7 +240,6 @@ def camera_threshold(image, camera, threshold=None):
     float or str
         A level in the image's units, or ``threshold`` itself ("auto", "otsu", a level).
     """
-    from .app import settings
     from .detect import app_level
 
     if threshold is None or (isinstance(threshold, str) and threshold == "app"):
@@ -265,7 +265,6 @@ def detector_settings(camera, threshold=None) -> dict:
         own units for a level given by the user); ``threshold_source`` ``"app by_camera[KEY]"``,
         ``"app default"`` or ``"given"``; ``fitted_overlay`` the overlay file (``fitted/KEY.toml``).
     """
-    from .app import settings
 
     key = camera_key(camera)
     fitted = load_camera(camera).tables.get("fitted") or {}
@@ -357,10 +356,7 @@ def solve_image(
         ``threshold_used`` (the detector's level); a solution's ``n_blobs`` and ``threshold_used``
         likewise.
     """
-    from .app import consistency
     from .detect import detect_blobs
-    from .identify import identify
-    from .solver import solve_centroids
 
     camera = load_camera(camera)
     pattern = load_pattern(pattern)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from .frames import state_dict
+
 #: Machine-readable failure reasons and what they mean.
 REASONS = {
     "no_blobs": "no bright blob passed the threshold and the size/shape gates",
@@ -37,7 +39,6 @@ class Solved:
     @property
     def state_dict(self) -> dict:
         """The state keyed by :data:`svgs_sim.svgs.frames.STATE_KEYS` (m and deg)."""
-        from .frames import state_dict
 
         return state_dict(self.state)
 

@@ -31,7 +31,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from svgs_sim.base.errors import InputError
-
+from svgs_sim.base.profiles import Camera
+from svgs_sim.camera.backend import get_backend
+from svgs_sim.camera.phone.cfa import channel_map, linear_bgr, luminance, response_map, tone_bgr, tone_image
 from svgs_sim.camera.phone.isp import (
     ExposureSolver,
     auto_exposure,
@@ -42,9 +44,16 @@ from svgs_sim.camera.phone.isp import (
     tone_lut,
     unsharp_mask,
 )
-from svgs_sim.camera.phone.cfa import channel_map, linear_bgr, luminance, response_map, tone_bgr, tone_image
-from svgs_sim.camera.phone.optics import apply_psf, compose, core_image, core_psf, core_share, glare_image, wings_coarse
-from svgs_sim.camera.phone.psf import PIXEL_KERNEL_RADIUS_PX, splat_patches, support_box
+from svgs_sim.camera.phone.optics import (
+    POINT_METHODS,
+    apply_psf,
+    compose,
+    core_image,
+    core_psf,
+    core_share,
+    glare_image,
+    wings_coarse,
+)
 from svgs_sim.camera.phone.params import (
     ALL_STAGES,
     NOISE_STAGES,
@@ -54,7 +63,9 @@ from svgs_sim.camera.phone.params import (
     check_demosaic,
     check_stages,
 )
+from svgs_sim.camera.phone.psf import PIXEL_KERNEL_RADIUS_PX, splat_patches, support_box
 from svgs_sim.camera.phone.sensor import bloom, electrons, fixed_patterns, readout
+from svgs_sim.camera.rendered import PointFlux
 from svgs_sim.camera.tonemap import gamma_u8
 
 __all__ = ["PhoneCamera", "Exposer", "Exposure", "PhoneParams", "ALL_STAGES", "NOISE_STAGES", "OPTICS_STAGES"]
@@ -110,11 +121,7 @@ class PhoneCamera:
     """
 
     def __init__(self, camera, params: PhoneParams | None = None, *, point_method: str = "grid", backend=None):
-        from svgs_sim.camera.backend import get_backend
 
-        from svgs_sim.base.profiles import Camera
-
-        from svgs_sim.camera.phone.optics import POINT_METHODS
 
         self.camera = Camera.load(camera)
         self.params = params if params is not None else PhoneParams.from_camera(self.camera)
@@ -273,7 +280,6 @@ class PhoneCamera:
         """Validate point samples (None passes)."""
         if points is None:
             return None
-        from svgs_sim.camera.rendered import PointFlux
 
         if not isinstance(points, PointFlux):
             raise InputError(f"points: expected a svgs_sim.camera.rendered.PointFlux, got {type(points).__name__}")

@@ -18,8 +18,7 @@ import numpy as np
 from numba import njit, prange
 
 from svgs_sim.base.errors import InputError
-
-from svgs_sim.camera.phone.params import ExposureParams, SensorParams
+from svgs_sim.camera.phone.params import ExposureParams, SensorParams, check_grid_offset, check_subsampling
 from svgs_sim.camera.tonemap import gamma_u8
 
 
@@ -334,7 +333,6 @@ def jpeg_roundtrip(image: np.ndarray, quality: int, subsampling: str = "gray", g
     -------
     ndarray, uint8, the shape of ``image``
     """
-    from svgs_sim.camera.phone.params import check_grid_offset, check_subsampling
 
     img = np.asarray(image)
     try:

@@ -32,8 +32,9 @@ import numpy as np
 from numba import njit, prange
 from scipy.signal import fftconvolve
 
+from svgs_sim.camera.backend import get_backend
 from svgs_sim.camera.phone.params import GlareParams
-from svgs_sim.camera.phone.psf import CorePSF
+from svgs_sim.camera.phone.psf import CorePSF, support_box
 from svgs_sim.camera.rendered import bilinear_splat
 
 #: Coarse grid size for the wing convolution, pixels.
@@ -111,8 +112,6 @@ def wings_coarse(flux, glare: GlareParams, points=None, backend=None):
         Per fine pixel (the full-resolution image itself when ``s == 1``).
     s : int
     """
-    from svgs_sim.camera.backend import get_backend
-    from svgs_sim.camera.phone.psf import support_box
 
     be = get_backend(backend)
     f = np.asarray(flux)

@@ -29,6 +29,7 @@ import math
 
 from svgs_sim.base.errors import InputError
 from svgs_sim.base.profiles import Camera
+from svgs_sim.camera.phone.params import SensorParams
 
 #: The Galaxy Nexus' preview size (``shared/notes/physics.md`` section 4); the HTC Amaze 4G's was
 #: not found and is taken to be the same (ASSUMPTION).
@@ -60,7 +61,6 @@ def binned_camera(camera, width: int = DEFAULT_PREVIEW_SIZE[0], height: int = DE
                          f"({cam.width} x {cam.height})")
     tables = {k: (dict(v) if isinstance(v, dict) else v) for k, v in cam.tables.items()}
     sensor = tables.setdefault("sensor", {})
-    from svgs_sim.camera.phone.params import SensorParams
 
     d = SensorParams()
     get = lambda k: float(sensor.get(k, getattr(d, k)))  # noqa: E731

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from svgs_sim.camera.backend import get_backend
 from svgs_sim.camera.rendered import bilinear_splat, bilinear_splats
 
 #: Encircled-energy table of the Airy pattern: x = pi r / (lambda N) from 0 to this value.
@@ -328,7 +329,6 @@ class CorePSF:
         """Convolve a pixel image (already integrated over pixels) with :meth:`pixel_kernel`.
         float32 (H, W); zero outside the frame. ``backend``: the array backend
         (:func:`svgs_sim.camera.backend.get_backend`; default the CPU's OpenCV)."""
-        from svgs_sim.camera.backend import get_backend
 
         be = get_backend(backend)
         k = self.pixel_kernel(radius_px).astype(np.float32)

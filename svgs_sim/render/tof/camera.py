@@ -60,17 +60,19 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from svgs_sim.assets import package_relative
+from svgs_sim.base.constants import PLANCK_J_S, SPEED_OF_LIGHT_M_S
 from svgs_sim.base.errors import InputError, ProfileError, check_finite, check_finite_positive
-from svgs_sim.svgs.frames import check_pose, pose_to_state, state_dict
 from svgs_sim.base.profile_schema import TOF_CAMERA_TABLES, check_table
+from svgs_sim.camera.amcw import RenderedTof, unambiguous_range_m
+from svgs_sim.render.optics import pixel_normalized_grid, radiance_to_photon_rate
+from svgs_sim.render.sampling import check_spp, to_numpy
+from svgs_sim.render.sensor import CameraModel
+from svgs_sim.render.variant import select_variant
+from svgs_sim.svgs.frames import check_pose, pose_to_state, state_dict
 from svgs_sim.tof.camera import DEFAULT_CAMERA, DEFAULT_PATTERN, load_camera, load_target
 
-from svgs_sim.camera.amcw import RenderedTof, unambiguous_range_m
-from svgs_sim.base.constants import PLANCK_J_S, SPEED_OF_LIGHT_M_S
-
-from svgs_sim.render.sampling import check_spp, to_numpy
-from svgs_sim.assets import package_relative
-
+from .scene import TofSceneOptions, build_tof_scene
 from .sobol import sobol_owen
 
 #: Default samples per pixel of the traced window (power of two).
@@ -318,9 +320,7 @@ class TofRenderer:
                  max_bounces: int = 1, modulation_frequency_hz: float | None = None, pinhole: bool = False,
                  illumination: dict | None = None, background_factor: float = 0.0, variant: str | None = None,
                  sampler: str = "sobol", rim_spp_factor: int | None = DEFAULT_RIM_SPP_FACTOR):
-        from svgs_sim.render.variant import select_variant
 
-        from .scene import TofSceneOptions, build_tof_scene
 
         self.camera = camera if hasattr(camera, "fx") else load_camera(camera, render=True)
         self.target = load_target(target)
@@ -349,7 +349,6 @@ class TofRenderer:
         import drjit as dr
         import mitsuba as mi
 
-        from svgs_sim.render.sensor import CameraModel
 
         self._mi, self._dr = mi, dr
         t0 = time.perf_counter()
@@ -363,7 +362,6 @@ class TofRenderer:
     def photons_per_radiance(self) -> np.ndarray:
         """Photons/s per pixel per W m^-2 sr^-1, shape (H, W) (aperture, pixel solid angle, cos^4)."""
         if self._photons is None:
-            from svgs_sim.render.optics import pixel_normalized_grid, radiance_to_photon_rate
 
             xy = pixel_normalized_grid(self.camera)
             self._photons = radiance_to_photon_rate(self.camera, self.optics, self.optics.photon_energy_j, xy)

@@ -25,6 +25,7 @@ from svgs_sim.base.errors import InputError, check_finite_positive
 from svgs_sim.base.profile_schema import REFLECTANCE, TOF_MATERIALS, TOF_PATTERN_TABLES, check_table
 
 from ..geometry import OptionsMixin
+from .retro import bsdf_dict, load_sheeting, register_bsdf
 
 #: Distractor kinds: ``sphere`` (``position_m``, ``radius_m``) and ``box`` (``lo_m``, ``hi_m``
 #: corners, axis-aligned in the target frame); both take ``albedo`` (Lambertian, default 0.8).
@@ -119,7 +120,6 @@ class TofSceneOptions(OptionsMixin):
             if v is not None:
                 _MARKER["material"].check(v, f"scene_options.{k}")
         if self.sheeting is not None:
-            from .retro import load_sheeting
 
             load_sheeting(self.sheeting)
         for k in ("plate_albedo", "marker_albedo", "dark_albedo"):
@@ -178,7 +178,6 @@ class TofGeometry:
     def to_json(self) -> dict:
         sheet = None
         if self.materials.get("sheeting"):
-            from .retro import load_sheeting
 
             sheet = load_sheeting(self.materials["sheeting"]).to_json()
         return {
@@ -236,7 +235,6 @@ def resolve_geometry(target, opts: TofSceneOptions) -> TofGeometry:
     m_mat = opts.marker_material if opts.marker_material is not None else marker.get("material", "lambertian")
     sheeting = opts.sheeting if opts.sheeting is not None else marker.get("sheeting")
     if "retroreflective" in (m_mat, opts.plate_material):
-        from .retro import load_sheeting
 
         if not sheeting:
             raise InputError(f"pattern {target.pattern.name!r}: a retroreflective surface needs a sheeting "
@@ -276,7 +274,6 @@ def scene_dict(geom: TofGeometry, opts: TofSceneOptions) -> dict:
 
     def material(kind, albedo):
         if kind == "retroreflective":
-            from .retro import bsdf_dict, register_bsdf
 
             register_bsdf()
             return bsdf_dict(geom.materials["sheeting"])

@@ -3,17 +3,19 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from svgs_sim.base.errors import InputError, check_finite
-from svgs_sim.svgs.frames import D_CAM_PHOTO, STATE_KEYS, angles_from_rotation, pose_to_state, state_dict
 from svgs_sim.base.profiles import load_camera, load_pattern
-
 from svgs_sim.sim.closed_loop import Frame, Scenario, lab_flux, lab_photon_factor, solve_exposure
+from svgs_sim.sim.crlb import frame_crlb
 from svgs_sim.sim.metrics import state_error
+from svgs_sim.svgs.frames import D_CAM_PHOTO, STATE_KEYS, angles_from_rotation, check_pose, pose_to_state, state_dict
+from svgs_sim.svgs.pipeline import camera_threshold
 
 from .stream import ExposureStream, RenderStream, frame_seeds
 from .trajectory import VELOCITY_STEP_S, Trajectory
@@ -206,7 +208,6 @@ class ApproachSensor:
     def _stream_params(self, params, frame_rate_hz):
         """The phone's parameters at a frame rate (its longest exposure capped at the period) and
         the checked rate (None: free-running)."""
-        import dataclasses
 
         if frame_rate_hz is None:
             return params, None
@@ -345,7 +346,6 @@ class ApproachSensor:
 
     def _frame_scenario(self, R_cam_target, t_cam_target_m, scenario: Scenario | None):
         """The frame's scenario (the lab around the target at this range) and pose ``(sc, R, t)``."""
-        from svgs_sim.svgs.frames import check_pose
 
         if scenario is not None:
             sc = scenario.replace(camera=self.base.camera, pattern=self.base.pattern)
@@ -358,7 +358,6 @@ class ApproachSensor:
 
     def _next_frame(self, next_pose):
         """The next frame's pose to render in the background (None: no overlap, or not in view)."""
-        from svgs_sim.svgs.frames import check_pose
 
         if next_pose is None or not self.overlap_render:
             return None
@@ -403,7 +402,6 @@ class ApproachSensor:
         against the actual pose): ``(exposure, blobs, row)``; ``timings`` gets ``expose`` and
         ``solve`` (detection included)."""
         from svgs_sim.svgs.detect import detect_blobs
-        from svgs_sim.svgs.pipeline import camera_threshold
 
         t0 = time.perf_counter()
         ex = exposer.expose(seed=noise_seed, exposure_s=settings[0], iso=settings[1])
@@ -422,7 +420,6 @@ class ApproachSensor:
         crlb = None
         t0 = time.perf_counter()
         if self.crlb and row["ok"]:
-            from svgs_sim.sim.crlb import frame_crlb
 
             c = frame_crlb(frame, exposer, row, draws=CRLB_DRAWS)
             crlb = None if c is None else c.get("crlb_std")

@@ -5,9 +5,12 @@ refocused every frame, optionally rendering the next frame in a background threa
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from svgs_sim.base.profiles import Camera, Pattern
+from svgs_sim.render.api import Renderer
 
 #: The phone's preview stream rate when the exposure allows it, frames/s: its auto-exposure loop
 #: steps once per stream frame, whether or not the sensor processes that frame (ASSUMPTION:
@@ -123,7 +126,6 @@ class RenderStream:
     def renderer(self):
         """The :class:`svgs_sim.render.api.Renderer` (made on first use)."""
         if self._renderer is None:
-            from svgs_sim.render.api import Renderer
 
             self._renderer = Renderer(self.camera, self.pattern, scene_options={"focus_distance_m": 1.0}, **self._quality)
         return self._renderer
@@ -141,7 +143,6 @@ class RenderStream:
 
     def start(self, k: int, R, t) -> None:
         """Render frame ``k`` at ``(R, t)`` in the background thread (one at a time)."""
-        from concurrent.futures import ThreadPoolExecutor
 
         self.drop()
         if self._pool is None:

@@ -9,15 +9,28 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import time
+from collections import OrderedDict
 
 import numpy as np
 
-from svgs_sim.sim.metrics import ATT_ERR_VEC_DEG, ERR_KEYS, POS_ERR_NORM_M, POS_ERR_VEC_M, ROT_ERR_DEG
-from svgs_sim.sim.trials import TrialKind, camera_with_calibration_errors, register_trial_kind
-from svgs_sim.svgs.frames import STATE_KEYS
+from svgs_sim.camera.rendered import PointFlux
+from svgs_sim.render.variant import select_variant
+from svgs_sim.sim.closed_loop import render_scenario, solve_exposure, solver_camera
+from svgs_sim.sim.crlb import centroid_crlb_px, pose_crlb
+from svgs_sim.sim.metrics import ATT_ERR_VEC_DEG, ERR_KEYS, POS_ERR_NORM_M, POS_ERR_VEC_M, ROT_ERR_DEG, state_m_deg
 from svgs_sim.sim.render_trial.scenario import (
-    RENDER_PARAMETERS, SOURCE_SWITCHES, RENDER_OUTPUTS, RenderScenario, RenderKey, render_key,
+    RENDER_OUTPUTS,
+    RENDER_PARAMETERS,
+    SOURCE_SWITCHES,
+    RenderKey,
+    RenderScenario,
+    render_key,
 )
+from svgs_sim.sim.trials import TrialKind, camera_with_calibration_errors, register_trial_kind
+from svgs_sim.sim.turbulence import image_shifts_px
+from svgs_sim.svgs.app import consistency
+from svgs_sim.svgs.frames import STATE_KEYS
 
 
 def merge_margin_dn(image: np.ndarray, targets_px: np.ndarray, threshold: float, step_px: float = 0.25) -> float:
@@ -58,7 +71,6 @@ def merge_margin_dn(image: np.ndarray, targets_px: np.ndarray, threshold: float,
 
 @functools.lru_cache(maxsize=2)
 def _frame(key: RenderKey):
-    from svgs_sim.sim.closed_loop import render_scenario
 
     return render_scenario(key.scenario(), seed=key.render_seed), {}
 
@@ -117,7 +129,6 @@ def _sensor_centroid_sigma(frame, exposer, row, cache: dict, key, spots_px) -> f
     at the targets' true positions, once per exposer and exposure setting: it depends on the
     render and the exposure, not on the noise draw (so not on which trial of a group asks first).
     None when a spot carries no information."""
-    from svgs_sim.sim.crlb import centroid_crlb_px
 
     k = ("crlb", *key, row["exposure_s"], row["iso"])
     if k not in cache:
@@ -144,8 +155,6 @@ def turbulent_points(frame, cn2_m23: float, seed: int):
     shifts_px : ndarray, shape (N, 2)
         Each target's image motion ``(du, dv)``, px.
     """
-    from svgs_sim.camera.rendered import PointFlux
-    from svgs_sim.sim.turbulence import image_shifts_px
 
     cam = frame.camera
     R, t = frame.scenario.pose()
@@ -176,9 +185,7 @@ def _exposure_exposer(frame, exposers: dict, gkey, scenario: RenderScenario, see
 
 def _exposure(frame, exposers: dict, key, scenario: RenderScenario, seed: int):
     """The exposure of ``(render, seed, stages, setting, air)``, made once per render group."""
-    import time
 
-    from collections import OrderedDict
 
     store = exposers.setdefault("exposures", OrderedDict())
     ev = scenario.exposure_compensation_ev
@@ -208,8 +215,6 @@ def _is_baseline(scenario: RenderScenario) -> bool:
 
 
 def _solve_one(scenario: RenderScenario, seed: int, frame, exposers: dict) -> dict:
-    from svgs_sim.sim.closed_loop import solve_exposure, solver_camera
-    from svgs_sim.sim.metrics import state_m_deg
 
     cam = frame.camera  # the true lens
     gkey = _glare_key(scenario)
@@ -253,12 +258,10 @@ def _solve_one(scenario: RenderScenario, seed: int, frame, exposers: dict) -> di
         rms = (_sensor_centroid_sigma(frame, exposer, row, exposers, gkey, uv) if _is_baseline(scenario) and
                frame.points is not None else None)
         if rms is not None:
-            from svgs_sim.sim.crlb import pose_crlb
 
             out["crlb_centroid_px"] = rms
             # the consistency test against the sensor's bound alone (what the residual would be
             # judged by if the centroids were as good as the CRLB): reported, not applied
-            from svgs_sim.svgs.app import consistency
 
             out["p_value_crlb"] = consistency(sol.residual_rms_px, len(pat.ids), sigma_px=rms).p_value
             out.update({f"crlb_sensor_{k}": float(v) for k, v in pose_crlb(sol, rms).items()})
@@ -278,7 +281,6 @@ def trial_picture(scenario, seed: int) -> dict:
         ``pattern``, ``threshold`` and ``row`` (:func:`svgs_sim.sim.closed_loop.solve_exposure`'s row,
         ``_solution`` included).
     """
-    from svgs_sim.sim.closed_loop import solve_exposure, solver_camera
 
     scenario = RenderScenario.from_row(scenario)
     frame, exposers = _frame(RenderKey.of(scenario))
@@ -346,7 +348,6 @@ def render_group(scenarios, seeds) -> list[dict]:
 
 
 def _warm_up():
-    from svgs_sim.render.variant import select_variant
 
     select_variant()
 

@@ -11,13 +11,14 @@ import dataclasses
 from dataclasses import dataclass
 from typing import ClassVar
 
-from svgs_sim.sim.scene import Scene, scene_parameters
-from svgs_sim.sim.metrics import ERR_KEYS, POS_ERR_NORM_M, ROT_ERR_DEG
-from svgs_sim.sim.trials import GEOMETRIC_PARAMETERS, POSE_KEYS, TRUTH_KEYS, Parameter, PoseScenario
 from svgs_sim.base.errors import InputError
-from svgs_sim.svgs.frames import STATE_KEYS
 from svgs_sim.base.limits import INPUT_BOUNDS, MAX_SEED, MAX_SPP, bounds
-
+from svgs_sim.base.profiles import load_camera, load_pattern
+from svgs_sim.sim.closed_loop import Scenario
+from svgs_sim.sim.metrics import ERR_KEYS, POS_ERR_NORM_M, ROT_ERR_DEG
+from svgs_sim.sim.scene import Scene, scene_parameters
+from svgs_sim.sim.trials import GEOMETRIC_PARAMETERS, POSE_KEYS, TRUTH_KEYS, Parameter, PoseScenario
+from svgs_sim.svgs.frames import STATE_KEYS
 
 _POSE = POSE_KEYS
 
@@ -312,8 +313,6 @@ class RenderKey:
     def scenario(self):
         """The :class:`svgs_sim.sim.closed_loop.Scenario` to render (the pattern scaled as an object,
         :meth:`svgs_sim.base.profiles.Pattern.scaled`)."""
-        from svgs_sim.sim.closed_loop import Scenario
-        from svgs_sim.base.profiles import load_pattern
 
         return Scenario(camera=self.camera, pattern=load_pattern(self.pattern).scaled(self.pattern_scale),
                         **dict(self.pose), lens_pp_offset_px=(self.lens_pp_u_px, self.lens_pp_v_px),
@@ -353,7 +352,6 @@ def camera_overrides(camera: str, f_number: float | None, led_offset_scale: floa
     if f_number is not None and f_number != -1:
         out.append(("optics", "f_number", float(f_number)))
     if led_offset_scale != 1.0:
-        from svgs_sim.base.profiles import load_camera
 
         leds = (load_camera(camera).tables.get("flash") or {}).get("led_offsets_m") or []
         out.append(("flash", "led_offsets_m", [[float(x) * led_offset_scale for x in led] for led in leds]))

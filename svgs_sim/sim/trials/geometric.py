@@ -13,14 +13,15 @@ from typing import ClassVar
 
 import numpy as np
 
-from svgs_sim.sim.metrics import ERR_KEYS, POS_ERR_NORM_M, ROT_ERR_DEG, error_columns, state_m_deg
 from svgs_sim.base.errors import InputError
-from svgs_sim.svgs.frames import STATE_KEYS
-from svgs_sim.svgs.envelope import ATTITUDE_LIMITS_DEG
 from svgs_sim.base.limits import RANGE_LIMIT_M, bounds
+from svgs_sim.base.profiles import Camera, load_camera, load_pattern
+from svgs_sim.sim.metrics import ERR_KEYS, POS_ERR_NORM_M, ROT_ERR_DEG, error_columns, state_m_deg
 from svgs_sim.sim.trials.registry import Parameter, TrialKind, register_trial_kind
-from svgs_sim.sim.trials.scenario import PoseScenario, camera_with_calibration_errors, build_scenario, PoseKey
-
+from svgs_sim.sim.trials.scenario import PoseKey, PoseScenario, build_scenario, camera_with_calibration_errors
+from svgs_sim.svgs.envelope import ATTITUDE_LIMITS_DEG
+from svgs_sim.svgs.frames import STATE_KEYS, pose_from_scenario, pose_to_state
+from svgs_sim.svgs.solver import solve_centroids
 
 # Every numeric parameter of every kind has a physical lower and upper bound (a test walks the
 # registry): the CLI's for the same quantity (svgs_sim.base.limits, one table), the sensor's envelope, or
@@ -131,8 +132,6 @@ def _geometric_render(scenario: GeometricScenario):
         All points in front of the camera.
     state_true : ndarray, shape (6,)
     """
-    from svgs_sim.svgs.frames import pose_to_state
-    from svgs_sim.base.profiles import load_camera, load_pattern
 
     cam, pat = load_camera(scenario.camera), load_pattern(scenario.pattern)
     (R, t), (R_truth, t_truth) = scenario.poses()
@@ -143,8 +142,6 @@ def _geometric_render(scenario: GeometricScenario):
 
 
 def _geometric_expose_solve(scenario: GeometricScenario, seed: int, rendered) -> dict:
-    from svgs_sim.base.profiles import load_camera, load_pattern
-    from svgs_sim.svgs.solver import solve_centroids
 
     uv_true, depth_ok, state_true = rendered
     cam, pat = load_camera(scenario.camera), load_pattern(scenario.pattern)
@@ -235,9 +232,6 @@ def geometric_render_key(scenario) -> PoseKey:
 
 def geometric_warm_up() -> None:
     """Load the compiled solver (numba, cached on disk after the first compilation)."""
-    from svgs_sim.svgs.frames import pose_from_scenario
-    from svgs_sim.base.profiles import Camera, load_pattern
-    from svgs_sim.svgs.solver import solve_centroids
 
     cam = Camera(name="warm-up", width=1000, height=1000, fx=1000.0, fy=1000.0, cx=499.5, cy=499.5)
     pat = load_pattern("svgs-3u")

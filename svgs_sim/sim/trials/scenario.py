@@ -15,9 +15,10 @@ from typing import ClassVar
 import numpy as np
 
 from svgs_sim.base.errors import InputError
+from svgs_sim.base.profiles import load_camera, load_pattern
+from svgs_sim.sim.closed_loop import Scenario
 from svgs_sim.sim.target_pose import TargetPose
 from svgs_sim.sim.trials.registry import ID_COLUMNS, TIMING_COLUMNS, TrialKind, get_trial_kind
-
 
 #: Scenario keys of the pose (the geometric kind's render key; the render kind adds its own).
 POSE_KEYS = ("range_m", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg", "stand", "stage_m",
@@ -120,7 +121,6 @@ class TrialScenario(Mapping):
 
     def _validate(self, row: dict) -> None:
         """Checks across fields (profiles exist...), after each parameter's own domain."""
-        from svgs_sim.base.profiles import load_camera, load_pattern
 
         load_camera(self.camera)  # InputError for an unknown profile, now rather than in a worker
         load_pattern(self.pattern)
@@ -236,7 +236,6 @@ class TrialScenario(Mapping):
     def closed_loop_scenario(self, **kw):
         """The :class:`svgs_sim.sim.closed_loop.Scenario` of this trial's pose (the profiles through the
         cached loaders; ``kw``: more of its fields)."""
-        from svgs_sim.sim.closed_loop import Scenario
 
         return Scenario(camera=self.camera, **self.pose_kwargs(), **kw)
 
@@ -402,7 +401,6 @@ def build_scenario(kind: TrialKind, values: dict, labels: dict | None = None):
     """
     if kind.scenario_type is not None:
         return kind.scenario_type.from_values(values, labels)
-    from svgs_sim.base.profiles import load_camera, load_pattern
 
     values = dict(values)
     if "camera" not in values:

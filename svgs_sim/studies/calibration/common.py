@@ -10,11 +10,13 @@ and distortion (:func:`true_camera`; defaults :data:`DEFAULT_TRUE_PP_OFFSET_PX`,
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 
 from svgs_sim.base.errors import InputError
-from svgs_sim.svgs.frames import STATE_KEYS
 from svgs_sim.base.profiles import DISTORTION_KEYS, Camera
+from svgs_sim.svgs.frames import STATE_KEYS
 
 #: Numbers of views the convergence study calibrates from.
 DEFAULT_VIEWS_LIST = (5, 10, 20, 40)
@@ -148,7 +150,6 @@ def cam_json(c: Camera) -> dict:
 
 def profile_dict(c: Camera) -> dict:
     """A camera's whole profile (JSON round-trip, name left out): what a cache must match."""
-    import json
 
     d = json.loads(json.dumps(c.to_dict(), default=float))
     d.pop("name", None)

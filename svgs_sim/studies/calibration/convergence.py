@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from svgs_sim.calibration import Board, calibrate, detect_views, mapping_error_px
 from svgs_sim.base.errors import InputError
 from svgs_sim.base.profiles import DISTORTION_KEYS, Camera
+from svgs_sim.calibration import Board, calibrate, detect_views, mapping_error_px
 from svgs_sim.svgs.result import Failure
 
 from .common import (
@@ -102,8 +102,6 @@ def save_detections(path, det: Detections, camera: Camera, info: dict) -> None:
 
     Written to a temporary name and renamed, so a killed run leaves no partial file.
     """
-    import os
-    from pathlib import Path
 
     path = Path(path)
     counts = np.array([len(p) for p in det.object_points], int)

@@ -11,6 +11,9 @@ per range is the focal-only calibration (:func:`focal_only_estimate`).
 
 from __future__ import annotations
 
+import json
+import os
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,6 +22,11 @@ import numpy as np
 
 from svgs_sim.base.errors import InputError, check_finite_positive
 from svgs_sim.base.profiles import Camera, Pattern
+from svgs_sim.calibration import estimate_focal
+from svgs_sim.sim.closed_loop import Scenario, render_scenario
+from svgs_sim.svgs.frames import pose_from_scenario
+from svgs_sim.svgs.identify import identify
+from svgs_sim.svgs.pipeline import camera_threshold
 
 from .common import (
     DEFAULT_FOCAL_EXPOSURES,
@@ -68,8 +76,6 @@ class FocalFrames:
     def save(self, path) -> None:
         """Write the frames to an ``.npz`` file (info as JSON); a temporary file renamed, so a
         killed run leaves no partial file."""
-        import json
-        import os
 
         path = Path(path)
         tmp = path.with_name(path.name + ".tmp.npz")
@@ -80,7 +86,6 @@ class FocalFrames:
 
     @classmethod
     def load(cls, path) -> FocalFrames:
-        import json
 
         try:
             with np.load(path, allow_pickle=False) as z:
@@ -93,7 +98,6 @@ class FocalFrames:
 def focal_frames_geometric(camera_true: Camera, pattern: Pattern, ranges_m, *, exposures: int = DEFAULT_FOCAL_EXPOSURES,
                            noise_px: float = GEOMETRIC_CENTROID_NOISE_PX, seed: int = 0) -> FocalFrames:
     """Projected centroids with Gaussian noise (the no-render stand-in)."""
-    from svgs_sim.svgs.frames import pose_from_scenario
 
     rng = np.random.default_rng(seed)
     r = np.asarray(ranges_m, float)
@@ -112,11 +116,9 @@ def _identified_points(image, believed: Camera, pattern: Pattern):
         Full-resolution pixels (an image the ISP downscaled is mapped back).
     """
     from svgs_sim.svgs.detect import detect_blobs
-    from svgs_sim.svgs.identify import identify
 
     h, w = image.shape[:2]
     cam_b = believed if (w, h) == (believed.width, believed.height) else believed.scaled(w, h)
-    from svgs_sim.svgs.pipeline import camera_threshold
 
     ident = identify(detect_blobs(image, threshold=camera_threshold(image, cam_b)), cam_b, pattern)
     if not ident:
@@ -156,10 +158,7 @@ def focal_frames_rendered(camera_true: Camera, believed: Camera, pattern: Patter
     -------
     FocalFrames
     """
-    import tempfile
 
-    from svgs_sim.sim.closed_loop import Scenario, render_scenario
-    from svgs_sim.svgs.frames import pose_from_scenario
 
     r = np.asarray(ranges_m, float)
     E = int(exposures)
@@ -286,7 +285,6 @@ def focal_case(frames: FocalFrames, case: dict, believed: Camera, pattern: Patte
         of the method's own 1-sigma, ``chi2_per_dof`` its mean consistency. None if no
         exposure has all the set's ranges.
     """
-    from svgs_sim.calibration import estimate_focal
 
     idx, sig = list(case["range_indices"]), float(case["added_noise_px"])
     ok, ranges = frames.ok(), frames.ranges_m
@@ -327,7 +325,6 @@ def focal_only_estimate(frames: FocalFrames, believed: Camera, pattern: Pattern)
     -------
     calibration.FocalEstimate
     """
-    from svgs_sim.calibration import estimate_focal
 
     ok = frames.ok()
     cs, rr = [], []

@@ -25,6 +25,10 @@ from dataclasses import dataclass
 
 from svgs_sim.studies.execution.plan import COST_TABLE_S, StudyPlan, _duration, cpu_cores
 
+from .common import DEFAULT_FOCAL_TRIALS
+from .convergence import convergence_subsets
+from .focal import default_range_sets
+
 #: A geometric board set (``--geometric``): the sample rays shared by its views, once, s per megapixel.
 GEOMETRIC_BOARD_SETUP_S_PER_MPX = 3.3
 #: A geometric board view, s per megapixel.
@@ -151,9 +155,6 @@ def study_plan(config: dict, width: int, height: int, n_error_cases: int, spec, 
     note : str
         Said after the counts.
     """
-    from .common import DEFAULT_FOCAL_TRIALS
-    from .convergence import convergence_subsets
-    from .focal import default_range_sets
 
     c = config
     vl, n_views = list(c["views_list"]), int(c["views_list"][-1])

@@ -14,6 +14,9 @@ from __future__ import annotations
 import numpy as np
 
 from svgs_sim.base.profiles import Camera, Pattern
+from svgs_sim.sim.metrics import state_error
+from svgs_sim.svgs.frames import pose_from_scenario, pose_to_state, rotation_angle_deg
+from svgs_sim.svgs.solver import solve_centroids
 
 from .common import (
     DEFAULT_POSE_RANGES_M,
@@ -31,7 +34,6 @@ _DRAWS_PER_POSE = 5
 
 
 def _draw_pose(r: float, rng, sp: dict):
-    from svgs_sim.svgs.frames import pose_from_scenario
 
     lat = sp["lateral_fraction"] * r
     return pose_from_scenario(r, rng.uniform(-lat, lat), rng.uniform(-lat, lat),
@@ -51,7 +53,6 @@ def study_poses(ranges_m, poses_per_range: int = DEFAULT_POSES_PER_RANGE, *, see
     R_cam_target : ndarray, shape (M, 3, 3)
     t_cam_target_m : ndarray, shape (M, 3)
     """
-    from svgs_sim.svgs.frames import pose_from_scenario
 
     sp = dict(POSE_SPREAD if spread is None else spread)
     rng = np.random.default_rng(seed)
@@ -73,7 +74,6 @@ def range_poses(range_m: float, range_index: int, poses_per_range: int, *, seed:
     R_cam_target : ndarray, shape (poses_per_range, 3, 3)
     t_cam_target_m : ndarray, shape (poses_per_range, 3)
     """
-    from svgs_sim.svgs.frames import pose_from_scenario
 
     sp = dict(POSE_SPREAD if spread is None else spread)
     n = int(poses_per_range)
@@ -121,9 +121,6 @@ def pose_errors_batch(camera_true: Camera, believed: Camera, pattern: Pattern, R
         angles wrapped: :func:`svgs_sim.sim.metrics.state_error`), ``pos_err_norm_m`` (M,) norm,
         ``rot_err_deg`` (M,) angle of the relative rotation, ``in_image`` (M,).
     """
-    from svgs_sim.sim.metrics import state_error
-    from svgs_sim.svgs.frames import pose_to_state, rotation_angle_deg
-    from svgs_sim.svgs.solver import solve_centroids
 
     P = pattern.points_m
     p_cam = np.einsum("mij,nj->mni", R, P) + t[:, None, :]

@@ -11,6 +11,8 @@ import numpy as np
 
 from svgs_sim.base.errors import InputError
 from svgs_sim.base.profiles import DISTORTION_KEYS
+from svgs_sim.studies.execution import library_versions
+from svgs_sim.studies.report import Report, write_csv
 
 from .common import (
     GEOMETRIC_CENTROID_NOISE_PX,
@@ -55,7 +57,6 @@ def study_summary(result) -> dict:
 
 def write_tables(result, out: Path) -> dict:
     """Write the CSV tables and ``summary.json`` into ``out``; name -> path."""
-    from svgs_sim.studies.report import write_csv
 
     files = {}
     files["calibration_convergence"] = write_csv(out / "calibration_convergence.csv", CONVERGENCE_CSV_COLUMNS,
@@ -212,8 +213,6 @@ def write_report(result, out_dir, command: str | None = None) -> dict:
     dict
         Name -> path of each file written.
     """
-    from svgs_sim.studies.execution import library_versions
-    from svgs_sim.studies.report import Report
 
     out = Path(out_dir)
     if out.exists() and not out.is_dir():

@@ -21,6 +21,7 @@ quick looks). Nothing here imports Mitsuba at import time.
 from __future__ import annotations
 
 import contextlib
+import json
 import shutil
 import sys
 import time
@@ -29,9 +30,21 @@ from pathlib import Path
 
 import numpy as np
 
-from svgs_sim.calibration import Board
 from svgs_sim.base.errors import InputError, SimulationFailure, check_finite_positive
 from svgs_sim.base.profiles import DISTORTION_KEYS, Camera, Pattern
+from svgs_sim.calibration import Board, synthesize_views
+from svgs_sim.calibration.synthetic import sample_board_poses
+from svgs_sim.sim.boards import BoardSet, render_board_set
+from svgs_sim.studies.execution import (
+    DEFAULT_CHUNK_SIZE,
+    Trial,
+    check_executor,
+    executor_spec,
+    open_executor,
+    run_study,
+)
+from svgs_sim.studies.seeding import trial_seed
+from svgs_sim.studies.store import ResultStore
 
 from .common import (
     DEFAULT_BOARD,
@@ -52,7 +65,30 @@ from .common import (
     spawn_seeds,
     true_camera,
 )
-from .focal import FocalFrames
+from .convergence import (
+    ERROR_COLUMNS,
+    check_views_list,
+    convergence_subsets,
+    convergence_summary,
+    detect_all,
+    load_detections,
+    save_detections,
+    upgrade_stored_columns,
+)
+from .focal import (
+    FOCAL_COLUMNS,
+    FocalFrames,
+    centroid_noise,
+    check_focal_frames,
+    focal_cases,
+    focal_frames_geometric,
+    focal_frames_rendered,
+    focal_only_estimate,
+)
+from .plan import part_plan, study_plan
+from .pose import SUMMARY_COLUMNS, error_cases, pose_seeds
+from .table4 import paper_phone, table4_comparison
+from .trials import KINDS, SCENARIO_KEYS, convergence_scenario, focal_scenario, pose_scenario
 
 
 @dataclass
@@ -157,7 +193,6 @@ def _check_board_poses(board: Board, cam_true: Camera, n_views: int, seed: int, 
     """Draw the board set's poses as the study will (the same seed): :class:`InputError` naming the
     options when the true camera leaves no pose with the whole board in its image - before any
     store or render."""
-    from svgs_sim.calibration.synthetic import sample_board_poses
 
     try:
         sample_board_poses(board, cam_true, n_views, seed=seed)
@@ -182,8 +217,6 @@ def _delivered(cam: Camera, like: Camera) -> Camera:
 
 
 def _geometric_board_set(s: _Setup, n_views: int, say=None):
-    from svgs_sim.calibration import sample_board_poses, synthesize_views
-
     seed = s.seeds["board_set"]
     R, t = sample_board_poses(s.board, s.camera_true, n_views, seed=seed)
     t0 = time.perf_counter()
@@ -199,7 +232,6 @@ def _geometric_board_set(s: _Setup, n_views: int, say=None):
 
 
 def _rendered_board_set(s: _Setup, n_views: int, board_set_dir, say):
-    from svgs_sim.sim.boards import BoardSet, render_board_set
 
     if board_set_dir is not None and (Path(board_set_dir) / "truth.json").is_file():
         bs = BoardSet.load(board_set_dir)
@@ -230,7 +262,6 @@ def board_detections(s: _Setup, path: Path, board_set_dir, say, timings: dict):
     (Detections, Camera, dict)
         Detections, the camera that made the images, the set's description.
     """
-    from .convergence import detect_all, load_detections, save_detections
 
     if path.is_file():
         det, camera, info = load_detections(path)
@@ -257,7 +288,6 @@ def board_detections(s: _Setup, path: Path, board_set_dir, say, timings: dict):
 
 def focal_frames(s: _Setup, path: Path, cache, say) -> FocalFrames:
     """The focal frames: from ``path`` if a run left them, else from ``cache`` or made; saved to ``path``."""
-    from .focal import focal_frames_geometric, focal_frames_rendered
 
     fr, exposures = s.config["focal_ranges_m"], s.config["focal_exposures"]
     for src in (path, None if (s.config["geometric"] or cache is None) else Path(cache)):
@@ -291,10 +321,7 @@ class _Runner:
     PARTS = ("convergence", "focal", "pose")
 
     def __init__(self, out: Path, manifest_: dict, spec, chunk_size, show_progress: bool):
-        from svgs_sim.studies.store import ResultStore
 
-        from .convergence import upgrade_stored_columns
-        from .trials import KINDS, SCENARIO_KEYS
 
         self.spec, self.chunk_size, self.show_progress = spec, chunk_size, show_progress
         self.stack = contextlib.ExitStack()
@@ -317,14 +344,11 @@ class _Runner:
 
     def run(self, part: str, trials: list, description: str) -> list[dict]:
         """Run the part's trials not yet stored; all its rows, by trial id."""
-        from svgs_sim.studies.execution import DEFAULT_CHUNK_SIZE, open_executor, run_study
 
-        from .trials import KINDS
 
         store = self.stores[part]
         if any(t.trial_id not in store.done_ids for t in trials):
             if self.show_progress:  # the part's plan (trials, estimate) before it runs
-                from .plan import part_plan
 
                 plan = part_plan(part, trials, self.spec, done_ids=store.done_ids)
                 print(f"{description}: {plan.describe()}", file=sys.stderr, flush=True)
@@ -343,16 +367,7 @@ class _Runner:
 
 def _convergence_part(s: _Setup, runner: _Runner, det, camera, timings: dict):
     """Run the calibrations; (rows, summary, full-calibration cameras by N)."""
-    from svgs_sim.studies.execution import Trial
-    from svgs_sim.studies.seeding import trial_seed
 
-    from .convergence import (
-        ERROR_COLUMNS,
-        check_views_list,
-        convergence_subsets,
-        convergence_summary,
-    )
-    from .trials import convergence_scenario
 
     t0 = time.perf_counter()
     vl = check_views_list(det, camera, s.config["views_list"])
@@ -373,15 +388,7 @@ def _convergence_part(s: _Setup, runner: _Runner, det, camera, timings: dict):
 
 def _focal_part(s: _Setup, runner: _Runner, frames: FocalFrames):
     """Run the focal-method cases; (rows, focal-only estimate)."""
-    from svgs_sim.studies.execution import Trial
 
-    from .focal import (
-        FOCAL_COLUMNS,
-        check_focal_frames,
-        focal_cases,
-        focal_only_estimate,
-    )
-    from .trials import focal_scenario
 
     check_focal_frames(frames)
     inputs = runner.folder("focal") / "focal_frames.npz"
@@ -418,10 +425,7 @@ def believed_cameras(s: _Setup, f_est, full_cams: dict, image_camera: Camera) ->
 
 def _pose_part(s: _Setup, runner: _Runner, believed: dict):
     """Run the pose-error cells: every case without noise, then the floor cases with noise."""
-    from svgs_sim.studies.execution import Trial
 
-    from .pose import SUMMARY_COLUMNS, error_cases, pose_seeds
-    from .trials import pose_scenario
 
     c, ct = s.config, s.camera_true
     full_max = f"full calibration ({c['views_list'][-1]} views)"
@@ -446,7 +450,6 @@ def _stored_timings(out: Path, rebuild_timings: dict) -> dict:
     """The timings of the run that computed the stored trials, when this one computed none (a
     report rebuilt from its stores): the previous ``summary.json``'s ``timings_s`` with this
     rebuild's total as ``rebuild_s``. Without a previous summary, this run's own timings."""
-    import json
 
     try:
         previous = json.loads((out / "summary.json").read_text()).get("timings_s") or {}
@@ -516,10 +519,7 @@ def plan_calibration_study(camera, out_dir, *, spec=None, board_set_dir=None, fo
     -------
     svgs_sim.studies.calibration.plan.CalibrationStudyPlan
     """
-    from svgs_sim.studies.execution import executor_spec
 
-    from .plan import study_plan
-    from .pose import error_cases
 
     s = _setup(camera, **study)
     trials = Path(out_dir) / "trials"
@@ -587,9 +587,7 @@ def run_calibration_study(camera, out_dir, *, views_list=DEFAULT_VIEWS_LIST, see
     -------
     StudyResult
     """
-    from svgs_sim.studies.execution import check_executor, executor_spec
 
-    from .table4 import paper_phone, table4_comparison
 
     say = progress or (lambda m: None)
     s = _setup(camera, views_list=views_list, seed=seed, board=board, subsets=subsets, spp=spp, geometric=geometric,
@@ -621,7 +619,6 @@ def run_calibration_study(camera, out_dir, *, views_list=DEFAULT_VIEWS_LIST, see
         runner.close()
     t4 = table4_comparison([r for r in pose_rows if r["case"] in floor and not (r["case"] == "exact" and r["noise_px"] == 0)],
                            phone=paper_phone(s.nominal.key))
-    from .focal import centroid_noise
 
     cams = {k: cam_json(c) for k, c in {**believed, "true": s.camera_true, "nominal": s.nominal}.items()}
     if not runner.stats:

@@ -31,7 +31,8 @@ import os
 
 import numpy as np
 
-from svgs_sim.sim.trials import TrialKind, register_trial_kind
+from svgs_sim.base.profiles import Pattern
+from svgs_sim.sim.trials import TrialKind, geometric_warm_up, register_trial_kind
 
 from .common import CAMERA_FIELDS, camera_columns, camera_from_columns
 from .convergence import ERROR_COLUMNS, calibrate_subset, load_detections
@@ -62,7 +63,6 @@ def _frames(stamp: tuple) -> FocalFrames:
 
 @functools.lru_cache(maxsize=8)
 def _pattern(name: str):
-    from svgs_sim.base.profiles import Pattern
 
     return Pattern.load(name)
 
@@ -164,7 +164,6 @@ def pose_trial(scenario: dict, seed: int) -> dict:
 
 
 def _warm_solver() -> None:
-    from svgs_sim.sim.trials import geometric_warm_up
 
     geometric_warm_up()
 

@@ -9,11 +9,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from svgs_sim.base.errors import InputError
-
-from ..seeding import check_seed, design_rng, trial_seed
-from .paper_calibration import CALIBRATION_KEYS, paper_calibration_error, paper_lens, rangefinder_readings
+from svgs_sim.base.profiles import load_camera, load_pattern
+from svgs_sim.sim.lab import lab_errors as _lab_errors
+from svgs_sim.sim.lab import stand_misalignment_deg
+from svgs_sim.sim.stand import TestStand, sample_in_view
 from svgs_sim.sim.trials import build_scenario, get_trial_kind
 
+from ..error_budget import variant_trials
+from ..execution import Trial
+from ..seeding import check_seed, design_rng, trial_seed
+from .paper_calibration import CALIBRATION_KEYS, paper_calibration_error, paper_lens, rangefinder_readings
 
 #: The paper's Sensor Mount envelope.
 GIMBAL_ROLL_DEG = 25.0
@@ -140,9 +145,6 @@ def make_config(camera: str, *, ranges_m=None, trials_per_range: int = 200, seed
         (whose readings also feed the paper's focal calibration) and, for the render kind, the
         air's turbulence. False: a perfect stand, exact ranges and still air.
     """
-    from svgs_sim.sim.lab import lab_errors as _lab_errors
-    from svgs_sim.sim.stand import TestStand
-    from svgs_sim.base.profiles import load_camera
 
     cam = load_camera(camera)
     kind = get_trial_kind(trial_kind)
@@ -156,7 +158,6 @@ def make_config(camera: str, *, ranges_m=None, trials_per_range: int = 200, seed
     if calibration not in ("exact", "paper"):
         raise InputError(f"--calibration: expected 'exact' or 'paper', got {calibration!r}")
     if misalignment_deg is None:
-        from svgs_sim.sim.lab import stand_misalignment_deg
 
         misalignment_deg = stand_misalignment_deg(cam.key)
     mis = tuple(float(x) for x in misalignment_deg)
@@ -309,8 +310,6 @@ def campaign_poses(config: CampaignConfig) -> list[list[dict]]:
     ``pitch_deg``, ``yaw_deg``), drawn uniformly over the Sensor Mount's envelope and kept when
     the phone sees every target (:func:`svgs_sim.sim.stand.sample_in_view`; pose ``j`` of range ``ri``
     from its own stream ``design_rng(seed, ri * POSE_STRIDE + j)``)."""
-    from svgs_sim.sim.stand import TestStand, sample_in_view
-    from svgs_sim.base.profiles import load_camera, load_pattern
 
     cam, pat = load_camera(config.camera), load_pattern(config.pattern)
     stand = TestStand(misalignment_deg=tuple(config.misalignment_deg))
@@ -337,7 +336,6 @@ def campaign_trials(config: CampaignConfig, *, variants: bool = True) -> list:
     -------
     list of :class:`svgs_sim.studies.execution.Trial`
     """
-    from ..execution import Trial
 
     kind = get_trial_kind(config.trial_kind)
     trials = []
@@ -364,7 +362,6 @@ def campaign_trials(config: CampaignConfig, *, variants: bool = True) -> list:
                                           "variant": "baseline"})
             trials.append(Trial(i, scen, trial_seed(config.seed, i)))
     if config.budget and variants:
-        from ..error_budget import variant_trials
 
         trials += variant_trials(trials, config)
     return trials

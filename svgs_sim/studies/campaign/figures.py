@@ -7,8 +7,13 @@ import math
 
 import numpy as np
 
-from .design import COMPONENT_LABELS, SHORT, CampaignConfig
+from svgs_sim.base.profiles import Pattern
+from svgs_sim.sim.closed_loop import solve_exposure, solver_camera
+from svgs_sim.sim.render_trial import rendered_frame
+from svgs_sim.sim.trials import camera_with_calibration_errors
 from svgs_sim.svgs.frames import STATE_KEYS
+
+from .design import COMPONENT_LABELS, SHORT, CampaignConfig
 
 
 def _range_groups(ranges):
@@ -79,10 +84,6 @@ def sample_image_figure(config: CampaignConfig, trials: list, table: dict):
     target, with the true target projections (circles) and the solved targets (crosses)."""
     from matplotlib.figure import Figure
 
-    from svgs_sim.sim.closed_loop import solve_exposure, solver_camera
-    from svgs_sim.sim.render_trial import rendered_frame
-    from svgs_sim.sim.trials import camera_with_calibration_errors
-    from svgs_sim.base.profiles import Pattern
 
     pat = Pattern.load(config.pattern)
     firsts = {}

@@ -3,18 +3,19 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 
 from svgs_sim.base.errors import InputError
+from svgs_sim.base.jsonable import to_jsonable
 
 from .design import CampaignConfig
 
 
 def run_log(out_dir) -> list[dict]:
     """The runs a campaign folder has seen (``DIR/runs.json``): trials run, wall time, executor."""
-    import json
 
     p = Path(out_dir) / "runs.json"
     try:
@@ -24,7 +25,6 @@ def run_log(out_dir) -> list[dict]:
 
 
 def log_run(out_dir, part: str, stats) -> None:
-    import json
 
     if stats is None:
         return
@@ -36,7 +36,6 @@ def log_run(out_dir, part: str, stats) -> None:
 
 def read_honest_count(out_dir) -> dict | None:
     """``DIR/honest_count.json`` of a campaign report (None when absent): for ``summary.json``."""
-    import json
 
     p = Path(out_dir) / "honest_count.json"
     try:
@@ -48,7 +47,6 @@ def read_honest_count(out_dir) -> dict | None:
 def config_from_manifest(out_dir) -> CampaignConfig:
     """The :class:`CampaignConfig` a campaign folder's ``manifest.json`` records (with
     ``calibration_info`` from ``calibration.json`` when there is one); nothing is recomputed."""
-    import json
 
     out_dir = Path(out_dir)
     try:
@@ -74,6 +72,5 @@ def config_from_manifest(out_dir) -> CampaignConfig:
 def finite_json(obj):
     """``obj`` in plain JSON types (:func:`svgs_sim.base.jsonable.to_jsonable`) with NaN and infinite floats
     as None (strict JSON)."""
-    from svgs_sim.base.jsonable import to_jsonable
 
     return to_jsonable(obj, nonfinite="null", other=None)

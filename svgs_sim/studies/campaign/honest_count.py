@@ -4,16 +4,19 @@ under each reading of the paper's mean error."""
 
 from __future__ import annotations
 
+import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..error_budget import HEADLINE_READING, MEAN_READINGS
-from .design import SHORT, CampaignConfig
 from svgs_sim.assets import ASSETS_DIR, package_relative
 from svgs_sim.assets.papers import svgs_2014_results
+from svgs_sim.base.profiles import apply_fitted, fitted_overlay_path, load_camera, read_fitted_overlay
+from svgs_sim.sim.lab import DEFAULT_LAB
 
+from ..error_budget import HEADLINE_READING, HEADLINE_REASON, MEAN_READINGS, READING_MEANINGS, cell_verdicts
+from .design import SHORT, CampaignConfig
 
 
 @dataclass(frozen=True)
@@ -105,7 +108,6 @@ def _fit_use(key: str, phone: str) -> FitUse | None:
 
 
 def _paper_ranges(config: CampaignConfig) -> list[float]:
-    from svgs_sim.base.profiles import load_camera
 
     phone = load_camera(config.camera).key
     paper = svgs_2014_results()
@@ -165,11 +167,7 @@ def fitted_values_table(config: CampaignConfig, table: dict | None = None) -> li
         ``range_source``, ``effect`` (text), ``in_campaign``, ``consumes``: list of
         ``(statistic, range_m, component)``.
     """
-    import tomllib
 
-    from svgs_sim.sim.lab import DEFAULT_LAB
-    from svgs_sim.base.profiles import load_camera
-    from svgs_sim.base.profiles import apply_fitted, fitted_overlay_path, read_fitted_overlay
 
     cam = load_camera(config.camera)
     phone = cam.key
@@ -292,7 +290,6 @@ def honest_counts(verdicts: list[dict]) -> dict:
 def honest_count_object(config: CampaignConfig, rows: list[dict], verdicts: list[dict]) -> dict:
     """What ``DIR/honest_count.json`` holds (and ``summary.json``'s ``honest_count``): the fitted
     values, the reading the verdicts use and why, and the counts under each reading."""
-    from ..error_budget import HEADLINE_REASON, READING_MEANINGS
 
     return {"headline_reading": HEADLINE_READING, "headline_reason": HEADLINE_REASON,
             "readings": {x: READING_MEANINGS[x] for x in (*MEAN_READINGS, "std")},
@@ -306,9 +303,7 @@ def campaign_verdicts(config: CampaignConfig, summary: list[dict], budget: dict 
     """Every cell of Tables 2-5 judged (:func:`svgs_sim.studies.error_budget.cell_verdicts`), the cells the
     fitted values consume (:func:`fitted_values_table`) as ``fitted``, each with its ``table``
     (``Table 2`` ... ``Table 5``)."""
-    from svgs_sim.base.profiles import load_camera
 
-    from ..error_budget import cell_verdicts
 
     rows = fitted_values_table(config) if rows is None else rows
     b = budget or {}

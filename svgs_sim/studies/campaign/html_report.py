@@ -3,18 +3,41 @@
 
 from __future__ import annotations
 
+import html as _html
+import json
+import sys
 from pathlib import Path
 
 import numpy as np
 
-from ..error_budget import HEADLINE_READING, MEAN_READINGS, READING_LABELS
+from svgs_sim.svgs.frames import STATE_KEYS
+
+from ..error_budget import (
+    HEADLINE_READING,
+    HEADLINE_REASON,
+    MEAN_READINGS,
+    READING_LABELS,
+    READING_MEANINGS,
+    SOURCE_LABELS,
+    VARIANTS,
+    VERDICT_COLUMNS,
+    applicable_variants,
+    budget_figure,
+    budget_rows_for_csv,
+)
+from ..report import Report, write_csv
 from .design import GIMBAL_ROLL_DEG, GIMBAL_YAW_DEG, SHORT, STAGE_HALF_TRAVEL_M, CampaignConfig
 from .figures import crlb_figure, histogram_figures, sample_image_figure
 from .folder import finite_json, run_log
-from .honest_count import (campaign_verdicts, consumes_text, fitted_values_table, honest_count_object, honest_counts,
-                           misalignment_text)
+from .honest_count import (
+    campaign_verdicts,
+    consumes_text,
+    fitted_values_table,
+    honest_count_object,
+    honest_counts,
+    misalignment_text,
+)
 from .statistics import SUMMARY_COLUMNS, explain, summary_long_rows
-from svgs_sim.svgs.frames import STATE_KEYS
 
 
 def _side_by_side(summary, stat_sim, stat_paper, stat_ratio, comps=STATE_KEYS, crlb: bool = False):
@@ -32,7 +55,6 @@ def _side_by_side(summary, stat_sim, stat_paper, stat_ratio, comps=STATE_KEYS, c
 
 def carried_figure(html_text: str, heading: str) -> str | None:
     """The first ``<figure>`` after ``<h2>heading</h2>`` of an earlier report (None if none)."""
-    import html as _html
 
     h = f"<h2>{_html.escape(heading)}</h2>"
     i = html_text.find(h)
@@ -47,7 +69,6 @@ def carried_figure(html_text: str, heading: str) -> str | None:
 
 
 def _honest_count_section(rep, config: CampaignConfig, rows: list[dict], verdicts: list[dict], counts: dict) -> None:
-    from ..error_budget import HEADLINE_REASON, READING_MEANINGS
 
     rep.heading("The honest count: fitted values and the cells they consume")
     h = counts[HEADLINE_READING]
@@ -156,10 +177,7 @@ def write_campaign_tables(out_dir, config: CampaignConfig, table: dict, summary:
         The fitted values (:func:`fitted_values_table`), the cells' verdicts
         (:func:`campaign_verdicts`) and their counts (:func:`honest_counts`).
     """
-    import json
 
-    from ..error_budget import VERDICT_COLUMNS
-    from ..report import write_csv
 
     out_dir = Path(out_dir)
     rows = fitted_values_table(config, table)
@@ -279,7 +297,6 @@ def write_campaign_report(out_dir, config: CampaignConfig, table: dict, summary:
     ``trials`` (rendered): the sample images are rendered again; without them
     ``sample_figure_html`` (that figure of an earlier report, :func:`rebuild_report`) is kept.
     """
-    from ..report import Report
 
     out_dir = Path(out_dir)
     rows, verdicts, counts = write_campaign_tables(out_dir, config, table, summary, budget)
@@ -304,8 +321,6 @@ def write_campaign_report(out_dir, config: CampaignConfig, table: dict, summary:
 
 
 def _budget_sections(rep, out_dir, config, summary, budget) -> None:
-    from ..error_budget import SOURCE_LABELS, VARIANTS, applicable_variants, budget_figure, budget_rows_for_csv
-    from ..report import write_csv
 
     cols, rows = budget_rows_for_csv(budget["attribution"])
     write_csv(out_dir / "budget.csv", cols, rows)
@@ -345,7 +360,6 @@ def _budget_sections(rep, out_dir, config, summary, budget) -> None:
 def print_summary(summary: list[dict], config: CampaignConfig, file=None) -> None:
     """A short table on stdout: per range, success and std simulated vs paper; then the cells of
     Tables 2-5 within 2x under each reading of the mean error, fitted cells left out."""
-    import sys
 
     f = file or sys.stdout
     rows = fitted_values_table(config)

@@ -4,12 +4,19 @@ hand-held rangefinder's readings), the principal point and distortion as the pap
 
 from __future__ import annotations
 
+import dataclasses
+import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from svgs_sim.base.errors import InputError
+from svgs_sim.base.profiles import load_camera, load_pattern
+from svgs_sim.calibration.focal import estimate_focal
+from svgs_sim.sim.lab import lab_errors
+from svgs_sim.studies.calibration.focal import focal_frames_rendered
+from svgs_sim.svgs.frames import pose_from_scenario
 
 from ..seeding import study_rng
 
@@ -43,13 +50,9 @@ def paper_calibration_error(camera, pattern, ranges_m, sigma_px: float, seed: in
     dict
         ``focal_error_frac``, ``pp_error_u_px``, ``pp_error_v_px``, ``k1_error``.
     """
-    from svgs_sim.calibration.focal import estimate_focal
-    from svgs_sim.svgs.frames import pose_from_scenario
 
-    from svgs_sim.base.profiles import load_pattern
 
     if range_sigma_m is None:
-        from svgs_sim.sim.lab import lab_errors
 
         range_sigma_m = lab_errors()["rangefinder_sigma_m"]
     pat = load_pattern(pattern)
@@ -112,7 +115,6 @@ def save_paper_calibration(config: CampaignConfig, out_dir) -> bool:
     bool
         Whether the file was written.
     """
-    import json
 
     if not config.calibration_info:
         return False
@@ -143,12 +145,7 @@ def rendered_paper_calibration(config: CampaignConfig, out_dir=None, progress=No
     only read from there, and :func:`save_paper_calibration` keeps a new one once the campaign's
     store has taken it (:func:`svgs_sim.studies.campaign.run_campaign`: a refused run writes nothing).
     """
-    import dataclasses
-    import json
 
-    from svgs_sim.calibration.focal import estimate_focal
-    from svgs_sim.base.profiles import load_camera, load_pattern
-    from svgs_sim.studies.calibration.focal import focal_frames_rendered
 
     if config.trial_kind != "render" or config.calibration != "paper":
         return config

@@ -4,19 +4,34 @@ rebuild DIR``)."""
 
 from __future__ import annotations
 
+import argparse
+import html as _html
+import json
+import re
+import sys
 from pathlib import Path
 
-from ..error_budget import HEADLINE_READING, MEAN_READINGS, READING_LABELS
+from svgs_sim.base.errors import InputError
+from svgs_sim.sim.trials import GEOMETRIC, get_trial_kind
+from svgs_sim.svgs.frames import STATE_KEYS
+
+from ..error_budget import (
+    HEADLINE_READING,
+    MEAN_READINGS,
+    READING_LABELS,
+    attribute,
+    centroid_statistics,
+    geometric_trials,
+    variant_statistics,
+)
+from ..execution import ExecutorSpec, check_executor, library_versions, run_stored_study
+from ..store import check_resumable, read_table
 from .design import CampaignConfig, campaign_trials
 from .folder import config_from_manifest, finite_json, log_run, read_honest_count
 from .honest_count import misalignment_text
 from .html_report import carried_figure, write_campaign_report
-from ..store import check_resumable
 from .paper_calibration import rendered_paper_calibration, save_paper_calibration
 from .statistics import READING_OUTPUT_NAMES, RENAMED_STATISTICS, summarize
-from svgs_sim.sim.trials import get_trial_kind
-from svgs_sim.base.errors import InputError
-from svgs_sim.svgs.frames import STATE_KEYS
 
 
 def run_campaign(config: CampaignConfig, out_dir, spec, *, chunk_size=None, progress: bool = True,
@@ -33,9 +48,7 @@ def run_campaign(config: CampaignConfig, out_dir, spec, *, chunk_size=None, prog
     (summary, stats, report_path, config)
         ``config`` with the calibration filled in.
     """
-    import sys
 
-    from ..execution import check_executor, library_versions, run_stored_study
 
     check_executor(spec)  # before the calibration renders: an unreachable cluster is bad input, not lost work
     kind = get_trial_kind(config.trial_kind)
@@ -91,10 +104,7 @@ def run_budget_geometric(config: CampaignConfig, trials: list, table: dict, out_
     """The error budget of a finished rendered campaign: the measured centroids, the geometric
     trial at their scatter (``DIR/budget-geometric``, in this process: milliseconds a trial), the
     variants' statistics and the attribution (:mod:`svgs_sim.studies.error_budget`)."""
-    from svgs_sim.sim.trials import GEOMETRIC
 
-    from ..error_budget import attribute, centroid_statistics, geometric_trials, variant_statistics
-    from ..execution import ExecutorSpec, run_stored_study
 
     cents = centroid_statistics(table, config.ranges_m)
     base = [t for t in trials if t.scenario.get("variant") == "baseline"]
@@ -132,13 +142,7 @@ def rebuild_report(out_dir, *, command: str | None = None) -> Path:
     Path
         ``DIR/report.html``.
     """
-    import html as _html
-    import json
-    import re
 
-    from ..error_budget import attribute, centroid_statistics, variant_statistics
-    from ..execution import library_versions
-    from ..store import read_table
 
     out_dir = Path(out_dir)
     config = config_from_manifest(out_dir)
@@ -183,7 +187,6 @@ def rebuild_report(out_dir, *, command: str | None = None) -> Path:
 
 def main(argv=None) -> int:
     """``python -m svgs_sim.studies.campaign rebuild DIR [DIR ...]``: :func:`rebuild_report` on each folder."""
-    import argparse
 
     p = argparse.ArgumentParser(prog="python -m svgs_sim.studies.campaign",
                                 description="Rebuild campaign reports from their stored results (no trial runs).")

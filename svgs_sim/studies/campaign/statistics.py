@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from svgs_sim.assets.papers import svgs_2014_results
+from svgs_sim.base.profiles import load_camera
+from svgs_sim.svgs.frames import STATE_KEYS
+
 from ..error_budget import MEAN_READINGS
 from .design import CampaignConfig
-from svgs_sim.assets.papers import svgs_2014_results
-from svgs_sim.svgs.frames import STATE_KEYS
 
 
 def summarize(table: dict, config: CampaignConfig, paper: dict | None = None) -> list[dict]:
@@ -34,7 +36,6 @@ def summarize(table: dict, config: CampaignConfig, paper: dict | None = None) ->
         geometric trials, of the solver's bound at ``sigma_px``. Units: those of the component
         (m or deg); ratios dimensionless.
     """
-    from svgs_sim.base.profiles import load_camera
 
     paper = svgs_2014_results() if paper is None else paper
     phone = load_camera(config.camera).key

@@ -5,6 +5,8 @@ rows as they finish, and stops at once on an interrupt with the stored rows kept
 from __future__ import annotations
 
 import contextlib
+import importlib.metadata as md
+import platform
 import signal
 import sys
 import threading
@@ -17,8 +19,11 @@ from concurrent.futures import (
 )
 from dataclasses import dataclass
 
+from svgs_sim.sim import hard_stop
 from svgs_sim.sim.trials import TrialKind
 
+from ..progress import progress_bar
+from ..store import ResultStore
 from .executors import (
     ExecutorSpec,
     InlineExecutor,
@@ -158,7 +163,6 @@ def _run_inline(kind: TrialKind, tasks: list, store, bar, progress) -> None:
     handler cannot enter) is abandoned and the process stops with the rows stored so far
     (:mod:`svgs_sim.sim.hard_stop`; ``progress()`` says how many).
     """
-    from svgs_sim.sim import hard_stop
 
     _warm(kind)
     with hard_stop.scope(progress):
@@ -248,7 +252,6 @@ def run_study(kind: TrialKind, trials: list[Trial], store, executor: Executor, *
         On an :class:`InlineExecutor` the trials run group by group in this process and no task
         starts after the interrupt.
     """
-    from ..progress import progress_bar
 
     ids = [t.trial_id for t in trials]
     if len(set(ids)) != len(ids):
@@ -311,7 +314,6 @@ def run_stored_study(kind: TrialKind, trials: list[Trial], out_dir, manifest: di
     stats : RunStats or None
         None when every trial was already stored.
     """
-    from ..store import ResultStore
 
     check_executor(spec)
     store = ResultStore(out_dir, manifest, kind.columns(list(trials[0].scenario)),
@@ -328,8 +330,6 @@ def run_stored_study(kind: TrialKind, trials: list[Trial], out_dir, manifest: di
 
 def library_versions() -> dict:
     """Versions of the libraries a study's numbers depend on (for reports)."""
-    import importlib.metadata as md
-    import platform
 
     out = {"python": sys.version.split()[0], "platform": platform.platform()}
     for name in ("svgs-sim", "numpy", "scipy", "numba", "opencv-python-headless", "matplotlib", "dask", "distributed",

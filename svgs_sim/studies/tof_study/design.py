@@ -6,10 +6,12 @@ Part of :mod:`svgs_sim.studies.tof_study`.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
-from svgs_sim.sim.tof_stability import COLUMNS
+from svgs_sim.sim.tof_closed_loop import noise_free_frame
+from svgs_sim.sim.tof_stability import COLUMNS, RUN_INFO_KEYS, assemble_run, stability_scenario
 
+from ..execution import Trial
 
 #: Short names of the columns in the report's sentences.
 SHORT_NAMES = dict(zip(COLUMNS, ("x", "y", "z", "roll", "pitch", "yaw")))
@@ -132,7 +134,6 @@ class TofStudyConfig:
 
     def scenario(self, range_m: float, *, scene: dict | None = None, max_bounces: int = 1, **sensor):
         """The stability scenario at ``range_m`` with this study's render and sensor settings."""
-        from svgs_sim.sim.tof_stability import stability_scenario
 
         so = {**dict(self.scene), **(scene or {})}
         kw = {"ambient_lux": self.ambient_lux, **sensor}
@@ -144,7 +145,6 @@ class TofStudyConfig:
 def auto_integration_times(cfg: TofStudyConfig) -> dict:
     """The automatic integration time at the paper's two ranges (s; the baseline renders'
     noise-free frames): the mechanism runs at a quarter of it and at the far range's."""
-    from svgs_sim.sim.tof_closed_loop import noise_free_frame
     from svgs_sim.sim.tof_trial import cached_render
 
     return {r: float(noise_free_frame(cached_render(cfg.scenario(r))).integration_time_s) for r in PAPER_RANGES_M}
@@ -185,9 +185,7 @@ def study_runs(cfg: TofStudyConfig, auto_T: dict) -> list:
 
 def study_trials(runs) -> list:
     """The study engine's trials: every frame of every run, ids in run order, each with its run's seed."""
-    from dataclasses import replace
 
-    from ..execution import Trial
 
     trials = []
     for _, _, first, _ in runs:
@@ -198,7 +196,6 @@ def study_trials(runs) -> list:
 
 def runs_from_rows(runs, rows) -> list:
     """The stored rows back as the stability runs of :func:`svgs_sim.sim.tof_stability.assemble_run`, one per run."""
-    from svgs_sim.sim.tof_stability import COLUMNS, RUN_INFO_KEYS, assemble_run
 
     by_label: dict = {}
     for r in rows:

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from svgs_sim.sim.tof_closed_loop import noise_free_frame, pipeline, render, solve
+
 
 def _depth_change(ra, rb) -> dict:
     """Depth change (mm) of the marker pixels (amplitude above 0.3 of the brightest) and of the
@@ -52,7 +54,6 @@ WALL = {"type": "box", "lo_m": [0.205, -0.16, 0.0], "hi_m": [0.215, 0.16, 0.30],
 def failure_modes(cfg, camera, target, png_path) -> dict:
     """Flying pixels at the marker rims, multipath from the plate and from a wall, 10 klux: measured
     at 1 m head-on (renders of :mod:`svgs_sim.sim.tof_closed_loop` with the study's settings)."""
-    from svgs_sim.sim.tof_closed_loop import noise_free_frame, pipeline, render, solve
 
     res = {}
     one, two = (render(cfg.scenario(1.0, max_bounces=b)) for b in (1, 2))

@@ -12,12 +12,25 @@ from pathlib import Path
 
 import numpy as np
 
-from svgs_sim.sim.tof_stability import COLUMNS, summary
+from svgs_sim.sim.tof_closed_loop import load_scene, make_sensor
+from svgs_sim.sim.tof_stability import COLUMNS, paper_statistics, statistics, summary
+from svgs_sim.sim.trials import get_trial_kind
 
-from .design import (LONG_CHECKPOINTS, PAPER_RANGES_M, STOPPING_RULES, SWEEP_RANGES_M, SWEEP_SCHEMES, TofStudyConfig,
-                     auto_integration_times, runs_from_rows, study_runs, study_trials)
+from ..execution import ExecutorSpec, plan_trials, run_stored_study
+from .design import (
+    LONG_CHECKPOINTS,
+    PAPER_RANGES_M,
+    STOPPING_RULES,
+    SWEEP_RANGES_M,
+    SWEEP_SCHEMES,
+    TofStudyConfig,
+    auto_integration_times,
+    runs_from_rows,
+    study_runs,
+    study_trials,
+)
 from .failures import failure_modes
-from .figures import plot_series, plot_mechanisms, plot_sweep
+from .figures import plot_mechanisms, plot_series, plot_sweep
 from .report import write_csv, write_markdown
 
 
@@ -38,11 +51,8 @@ def run_study(cfg: TofStudyConfig, out: Path, spec=None, *, store_dir=None, chun
     chunk_size : int, optional
         Trials per task, at least (:func:`svgs_sim.sim.tof_trial.chunk_frames`: a run stays in one task).
     """
-    from svgs_sim.sim.tof_closed_loop import load_scene, make_sensor
-    from svgs_sim.sim.trials import get_trial_kind
     from svgs_sim.sim.tof_trial import cached_render, chunk_frames
 
-    from ..execution import ExecutorSpec, plan_trials, run_stored_study
 
     t_start = time.perf_counter()
     out = Path(out)
@@ -130,7 +140,6 @@ def _sections(runs, done) -> dict:
 
 def _long_run(run) -> dict:
     """Fluctuation (max - min) and std of the first N frames of a long run, against Tables 1 and 3."""
-    from svgs_sim.sim.tof_stability import paper_statistics, statistics
 
     paper = paper_statistics(run["range_mm"])
     C = run["cols"]
