@@ -27,7 +27,6 @@ Rows (:data:`TOF_OUTPUTS`)
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields, replace
 
 from svgs_sim.base.errors import InputError
@@ -35,7 +34,7 @@ from svgs_sim.render.variant import select_variant
 from svgs_sim.sim.metrics import ERR_KEYS, POS_ERR_NORM_M, error_columns, state_m_deg
 from svgs_sim.sim.tof_closed_loop import TofScenario, render, solve_frames
 from svgs_sim.sim.tof_stability import COLUMNS, REFERENCES, RUN_INFO_KEYS, frame_row, reference_point_m, run_info
-from svgs_sim.sim.trials import Parameter, TrialKind, register_trial_kind
+from svgs_sim.sim.trials import Parameter, RowView, TrialKind, register_trial_kind
 from svgs_sim.svgs.frames import STATE_KEYS
 from svgs_sim.tof.camera import DESIGN_RANGE_M
 
@@ -65,7 +64,7 @@ def chunk_frames(longest_run: int, chunk_size: int | None = None) -> int:
 
 
 @dataclass(frozen=True)
-class TofTrialScenario(Mapping):
+class TofTrialScenario(RowView):
     """Frame ``frame`` of a stability run: the ``tof`` kind's typed scenario (registered as its
     :attr:`svgs_sim.sim.trials.TrialKind.scenario_type`). As a mapping it is its results-store row
     (:meth:`to_row`, the codec; :meth:`from_row` reads one back), so the study engine and the store
@@ -105,16 +104,6 @@ class TofTrialScenario(Mapping):
         if not 0 <= int(self.frame) < int(self.frames):
             raise InputError(f"frame: expected 0..{int(self.frames) - 1}, got {self.frame!r}")
         object.__setattr__(self, "_row", self.to_row())
-
-    # the row view (read-only): the results store's codec
-    def __getitem__(self, key):
-        return self._row[key]
-
-    def __iter__(self):
-        return iter(self._row)
-
-    def __len__(self):
-        return len(self._row)
 
     @classmethod
     def from_values(cls, values, labels=None) -> "TofTrialScenario":

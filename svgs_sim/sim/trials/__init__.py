@@ -31,7 +31,7 @@ from .registry import (
     register_trial_kind,
 )
 from .scenario import (
-    POSE_KEYS, PoseKey, PoseScenario, TRUTH_KEYS, TrialScenario, as_scenario, build_scenario,
+    POSE_KEYS, PoseKey, PoseScenario, RowView, TRUTH_KEYS, TrialScenario, as_scenario, build_scenario,
     camera_with_calibration_errors,
 )
 from .geometric import (
@@ -41,7 +41,7 @@ from .geometric import (
 
 __all__ = [
     "KIND_MODULES", "ID_COLUMNS", "TIMING_COLUMNS", "Parameter", "TrialKind", "register_trial_kind",
-    "known_trial_kinds", "get_trial_kind", "POSE_KEYS", "TRUTH_KEYS", "TrialScenario", "PoseScenario",
+    "known_trial_kinds", "get_trial_kind", "POSE_KEYS", "TRUTH_KEYS", "TrialScenario", "PoseScenario", "RowView",
     "as_scenario", "camera_with_calibration_errors", "build_scenario", "PoseKey", "GEOMETRIC_PARAMETERS",
     "GeometricScenario", "geometric_scenario", "GEOMETRIC_OUTPUTS", "estimate_outputs", "geometric_trial",
     "geometric_group", "geometric_render_key", "geometric_warm_up", "GEOMETRIC",

@@ -34,8 +34,22 @@ TRUTH_KEYS = ("truth_actual", "truth_stand", "truth_rail")
 _NON_SCENARIO = (*ID_COLUMNS, *TIMING_COLUMNS)
 
 
+class RowView(Mapping):
+    """A typed scenario read as its results-store row (read-only): the subclass keeps the row,
+    a dict of column -> value, in ``self._row``."""
+
+    def __getitem__(self, key):
+        return self._row[key]
+
+    def __iter__(self):
+        return iter(self._row)
+
+    def __len__(self):
+        return len(self._row)
+
+
 @dataclass(frozen=True, eq=False)
-class TrialScenario(Mapping):
+class TrialScenario(RowView):
     """A trial kind's scenario: a typed, frozen, hashable value; the base of the kinds' scenarios.
 
     Attributes hold what a trial means (None where the profile's or the phone's own value is
@@ -208,16 +222,7 @@ class TrialScenario(Mapping):
         values = {k: row[k] for k in ("camera", "pattern", *kind.parameters) if k in row}
         return cls.from_values(values, {k: v for k, v in row.items() if k not in skip})
 
-    # ------------------------------------------------------------------ the row view (Mapping)
-    def __getitem__(self, key):
-        return self._row[key]
-
-    def __iter__(self):
-        return iter(self._row)
-
-    def __len__(self):
-        return len(self._row)
-
+    # ------------------------------------------------------------------ the row view (RowView)
     def __eq__(self, other):
         if isinstance(other, TrialScenario):
             return type(self) is type(other) and self._row == other._row
