@@ -77,3 +77,25 @@ def check_finite(value, name: str) -> float:
     if v != v or v in (float("inf"), float("-inf")):
         raise InputError(f"{name}: expected a finite number, got {value!r}")
     return v
+
+
+def interrupt_in(exc: BaseException) -> KeyboardInterrupt | None:
+    """The ``KeyboardInterrupt`` (Ctrl-C, or SIGTERM's subclass) among ``exc``'s causes, if any.
+
+    Parameters
+    ----------
+    exc : BaseException
+        An exception raised by native code that wraps what it caught (``__cause__`` or
+        ``__context__``).
+
+    Returns
+    -------
+    KeyboardInterrupt or None
+    """
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None

@@ -28,6 +28,7 @@ import sys
 import threading
 import time
 
+from svgs_sim.base.errors import interrupt_in
 from svgs_sim.cli.exit_codes import EXIT_INTERRUPTED
 
 #: Exit code after SIGTERM: 128 + the signal number, as a shell reports it.
@@ -231,6 +232,12 @@ def interruptible(args, *, hard_stop: bool = False):
         except KeyboardInterrupt as exc:  # Ctrl-C or Terminated: the command has unwound, its rows are kept
             report_interrupt(name, exc, as_json)
             return EXIT_TERMINATED if isinstance(exc, Terminated) else EXIT_INTERRUPTED
+        except Exception as exc:  # a native library (Dr.Jit's custom ops) that wrapped the interrupt in its error
+            interrupt = interrupt_in(exc)
+            if interrupt is None:
+                raise
+            report_interrupt(name, interrupt, as_json)
+            return EXIT_TERMINATED if isinstance(interrupt, Terminated) else EXIT_INTERRUPTED
         finally:
             if previous is not None:
                 signal.signal(signal.SIGTERM, previous)

@@ -43,7 +43,7 @@ from .constants import (
 from .geometry import Reflector, SceneOptions
 from .optics import Flash, Optics, pixel_normalized_grid, radiance_to_photon_rate
 from .predict import predicted_centroids_px, predicted_spots_px, virtual_sources
-from .sampling import check_spp, film_to_numpy, to_numpy
+from .sampling import check_spp, render_film, to_numpy
 from .scene import TILE_COUNTS
 from .scene import TILE_SIZE_PX as T
 from .scene import build_scene
@@ -322,7 +322,7 @@ class Renderer:
         acc = None
         seeds = np.random.SeedSequence(int(seed)).generate_state(n_pass, dtype=np.uint32)
         for k in range(n_pass):
-            a = film_to_numpy(mi.render(self.scene, sensor=sensor, spp=per_pass, seed=int(seeds[k])))
+            a = render_film(mi, self.scene, sensor, per_pass, int(seeds[k]))
             acc = a if acc is None else acc + a
         return acc / n_pass
 

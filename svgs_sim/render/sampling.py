@@ -11,14 +11,22 @@ Samples per pixel
 Dr.Jit -> numpy
     :func:`to_numpy` is where every Dr.Jit array or tensor a renderer made becomes a numpy
     array (a copy, evaluated); :func:`film_to_numpy` is the same for a rendered film
-    (channels averaged to one radiance value per pixel). Renderers return numpy only.
+    (channels averaged to one radiance value per pixel), and :func:`render_film` the one
+    call of ``mi.render``. Renderers return numpy only.
+
+Ctrl-C inside a render
+    Mitsuba's ``mi.render`` runs its integrator inside ``dr.custom``, which turns any
+    exception raised there into ``RuntimeError("drjit.custom(...): error while performing a
+    custom differentiable operation")`` with the original as its cause. A Ctrl-C that lands in
+    that Python frame would so end the command as an error (exit 1) instead of an interrupt
+    (exit 130, rows kept): :func:`render_film` raises the ``KeyboardInterrupt`` itself.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from svgs_sim.base.errors import InputError
+from svgs_sim.base.errors import InputError, interrupt_in
 
 
 def round_up_power(n: int, base: int = 4, minimum: int = 4) -> int:
@@ -84,6 +92,40 @@ def to_numpy(value, dtype=np.float64) -> np.ndarray:
         Same shape as ``value`` (flat for a 1-D Dr.Jit array).
     """
     return np.asarray(value, dtype=dtype)
+
+
+def render_film(mi, scene, sensor, spp: int, seed: int) -> np.ndarray:
+    """``mi.render(scene, sensor=sensor, spp=spp, seed=seed)`` as radiance per pixel.
+
+    Parameters
+    ----------
+    mi : module
+        The ``mitsuba`` module with its variant set.
+    scene, sensor
+        Mitsuba objects.
+    spp : int
+        Samples per pixel of this pass.
+    seed : int
+        The pass's sampler seed (uint32).
+
+    Returns
+    -------
+    ndarray of float64, shape (h, w)
+        As :func:`film_to_numpy`.
+
+    Raises
+    ------
+    KeyboardInterrupt
+        Ctrl-C (or SIGTERM's :class:`svgs_sim.cli.signals.Terminated`) during the render, also
+        where Dr.Jit wrapped it in a ``RuntimeError``.
+    """
+    try:
+        return film_to_numpy(mi.render(scene, sensor=sensor, spp=int(spp), seed=int(seed)))
+    except RuntimeError as exc:
+        interrupt = interrupt_in(exc)
+        if interrupt is None:
+            raise
+        raise interrupt from None
 
 
 def film_to_numpy(image) -> np.ndarray:
