@@ -63,7 +63,7 @@ def _hand_head_on_glint(camera, pattern, range_m):
     lens crosses the face's plane at s / 2 whatever z_face. The glint reaches the lens when that
     point is on the face: within its radius (+ the renderer's 3 mm footprint margin,
     svgs_sim.render.predict.virtual_sources) of the face's centre."""
-    led = np.asarray(camera.table("flash")["led_offsets_m"], float)
+    led = np.asarray(camera.flash.led_offsets_m, float)
     R, t = pose_from_scenario(range_m)
     centres = pattern.points_m @ R.T + t  # the faces' centres are on the cubes' axes, laterally at the points
     radius_m = 0.5 * 0.0127  # svgs-3u's reflector: Edmund N-BK7 corner cubes, 12.7 mm across

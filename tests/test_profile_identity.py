@@ -72,3 +72,71 @@ def test_a_copied_profile_under_another_name_renders_and_solves_the_same(tmp_pat
                                               "threshold_source": "app by_camera[galaxy-nexus]",
                                               "fitted_overlay": "fitted/galaxy-nexus.toml"}
     assert a["state"] == b["state"] and a["exposure_s"] == b["exposure_s"]
+
+
+# --------------------------------------------------------------------------- one loader
+PACKAGE = Path(__file__).resolve().parents[1] / "svgs_sim"
+#: The loader: the only module that reads a profile's tables, parses TOML or loads uncached.
+LOADER = PACKAGE / "base" / "profiles.py"
+
+
+def _loader_breaches(source: str) -> list[str]:
+    """What in ``source`` bypasses the loader: a ``.tables`` read, ``tomllib``, an uncached
+    ``Camera.load``/``Pattern.load``."""
+    import ast
+
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Attribute) and node.attr == "tables":
+            found.append(f"line {node.lineno}: .tables (read the typed parts: camera.optics, camera.flash...)")
+        elif isinstance(node, (ast.Import, ast.ImportFrom)):
+            names = [a.name for a in node.names] + ([node.module] if isinstance(node, ast.ImportFrom) else [])
+            if "tomllib" in names:
+                found.append(f"line {node.lineno}: tomllib (read files with svgs_sim.base.profiles.read_toml)")
+        elif (isinstance(node, ast.Attribute) and node.attr == "load" and isinstance(node.value, ast.Name)
+              and node.value.id in ("Camera", "Pattern")):
+            found.append(f"line {node.lineno}: {node.value.id}.load (use load_camera / load_pattern: one cache)")
+    return found
+
+
+def test_no_module_but_the_loader_reads_raw_profile_tables_or_toml():
+    """Profiles are parsed and checked once, by the loader; every other module reads frozen
+    objects (svgs_sim.base.profile_parts) and loads through the one cache."""
+    breaches = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path == LOADER:
+            continue
+        found = _loader_breaches(path.read_text(encoding="utf-8"))
+        if found:
+            breaches[str(path.relative_to(PACKAGE.parent))] = found
+    assert not breaches, breaches
+
+
+def test_the_loader_check_finds_each_kind_of_breach():
+    src = ("import tomllib\n"
+           "def f(cam):\n"
+           "    return cam.tables.get('optics'), Camera.load('x')\n")
+    found = _loader_breaches(src)
+    assert sorted(f.split(":")[1].split()[0] for f in found) == [".tables", "Camera.load", "tomllib"], found
+
+
+def test_a_profile_is_a_tree_of_frozen_parts():
+    import dataclasses
+
+    from svgs_sim.base.profiles import load_camera, load_pattern
+
+    cam = load_camera("galaxy-nexus")
+    assert cam.optics.f_number == 2.4 and cam.sensor.pixel_pitch_m == 1.4e-6
+    assert cam.flash.led_offsets_m == ((0.008, 0.0, 0.0),)  # one LED, normalised to a list of them
+    assert not cam.tof and cam.optics  # a phone has no [tof] table
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        cam.optics.f_number = 2.8
+    assert {f.key for f in cam.fitted} >= {"exposure.mode"}
+    tof = load_camera("tof-epc660")
+    assert tof.tof.modulation_frequency_hz == 10e6 and tof.is_tof and not cam.is_tof
+    pat = load_pattern("svgs-3u")
+    assert pat.reflector.model == "edmund-nbk7-12.7mm" and [t.id for t in pat.targets] == list(pat.ids)
+    # a value changed through the loader is checked by the schema
+    from svgs_sim.base.errors import ProfileError
+    with pytest.raises(ProfileError, match=r"\[optics\] f_number = 0.1"):
+        cam.with_values([("optics", "f_number", 0.1)])

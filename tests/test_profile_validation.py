@@ -162,9 +162,9 @@ def test_an_unknown_reflector_model_is_never_replaced_by_the_default():
     from svgs_sim.render.geometry import Reflector
 
     good = Pattern.load("svgs-3u")
-    made = Pattern(name="made", ids=good.ids, points_m=good.points_m, tables={"reflector": {"model": "acme"}})
     with pytest.raises(InputError, match=r"model = 'acme'.*'edmund-nbk7-12\.7mm', 'hollow-12\.7mm'"):
-        Reflector.resolve(None, made)
+        # a pattern built in code: refused when built (its parts are typed), before any render
+        Pattern(name="made", ids=good.ids, points_m=good.points_m, tables={"reflector": {"model": "acme"}})
     hollow = Pattern(name="h", ids=good.ids, points_m=good.points_m, tables={"reflector": {"model": "hollow-12.7mm"}})
     assert Reflector.resolve(None, hollow).kind == "hollow"
 

@@ -85,7 +85,7 @@ def test_missing_flash_table_is_a_clear_error():
         ({"led_offsets_m": [0.01, 0, 0], "emitter_diameter_m": -1.0, "radiant_intensity_w_sr": 1.0}, "emitter_diameter_m"),
         ({"led_offsets_m": [0.0001, 0, 0], "emitter_diameter_m": 0.001, "radiant_intensity_w_sr": 1.0}, "covers the lens"),
         ({"led_offsets_m": [0.01, 0, 0], "emitter_diameter_m": 0.001}, "luminous_intensity_cd or radiant"),
-        ({"led_offsets_m": [0.01, 0, 0], "emitter_diameter_m": 0.001, "luminous_intensity_cd": 5, "spectrum": "xenon"}, "unknown"),
+        ({"led_offsets_m": [0.01, 0, 0], "emitter_diameter_m": 0.001, "luminous_intensity_cd": 5, "spectrum": "xenon"}, "spectrum = 'xenon'"),
     ],
 )
 def test_bad_flash_tables(flash, msg):

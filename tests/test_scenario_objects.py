@@ -24,10 +24,9 @@ def camera_reads(monkeypatch):
         return orig(cls, name_or_path, **kw)
 
     monkeypatch.setattr(Camera, "load", classmethod(counting))
-    profiles._cached_camera.cache_clear()
-    profiles._cached_pattern.cache_clear()
+    profiles.clear_cache()
     yield reads
-    profiles._cached_camera.cache_clear()
+    profiles.clear_cache()
 
 
 def test_the_closed_loop_reads_each_profile_once(camera_reads):

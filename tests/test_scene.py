@@ -45,7 +45,7 @@ def test_the_defaults_are_the_labs():
     lab = load_lab()
     s = Scene()
     assert (s.backdrop_distance_m, s.backdrop_reflectance, s.ambient_radiance_w_m2_sr) == \
-        (lab["backdrop_distance_m"], lab["backdrop_reflectance"], lab["ambient_radiance_w_m2_sr"])
+        (lab.backdrop_distance_m, lab.backdrop_reflectance, lab.ambient_radiance_w_m2_sr)
     assert Scenario().scene == s and RenderScenario(camera="galaxy-nexus").scene == s
 
 
@@ -123,7 +123,7 @@ def test_the_range_sweep_config_holds_a_scene_and_writes_the_old_manifest():
     m = cfg.manifest()
     # the manifest of 0.1 (flat row values) so an old folder resumes
     assert (m["backdrop_distance_m"], m["ambient_radiance_w_m2_sr"], m["spp"], m["exposure_s"]) == \
-        (0.0, load_lab()["ambient_radiance_w_m2_sr"], -1, 0.0)
+        (0.0, load_lab().ambient_radiance_w_m2_sr, -1, 0.0)
     assert cfg.spp is None and cfg.exposure_s is None
     with pytest.raises(InputError, match="scene"):
         make_config("galaxy-nexus", [5.0], scene={"backdrop_distance_m": 1.0})

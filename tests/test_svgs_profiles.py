@@ -251,8 +251,8 @@ def test_lab_overlay_is_a_physical_fit():
         table, name = f["key"].split(".")
         assert lo <= f["value"] <= hi and lo <= base[table][name] <= hi
         assert "PRIOR" in base["sources"]["ambient"] and "fitted/" in base["sources"]["ambient"]
-    assert load_lab()["ambient_radiance_w_m2_sr"] == over["fit"][0]["value"]
-    assert load_lab(fitted=False)["ambient_radiance_w_m2_sr"] == base["lab"]["ambient_radiance_w_m2_sr"]
+    assert load_lab().ambient_radiance_w_m2_sr == over["fit"][0]["value"]
+    assert load_lab(fitted=False).ambient_radiance_w_m2_sr == base["lab"]["ambient_radiance_w_m2_sr"]
 
 
 def test_the_overlay_is_chosen_by_the_key_not_the_file_or_display_name(tmp_path):

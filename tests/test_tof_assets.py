@@ -19,12 +19,12 @@ def test_epc660_profile_matches_the_paper_optics():
     assert hfov == pytest.approx(52.4, abs=0.1)
     assert vfov == pytest.approx(40.6, abs=0.1)
     tof = cam.table("tof")
-    assert cam.table("optics")["focal_length_m"] / tof["pixel_pitch_m"] == pytest.approx(cam.fx)
+    assert cam.table("optics").focal_length_m / tof.pixel_pitch_m == pytest.approx(cam.fx)
     # unambiguous range c / (2 f) covers the paper's 15 m operating range
-    assert 299_792_458.0 / (2 * tof["modulation_frequency_hz"]) == pytest.approx(15.0, rel=0.01)
-    assert tof["depth_kind"] == "radial"
-    assert cam.table("illumination")["divergence_full_angle_deg"] == 90.0
-    assert tof["wavelength_m"] == pytest.approx(850e-9)
+    assert 299_792_458.0 / (2 * tof.modulation_frequency_hz) == pytest.approx(15.0, rel=0.01)
+    assert tof.depth_kind == "radial"
+    assert cam.table("illumination").divergence_full_angle_deg == 90.0
+    assert tof.wavelength_m == pytest.approx(850e-9)
 
 
 def test_every_number_of_the_profile_is_sourced_or_assumed():

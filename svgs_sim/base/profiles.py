@@ -17,7 +17,6 @@ which the model tests use.
 from __future__ import annotations
 
 import copy
-import functools
 import os
 import re
 import tomllib
@@ -29,6 +28,7 @@ import tomli_w
 
 from ..assets import ASSETS_DIR
 from .errors import InputError, ProfileError, check_finite, check_finite_positive
+from .profile_parts import CAMERA_PARTS, PATTERN_PARTS, FittedValue, ProfilePart, TargetSpec
 from .profile_schema import (
     DISTINCT_TARGETS_M,
     INTRINSICS_KEYS,
@@ -77,30 +77,92 @@ def _resolve(name_or_path, folder: Path, kind: str) -> Path:
     return p
 
 
-def _read_toml(path: Path, kind: str) -> dict:
-    """The parsed TOML file (a fresh copy: callers may change it). Files are parsed once per
-    content: kept by path, modification time and size, so an edited file is read again."""
-    try:
-        st = os.stat(path)
-        key = (str(path), st.st_mtime_ns, st.st_size)
-        hit = _TOML_CACHE.get(key)
-        if hit is None:
+def cached(kind: str, key: tuple, files, build):
+    """The one cache of every file-backed object of the project: profiles, patterns, labs, the
+    app's settings, material tables and the parsed TOML under them.
+
+    An entry is kept with the modification time and size of each file it was built from, and
+    built again when one of them changed (an edited profile is read again; a file that did not
+    change is opened once per process).
+
+    Parameters
+    ----------
+    kind : str
+        What is cached (``"toml"``, ``"camera"``, ``"pattern"``, ``"lab"``, ``"app"``,
+        ``"sheeting"``...).
+    key : tuple
+        What tells two entries of one kind apart (the resolved path, options).
+    files : iterable of Path
+        The files the object is built from.
+    build : callable
+        ``build()`` makes the object (called on a miss).
+
+    Returns
+    -------
+    object
+        Shared by every caller in the process: treat it as read-only (the profile objects
+        are frozen).
+    """
+    stamps = []
+    for f in files:
+        try:
+            st = os.stat(f)
+            stamps.append((str(f), st.st_mtime_ns, st.st_size))
+        except OSError:
+            stamps.append((str(f), None, None))
+    full = (kind, *key)
+    hit = _CACHE.get(full)
+    if hit is not None and hit[0] == tuple(stamps):
+        return hit[1]
+    value = build()
+    if len(_CACHE) >= _CACHE_SIZE:
+        _CACHE.clear()
+    _CACHE[full] = (tuple(stamps), value)
+    return value
+
+
+def clear_cache() -> None:
+    """Forget every cached object (:func:`cached`): the next load reads its files again."""
+    _CACHE.clear()
+
+
+#: ``(kind, *key) -> (file stamps, object)``: :func:`cached`.
+_CACHE: dict = {}
+_CACHE_SIZE = 256
+
+
+def read_toml(path, kind: str) -> dict:
+    """A TOML file of the project's kinds, parsed (a fresh copy: callers may change it).
+
+    Parameters
+    ----------
+    path : str or Path
+    kind : str
+        What the file is, for the message (``"camera profile"``, ``"lab file"``...).
+
+    Raises
+    ------
+    ProfileError
+        Naming the file: not TOML, not UTF-8, unreadable.
+    """
+    path = Path(path)
+
+    def parse():
+        try:
             with open(path, "rb") as fh:
-                hit = tomllib.load(fh)
-            if len(_TOML_CACHE) >= 64:
-                _TOML_CACHE.clear()
-            _TOML_CACHE[key] = hit
-        return copy.deepcopy(hit)
-    except tomllib.TOMLDecodeError as exc:
-        raise ProfileError(f"{kind} file {str(path)!r} is not valid TOML: {exc}") from None
-    except UnicodeDecodeError as exc:
-        raise ProfileError(f"{kind} file {str(path)!r} is not UTF-8 text (TOML files are): byte "
-                           f"0x{exc.object[exc.start]:02x} at offset {exc.start}") from None
-    except OSError as exc:
-        raise ProfileError(f"{kind} file {str(path)!r} cannot be read: {exc}") from None
+                return tomllib.load(fh)
+        except tomllib.TOMLDecodeError as exc:
+            raise ProfileError(f"{kind} file {str(path)!r} is not valid TOML: {exc}") from None
+        except UnicodeDecodeError as exc:
+            raise ProfileError(f"{kind} file {str(path)!r} is not UTF-8 text (TOML files are): byte "
+                               f"0x{exc.object[exc.start]:02x} at offset {exc.start}") from None
+        except OSError as exc:
+            raise ProfileError(f"{kind} file {str(path)!r} cannot be read: {exc}") from None
+
+    return copy.deepcopy(cached("toml", (str(path),), (path,), parse))
 
 
-_TOML_CACHE: dict = {}
+_read_toml = read_toml
 
 
 def fitted_overlay_path(profile_path, key: str | None = None) -> Path | None:
@@ -242,7 +304,10 @@ class Camera:
     dist : ndarray, shape (5,)
         OpenCV distortion coefficients ``(k1, k2, p1, p2, k3)``.
     tables : dict
-        Every other table of the profile (sensor, optics, flash, isp, sources...).
+        Every other table of the profile as read from its file: the loader's own record, from
+        which it builds the typed parts and writes the profile back (:meth:`to_dict`). Other
+        modules read the typed parts (:attr:`sensor`, :attr:`optics`, :attr:`flash`...,
+        :mod:`svgs_sim.base.profile_parts`), never this (a test keeps it so).
     source : str
         Where the profile was loaded from.
     key : str or None
@@ -286,6 +351,137 @@ class Camera:
         if d.shape != (5,) or not np.all(np.isfinite(d)):
             raise ProfileError(f"camera {self.name!r}: distortion must be 5 finite numbers (k1, k2, p1, p2, k3), got {self.dist!r}")
         object.__setattr__(self, "dist", d)
+        tables = copy.deepcopy(dict(self.tables or {}))  # the camera's own: no caller shares it
+        object.__setattr__(self, "tables", tables)
+        where = f"camera profile {self.source!r}" if self.source else f"camera {self.name!r}"
+        parts = {name: cls.from_table(tables.get(name), where) for name, cls in CAMERA_PARTS.items()}
+        fitted = tables.get("fitted") or {}
+        if not isinstance(fitted, dict):
+            raise ProfileError(f"{where}: [fitted] must be a table of fitted values")
+        parts["fitted"] = tuple(FittedValue.from_entry(k, e) for k, e in fitted.items() if isinstance(e, dict))
+        preview = tables.get("preview")
+        parts["preview_of"] = preview.get("of") if isinstance(preview, dict) else None
+        object.__setattr__(self, "_parts", parts)
+
+    # ------------------------------------------------------------------ typed parts
+    @property
+    def sensor(self):
+        """The image sensor (:class:`svgs_sim.base.profile_parts.Sensor`; fields None where not given)."""
+        return self._parts["sensor"]
+
+    @property
+    def glare(self):
+        """The lens' stray light (:class:`svgs_sim.base.profile_parts.Glare`)."""
+        return self._parts["glare"]
+
+    @property
+    def exposure(self):
+        """The exposure control (:class:`svgs_sim.base.profile_parts.Exposure`)."""
+        return self._parts["exposure"]
+
+    @property
+    def cfa(self):
+        """The colour filter array (:class:`svgs_sim.base.profile_parts.Cfa`)."""
+        return self._parts["cfa"]
+
+    @property
+    def isp(self):
+        """The image signal processor (:class:`svgs_sim.base.profile_parts.Isp`)."""
+        return self._parts["isp"]
+
+    @property
+    def optics(self):
+        """The lens (:class:`svgs_sim.base.profile_parts.Optics`)."""
+        return self._parts["optics"]
+
+    @property
+    def flash(self):
+        """The LED flash (:class:`svgs_sim.base.profile_parts.Flash`)."""
+        return self._parts["flash"]
+
+    @property
+    def tof(self):
+        """A ToF camera's pixel (:class:`svgs_sim.base.profile_parts.Tof`)."""
+        return self._parts["tof"]
+
+    @property
+    def noise(self):
+        """A ToF camera's noise (:class:`svgs_sim.base.profile_parts.Noise`)."""
+        return self._parts["noise"]
+
+    @property
+    def illumination(self):
+        """A ToF camera's emitters (:class:`svgs_sim.base.profile_parts.Illumination`)."""
+        return self._parts["illumination"]
+
+    @property
+    def fitted(self) -> tuple:
+        """The values a fitted overlay set, tuple of :class:`svgs_sim.base.profile_parts.FittedValue`
+        (empty: an unfitted profile)."""
+        return self._parts["fitted"]
+
+    @property
+    def preview_of(self) -> str | None:
+        """The key of the phone whose preview stream this camera is (``[preview] of``), or None."""
+        return self._parts["preview_of"]
+
+    @property
+    def is_tof(self) -> bool:
+        """A ToF camera: the profile has a ``[tof]`` table and no ``[flash]``."""
+        return "tof" in self.tables and "flash" not in self.tables
+
+    def has(self, table: str) -> bool:
+        """Whether the profile has the table ``table`` (``"flash"``, ``"optics"``...)."""
+        return isinstance(self.tables.get(table), dict)
+
+    def with_values(self, values) -> "Camera":
+        """A copy with single values of its tables changed, checked by the schema.
+
+        Parameters
+        ----------
+        values : iterable of (str, str, object)
+            ``(table, key, value)``, e.g. ``("optics", "f_number", 2.8)``.
+
+        Returns
+        -------
+        Camera
+        """
+        tables = copy.deepcopy(self.tables)
+        for table, key, value in values:
+            tables.setdefault(table, {})[key] = value
+        return self.replace(tables=tables)
+
+    def fingerprint(self) -> tuple:
+        """The camera by content (hashable): name, geometry and every table."""
+        return (self.name, self.width, self.height, self.fx, self.fy, self.cx, self.cy,
+                tuple(np.asarray(self.dist, float).tolist()), repr(self.tables))
+
+    def with_tables(self, **tables) -> "Camera":
+        """A copy with whole tables replaced (``None``: removed), checked as a file's would be.
+
+        Parameters
+        ----------
+        **tables : dict or None
+            ``name=table`` in the TOML structure (``calibration={...}``, ``sensor={...}``).
+
+        Returns
+        -------
+        Camera
+        """
+        new = copy.deepcopy(self.tables)
+        for k, v in tables.items():
+            if v is None:
+                new.pop(k, None)
+            else:
+                new[k] = v  # in its place; a new table last
+        where = f"camera profile {self.source!r}" if self.source else f"camera {self.name!r}"
+        try:
+            check_camera_tables(new)
+        except ProfileError:
+            raise
+        except InputError as exc:
+            raise ProfileError(f"{where}: {exc}") from None
+        return self.replace(tables=new)
 
     # ------------------------------------------------------------------ loading
     @classmethod
@@ -419,12 +615,18 @@ class Camera:
     def has_distortion(self) -> bool:
         return bool(np.any(self.dist != 0))
 
-    def table(self, name: str) -> dict:
-        """An optional table of the profile; :class:`ProfileError` naming it if absent."""
-        t = self.tables.get(name)
-        if not isinstance(t, dict):
+    def table(self, name: str) -> ProfilePart:
+        """A part the operation needs (``"optics"``, ``"flash"``...): :class:`ProfileError` naming
+        the table if the profile lacks it.
+
+        Returns
+        -------
+        ProfilePart
+            The typed part (:mod:`svgs_sim.base.profile_parts`).
+        """
+        if name not in CAMERA_PARTS or not self.has(name):
             raise ProfileError(f"camera {self.name!r} ({self.source or 'dict'}) has no [{name}] table, which this operation needs")
-        return t
+        return self._parts[name]
 
     def distort_normalized(self, xy: np.ndarray) -> np.ndarray:
         """Apply the distortion model to normalised (undistorted) coordinates.
@@ -548,7 +750,13 @@ class Pattern:
     points_m : ndarray, shape (N, 3)
         Target positions in the target frame, metres.
     tables : dict
-        Any other table of the file (reflector model, body, description...).
+        Any other table of the file as read (the loader's record; other modules read the typed
+        parts :attr:`reflector`, :attr:`plate`, :attr:`marker` and :attr:`targets`).
+    source : str
+        Where the pattern was loaded from.
+    target_sizes_m : tuple
+        Per target, in the order of ``ids``: ``(diameter_m, standoff_m)`` of its ``[[target]]``
+        table, each None where the file does not give it.
     """
 
     name: str
@@ -556,6 +764,7 @@ class Pattern:
     points_m: np.ndarray
     tables: dict = field(default_factory=dict)
     source: str = ""
+    target_sizes_m: tuple = ()
 
     def __post_init__(self):
         ids = np.asarray(self.ids)
@@ -582,6 +791,38 @@ class Pattern:
             raise ProfileError(f"{where}: targets are collinear; a pose cannot be solved from them")
         object.__setattr__(self, "ids", ids.astype(int))
         object.__setattr__(self, "points_m", pts)
+        sizes = tuple(tuple(x) for x in self.target_sizes_m) or ((None, None),) * len(ids)
+        if len(sizes) != len(ids) or any(len(x) != 2 for x in sizes):
+            raise ProfileError(f"{where}: target_sizes_m must hold (diameter_m, standoff_m) per target")
+        object.__setattr__(self, "target_sizes_m", sizes)
+        tables = copy.deepcopy(dict(self.tables or {}))
+        object.__setattr__(self, "tables", tables)
+        object.__setattr__(self, "_parts", {n: c.from_table(tables.get(n), where) for n, c in PATTERN_PARTS.items()})
+
+    def fingerprint(self) -> tuple:
+        """The pattern by content (hashable): name, targets and every table."""
+        return (self.name, self.ids.tolist(), self.points_m.tolist(), repr(self.tables), self.target_sizes_m)
+
+    @property
+    def reflector(self):
+        """The corner cubes (:class:`svgs_sim.base.profile_parts.Reflector`; fields None where not given)."""
+        return self._parts["reflector"]
+
+    @property
+    def plate(self):
+        """A ToF target's plate (:class:`svgs_sim.base.profile_parts.Plate`)."""
+        return self._parts["plate"]
+
+    @property
+    def marker(self):
+        """A ToF target's markers (:class:`svgs_sim.base.profile_parts.Marker`)."""
+        return self._parts["marker"]
+
+    @property
+    def targets(self) -> tuple:
+        """Each target, tuple of :class:`svgs_sim.base.profile_parts.TargetSpec` in the order of ``ids``."""
+        return tuple(TargetSpec(int(i), float(p[0]), float(p[1]), float(p[2]), d, so)
+                     for i, p, (d, so) in zip(self.ids, self.points_m, self.target_sizes_m))
 
     @classmethod
     def load(cls, name_or_path) -> "Pattern":
@@ -606,9 +847,11 @@ class Pattern:
             raise ProfileError(f"{where}: {exc}") from None
         ids = [c["id"] for c in checked]
         pts = [[c[k] for k in ("x_m", "y_m", "z_m")] for c in checked]
+        sizes = [(c.get("diameter_m"), c.get("standoff_m")) for c in checked]
         order = np.argsort(ids)
         tables = {k: v for k, v in data.items() if k not in ("name", "target")}
-        return cls(name=name, ids=np.asarray(ids)[order], points_m=np.asarray(pts)[order], tables=tables, source=str(path))
+        return cls(name=name, ids=np.asarray(ids)[order], points_m=np.asarray(pts)[order], tables=tables, source=str(path),
+                   target_sizes_m=tuple(sizes[i] for i in order))
 
     @property
     def n(self) -> int:
@@ -634,7 +877,7 @@ class Pattern:
         if f == 1.0:
             return self
         return Pattern(name=f"{self.name}-x{f:g}", ids=self.ids.copy(), points_m=self.points_m * f,
-                       tables=dict(self.tables), source=self.source)
+                       tables=dict(self.tables), source=self.source, target_sizes_m=self.target_sizes_m)
 
     def point(self, target_id: int) -> np.ndarray:
         """The position of one target, shape (3,)."""
@@ -644,35 +887,24 @@ class Pattern:
         return self.points_m[idx[0]]
 
 
-@functools.lru_cache(maxsize=32)
-def _cached_camera(path: str, mtime_ns: int, fitted: bool) -> "Camera":
-    return Camera.load(path, fitted=fitted)
-
-
-@functools.lru_cache(maxsize=32)
-def _cached_pattern(path: str, mtime_ns: int) -> "Pattern":
-    return Pattern.load(path)
-
-
 def load_camera(name_or_path, *, fitted: bool = True) -> Camera:
-    """The camera profile ``name_or_path``, read once per process (:meth:`Camera.load`, cached).
-
-    The cache is keyed on the resolved file and its modification time, so an edited profile
-    is read again. A :class:`Camera` is returned as is. Treat the result as read-only: it is
+    """The camera profile ``name_or_path``, read once per process (:meth:`Camera.load`, kept in
+    the one cache, :func:`cached`, with the profile's and its overlay's file stamps, so an edited
+    profile is read again). A :class:`Camera` is returned as is. Treat the result as read-only: it is
     shared by every caller in the process.
     """
     if isinstance(name_or_path, Camera):
         return name_or_path
     path = _resolve(name_or_path, CAMERAS_DIR, "camera profile")
     overlay = _camera_overlay(path, _read_toml(path, "camera profile")) if fitted else None
-    stamp = path.stat().st_mtime_ns + (overlay.stat().st_mtime_ns if overlay is not None else 0)
-    return _cached_camera(str(path), stamp, bool(fitted))
+    files = (path,) if overlay is None else (path, overlay)
+    return cached("camera", (str(path), bool(fitted)), files, lambda: Camera.load(path, fitted=fitted))
 
 
 def load_pattern(name_or_path) -> Pattern:
-    """The target pattern ``name_or_path``, read once per process (:meth:`Pattern.load`, cached
-    on the resolved file and its modification time). A :class:`Pattern` is returned as is."""
+    """The target pattern ``name_or_path``, read once per process (:meth:`Pattern.load`, kept in
+    the one cache, :func:`cached`). A :class:`Pattern` is returned as is."""
     if isinstance(name_or_path, Pattern):
         return name_or_path
     path = _resolve(name_or_path, PATTERNS_DIR, "target pattern")
-    return _cached_pattern(str(path), path.stat().st_mtime_ns)
+    return cached("pattern", (str(path),), (path,), lambda: Pattern.load(path))

@@ -61,7 +61,7 @@ from pathlib import Path
 import numpy as np
 
 from svgs_sim.base.errors import InputError, check_finite_positive
-from svgs_sim.base.profiles import Camera, Pattern
+from svgs_sim.base.profiles import Camera, Pattern, load_camera, load_pattern
 from svgs_sim.svgs.identify import identify
 from svgs_sim.svgs.pipeline import camera_threshold, check_image_matches_camera, load_image
 
@@ -157,8 +157,7 @@ class FocalEstimate:
 
     def to_camera(self, camera: Camera) -> Camera:
         """``camera`` with ``fx = f_px`` and ``fy = aspect * f_px``, recording the estimate."""
-        tables = dict(camera.tables)
-        tables["calibration"] = {
+        record = {
             "method": "focal-from-spacings (Becker et al. 2014)",
             "f_px": float(self.f_px),
             "sigma_f_px": float(self.sigma_f_px),
@@ -166,7 +165,7 @@ class FocalEstimate:
             "ranges_m": [float(r) for r in self.ranges_m],
             "residual_rms_px": float(self.residual_rms_px),
         }
-        return camera.replace(fx=float(self.f_px), fy=float(self.f_px * self.aspect), tables=tables)
+        return camera.replace(fx=float(self.f_px), fy=float(self.f_px * self.aspect)).with_tables(calibration=record)
 
     @property
     def warnings(self) -> list[str]:
@@ -310,8 +309,8 @@ def estimate_focal(
         Mismatched or non-finite input, a range inside the pattern, or a degenerate
         geometry (all targets on one image point).
     """
-    camera = Camera.load(camera)
-    pattern = Pattern.load(pattern)
+    camera = load_camera(camera)
+    pattern = load_pattern(pattern)
     pts, rng, names = _check_inputs(centroids_px_list, ranges_m, pattern, names)
     if centroid_sigma_px is not None:
         centroid_sigma_px = check_finite_positive(centroid_sigma_px, "centroid_sigma_px")
@@ -517,8 +516,8 @@ def estimate_focal_from_images(
     from svgs_sim.svgs.detect import detect_blobs
 
 
-    camera = Camera.load(camera)
-    pattern = Pattern.load(pattern)
+    camera = load_camera(camera)
+    pattern = load_pattern(pattern)
     images = list(images)
     rng = np.asarray(ranges_m, float).reshape(-1)
     if rng.shape[0] != len(images):

@@ -140,14 +140,11 @@ class Calibration:
             standard deviations.
         """
         w, h = self.image_size
-        tables = {}
-        if base is not None:
-            if (base.width, base.height) != (w, h):
-                raise InputError(
-                    f"camera {base.name!r} is {base.width} x {base.height} px but the calibration images are {w} x {h} px"
-                )
-            tables = {k: v for k, v in base.tables.items() if k != "calibration"}
-        tables["calibration"] = {
+        if base is not None and (base.width, base.height) != (w, h):
+            raise InputError(
+                f"camera {base.name!r} is {base.width} x {base.height} px but the calibration images are {w} x {h} px"
+            )
+        record = {
             "method": "opencv-calibrateCamera",
             "board": self.board.describe() if self.board is not None else "given points",
             "n_views": len(self.views),
@@ -156,8 +153,10 @@ class Calibration:
             "constraints": ", ".join(k for k, v in self.constraints.items() if v is True) or "none",
             **{f"std_{k}": float(v) for k, v in self.std.items()},
         }
-        return Camera(name=name, width=int(w), height=int(h), fx=self.fx, fy=self.fy, cx=self.cx, cy=self.cy,
-                      dist=np.asarray(self.dist, float), tables=tables, key=None if base is None else base.key)
+        geometry = dict(name=name, width=int(w), height=int(h), fx=self.fx, fy=self.fy, cx=self.cx, cy=self.cy,
+                        dist=np.asarray(self.dist, float), source="")
+        cam = Camera(**geometry) if base is None else base.replace(**geometry)
+        return cam.with_tables(calibration=record)
 
     def to_json(self) -> dict:
         """JSON-ready dict (non-finite numbers become ``None``)."""

@@ -277,9 +277,9 @@ class TofSensor:
         be ``"auto"``); ``optics.transmittance``. Missing keys keep the class defaults.
         ``overrides`` replace fields (None values are ignored; ``integration_time_s="auto"``).
         """
-        t = dict(camera.tables.get("tof") or {})
-        n = dict(camera.tables.get("noise") or {})
-        o = dict(camera.tables.get("optics") or {})
+        t = camera.tof.to_dict()
+        n = camera.noise.to_dict()
+        o = camera.optics.to_dict()
         kw = {}
         names = {f.name for f in fields(cls)}
         for src in (t, n):

@@ -57,14 +57,14 @@ _threshold = parse_threshold  # one parser for every command's --threshold
 
 
 def cmd_focal(args) -> int:
-    from svgs_sim.base.profiles import Camera, Pattern
+    from svgs_sim.base.profiles import load_camera, load_pattern
 
     from svgs_sim.calibration.focal import estimate_focal_from_images
 
     if len(args.image) != len(args.range):
         raise InputError(f"give one --range per --image: got {len(args.image)} images and {len(args.range)} ranges")
-    camera = Camera.load(args.camera)
-    pattern = Pattern.load(args.pattern)
+    camera = load_camera(args.camera)
+    pattern = load_pattern(args.pattern)
     threshold = _threshold(args.threshold)
     from svgs_sim.cli.outdir import output_file_if
 
@@ -149,7 +149,7 @@ def expand_images(paths) -> list[Path]:
 
 
 def cmd_board(args) -> int:
-    from svgs_sim.base.profiles import Camera
+    from svgs_sim.base.profiles import load_camera
 
     from svgs_sim.calibration.boards import Board
     from svgs_sim.calibration.intrinsics import calibrate_images
@@ -163,7 +163,7 @@ def cmd_board(args) -> int:
         marker_m=None if args.marker_mm is None else args.marker_mm * 1e-3,
         dictionary=args.dictionary, legacy=args.legacy,
     )
-    base = Camera.load(args.camera) if args.camera else None
+    base = load_camera(args.camera) if args.camera else None
     files = expand_images(args.images)
     names = [f.name for f in files]
     if len(set(names)) != len(names):

@@ -51,9 +51,9 @@ def _make_board(args):
 
 def _camera(args):
     """The camera profile, resized with --width/--height (the same field of view)."""
-    from svgs_sim.base.profiles import Camera
+    from svgs_sim.base.profiles import load_camera
 
-    cam = Camera.load(args.camera)
+    cam = load_camera(args.camera)
     if (args.width is None) != (args.height is None):
         raise InputError("--width and --height go together")
     if args.width is not None:

@@ -57,14 +57,14 @@ def compile_kernels(out=None) -> dict:
     print("compiling the solver and camera kernels (first run only; cached for later runs) ...", file=out, flush=True)
     from svgs_sim.sim.trials import geometric_warm_up
     from svgs_sim.svgs.frames import pose_from_scenario
-    from svgs_sim.base.profiles import Camera, Pattern
+    from svgs_sim.base.profiles import load_camera, load_pattern
     from svgs_sim.svgs.solver import solve_centroids
 
     t0 = time.perf_counter()
     geometric_warm_up()
-    Camera.load("galaxy-nexus").replace(dist=np.array([0.01, 0.0, 0.0, 0.0, 0.0])).undistort_normalized(
+    load_camera("galaxy-nexus").replace(dist=np.array([0.01, 0.0, 0.0, 0.0, 0.0])).undistort_normalized(
         np.zeros((4, 2)))  # the parallel undistortion kernel
-    cam, pat = Camera.load("galaxy-nexus"), Pattern.load("svgs-3u")
+    cam, pat = load_camera("galaxy-nexus"), load_pattern("svgs-3u")
     uv = cam.project_target(pat.points_m, *pose_from_scenario(10.0, 0.1, -0.1, 2.0, -3.0, 4.0))
     solve_centroids(np.stack([uv, uv]), cam, pat)  # the batch kernel
     solver_s = time.perf_counter() - t0

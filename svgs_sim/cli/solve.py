@@ -130,10 +130,10 @@ def print_solution(result, out=None) -> None:
 
 
 def cmd_solve(args) -> int:
-    from svgs_sim.base.profiles import Camera, Pattern
+    from svgs_sim.base.profiles import load_camera, load_pattern
 
-    camera = Camera.load(args.camera)
-    pattern = Pattern.load(args.pattern)
+    camera = load_camera(args.camera)
+    pattern = load_pattern(args.pattern)
     if not (np.isfinite(args.sigma_px) and args.sigma_px > 0):
         raise InputError(f"--sigma-px: expected a positive number of pixels, got {args.sigma_px}")
     if args.consistency_sigma_px is not None:

@@ -145,7 +145,7 @@ def cmd_solve(args) -> int:
 
     camera = load_camera(args.camera)
     target = load_target(args.pattern)
-    scale = float(camera.tables.get("tof", {}).get("depth_png_scale_m", 0.001))
+    scale = float(camera.tof.given("depth_png_scale_m", 0.001))
     grays = _gather(args.gray, "gray")
     depths = _gather(args.depth, "depth", args.depth_unit, scale)
     if len(grays) != len(depths):

@@ -222,7 +222,7 @@ def _check_profile_and_envelope(args, cmd: str, ranges: dict) -> None:
     from svgs_sim.base.profiles import load_camera, load_pattern
 
     cam = load_camera(cam_name)
-    if "tof" in cam.tables and "flash" not in cam.tables:
+    if cam.is_tof:
         raise InputError(f"--camera: {cam.name!r} is a time-of-flight camera profile; this command needs a phone "
                          "(SVGS) profile such as 'galaxy-nexus' (the ToF sensor's commands are 'svgs tof ...')")
     if not ranges:

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from svgs_sim.base.errors import InputError, check_finite
-from svgs_sim.base.profiles import Camera, Pattern
+from svgs_sim.base.profiles import load_camera, load_pattern
 from svgs_sim.camera.rendered import PointFlux, RenderedFrame
 from svgs_sim.camera.tonemap import encode_u8, log_stretch
 from svgs_sim.svgs.frames import check_pose
@@ -168,8 +168,8 @@ class Renderer:
                  roi_size_px: int = DEFAULT_ROI_SIZE_PX, spp: int = DEFAULT_SPP, roi_spp: int | None = None,
                  spot_samples: int = DEFAULT_SPOT_SAMPLES, method: str = "guided", variant: str | None = None,
                  extra_meshes=(), spot_sampler: str = DEFAULT_SPOT_SAMPLER):
-        self.camera = Camera.load(camera)
-        self.pattern = Pattern.load(pattern)
+        self.camera = load_camera(camera)
+        self.pattern = load_pattern(pattern)
         self.optics = Optics.from_camera(self.camera)
         self.flash = Flash.from_camera(self.camera, self.optics.band_nm)
         self.reflector = Reflector.resolve(reflector, self.pattern)
@@ -587,8 +587,8 @@ def render_flux(camera, pattern, R_cam_target, t_cam_target_m, *, spp: int = DEF
     loop of calls reuses the loaded scene and compiled kernels.
     """
 
-    cam = Camera.load(camera)
-    pat = Pattern.load(pattern)
+    cam = load_camera(camera)
+    pat = load_pattern(pattern)
     refl = Reflector.resolve(reflector, pat)
     opts = SceneOptions.resolve(scene_options)
     # the focus distance is not part of the scene: a renderer is refocused, not rebuilt

@@ -33,10 +33,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from svgs_sim.base.errors import InputError, ProfileError, check_finite_positive
-from svgs_sim.base.profiles import Camera
+from svgs_sim.base.profiles import Camera, load_camera
 
 from .optics import Optics, photometry, pixel_normalized_grid, radiance_to_photon_rate
-from .sampling import film_to_numpy, round_up_power
+from .sampling import render_film, round_up_power
 from .scene import film_dict
 from .sensor import PLUGIN_NAME, CameraModel, sensor_class
 from .variant import select_variant
@@ -157,10 +157,10 @@ class BoardRenderer:
                  wall_reflectance: float = DEFAULT_WALL_REFLECTANCE, wall_distance_m: float = DEFAULT_WALL_DISTANCE_M,
                  variant: str | None = None):
 
-        self.camera = Camera.load(camera)
+        self.camera = load_camera(camera)
         self.board = board
         self.optics = Optics.from_camera(self.camera)
-        spectrum = str((self.camera.tables.get("flash") or {}).get("spectrum", "white-led"))
+        spectrum = str(self.camera.flash.given("spectrum", "white-led"))
         try:
             self.photometry = photometry(spectrum, self.optics.band_nm)
         except InputError as exc:
@@ -281,7 +281,7 @@ class BoardRenderer:
             self._sensor.set_windows(np.array([[0.0, float(y0c)]]), hs)
             acc = np.zeros((hs, W))
             for _ in range(n_pass):
-                acc += film_to_numpy(mi.render(self.scene, sensor=self._sensor, spp=self._spp_pass, seed=int(seeds[k])))
+                acc += render_film(mi, self.scene, self._sensor, self._spp_pass, int(seeds[k]))
                 k += 1
             rad[y0c:y0c + hs] = acc / n_pass
         t1 = time.perf_counter()

@@ -153,7 +153,7 @@ class Reflector:
         if isinstance(spec, Reflector):
             return spec
         base = dict(REFLECTOR_MODELS["edmund-nbk7-12.7mm"], model="edmund-nbk7-12.7mm")
-        ptab = (pattern.tables.get("reflector") if pattern is not None else None) or {}
+        ptab = pattern.reflector.to_dict() if pattern is not None else {}
         try:  # an unknown model is refused, never replaced by the default (a pattern built in code)
             ptab = check_reflector_table(ptab)
         except InputError as exc:

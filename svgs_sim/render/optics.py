@@ -127,19 +127,19 @@ class Optics:
         t = camera.table("optics")
         where = f"camera {camera.name!r} [optics]"
         for k in ("focal_length_m", "f_number", "focus_distance_m"):
-            if k not in t:
+            if getattr(t, k) is None:
                 raise ProfileError(f"{where} lacks {k}")
-        f = _p(check_finite_positive, t["focal_length_m"], f"{where}.focal_length_m")
-        n = _p(check_finite_positive, t["f_number"], f"{where}.f_number")
-        fd = _p(check_finite_positive, t["focus_distance_m"], f"{where}.focus_distance_m")
-        band = t.get("band_nm", [400.0, 700.0])
+        f = _p(check_finite_positive, t.focal_length_m, f"{where}.focal_length_m")
+        n = _p(check_finite_positive, t.f_number, f"{where}.f_number")
+        fd = _p(check_finite_positive, t.focus_distance_m, f"{where}.focus_distance_m")
+        band = t.given("band_nm", [400.0, 700.0])
         try:
             band = (float(band[0]), float(band[1]))
         except (TypeError, ValueError, IndexError):
             raise ProfileError(f"{where}.band_nm: expected [low, high] in nm, got {band!r}") from None
         if not (200.0 <= band[0] < band[1] <= 2000.0):
             raise ProfileError(f"{where}.band_nm: expected 200 <= low < high <= 2000 nm, got {list(band)}")
-        pitch = (camera.tables.get("sensor") or {}).get("pixel_pitch_m")
+        pitch = camera.sensor.pixel_pitch_m
         if pitch is not None:
             pitch = _p(check_finite_positive, pitch, f"camera {camera.name!r} [sensor].pixel_pitch_m")
         return cls(focal_length_m=f, f_number=n, focus_distance_m=fd, band_nm=band, pixel_pitch_m=pitch)
@@ -207,31 +207,31 @@ class Flash:
         """Read the ``[flash]`` table of a camera profile (ProfileError if absent)."""
         t = camera.table("flash")
         where = f"camera {camera.name!r} [flash]"
-        offs = t.get("led_offsets_m")
+        offs = t.led_offsets_m
         if offs is None:
             raise ProfileError(f"{where} lacks led_offsets_m (LED centre(s) minus lens centre, camera frame, m)")
         offs = np.asarray(offs, dtype=float)
         if offs.ndim == 1:
             offs = offs[None, :]
         if offs.ndim != 2 or offs.shape[1] != 3 or offs.shape[0] < 1 or not np.all(np.isfinite(offs)):
-            raise ProfileError(f"{where}.led_offsets_m: expected [[x, y, z], ...] finite metres, got {t.get('led_offsets_m')!r}")
-        if "emitter_diameter_m" not in t:
+            raise ProfileError(f"{where}.led_offsets_m: expected [[x, y, z], ...] finite metres, got {t.led_offsets_m!r}")
+        if t.emitter_diameter_m is None:
             raise ProfileError(f"{where} lacks emitter_diameter_m")
-        dia = _p(check_finite_positive, t["emitter_diameter_m"], f"{where}.emitter_diameter_m")
+        dia = _p(check_finite_positive, t.emitter_diameter_m, f"{where}.emitter_diameter_m")
         if np.any(np.hypot(offs[:, 0], offs[:, 1]) < 0.5 * dia):
             raise ProfileError(f"{where}: an LED disk covers the lens centre (offset < emitter radius)")
-        m = _p(check_finite, t.get("cos_exponent", 1.0), f"{where}.cos_exponent")
+        m = _p(check_finite, t.given("cos_exponent", 1.0), f"{where}.cos_exponent")
         if not 0.0 <= m <= 50.0:
             raise ProfileError(f"{where}.cos_exponent: expected 0..50, got {m}")
-        spec = str(t.get("spectrum", "white-led"))
+        spec = str(t.given("spectrum", "white-led"))
         if spec not in SPECTRA:
             raise ProfileError(f"{where}.spectrum: unknown {spec!r}; known {sorted(SPECTRA)}")
         ph = photometry(spec, band_nm)
         cd = None
-        if "radiant_intensity_w_sr" in t:
-            ie = _p(check_finite_positive, t["radiant_intensity_w_sr"], f"{where}.radiant_intensity_w_sr")
-        elif "luminous_intensity_cd" in t:
-            cd = _p(check_finite_positive, t["luminous_intensity_cd"], f"{where}.luminous_intensity_cd")
+        if t.radiant_intensity_w_sr is not None:
+            ie = _p(check_finite_positive, t.radiant_intensity_w_sr, f"{where}.radiant_intensity_w_sr")
+        elif t.luminous_intensity_cd is not None:
+            cd = _p(check_finite_positive, t.luminous_intensity_cd, f"{where}.luminous_intensity_cd")
             ie = cd / ph["luminous_efficacy_lm_per_w"] * ph["band_fraction"]
         else:
             raise ProfileError(f"{where} needs luminous_intensity_cd or radiant_intensity_w_sr")

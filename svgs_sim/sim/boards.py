@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from svgs_sim.base.errors import InputError, SimulationFailure
-from svgs_sim.base.profiles import Camera
+from svgs_sim.base.profiles import Camera, load_camera
 from svgs_sim.calibration.boards import Board
 from svgs_sim.calibration.synthetic import sample_board_poses
 from svgs_sim.render.boards import (
@@ -143,7 +143,7 @@ class BoardSet:
             t = np.array([v["t_cam_board_m"] for v in views], float)
         except (KeyError, TypeError, ValueError) as exc:
             raise InputError(f"{str(tp)!r}: not a board-set truth record ({exc})") from None
-        camera = Camera.load(d / "camera_true.toml")
+        camera = load_camera(d / "camera_true.toml")
         images = [load_image(d / n) for n in names]
         return cls(images, names, camera, board, R, t, truth)
 
@@ -197,7 +197,7 @@ def render_board_set(camera, board, n_views: int, *, seed: int = 0, spp: int = D
     """
     from svgs_sim.camera.phone import PhoneCamera
 
-    cam = Camera.load(camera)
+    cam = load_camera(camera)
     try:
         n = int(n_views)
     except (TypeError, ValueError):

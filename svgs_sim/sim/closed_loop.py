@@ -37,12 +37,6 @@ from svgs_sim.svgs.frames import pose_from_scenario, pose_to_state, state_dict
 from svgs_sim.svgs.pipeline import solve_image
 
 
-def _camera_key(camera: Camera) -> tuple:
-    """A camera by content (hashable): its geometry and tables."""
-    return (camera.name, camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy,
-            tuple(np.asarray(camera.dist, float).tolist()), repr(camera.tables))
-
-
 @dataclass(frozen=True, eq=False)
 class Scenario(TargetPose):
     """One simulated situation (what a test stand would set up).
@@ -229,10 +223,7 @@ class Scenario(TargetPose):
     def _true_lens(self) -> Camera:
         cam = self.camera
         if self.camera_overrides:
-            tables = {k: (dict(v) if isinstance(v, dict) else v) for k, v in cam.tables.items()}
-            for table, key, value in self.camera_overrides:
-                tables.setdefault(table, {})[key] = value
-            cam = cam.replace(tables=tables)
+            cam = cam.with_values(self.camera_overrides)
         du, dv = self.lens_pp_offset_px
         if du == 0 and dv == 0 and self.lens_k1 == 0:
             return cam
@@ -248,9 +239,8 @@ class Scenario(TargetPose):
     def _key(self) -> tuple:
         """What the scenario is (its fields, the profiles by content) for ``==`` and ``hash``."""
         d = self.to_json()
-        d["camera"] = _camera_key(self.camera)
-        d["pattern"] = (self.pattern.name, self.pattern.ids.tolist(), self.pattern.points_m.tolist(),
-                        repr(self.pattern.tables))
+        d["camera"] = self.camera.fingerprint()
+        d["pattern"] = self.pattern.fingerprint()
         return tuple((k, repr(v)) for k, v in d.items() if k not in ("camera_source", "pattern_source"))
 
     def __eq__(self, other):
@@ -421,7 +411,7 @@ def lab_photon_factor(camera: Camera) -> np.ndarray:
     :func:`svgs_sim.render.optics.radiance_to_photon_rate`, which varies smoothly, on a 16-px grid
     interpolated to every pixel. Read-only; the same array for the same camera (cached by the
     profile's content), so that the camera model can keep its optical image between frames."""
-    key = _camera_key(camera)
+    key = camera.fingerprint()
     hit = _LAB_FACTORS.get(key)
     if hit is None:
         if len(_LAB_FACTORS) >= 8:

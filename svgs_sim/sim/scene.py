@@ -118,14 +118,14 @@ class Scene:
     """
 
     backdrop_distance_m: float | None = quantity(
-        LAB["backdrop_distance_m"], unit="m", meaning="grey backdrop behind the target",
+        LAB.backdrop_distance_m, unit="m", meaning="grey backdrop behind the target",
         lower=0.0, upper=INPUT_BOUNDS["backdrop_m"][1], lower_open=True, none_means="none", row_none=0.0,
         flag="--backdrop-m", help="distance of a grey backdrop behind the target (m; default 3; 0 = none)")
     backdrop_reflectance: float = quantity(
-        LAB["backdrop_reflectance"], unit="1", meaning="the backdrop's Lambertian reflectance", lower=0.0, upper=1.0,
+        LAB.backdrop_reflectance, unit="1", meaning="the backdrop's Lambertian reflectance", lower=0.0, upper=1.0,
         trial=False)
     ambient_radiance_w_m2_sr: float = quantity(
-        LAB["ambient_radiance_w_m2_sr"], unit="W m^-2 sr^-1",
+        LAB.ambient_radiance_w_m2_sr, unit="W m^-2 sr^-1",
         meaning="uniform ambient scene radiance from room lights, in band (default: the lab's, svgs_sim.sim.lab)",
         lower=0.0, upper=INPUT_BOUNDS["ambient"][1], flag="--ambient",
         help="ambient scene radiance from room lights, W m^-2 sr^-1 in band (default: the lab's, 0.028, fitted in "

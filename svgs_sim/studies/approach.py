@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from svgs_sim.base.errors import InputError
-from svgs_sim.base.profiles import Camera, Pattern
+from svgs_sim.base.profiles import load_camera, load_pattern
 from svgs_sim.sim import hard_stop
 from svgs_sim.sim.approach import MEASUREMENT_COLUMNS, TIMING_KEYS, ApproachSensor, Trajectory, check_visible
 from svgs_sim.studies.diagnosis import FAR_ABOVE_BOUND, bound_ratios, cause_text, far_above, glint_targets_of_state
@@ -74,7 +74,7 @@ def sensor_camera(cfg: dict):
         from svgs_sim.camera.phone.preview import binned_camera
 
         return binned_camera(cfg["camera"])
-    return Camera.load(cfg["camera"])
+    return load_camera(cfg["camera"])
 
 
 def trajectory_of(cfg: dict) -> Trajectory:
@@ -149,7 +149,7 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
     out = Path(out_dir)
     ids = range(len(times))
     store = ResultStore(out, cfg, ("trial_id",) + MEASUREMENT_COLUMNS, trial_ids=ids, text_columns=TEXT_COLUMNS)
-    pattern = Pattern.load(cfg["pattern"])
+    pattern = load_pattern(cfg["pattern"])
     t_start = time.perf_counter()
     n_new = 0
     with store.open():

@@ -60,7 +60,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from svgs_sim.base.profiles import Camera
+from svgs_sim.base.profiles import load_camera
 from svgs_sim.sim.trials import GEOMETRIC, build_scenario, get_trial_kind
 from svgs_sim.svgs.frames import STATE_KEYS
 
@@ -151,7 +151,7 @@ def applicable_variants(camera, lab_errors: dict | None = None) -> tuple:
     on in ``lab_errors`` (:attr:`svgs_sim.studies.campaign.CampaignConfig.lab_errors`; None: none on)."""
     from svgs_sim.camera.phone.params import PhoneParams
 
-    params = PhoneParams.from_camera(Camera.load(camera))
+    params = PhoneParams.from_camera(load_camera(camera))
     lab = lab_errors or {}
     return tuple(v for v in VARIANTS if (v.applies is None or v.applies(params))
                  and (not v.lab or any(float(lab.get(k, 0.0)) > 0 for k in v.lab)))
@@ -170,7 +170,7 @@ def variant_trials(baseline: list, config) -> list:
     keep = {v.name for v in applicable_variants(config.camera, config.lab_errors)}
     from svgs_sim.camera.phone.params import PhoneParams
 
-    on = image_path_on(PhoneParams.from_camera(Camera.load(config.camera)))
+    on = image_path_on(PhoneParams.from_camera(load_camera(config.camera)))
     out = []
     for v, var in enumerate(VARIANTS):
         if var.name not in keep:

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from svgs_sim.base.errors import InputError
-from svgs_sim.base.profiles import Camera
+from svgs_sim.base.profiles import load_camera
 from svgs_sim.sim.metrics import POS_ERR_NORM_M, ROT_ERR_DEG
 from svgs_sim.sim.render_trial import render_trial_scenario
 
@@ -119,8 +119,8 @@ def make_config(camera: str, ranges_m, remedies=None, *, trials: int = 5, seed: 
 
 def _base_iso(camera: str) -> float:
 
-    cam = Camera.load(camera)
-    return float((cam.tables.get("sensor") or {}).get("base_iso", 100.0))
+    cam = load_camera(camera)
+    return float(cam.sensor.given("base_iso", 100.0))
 
 
 def exposure_study_trials(cfg: ExposureStudyConfig) -> list:

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from svgs_sim.base.errors import InputError
-from svgs_sim.base.profiles import Camera
+from svgs_sim.base.profiles import load_camera
 from svgs_sim.sim.render_trial import RENDER, render_trial_scenario
 from svgs_sim.svgs.app import settings
 
@@ -135,7 +135,7 @@ def make_config(camera: str, *, ranges_m=None, vary=None, exposures: int = 2, se
         if name == "threshold" and not rng:  # around this camera's app setting, within its plausible range
 
             app = settings()
-            t = app.threshold_for(Camera.load(camera).key)
+            t = app.threshold_for(load_camera(camera).key)
             lo, hi = max(app.threshold_range_dn[0], 0.85 * t), min(app.threshold_range_dn[1], 1.25 * t)
         if rng:
             try:

@@ -15,12 +15,11 @@ Consistency
 
 from __future__ import annotations
 
-import functools
 import math
-import tomllib
 from dataclasses import dataclass
 
-from ..base.errors import InputError, check_finite_positive
+from ..base.errors import InputError, ProfileError, check_finite_positive
+from ..base.profiles import cached, read_toml
 from ..assets import ASSETS_DIR
 
 #: The app's settings file.
@@ -69,18 +68,22 @@ class AppSettings:
         return f"by_camera[{camera_key}]" if camera_key in self.threshold_by_camera else "default"
 
 
-@functools.lru_cache(maxsize=None)
 def settings() -> AppSettings:
-    """The app's settings from :data:`APP_FILE` (read once).
+    """The app's settings from :data:`APP_FILE` (read once: the profiles' cache,
+    :func:`svgs_sim.base.profiles.cached`).
 
     Raises
     ------
     InputError
         The file is missing or a value is out of range.
     """
+    return cached("app", (str(APP_FILE),), (APP_FILE,), _read_settings)
+
+
+def _read_settings() -> AppSettings:
     try:
-        d = tomllib.loads(APP_FILE.read_text())
-    except (OSError, tomllib.TOMLDecodeError) as exc:
+        d = read_toml(APP_FILE, "app settings")
+    except ProfileError as exc:
         raise InputError(f"app settings {APP_FILE.name}: cannot be read ({exc})") from None
     th, ce, co = d.get("threshold", {}), d.get("centroid", {}), d.get("consistency", {})
     try:

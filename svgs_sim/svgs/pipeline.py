@@ -267,8 +267,7 @@ def detector_settings(camera, threshold=None) -> dict:
     """
 
     key = camera_key(camera)
-    fitted = load_camera(camera).tables.get("fitted") or {}
-    overlays = sorted({e.get("overlay") for e in fitted.values() if isinstance(e, dict) and e.get("overlay")})
+    overlays = sorted({f.overlay for f in load_camera(camera).fitted if f.overlay})
     if threshold is None or (isinstance(threshold, str) and threshold == "app"):
         level, source = settings().threshold_for(key), f"app {settings().threshold_source(key)}"
     else:
@@ -301,8 +300,7 @@ def camera_key(camera) -> str | None:
     cam = load_camera(camera)
     if cam.key is not None:
         return cam.key
-    preview = cam.tables.get("preview")
-    return None if not isinstance(preview, dict) else preview.get("of")
+    return cam.preview_of
 
 
 def solve_image(

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..base.errors import InputError
 from .frames import D_CAM_PHOTO, STATE_KEYS, pose_to_state, rotation_from_angles, state_to_pose
-from ..base.profiles import Camera, Pattern
+from ..base.profiles import Camera, Pattern, load_camera, load_pattern
 from .result import Failure, Solved
 
 #: Default convergence tolerance on the state step: metres for position, radians for angles.
@@ -354,8 +354,8 @@ def solve_centroids(
     BatchSolution
         For ``N`` frames.
     """
-    camera = Camera.load(camera)
-    pattern = Pattern.load(pattern)
+    camera = load_camera(camera)
+    pattern = load_pattern(pattern)
     if not (np.isfinite(sigma_px) and sigma_px > 0):
         raise InputError(f"sigma_px: expected a positive centroid noise in px, got {sigma_px!r}")
     pts, single = _check_points(points_px, pattern)

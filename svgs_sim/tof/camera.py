@@ -14,15 +14,14 @@ Depth convention
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from svgs_sim.base.errors import InputError, ProfileError
 from svgs_sim.base.profile_schema import DEPTH_KINDS, TARGET_KEYS, TOF_CAMERA_TABLES
-from svgs_sim.base.profiles import Camera, Pattern
+from svgs_sim.base.profiles import Camera, Pattern, load_pattern
+from svgs_sim.base.profiles import load_camera as load_profile
 
 #: Default ToF camera profile (``assets/cameras/tof-epc660.toml``).
 DEFAULT_CAMERA = "tof-epc660"
@@ -58,13 +57,13 @@ def load_camera(name_or_path=DEFAULT_CAMERA, *, render: bool = False) -> Camera:
         a ``[flash]``/``[cfa]``... table: an SVGS camera, not a ToF one), or ``render=True`` and
         a table missing.
     """
-    cam = Camera.load(name_or_path)
-    phone = [t for t in PHONE_TABLES if t in cam.tables]
+    cam = load_profile(name_or_path)
+    phone = [t for t in PHONE_TABLES if cam.has(t)]
     if phone:
         raise ProfileError(f"camera {cam.name!r} is a phone (SVGS) profile (it has [{phone[0]}]), not a ToF camera; "
                            f"ToF commands need a ToF profile such as {DEFAULT_CAMERA!r}")
     if render:
-        missing = [t for t in RENDER_TABLES if not isinstance(cam.tables.get(t), dict)]
+        missing = [t for t in RENDER_TABLES if not cam.has(t)]
         if missing:
             raise ProfileError(f"camera {cam.name!r}: rendering the ToF camera needs the table(s) "
                                f"{['[' + m + ']' for m in missing]} (see {DEFAULT_CAMERA!r})")
@@ -75,8 +74,7 @@ def depth_kind(camera: Camera) -> str:
     """What the camera's depth image holds: ``"radial"`` (default) or ``"z"``
     (:data:`svgs_sim.base.profile_schema.DEPTH_KINDS`; checked by the profile's entry, for cameras
     built in code: a loaded profile passed the check already)."""
-    t = camera.tables.get("tof", {})
-    kind = t.get("depth_kind", "radial") if isinstance(t, dict) else "radial"
+    kind = camera.tof.given("depth_kind", "radial")
     try:
         return TOF_CAMERA_TABLES["tof"]["depth_kind"].check(kind, f"camera {camera.name!r}: [tof] depth_kind")
     except InputError as exc:
@@ -186,35 +184,25 @@ def load_target(name_or_path=DEFAULT_PATTERN) -> MarkerTarget:
     """
     if isinstance(name_or_path, MarkerTarget):
         return name_or_path
-    pattern = Pattern.load(name_or_path)
-    raw = {}
-    if pattern.source and Path(pattern.source).is_file():
-        with open(pattern.source, "rb") as fh:
-            raw = tomllib.load(fh)
-    by_id = {int(t["id"]): t for t in raw.get("target", []) if isinstance(t, dict) and "id" in t}
-    default_d = None
-    for tab in ("marker", "reflector"):
-        t = pattern.tables.get(tab)
-        if isinstance(t, dict) and "diameter_m" in t:
-            default_d = t["diameter_m"]
-            break
+    pattern = load_pattern(name_or_path)
+    default_d = pattern.marker.diameter_m
+    if default_d is None:
+        default_d = pattern.reflector.diameter_m
     diam, stand = [], []
-    for tid, p in zip(pattern.ids, pattern.points_m):
-        t = by_id.get(int(tid), {})
-        d = t.get("diameter_m", default_d)
+    for spec in pattern.targets:
+        tid = spec.id
+        d = default_d if spec.diameter_m is None else spec.diameter_m
         if d is None:
             raise ProfileError(f"pattern {pattern.name!r}: target {tid} has no diameter_m (and no [marker] diameter_m)")
         try:  # a loaded file passed this check already; a pattern built in code may not have
             diam.append(TARGET_KEYS["diameter_m"].check(d, f"pattern {pattern.name!r}: target {tid} diameter_m"))
         except InputError as exc:
             raise ProfileError(str(exc)) from None
-        stand.append(float(t.get("standoff_m", p[2])))
-    plate = pattern.tables.get("plate", {})
-    marker = pattern.tables.get("marker", {})
+        stand.append(float(spec.z_m if spec.standoff_m is None else spec.standoff_m))
     return MarkerTarget(
         pattern=pattern,
         diameter_m=np.asarray(diam),
         standoff_m=np.asarray(stand),
-        plate=plate if isinstance(plate, dict) else {},
-        marker=marker if isinstance(marker, dict) else {},
+        plate=pattern.plate.to_dict(),
+        marker=pattern.marker.to_dict(),
     )

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from svgs_sim.base.errors import InputError
-from svgs_sim.base.profiles import Camera
+from svgs_sim.base.profiles import Camera, load_camera
 from svgs_sim.camera.backend import get_backend
 from svgs_sim.camera.phone.cfa import channel_map, linear_bgr, luminance, response_map, tone_bgr, tone_image
 from svgs_sim.camera.phone.isp import (
@@ -123,7 +123,7 @@ class PhoneCamera:
     def __init__(self, camera, params: PhoneParams | None = None, *, point_method: str = "grid", backend=None):
 
 
-        self.camera = Camera.load(camera)
+        self.camera = load_camera(camera)
         self.params = params if params is not None else PhoneParams.from_camera(self.camera)
         if point_method not in POINT_METHODS:
             raise InputError(f"point_method: expected one of {POINT_METHODS}, got {point_method!r}")

@@ -263,16 +263,14 @@ class PhoneParams:
     @classmethod
     def from_camera(cls, camera) -> "PhoneParams":
         """Read the tables of a :class:`svgs_sim.svgs.Camera` (missing tables take the defaults)."""
-        tabs = camera.tables
-        optics = check_table("optics", tabs.get("optics"))
-        f_number = optics.get("f_number", 2.4)
-        band = optics.get("band_nm", (400.0, 700.0))
+        f_number = camera.optics.given("f_number", 2.4)
+        band = camera.optics.given("band_nm", (400.0, 700.0))
         return cls(
-            sensor=SensorParams.from_table(tabs.get("sensor")),
-            glare=GlareParams.from_table(tabs.get("glare")),
-            exposure=ExposureParams.from_table(tabs.get("exposure")),
-            isp=IspParams.from_table(tabs.get("isp")),
-            cfa=CfaParams.from_table(tabs.get("cfa")),
+            sensor=SensorParams.from_table(camera.sensor.to_dict()),
+            glare=GlareParams.from_table(camera.glare.to_dict()),
+            exposure=ExposureParams.from_table(camera.exposure.to_dict()),
+            isp=IspParams.from_table(camera.isp.to_dict()),
+            cfa=CfaParams.from_table(camera.cfa.to_dict()),
             f_number=f_number,
             band_nm=band,
         )

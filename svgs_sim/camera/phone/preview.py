@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 
 from svgs_sim.base.errors import InputError
-from svgs_sim.base.profiles import Camera
+from svgs_sim.base.profiles import Camera, load_camera
 from svgs_sim.camera.phone.params import SensorParams
 
 #: The Galaxy Nexus' preview size (``shared/notes/physics.md`` section 4); the HTC Amaze 4G's was
@@ -50,7 +50,7 @@ def binned_camera(camera, width: int = DEFAULT_PREVIEW_SIZE[0], height: int = DE
     svgs.Camera
         Named ``<name>-preview-<width>x<height>``.
     """
-    cam = Camera.load(camera)
+    cam = load_camera(camera)
     width, height = int(width), int(height)
     if width < 16 or height < 16 or width > cam.width or height > cam.height:
         raise InputError(f"preview size: expected 16 px up to the picture's {cam.width} x {cam.height}, "
@@ -59,9 +59,7 @@ def binned_camera(camera, width: int = DEFAULT_PREVIEW_SIZE[0], height: int = DE
     if abs(cam.height / height - s) > 0.01 * s:
         raise InputError(f"preview size: {width} x {height} does not keep the picture's aspect ratio "
                          f"({cam.width} x {cam.height})")
-    tables = {k: (dict(v) if isinstance(v, dict) else v) for k, v in cam.tables.items()}
-    sensor = tables.setdefault("sensor", {})
-
+    sensor = cam.sensor.to_dict()
     d = SensorParams()
     get = lambda k: float(sensor.get(k, getattr(d, k)))  # noqa: E731
     sensor["pixel_pitch_m"] = get("pixel_pitch_m") * s
@@ -70,23 +68,24 @@ def binned_camera(camera, width: int = DEFAULT_PREVIEW_SIZE[0], height: int = DE
     sensor["read_noise_e"] = get("read_noise_e") * s
     sensor["dsnu_e"] = get("dsnu_e") * s
     sensor["prnu"] = get("prnu") / s
-    glare = tables.get("glare")
-    if isinstance(glare, dict):
+    changed = {"sensor": sensor}
+    if cam.has("glare"):
+        glare = changed["glare"] = cam.glare.to_dict()
         for k in ("aberration_sigma_px", "wing_core_px", "wing_radius_px"):
             if k in glare:
                 glare[k] = float(glare[k]) / s
         if "ghosts" in glare:
             glare["ghosts"] = [[g[0], g[1], float(g[2]) / s] for g in glare["ghosts"]]
-    isp = tables.get("isp")
-    if isinstance(isp, dict):
+    if cam.has("isp"):
+        isp = changed["isp"] = cam.isp.to_dict()
         if isp.get("output_width"):
             isp["output_width"], isp["output_height"] = 0, 0  # the preview is delivered at its own size
         # a preview frame is the ISP's YCbCr 4:2:0 (yuv420sp on OMAP4 and MSM8660), not a JPEG: the
         # app reads its Y plane (the luma of the toned colour image), so no JPEG round trip
         isp["jpeg_quality"] = 0
     # the phone whose stream this is: the app's settings for that phone apply to it
-    tables["preview"] = {"of": cam.name, "binning": int(s)}
-    out = cam.scaled(width, height).replace(name=f"{cam.name}-preview-{width}x{height}", tables=tables)
+    changed["preview"] = {"of": cam.name, "binning": int(s)}
+    out = cam.scaled(width, height).replace(name=f"{cam.name}-preview-{width}x{height}").with_tables(**changed)
     if not math.isfinite(out.fx) or out.fx <= 0:
         raise InputError(f"preview size: {width} x {height} gives no usable focal length")
     return out

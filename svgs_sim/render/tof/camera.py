@@ -142,7 +142,7 @@ class Illumination:
     @classmethod
     def from_camera(cls, camera, **overrides) -> "Illumination":
         """From the profile's ``[illumination]`` table (missing keys: class defaults)."""
-        t = dict(camera.tables.get("illumination") or {})
+        t = camera.illumination.to_dict()
         names = set(cls.__dataclass_fields__)
         kw = {k: v for k, v in t.items() if k in names}
         for k, v in overrides.items():
@@ -214,8 +214,8 @@ class TofOptics:
     def from_camera(cls, camera) -> "TofOptics":
         """The lens of ``[optics]`` and the wavelength of ``[tof]`` (missing keys: class defaults),
         checked by the profile's own entries (:mod:`svgs_sim.base.profile_schema`)."""
-        o = dict(camera.tables.get("optics") or {})
-        t = dict(camera.tables.get("tof") or {})
+        o = camera.optics.to_dict()
+        t = camera.tof.to_dict()
         try:
             lens = check_table("optics", {k: o[k] for k in ("focal_length_m", "f_number", "focus_distance_m") if k in o})
             light = check_table("tof", {k: t[k] for k in ("wavelength_m",) if k in t})
@@ -329,7 +329,7 @@ class TofRenderer:
         self.illumination = Illumination.from_camera(self.camera, **(illumination or {}))
         f = modulation_frequency_hz
         if f is None:
-            f = (self.camera.tables.get("tof") or {}).get("modulation_frequency_hz", 10.0e6)
+            f = self.camera.tof.given("modulation_frequency_hz", 10.0e6)
         self.modulation_frequency_hz = MODULATION_FREQUENCY_HZ.check(f, "modulation_frequency_hz")
         self.spp = check_spp(DEFAULT_SPP if spp is None else spp, "spp", base=2)
         self.rim_spp_factor = check_spp(DEFAULT_RIM_SPP_FACTOR if rim_spp_factor is None else rim_spp_factor,

@@ -44,7 +44,6 @@ Sampling
 from __future__ import annotations
 
 import functools
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,6 +51,7 @@ import numpy as np
 
 from svgs_sim.assets import ASSETS_DIR
 from svgs_sim.base.errors import InputError, ProfileError
+from svgs_sim.base.profiles import cached, read_toml
 
 SHEETING_FILE = ASSETS_DIR / "materials" / "retroreflective-sheeting.toml"
 #: Name of the Mitsuba plugin registered by :func:`register_bsdf`.
@@ -129,14 +129,13 @@ def _ra(alpha_deg, beta_deg, tab: SheetingTable, where, log, exp):
     return r * where(fall > 0.0, fall, 0.0 * fall)
 
 
-@functools.lru_cache(maxsize=None)
 def _tables(path: str) -> dict:
-    p = Path(path)
-    try:
-        with open(p, "rb") as fh:
-            raw = tomllib.load(fh)
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise ProfileError(f"sheeting table {p}: {exc}") from None
+    """The sheeting tables of the file ``path`` by name (read once: the profiles' cache)."""
+    return cached("sheeting", (str(path),), (Path(path),), lambda: _read_tables(Path(path)))
+
+
+def _read_tables(p: Path) -> dict:
+    raw = read_toml(p, "sheeting table")
     out = {}
     for i, t in enumerate(raw.get("sheeting", [])):
         where = f"{p.name} [[sheeting]] {i} ({t.get('name', '?')})"

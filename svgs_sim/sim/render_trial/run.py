@@ -15,6 +15,7 @@ from collections import OrderedDict
 import numpy as np
 
 from svgs_sim.camera.rendered import PointFlux
+from svgs_sim.render.optics import Optics
 from svgs_sim.render.variant import select_variant
 from svgs_sim.sim.closed_loop import render_scenario, solve_exposure, solver_camera
 from svgs_sim.sim.crlb import centroid_crlb_px, pose_crlb
@@ -160,8 +161,7 @@ def turbulent_points(frame, cn2_m23: float, seed: int):
     R, t = frame.scenario.pose()
     pat = frame.pattern
     p_cam = pat.points_m @ R.T + t
-    optics = cam.tables.get("optics") or {}
-    aperture_m = float(optics["focal_length_m"]) / float(optics["f_number"])
+    aperture_m = 2.0 * Optics.from_camera(cam).aperture_radius_m  # the entrance pupil's diameter
     rng = np.random.default_rng([int(seed), 0x7475726E])  # "turn": the air's own stream
     shifts = image_shifts_px(p_cam, cam.fx, aperture_m, float(cn2_m23), rng)
     uv = cam.project_target(pat.points_m, R, t)

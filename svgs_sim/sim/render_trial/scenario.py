@@ -353,6 +353,6 @@ def camera_overrides(camera: str, f_number: float | None, led_offset_scale: floa
         out.append(("optics", "f_number", float(f_number)))
     if led_offset_scale != 1.0:
 
-        leds = (load_camera(camera).tables.get("flash") or {}).get("led_offsets_m") or []
+        leds = load_camera(camera).flash.led_offsets_m or ()
         out.append(("flash", "led_offsets_m", [[float(x) * led_offset_scale for x in led] for led in leds]))
     return tuple((t, k, tuple(map(tuple, v)) if isinstance(v, list) else v) for t, k, v in out)

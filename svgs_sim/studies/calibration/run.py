@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from svgs_sim.base.errors import InputError, SimulationFailure, check_finite_positive
-from svgs_sim.base.profiles import DISTORTION_KEYS, Camera, Pattern
+from svgs_sim.base.profiles import Camera, DISTORTION_KEYS, Pattern, load_camera, load_pattern
 from svgs_sim.calibration import Board, synthesize_views
 from svgs_sim.calibration.synthetic import sample_board_poses
 from svgs_sim.sim.boards import BoardSet, render_board_set
@@ -147,7 +147,7 @@ def _pattern_ref(pattern, loaded: Pattern) -> str:
     if isinstance(pattern, (str, Path)):
         return str(pattern)
     try:
-        Pattern.load(loaded.name)
+        load_pattern(loaded.name)
         return loaded.name
     except InputError:
         from .trials import input_path
@@ -162,8 +162,8 @@ def _setup(camera, *, views_list=DEFAULT_VIEWS_LIST, seed=0, board=None, subsets
            poses_per_range=DEFAULT_POSES_PER_RANGE, floor_noise_px=DEFAULT_FLOOR_NOISE_PX, pattern="svgs-3u") -> _Setup:
     """Load and check the parameters (:class:`InputError` before any work); the defaults are
     :func:`run_calibration_study`'s."""
-    nominal = Camera.load(camera)
-    pat = Pattern.load(pattern)
+    nominal = load_camera(camera)
+    pat = load_pattern(pattern)
     board = board or Board(*DEFAULT_BOARD)
     cam_true = true_camera(nominal, true_pp_offset_px, true_dist)
     vl = tuple(sorted({int(v) for v in views_list}))

@@ -31,7 +31,7 @@ import os
 
 import numpy as np
 
-from svgs_sim.base.profiles import Pattern
+from svgs_sim.base.profiles import load_pattern
 from svgs_sim.sim.trials import TrialKind, geometric_warm_up, register_trial_kind
 
 from .common import CAMERA_FIELDS, camera_columns, camera_from_columns
@@ -64,7 +64,7 @@ def _frames(stamp: tuple) -> FocalFrames:
 @functools.lru_cache(maxsize=8)
 def _pattern(name: str):
 
-    return Pattern.load(name)
+    return load_pattern(name)
 
 
 def indices_text(idx) -> str:

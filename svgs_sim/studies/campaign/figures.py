@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from svgs_sim.base.profiles import Pattern
+from svgs_sim.base.profiles import load_pattern
 from svgs_sim.sim.closed_loop import solve_exposure, solver_camera
 from svgs_sim.sim.render_trial import rendered_frame
 from svgs_sim.sim.trials import camera_with_calibration_errors
@@ -85,7 +85,7 @@ def sample_image_figure(config: CampaignConfig, trials: list, table: dict):
     from matplotlib.figure import Figure
 
 
-    pat = Pattern.load(config.pattern)
+    pat = load_pattern(config.pattern)
     firsts = {}
     for t in trials:
         sc = t.scenario

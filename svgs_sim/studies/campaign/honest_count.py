@@ -4,7 +4,6 @@ under each reading of the paper's mean error."""
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -12,8 +11,8 @@ import numpy as np
 
 from svgs_sim.assets import ASSETS_DIR, package_relative
 from svgs_sim.assets.papers import svgs_2014_results
-from svgs_sim.base.profiles import apply_fitted, fitted_overlay_path, load_camera, read_fitted_overlay
-from svgs_sim.sim.lab import DEFAULT_LAB
+from svgs_sim.base.profiles import fitted_overlay_path, load_camera, read_toml
+from svgs_sim.sim.lab import DEFAULT_LAB, load_lab
 
 from ..error_budget import HEADLINE_READING, HEADLINE_REASON, MEAN_READINGS, READING_MEANINGS, cell_verdicts
 from .design import SHORT, CampaignConfig
@@ -172,17 +171,17 @@ def fitted_values_table(config: CampaignConfig, table: dict | None = None) -> li
     cam = load_camera(config.camera)
     phone = cam.key
     rows = []
-    for key, entry in (cam.tables.get("fitted") or {}).items():
+    for fit in cam.fitted:
+        key, entry = fit.key, fit.entry()
         use = _fit_use(key, phone)
         if use is not None:
             rows.append(_fit_row(key, entry, f"assets/cameras/{entry.get('overlay', 'fitted/' + phone + '.toml')}", use,
                                  config, phone, "fitted"))
-    lab_path = ASSETS_DIR / "labs" / f"{DEFAULT_LAB}.toml"
-    overlay = fitted_overlay_path(lab_path)
+    lab = load_lab(DEFAULT_LAB)
+    overlay = fitted_overlay_path(lab.source)
     if overlay is not None:
-        base = tomllib.loads(lab_path.read_text())
-        record = apply_fitted(base, read_fitted_overlay(overlay, base))["fitted"]
-        for key, entry in record.items():
+        for fit in lab.fitted:
+            key, entry = fit.key, fit.entry()
             use = _fit_use(key, phone)
             if use is None:
                 continue
@@ -193,7 +192,7 @@ def fitted_values_table(config: CampaignConfig, table: dict | None = None) -> li
                 inc = ", ".join(f"{v:g}" for v in vals) if vals.size else None
             rows.append(_fit_row(key, entry, package_relative(overlay), use, config, phone, "fitted", inc))
     if APP_SETTINGS_FILE.is_file():
-        th = tomllib.loads(APP_SETTINGS_FILE.read_text()).get("threshold") or {}
+        th = read_toml(APP_SETTINGS_FILE, "app settings").get("threshold") or {}
         by = th.get("by_camera") or {}
         if phone in by or "default_dn" in th:
             use = FIT_USES["threshold.by_camera"]
