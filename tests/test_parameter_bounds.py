@@ -29,20 +29,25 @@ def _parameters(kinds=None):
 
 def test_every_parameter_of_every_kind_has_both_bounds():
     assert {"geometric", "render", "tof"} <= set(known_trial_kinds())
-    unbounded = [f"{k}.{p.name}" for k, p in _parameters() if p.lower is None or p.upper is None]
+    unbounded = [f"{k}.{p.name}" for k, p in _parameters()
+                 if (p.lower is None or p.upper is None) and not p.choice_only]
     assert not unbounded, unbounded
     for k, p in _parameters():
+        assert p.check(p.default) == p.default, (k, p.name)  # the default lies inside (or is a code)
+        if p.choice_only:  # a choice (the demosaic): its words only, never varied
+            assert [p.check(c.word) for c in p.codes] == [c.value for c in p.codes]
+            continue
         assert math.isfinite(p.lower) and math.isfinite(p.upper) and p.lower < p.upper, (k, p)
-        assert p.check(p.default) == p.default, (k, p.name)  # the default lies inside
 
 
 def test_a_parameter_takes_the_cli_bounds_of_its_quantity():
     for k, p in _parameters():
         key = SAME_QUANTITY.get(p.name, p.name)
-        if key in INPUT_BOUNDS and key != "iso":  # iso: 0 is the phone's automatic ISO (below)
+        if key in INPUT_BOUNDS:
             assert (p.lower, p.upper) == INPUT_BOUNDS[key][:2], (k, p.name)
     render = get_trial_kind("render").parameters
-    assert (render["iso"].lower, render["iso"].upper) == (0.0, INPUT_BOUNDS["iso"][1])
+    # 0 is the phone's automatic ISO: a code, written 'phone', not a quantity
+    assert render["iso"].word(0.0) == "phone" and render["iso"].check("phone") == 0.0
     assert render["spp"].upper == render["roi_spp"].upper == MAX_SPP == INT_BOUNDS["spp"][1]
     assert render["render_seed"].upper == MAX_SEED == INT_BOUNDS["seed"][1]
     tof = get_trial_kind("tof").parameters
@@ -91,7 +96,9 @@ def warm(tmp_path_factory):
 def test_an_absurd_vary_high_is_refused_before_any_work(kind, name, warm, tmp_path, capsys):
     p = get_trial_kind(kind).parameters[name]
     out = tmp_path / "out"
-    argv = ["sensitivity", "--camera", "galaxy-nexus", "--trial-kind", kind, "--vary", f"{name}={p.default!r}:1e308",
+    coded = any(p.default == c.value for c in p.codes)
+    low = p.default if not coded or p.choice_only else (p.lower if not p.lower_open else p.lower + 0.5 * (p.upper - p.lower))
+    argv = ["sensitivity", "--camera", "galaxy-nexus", "--trial-kind", kind, "--vary", f"{name}={low!r}:1e308",
             "--vary", _other(name), "--out", str(out)]
     t0 = time.perf_counter()
     rc = main(argv)
@@ -99,9 +106,29 @@ def test_an_absurd_vary_high_is_refused_before_any_work(kind, name, warm, tmp_pa
     cap = capsys.readouterr()
     lines = [ln for ln in cap.err.splitlines() if ln.strip()]
     assert rc == 2 and len(lines) == 1 and cap.out == "", cap.err
+    if p.choice_only:  # a choice is held fixed, never varied: its LOW is refused already
+        assert f"--vary {name} LOW" in lines[0] and "a choice, not a quantity" in lines[0], lines[0]
+        assert elapsed_s < 1.0 and not out.exists()
+        return
     assert f"--vary {name} HIGH" in lines[0] and "Traceback" not in cap.err, lines[0]
     if name == "range_m":  # the camera's envelope (svgs_sim.svgs.envelope.range_envelope_m)
         assert "allowed" in lines[0] and " m)" in lines[0], lines[0]
     else:
-        assert p.domain() in lines[0], lines[0]
+        assert p.domain(codes=False) in lines[0], lines[0]
     assert elapsed_s < 1.0 and not out.exists()
+
+
+def test_a_code_is_written_and_shown_as_its_word_never_as_its_number(tmp_path, capsys):
+    """'profile', 'renderer', 'phone', 'app'...: the store's -1 / 0 never reach the user."""
+    render = get_trial_kind("render").parameters
+    assert render["f_number"].check("profile") == -1.0 and render["f_number"].word(-1.0) == "profile"
+    assert render["threshold"].check("otsu") == -1.0 and render["spp"].check("renderer") == -1.0
+    msg = render["f_number"].domain()
+    assert msg == "1 to 16, or 'profile' (the profile's [optics] f_number)" and "-1" not in msg
+    with pytest.raises(InputError, match=r"f_number: expected 1 to 16, or 'profile'"):
+        render["f_number"].check(0.2)  # once accepted: inside the sentinel's old range -1..16
+    out = tmp_path / "out"
+    rc = main(["sensitivity", "--camera", "galaxy-nexus", "--trial-kind", "render", "--vary", "range_m=5:10",
+               "--vary", "f_number=2:4", "--fixed", "jpeg_quality=profile", "--fixed", "threshold=app",
+               "--plan-only", "--out", str(out)])
+    assert rc == 0, capsys.readouterr().err

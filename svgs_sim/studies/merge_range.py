@@ -160,7 +160,7 @@ def merge_range_trials(config: MergeRangeConfig) -> list:
     for case, param, value in config.cases():
         for ri, r in enumerate(config.ranges_m):
             for e in range(config.exposures):
-                values = {"camera": config.camera, "pattern": config.pattern, "range_m": r, "stand": 1.0, **ATTITUDE_DEG}
+                values = {"camera": config.camera, "pattern": config.pattern, "rail_m": r, "mount": "stand", **ATTITUDE_DEG}
                 if param:
                     values[param] = value
                 scen = render_trial_scenario(labels={"case": case, "parameter": param or "nominal",

@@ -60,7 +60,7 @@ N_BOOTSTRAP = 499
 
 _NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _VARY = re.compile(rf"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*=\s*({_NUM})\s*:\s*({_NUM})\s*$")
-_FIXED = re.compile(rf"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*=\s*({_NUM})\s*$")
+_FIXED = re.compile(rf"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*=\s*({_NUM}|[A-Za-z_]+)\s*$")
 
 
 @dataclass(frozen=True)
@@ -115,7 +115,7 @@ def parse_vary(texts, kind: TrialKind, envelope=None) -> list[Varied]:
         for what, x in (("LOW", lo), ("HIGH", hi)):
             if envelope is not None:
                 envelope(name, x, f"--vary {name} {what}")
-            p.check(x, f"--vary {name} {what}")
+            p.check(x, f"--vary {name} {what}", codes=False)  # a range of quantities: no choice words
         out.append(Varied(name, lo, hi, p.unit, p.meaning, p.needs_render))
     if len(out) < 2:
         raise InputError("--vary: a sensitivity analysis needs at least two varied parameters")
@@ -130,7 +130,7 @@ def parse_fixed(texts, kind: TrialKind, varied, envelope=None) -> dict:
     for t in texts or ():
         m = _FIXED.match(str(t))
         if not m:
-            raise InputError(f"--fixed: expected PARAM=VALUE with a number, got {t!r}")
+            raise InputError(f"--fixed: expected PARAM=VALUE with a number or a word such as 'profile', got {t!r}")
         name, v = m.group(1), m.group(2)
         if name not in kind.parameters:
             raise InputError(f"--fixed: unknown parameter {name!r} for trial kind {kind.name!r}. Known: {_known(kind)}")
@@ -138,7 +138,7 @@ def parse_fixed(texts, kind: TrialKind, varied, envelope=None) -> dict:
             raise InputError(f"--fixed {name}: it is also varied")
         if name in out:
             raise InputError(f"--fixed: parameter {name!r} given twice")
-        if envelope is not None:
+        if envelope is not None and re.fullmatch(_NUM, v):
             envelope(name, float(v), f"--fixed {name}")
         out[name] = kind.parameters[name].check(v, f"--fixed {name}")
     return out
@@ -465,7 +465,10 @@ def write_sensitivity_report(out_dir, config: SensitivityConfig, table: dict, re
               [[v.name, v.low, v.high, v.unit, "before the render" if v.needs_render else "after the render", v.meaning]
                for v in config.varied], text_columns=["unit", "acts", "meaning"], digits=4)
     if config.fixed:
-        rep.table(["fixed parameter", "value"], sorted(config.fixed.items()), digits=4)
+        params = get_trial_kind(config.trial_kind).parameters  # a code shown as its word ('profile')
+        rep.table(["fixed parameter", "value"],
+                  [[k, params[k].word(v) if params[k].codes else v] for k, v in sorted(config.fixed.items())],
+                  text_columns=["value"] if any(params[k].codes for k in config.fixed) else (), digits=4)
     _report_ranking(rep, result, config)
     rep.heading("Indices")
     for k in analysed_outputs(config):

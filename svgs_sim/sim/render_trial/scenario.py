@@ -12,12 +12,12 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from svgs_sim.base.errors import InputError
-from svgs_sim.base.limits import INPUT_BOUNDS, MAX_SEED, MAX_SPP, bounds
+from svgs_sim.base.limits import MAX_SEED, MAX_SPP, bounds
 from svgs_sim.base.profiles import load_camera, load_pattern
 from svgs_sim.sim.closed_loop import Scenario
 from svgs_sim.sim.metrics import ERR_KEYS, POS_ERR_NORM_M, ROT_ERR_DEG
 from svgs_sim.sim.scene import Scene, scene_parameters
-from svgs_sim.sim.trials import GEOMETRIC_PARAMETERS, POSE_KEYS, TRUTH_KEYS, Parameter, PoseScenario
+from svgs_sim.sim.trials import GEOMETRIC_PARAMETERS, POSE_KEYS, TRUTH_KEYS, Code, Parameter, PoseScenario
 from svgs_sim.svgs.frames import STATE_KEYS
 
 _POSE = POSE_KEYS
@@ -28,14 +28,18 @@ _POSE = POSE_KEYS
 #: automatic rule.
 THRESHOLD_APP, THRESHOLD_OTSU, THRESHOLD_AUTO = 0.0, -1.0, -2.0
 
+#: The row codes of "not a quantity" values: written and shown as the words, held as the numbers.
+_RENDERER = Code(-1.0, "renderer", "the renderer's default")
+_PHONE = Code(0.0, "phone", "the phone's auto-exposure")
+
 
 RENDER_PARAMETERS = {
     **{k: GEOMETRIC_PARAMETERS[k] for k in _POSE},
     **scene_parameters(),  # the scene around the target, declared once (svgs_sim.sim.scene)
-    "spp": Parameter("spp", "1", "samples per pixel of the full frame (-1: the renderer's default)", -1.0, True,
-                     lower=-1.0, upper=MAX_SPP),
-    "roi_spp": Parameter("roi_spp", "1", "samples per pixel in the spot windows (-1: the renderer's default)", -1.0,
-                         True, lower=-1.0, upper=MAX_SPP),
+    "spp": Parameter("spp", "1", "samples per pixel of the full frame", -1.0, True, lower=1.0, upper=MAX_SPP,
+                     codes=(_RENDERER,)),
+    "roi_spp": Parameter("roi_spp", "1", "samples per pixel in the spot windows", -1.0, True, lower=1.0,
+                         upper=MAX_SPP, codes=(_RENDERER,)),
     "render_seed": Parameter("render_seed", "1", "seed of the render's Monte Carlo sampling", 0.0, True, lower=0.0,
                               upper=MAX_SEED),
     "pattern_scale": Parameter("pattern_scale", "1", "the pattern scaled about its origin by this factor (a wider target)",
@@ -43,12 +47,14 @@ RENDER_PARAMETERS = {
     "target_scale": Parameter("target_scale", "1", "multiplies the target's flux, not the lab's (an ND filter of "
                               "transmission T over every reflector: T**2)", 1.0, False, lower=0.0, upper=1.0,
                               lower_open=True),
-    "exposure_s": Parameter("exposure_s", "s", "exposure time forced on the phone (0: the phone's auto-exposure)", 0.0,
-                            False, **bounds("exposure_s")),
-    "iso": Parameter("iso", "ISO", "sensitivity forced on the phone (0: the phone's auto-exposure)", 0.0, False,
-                     lower=0.0, upper=INPUT_BOUNDS["iso"][1]),
-    "threshold": Parameter("threshold", "DN", "detector threshold in 8-bit counts (0: the app's for the camera, "
-                           "svgs_sim.svgs.app; -1: Otsu's; -2: the automatic rule)", 0.0, False, lower=-2.0, upper=255.0),
+    "exposure_s": Parameter("exposure_s", "s", "exposure time forced on the phone", 0.0, False, **bounds("exposure_s"),
+                            lower_open=True, codes=(_PHONE,)),
+    "iso": Parameter("iso", "ISO", "sensitivity forced on the phone", 0.0, False, **bounds("iso"), codes=(_PHONE,)),
+    "threshold": Parameter("threshold", "DN", "detector threshold in 8-bit counts", 0.0, False, lower=0.0, upper=255.0,
+                           lower_open=True,
+                           codes=(Code(THRESHOLD_APP, "app", "the app's for the camera, svgs_sim.svgs.app"),
+                                  Code(THRESHOLD_OTSU, "otsu", "Otsu's"),
+                                  Code(THRESHOLD_AUTO, "auto", "the automatic rule"))),
     **{k: GEOMETRIC_PARAMETERS[k] for k in ("focal_error_frac", "pp_error_u_px", "pp_error_v_px", "k1_error")},
     # the true lens (the solver's calibration errors above are relative to it)
     "lens_pp_u_px": Parameter("lens_pp_u_px", "px", "the true lens' principal point cx minus the profile's (the image "
@@ -75,10 +81,12 @@ RENDER_PARAMETERS = {
     "jpeg": Parameter("jpeg", "1", "1: the JPEG round trip; 0: the 8-bit image the encoder would get", 1.0, False,
                       lower=0.0, upper=1.0),
     # the ISP's choices (after the render, per exposure)
-    "demosaic": Parameter("demosaic", "1", "the ISP's demosaic: 0 the profile's ([cfa] demosaic), 1 bilinear, "
-                          "2 edge-aware, 3 VNG (OpenCV)", 0.0, False, lower=0.0, upper=3.0),
-    "jpeg_quality": Parameter("jpeg_quality", "1", "JPEG quality 1-100 (-1: the profile's [isp] jpeg_quality)", -1.0,
-                              False, lower=-1.0, upper=100.0),
+    "demosaic": Parameter("demosaic", "1", "the ISP's demosaic", 0.0, False,
+                          codes=(Code(0.0, "profile", "the profile's [cfa] demosaic"),
+                                 Code(1.0, "bilinear", "bilinear (OpenCV)"), Code(2.0, "edge_aware", "edge-aware (OpenCV)"),
+                                 Code(3.0, "vng", "VNG (OpenCV)"))),
+    "jpeg_quality": Parameter("jpeg_quality", "1", "JPEG quality 1-100 (0: no JPEG round trip)", -1.0, False,
+                              lower=0.0, upper=100.0, codes=(Code(-1.0, "profile", "the profile's [isp] jpeg_quality"),)),
     "jpeg_grid_offset_u_px": Parameter("jpeg_grid_offset_u_px", "px", "the JPEG block grid moved right by this "
                                        "many pixels against the image, added to the profile's (0-15)", 0.0, False,
                                        lower=0.0, upper=15.0),
@@ -90,16 +98,18 @@ RENDER_PARAMETERS = {
     "turbulence_cn2": Parameter("turbulence_cn2", "m^-2/3", "C_n^2 of the air between the phone and the target: "
                                 "each exposure's spots moved by a frozen draw of their angles of arrival "
                                 "(svgs_sim.sim.turbulence; 0: still air)", 0.0, False, lower=0.0, upper=1e-9),
-    # the physics a sensitivity study varies (-1: the profile's value)
-    "f_number": Parameter("f_number", "1", "the lens' f-number, for the render (aperture) and the PSF (-1: the "
-                          "profile's)", -1.0, True, lower=-1.0, upper=16.0),
+    # the physics a sensitivity study varies ('profile': the profile's value)
+    "f_number": Parameter("f_number", "1", "the lens' f-number, for the render (aperture) and the PSF", -1.0, True,
+                          lower=1.0, upper=16.0, codes=(Code(-1.0, "profile", "the profile's [optics] f_number"),)),
     "led_offset_scale": Parameter("led_offset_scale", "1", "every flash LED's offset from the lens scaled by this "
                                   "factor (the retro spots' parallax and the return's angle)", 1.0, True, lower=0.0,
                                   upper=5.0, lower_open=True),
-    "glare_veiling_fraction": Parameter("glare_veiling_fraction", "1", "share of the light in the lens' glare wings "
-                                        "(-1: the profile's)", -1.0, False, lower=-1.0, upper=0.5),
-    "glare_wing_exponent": Parameter("glare_wing_exponent", "1", "the glare wings fall as r^-exponent (-1: the "
-                                     "profile's)", -1.0, False, lower=-1.0, upper=10.0),
+    "glare_veiling_fraction": Parameter("glare_veiling_fraction", "1", "share of the light in the lens' glare wings",
+                                        -1.0, False, lower=0.0, upper=0.5,
+                                        codes=(Code(-1.0, "profile", "the profile's [glare] veiling_fraction"),)),
+    "glare_wing_exponent": Parameter("glare_wing_exponent", "1", "the glare wings fall as r^-exponent", -1.0, False,
+                                     lower=1.0, upper=10.0, lower_open=True,
+                                     codes=(Code(-1.0, "profile", "the profile's [glare] wing_exponent"),)),
     "exposure_compensation_ev": Parameter("exposure_compensation_ev", "EV", "the exposure time the phone chooses "
                                           "(or is forced to) times 2^EV, the gain kept", 0.0, False, lower=-4.0,
                                           upper=4.0),
@@ -159,7 +169,7 @@ def _threshold(value: float):
     if v == THRESHOLD_OTSU:
         return "otsu"
     if v < 0:
-        raise InputError(f"threshold: {v:g} is neither a level (>= 0) nor 0 (app), -1 (otsu) or -2 (auto)")
+        raise InputError(f"threshold: expected {RENDER_PARAMETERS['threshold'].domain()}")
     return v
 
 
@@ -347,9 +357,9 @@ def render_key(scenario) -> RenderKey:
 
 def camera_overrides(camera: str, f_number: float | None, led_offset_scale: float) -> tuple:
     """The profile values a scenario replaces (:attr:`svgs_sim.sim.closed_loop.Scenario.camera_overrides`);
-    ``f_number`` None (or the row's -1): the profile's."""
+    ``f_number`` None: the profile's."""
     out = []
-    if f_number is not None and f_number != -1:
+    if f_number is not None:
         out.append(("optics", "f_number", float(f_number)))
     if led_offset_scale != 1.0:
 

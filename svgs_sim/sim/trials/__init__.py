@@ -27,7 +27,7 @@ package exports their public names.
 """
 
 from .registry import (
-    ID_COLUMNS, KIND_MODULES, Parameter, TIMING_COLUMNS, TrialKind, get_trial_kind, known_trial_kinds,
+    ID_COLUMNS, KIND_MODULES, Code, Parameter, TIMING_COLUMNS, TrialKind, get_trial_kind, known_trial_kinds,
     register_trial_kind,
 )
 from .scenario import (
@@ -40,7 +40,7 @@ from .geometric import (
 )
 
 __all__ = [
-    "KIND_MODULES", "ID_COLUMNS", "TIMING_COLUMNS", "Parameter", "TrialKind", "register_trial_kind",
+    "KIND_MODULES", "ID_COLUMNS", "TIMING_COLUMNS", "Code", "Parameter", "TrialKind", "register_trial_kind",
     "known_trial_kinds", "get_trial_kind", "POSE_KEYS", "TRUTH_KEYS", "TrialScenario", "PoseScenario", "RowView",
     "as_scenario", "camera_with_calibration_errors", "build_scenario", "PoseKey", "GEOMETRIC_PARAMETERS",
     "GeometricScenario", "geometric_scenario", "GEOMETRIC_OUTPUTS", "estimate_outputs", "geometric_trial",

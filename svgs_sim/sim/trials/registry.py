@@ -40,6 +40,28 @@ def _number(x) -> str:
 
 
 @dataclass(frozen=True)
+class Code:
+    """A value of a parameter that stands for a choice, not a quantity: what the results store
+    holds (``value``) and what a user writes and reads (``word``).
+
+    Attributes
+    ----------
+    value : float
+        The number in the store's row (``-1.0`` for the profile's f-number...): the codec's, never
+        shown in a message.
+    word : str
+        What ``--fixed NAME=WORD`` takes and messages print (``profile``, ``renderer``, ``phone``,
+        ``app``, ``otsu``...).
+    meaning : str
+        What it chooses, for ``--help`` and messages (``the profile's [optics] f_number``).
+    """
+
+    value: float
+    word: str
+    meaning: str
+
+
+@dataclass(frozen=True)
 class Parameter:
     """A scenario parameter a study may set or vary.
 
@@ -56,7 +78,11 @@ class Parameter:
         it acts after the render (noise, exposure, detector, calibration used by the solver),
         so trials differing only in it can share one render.
     lower, upper : float or None
-        Physical domain (inclusive unless ``*_open``).
+        Physical domain (inclusive unless ``*_open``). Both None with ``codes``: a choice among
+        the codes only (the demosaic).
+    codes : tuple of Code
+        Values that stand for a choice (the profile's value, the renderer's default, the app's
+        threshold): written and shown as words, held in the store's row as their numbers.
     """
 
     name: str
@@ -67,9 +93,15 @@ class Parameter:
     lower: float | None = None
     upper: float | None = None
     lower_open: bool = False
+    codes: tuple = ()
 
-    def domain(self) -> str:
-        """The allowed values in words, with the unit (none for a dimensionless "1")."""
+    @property
+    def choice_only(self) -> bool:
+        """A choice among :attr:`codes` (no physical range)."""
+        return bool(self.codes) and self.lower is None and self.upper is None
+
+    def physical_domain(self) -> str:
+        """The physical values in words, with the unit (none for a dimensionless "1")."""
         unit = "" if self.unit in ("", "1") else f" {self.unit}"
         lo, hi = _number(self.lower), _number(self.upper)
         if self.lower is not None and self.upper is not None:
@@ -82,18 +114,53 @@ class Parameter:
             return f"a value <= {hi}{unit}"
         return f"a finite number{unit}"
 
-    def check(self, value, what: str = "") -> float:
-        """``float(value)`` if it lies in the domain, else :class:`InputError`."""
+    def domain(self, codes: bool = True) -> str:
+        """The allowed values in words: the physical range and (``codes``) the words."""
+        words = ", ".join(f"{c.word!r} ({c.meaning})" for c in self.codes)
+        if self.choice_only:
+            return f"one of {words}"
+        if not codes or not self.codes:
+            return self.physical_domain()
+        return f"{self.physical_domain()}, or {words}"
+
+    def word(self, value) -> str:
+        """``value`` as a user reads it: the word of a code, else the number."""
+        for c in self.codes:
+            if float(value) == c.value:
+                return c.word
+        return _number(value)
+
+    def check(self, value, what: str = "", *, codes: bool = True) -> float:
+        """The row's number of ``value`` (a number in the domain, or - with ``codes`` - a code's
+        word or the code's number, as a store holds it), else :class:`InputError`.
+
+        Parameters
+        ----------
+        value : float or str
+        what : str
+            The input's name for the message (default the parameter's).
+        codes : bool
+            Accept the codes (False: a quantity only, e.g. the bounds of a varied range).
+        """
         label = what or self.name
+        if isinstance(value, str) and codes:
+            for c in self.codes:
+                if value.strip().lower() == c.word:
+                    return float(c.value)
         try:
             v = float(value)
         except (TypeError, ValueError):
-            raise InputError(f"{label}: expected {self.domain()}, got {value!r}") from None
+            raise InputError(f"{label}: expected {self.domain(codes)}, got {value!r}") from None
         if not np.isfinite(v):
-            raise InputError(f"{label}: expected {self.domain()}, got {value!r}")
+            raise InputError(f"{label}: expected {self.domain(codes)}, got {value!r}")
+        if codes and any(v == c.value for c in self.codes):
+            return v
+        if self.choice_only:
+            what_ = "it is a choice, not a quantity: hold it fixed" if not codes else self.meaning
+            raise InputError(f"{label}: expected {self.domain()}, got {_number(v)} - {what_}")
         low_bad = self.lower is not None and (v < self.lower or (self.lower_open and v == self.lower))
         if low_bad or (self.upper is not None and v > self.upper):
-            raise InputError(f"{label}: expected {self.domain()}, got {v:g} - {self.meaning}")
+            raise InputError(f"{label}: expected {self.domain(codes)}, got {v:g} - {self.meaning}")
         return v
 
 

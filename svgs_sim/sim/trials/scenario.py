@@ -306,6 +306,25 @@ class PoseScenario(TrialScenario, TargetPose):
         super()._normalise()
 
     @classmethod
+    def from_values(cls, values: Mapping, labels: Mapping | None = None) -> "PoseScenario":
+        """As :meth:`TrialScenario.from_values`, and the pose by its typed names: ``mount``
+        (``"target"`` or ``"stand"``) and ``rail_m`` (the stand's rail position) for the row's
+        ``stand`` and ``range_m`` codes (a design never writes ``"stand": 1.0``)."""
+        values = dict(values)
+        if "mount" in values or "rail_m" in values:
+            mount = values.pop("mount", "stand" if "rail_m" in values else "target")
+            if mount not in ("target", "stand"):
+                raise InputError(f"mount: expected 'target' or 'stand', got {mount!r}")
+            if "stand" in values:
+                raise InputError("give the mount as mount='stand' or 'target', not also as stand")
+            values["stand"] = 1.0 if mount == "stand" else 0.0
+            if "rail_m" in values:
+                if mount != "stand" or "range_m" in values:
+                    raise InputError("rail_m: the stand's rail position, with mount='stand' and no range_m")
+                values["range_m"] = values.pop("rail_m")
+        return super().from_values(values, labels)
+
+    @classmethod
     def _decode(cls, values: dict) -> dict:
         values = dict(values)
         stand = values.pop("stand")

@@ -289,14 +289,14 @@ def stand_errors(config: CampaignConfig, ri: int, j: int, readings: list[float] 
     Returns
     -------
     dict
-        ``range_m`` (the recorded range) and the scenario's ``stand_err_*`` and ``rail_err_m``.
+        ``rail_m`` (the recorded rail position) and the scenario's ``stand_err_*`` and ``rail_err_m``.
         ``readings``: :func:`rangefinder_readings` when the caller has them.
     """
     g, st = config.lab_error("gimbal_accuracy_deg"), config.lab_error("stage_accuracy_m")
     rng = design_rng(config.seed, STAND_ERROR_STREAM + ri * POSE_STRIDE + j)
     e = rng.uniform(-1.0, 1.0, 4)
     recorded = (rangefinder_readings(config) if readings is None else readings)[ri]
-    return {"range_m": recorded, "rail_err_m": float(config.ranges_m[ri] - recorded),
+    return {"rail_m": recorded, "rail_err_m": float(config.ranges_m[ri] - recorded),
             "stand_err_roll_deg": float(g * e[0]), "stand_err_pitch_deg": float(g * e[1]),
             "stand_err_yaw_deg": float(g * e[2]), "stand_err_stage_m": float(st * e[3])}
 
@@ -340,7 +340,7 @@ def campaign_trials(config: CampaignConfig, *, variants: bool = True) -> list:
     kind = get_trial_kind(config.trial_kind)
     trials = []
     n, K = config.trials_per_range, config.exposures_per_render
-    fixed = {"camera": config.camera, "pattern": config.pattern, **config.calibration_error, "stand": 1.0,
+    fixed = {"camera": config.camera, "pattern": config.pattern, **config.calibration_error, "mount": "stand",
              **{f"misalign_{a}_deg": float(v) for a, v in zip(("roll", "pitch", "yaw"), config.misalignment_deg)}}
     if kind.name == "render":
         fixed.update(config.lens)
@@ -356,7 +356,7 @@ def campaign_trials(config: CampaignConfig, *, variants: bool = True) -> list:
         for k in range(n):
             i = ri * n + k
             j, e = divmod(k, K)
-            lab = stand_errors(config, ri, j, readings) if config.lab_errors else {"range_m": r}
+            lab = stand_errors(config, ri, j, readings) if config.lab_errors else {"rail_m": r}
             scen = build_scenario(kind, {**fixed, **poses[ri][j], **lab},
                                   labels={"nominal_range_m": float(r), "pose_index": j, "exposure_index": e,
                                           "variant": "baseline"})
