@@ -6,23 +6,14 @@ tables. Each checked table of the schema becomes one frozen dataclass here, gene
 schema's own key list, so a key is declared once (its name carries its unit, ``pixel_pitch_m``,
 ``full_well_e``, ``modulation_frequency_hz``):
 
-==================  =====================  ========================================
-part                profile table          read by
-==================  =====================  ========================================
-:class:`Sensor`     ``[sensor]``           the phone camera model, the renderer's optics
-:class:`Glare`      ``[glare]``            the phone camera model
-:class:`Exposure`   ``[exposure]``         the phone camera model
-:class:`Cfa`        ``[cfa]``              the phone camera model
-:class:`Isp`        ``[isp]``              the phone camera model
-:class:`Optics`     ``[optics]``           the renderer, the phone and ToF camera models
-:class:`Flash`      ``[flash]``            the renderer (SVGS, boards), the lab geometry
-:class:`Tof`        ``[tof]``              the ToF camera model, renderer and pipeline
-:class:`Noise`      ``[noise]``            the ToF camera model
-:class:`Illumination` ``[illumination]``   the ToF renderer
-:class:`Reflector`  a pattern's ``[reflector]``  the SVGS renderer's corner cubes
-:class:`Plate`      a pattern's ``[plate]``      the ToF target
-:class:`Marker`     a pattern's ``[marker]``     the ToF target
-==================  =====================  ========================================
+- :class:`Sensor` (``[sensor]``), :class:`Glare`, :class:`Exposure`, :class:`Cfa`, :class:`Isp`:
+  the phone camera model (the renderer's optics read the sensor's pixel pitch);
+- :class:`Optics` (``[optics]``): the renderer, the phone and the ToF camera models;
+- :class:`Flash` (``[flash]``): the SVGS and board renderers, the lab geometry;
+- :class:`Tof`, :class:`Noise`, :class:`Illumination` (``[tof]``, ``[noise]``,
+  ``[illumination]``): the ToF camera model, renderer and pipeline;
+- a pattern's :class:`Reflector` (``[reflector]``: the SVGS renderer's corner cubes) and
+  :class:`Plate`, :class:`Marker` (``[plate]``, ``[marker]``: the ToF target).
 
 A field is ``None`` where the profile does not give the key: the model that reads it applies
 its own documented default (:data:`svgs_sim.base.profile_schema.PHONE_DEFAULTS` and the
