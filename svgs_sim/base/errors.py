@@ -80,7 +80,10 @@ def check_finite(value, name: str) -> float:
 
 
 def interrupt_in(exc: BaseException) -> KeyboardInterrupt | None:
-    """The ``KeyboardInterrupt`` (Ctrl-C, or SIGTERM's subclass) among ``exc``'s causes, if any.
+    """The ``KeyboardInterrupt`` (Ctrl-C, or SIGTERM's subclass) among ``exc``'s causes, if any:
+    an interrupt raised inside a callback from compiled code (a Numba kernel) comes back as a
+    ``SystemError`` caused by it, one raised in the Python frame of a Dr.Jit custom operation
+    (``mi.render``) as a ``RuntimeError``.
 
     Parameters
     ----------

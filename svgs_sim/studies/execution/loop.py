@@ -19,6 +19,7 @@ from concurrent.futures import (
 )
 from dataclasses import dataclass
 
+from svgs_sim.base.errors import interrupt_in
 from svgs_sim.sim import hard_stop
 from svgs_sim.sim.trials import TrialKind
 
@@ -134,18 +135,6 @@ def _signals_held(escalate: bool = False):
         held[caught[0]](caught[0], None)
 
 
-def _interrupt_in(exc: BaseException) -> KeyboardInterrupt | None:
-    """The interrupt that caused ``exc``, if any: an interrupt raised inside a callback from
-    compiled code (a Numba kernel) comes back as a ``SystemError`` caused by it."""
-    seen = set()
-    while exc is not None and id(exc) not in seen:
-        if isinstance(exc, KeyboardInterrupt):
-            return exc
-        seen.add(id(exc))
-        exc = exc.__cause__ or exc.__context__
-    return None
-
-
 def _store_rows(store, rows: list, bar) -> None:
     with _signals_held():
         store.append(rows)
@@ -173,7 +162,7 @@ def _run_inline(kind: TrialKind, tasks: list, store, bar, progress) -> None:
                     try:
                         rows = next(groups, None)
                     except SystemError as exc:
-                        interrupt = _interrupt_in(exc)
+                        interrupt = interrupt_in(exc)
                         if interrupt is None:
                             raise
                         raise interrupt from None
