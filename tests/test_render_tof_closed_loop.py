@@ -33,15 +33,21 @@ def head_on():
 
 
 def test_the_scenario_is_typed_and_refuses_bad_input():
-    from svgs_sim.sim.tof_closed_loop import TofScenario
+    from svgs_sim.sim.tof_closed_loop import TofScenario, TofScene
 
     sc = TofScenario(range_m=2.0)
+    assert sc.scene == TofScene() and sc.scene_dict() == {}  # the pattern's marker material and sheeting
     assert sc.spp is None and sc.ambient_lux is None and sc.integration_time_s is None  # None: the default
     for kw, what in (({"range_m": -1.0}, "range_m"), ({"spp": -4}, "spp"), ({"max_bounces": 7}, "max_bounces"),
-                     ({"ambient_lux": float("nan")}, "ambient_lux"), ({"scene_options": (("colour", 1),)}, "scene_options"),
+                     ({"ambient_lux": float("nan")}, "ambient_lux"), ({"scene": {"colour": 1}}, "scene"),
                      ({"seed": -1}, "seed")):
         with pytest.raises(InputError, match=what):
             TofScenario(**kw)
+    with pytest.raises(InputError, match=r"scene: unknown option\(s\) 'colour'"):
+        TofScene.from_dict({"colour": 1})
+    with pytest.raises(InputError, match="scene.sheeting: expected one of"):
+        TofScene(sheeting="tinfoil")
+    assert TofScene.from_dict({"sheeting": "en12899-ra1-white"}).to_dict() == {"sheeting": "en12899-ra1-white"}
 
 
 def test_the_pose_is_the_one_written_out(head_on):

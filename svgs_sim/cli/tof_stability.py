@@ -113,7 +113,7 @@ def scene_options(args) -> dict:
 
 def check_stability_args(args):
     """Everything checked before rendering; returns the run's :class:`svgs_sim.sim.tof_closed_loop.TofScenario`."""
-    from svgs_sim.sim.tof_closed_loop import check_in_view
+    from svgs_sim.sim.tof_closed_loop import TofScene, check_in_view
     from svgs_sim.sim.tof_stability import check_frames, stability_scenario
 
     from svgs_sim.cli.outdir import check_output_folder
@@ -132,7 +132,7 @@ def check_stability_args(args):
         check_output_folder(args.out)
     sc = stability_scenario(r, camera=args.camera, pattern=args.pattern, seed=args.seed, spp=args.spp,
                             rim_spp_factor=args.rim_spp_factor, max_bounces=args.bounces,
-                            scene_options=tuple(scene_options(args).items()), ambient_lux=args.ambient_lux)
+                            scene=TofScene.from_dict(scene_options(args)), ambient_lux=args.ambient_lux)
     check_in_view(sc)
     return sc
 

@@ -32,6 +32,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from svgs_sim.base.errors import InputError, SimulationFailure, check_finite
+from svgs_sim.base.profile_schema import SHEETINGS, TOF_MATERIALS
 from svgs_sim.camera.amcw import TofSensor
 from svgs_sim.sim.metrics import no_pose_errors, pose_errors, state_error
 from svgs_sim.sim.target_pose import TargetPose
@@ -40,8 +41,59 @@ from svgs_sim.svgs.frames import pose_from_scenario, pose_to_state
 #: Second entry of the noise stream's seed ``[seed, NOISE_STREAM]`` (the stability runs' since
 #: issue 23, kept so the committed ToF report does not move).
 NOISE_STREAM = 7
-#: Keys of :attr:`TofScenario.scene_options` (the renderer's scene options).
+#: The fields of :class:`TofScene` (the renderer's scene options a scenario sets).
 SCENE_KEYS = ("marker_material", "sheeting", "distractors")
+
+
+@dataclass(frozen=True)
+class TofScene:
+    """What the ToF scene holds around the target besides the pattern's own values: the scene
+    part of :class:`TofScenario` (the SVGS scenario's is :class:`svgs_sim.sim.scene.Scene`).
+
+    Attributes
+    ----------
+    marker_material : str or None
+        The markers' surface (:data:`svgs_sim.base.profile_schema.TOF_MATERIALS`); None: the
+        pattern's ``[marker] material``.
+    sheeting : str or None
+        The retroreflective sheeting table (:data:`svgs_sim.base.profile_schema.SHEETINGS`); None:
+        the pattern's ``[marker] sheeting``.
+    distractors : tuple of dict
+        Extra diffuse objects in the target frame (:data:`svgs_sim.render.tof.scene.DISTRACTOR_KINDS`).
+    """
+
+    marker_material: str | None = None
+    sheeting: str | None = None
+    distractors: tuple = ()
+
+    def __post_init__(self):
+        for k, choices in (("marker_material", TOF_MATERIALS), ("sheeting", SHEETINGS)):
+            v = getattr(self, k)
+            if v is not None and v not in choices:
+                raise InputError(f"scene.{k}: expected one of {', '.join(choices)} (or None: the pattern's), got {v!r}")
+        if not isinstance(self.distractors, (list, tuple)):
+            raise InputError(f"scene.distractors: expected a list of objects, got {self.distractors!r}")
+        object.__setattr__(self, "distractors", tuple(self.distractors))
+
+    @classmethod
+    def from_dict(cls, options) -> "TofScene":
+        """The scene of the renderer's option names (a dict or ``(name, value)`` pairs; the
+        results store's ``scene`` column read back)."""
+        items = dict(options.items() if isinstance(options, dict) else options)
+        unknown = sorted(set(items) - set(SCENE_KEYS))
+        if unknown:
+            raise InputError(f"scene: unknown option(s) {', '.join(map(repr, unknown))}; known: {', '.join(SCENE_KEYS)}")
+        return cls(**items)
+
+    def to_dict(self) -> dict:
+        """The renderer's ``scene_options`` (only what the scene sets: the pattern's values
+        elsewhere), sorted by name."""
+        out = {"distractors": list(self.distractors)} if self.distractors else {}
+        if self.marker_material is not None:
+            out["marker_material"] = self.marker_material
+        if self.sheeting is not None:
+            out["sheeting"] = self.sheeting
+        return dict(sorted(out.items()))
 
 
 def _optional(value, name: str, kind=float, positive: bool = True, allow_zero: bool = False):
@@ -82,9 +134,9 @@ class TofScenario(TargetPose):
         1 direct returns, 2-4 with multipath.
     pinhole : bool
         No defocus blur.
-    scene_options : tuple of (str, value)
-        :class:`svgs_sim.render.tof.scene` options (``marker_material``, ``sheeting``, ``distractors``),
-        as sorted pairs; empty: the pattern's.
+    scene : TofScene
+        The scene around the target (marker material, sheeting, distractors; default: the
+        pattern's). A dict of its fields is taken too.
     ambient_lux, integration_time_s, modulation_frequency_hz : float or None
         Sensor overrides (None: the profile's; integration time None: automatic).
     """
@@ -97,18 +149,16 @@ class TofScenario(TargetPose):
     rim_spp_factor: int | None = None
     max_bounces: int = 1
     pinhole: bool = False
-    scene_options: tuple = ()
+    scene: TofScene = TofScene()
     ambient_lux: float | None = None
     integration_time_s: float | None = None
     modulation_frequency_hz: float | None = None
 
     def __post_init__(self):
-        so = self.scene_options
-        items = sorted(so.items()) if isinstance(so, dict) else sorted(tuple(x) for x in so)
-        for it in items:
-            if len(it) != 2 or it[0] not in SCENE_KEYS:
-                raise InputError(f"scene_options: expected ({'|'.join(SCENE_KEYS)}, value) pairs, got {it!r}")
-        object.__setattr__(self, "scene_options", tuple(tuple(it) for it in items))
+        if isinstance(self.scene, dict):  # the renderer's option names (or a TofScene's fields)
+            object.__setattr__(self, "scene", TofScene.from_dict(self.scene))
+        if not isinstance(self.scene, TofScene):
+            raise InputError(f"scene: expected a TofScene or a dict of its fields, got {self.scene!r}")
         for k in ("range_m", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg"):
             check_finite(getattr(self, k), k)
         if self.range_m <= 0:
@@ -129,8 +179,8 @@ class TofScenario(TargetPose):
                                   self.yaw_deg)
 
     def scene_dict(self) -> dict:
-        """:attr:`scene_options` as the renderer's ``scene_options`` dict."""
-        return {k: v for k, v in self.scene_options}
+        """:attr:`scene` as the renderer's ``scene_options`` dict."""
+        return self.scene.to_dict()
 
     def render_key(self) -> tuple:
         """What decides the render (hashable): equal keys, equal renders."""

@@ -32,7 +32,7 @@ from dataclasses import asdict, dataclass, fields, replace
 from svgs_sim.base.errors import InputError
 from svgs_sim.render.variant import select_variant
 from svgs_sim.sim.metrics import ERR_KEYS, POS_ERR_NORM_M, error_columns, state_m_deg
-from svgs_sim.sim.tof_closed_loop import TofScenario, render, solve_frames
+from svgs_sim.sim.tof_closed_loop import TofScenario, TofScene, render, solve_frames
 from svgs_sim.sim.tof_stability import COLUMNS, REFERENCES, RUN_INFO_KEYS, frame_row, reference_point_m, run_info
 from svgs_sim.sim.trials import Parameter, RowView, TrialKind, register_trial_kind
 from svgs_sim.svgs.frames import STATE_KEYS
@@ -119,9 +119,9 @@ class TofTrialScenario(RowView):
     def to_row(self) -> dict:
         """The flat scenario columns of the results store (None: the default)."""
         sc = asdict(self.scenario)
+        del sc["scene"]  # the column keeps its place after render_seed
         sc["render_seed"] = sc.pop("seed")
         sc["scene"] = json.dumps(self.scenario.scene_dict(), sort_keys=True)
-        del sc["scene_options"]
         return {**sc, "nominal_range_m": float(self.nominal_range_m), "frames": int(self.frames),
                 "frame": int(self.frame), "pipeline": json.dumps(dict(self.pipeline), sort_keys=True),
                 "reference": self.reference, "run": self.run}
@@ -132,13 +132,13 @@ class TofTrialScenario(RowView):
         :class:`TofTrialScenario` is returned as it is)."""
         if isinstance(row, cls):
             return row
-        names = {f.name for f in fields(TofScenario)} - {"seed", "scene_options"}
+        names = {f.name for f in fields(TofScenario)} - {"seed", "scene"}
         kw = {k: row[k] for k in names if k in row}
         for k in ("spp", "rim_spp_factor", "max_bounces"):
             if kw.get(k) is not None:
                 kw[k] = int(kw[k])
         kw["pinhole"] = bool(kw.get("pinhole") or False)
-        sc = TofScenario(seed=int(row["render_seed"]), scene_options=tuple(json.loads(row.get("scene") or "{}").items()),
+        sc = TofScenario(seed=int(row["render_seed"]), scene=TofScene.from_dict(json.loads(row.get("scene") or "{}")),
                          **kw)
         return cls(sc, float(row["nominal_range_m"]), int(row["frames"]), int(row["frame"]),
                    tuple(json.loads(row.get("pipeline") or "{}").items()), str(row.get("reference") or "markers"),

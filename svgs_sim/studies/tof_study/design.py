@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
 
-from svgs_sim.sim.tof_closed_loop import noise_free_frame
+from svgs_sim.sim.tof_closed_loop import TofScene, noise_free_frame
 from svgs_sim.sim.tof_stability import COLUMNS, RUN_INFO_KEYS, assemble_run, stability_scenario
 
 from ..execution import Trial
@@ -139,7 +139,7 @@ class TofStudyConfig:
         kw = {"ambient_lux": self.ambient_lux, **sensor}
         return stability_scenario(range_m, camera=self.camera, pattern=self.pattern, seed=self.seed, spp=self.spp,
                                   rim_spp_factor=self.rim_spp_factor, max_bounces=max_bounces,
-                                  scene_options=tuple(so.items()), **kw)
+                                  scene=TofScene.from_dict(so), **kw)
 
 
 def auto_integration_times(cfg: TofStudyConfig) -> dict:
