@@ -140,3 +140,5 @@ def test_a_profile_is_a_tree_of_frozen_parts():
     from svgs_sim.base.errors import ProfileError
     with pytest.raises(ProfileError, match=r"\[optics\] f_number = 0.1"):
         cam.with_values([("optics", "f_number", 0.1)])
+    assert cam.with_values([("optics", "f_number", 2.8)]).optics.f_number == 2.8  # parts built again
+    assert cam.replace(fx=cam.fx * 1.01).optics is cam.optics  # a copy's geometry only: parts shared

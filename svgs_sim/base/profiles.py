@@ -286,6 +286,15 @@ def _camera_overlay(path: Path, data: dict) -> Path | None:
     return fitted_overlay_path(path, key)
 
 
+class _Tables(dict):
+    """The tables a camera or pattern owns (a copy of what it was built from) with the typed
+    parts built from them: a copy of the object (``Camera.replace``) keeps both, without
+    copying or checking them again. Nothing outside this module reads or changes them."""
+
+    kind: str = ""
+    parts: dict | None = None
+
+
 @dataclass(frozen=True)
 class Camera:
     """A camera's geometry (pinhole + Brown-Conrady distortion, OpenCV conventions).
@@ -351,8 +360,10 @@ class Camera:
         if d.shape != (5,) or not np.all(np.isfinite(d)):
             raise ProfileError(f"camera {self.name!r}: distortion must be 5 finite numbers (k1, k2, p1, p2, k3), got {self.dist!r}")
         object.__setattr__(self, "dist", d)
-        tables = copy.deepcopy(dict(self.tables or {}))  # the camera's own: no caller shares it
-        object.__setattr__(self, "tables", tables)
+        if isinstance(self.tables, _Tables) and self.tables.kind == "camera":
+            object.__setattr__(self, "_parts", self.tables.parts)  # a copy of a camera (replace): parts kept
+            return
+        tables = _Tables(copy.deepcopy(dict(self.tables or {})))  # the camera's own: no caller shares it
         where = f"camera profile {self.source!r}" if self.source else f"camera {self.name!r}"
         parts = {name: cls.from_table(tables.get(name), where) for name, cls in CAMERA_PARTS.items()}
         fitted = tables.get("fitted") or {}
@@ -361,6 +372,8 @@ class Camera:
         parts["fitted"] = tuple(FittedValue.from_entry(k, e) for k, e in fitted.items() if isinstance(e, dict))
         preview = tables.get("preview")
         parts["preview_of"] = preview.get("of") if isinstance(preview, dict) else None
+        tables.kind, tables.parts = "camera", parts
+        object.__setattr__(self, "tables", tables)
         object.__setattr__(self, "_parts", parts)
 
     # ------------------------------------------------------------------ typed parts
@@ -446,7 +459,7 @@ class Camera:
         -------
         Camera
         """
-        tables = copy.deepcopy(self.tables)
+        tables = copy.deepcopy(dict(self.tables))
         for table, key, value in values:
             tables.setdefault(table, {})[key] = value
         return self.replace(tables=tables)
@@ -468,7 +481,7 @@ class Camera:
         -------
         Camera
         """
-        new = copy.deepcopy(self.tables)
+        new = copy.deepcopy(dict(self.tables))
         for k, v in tables.items():
             if v is None:
                 new.pop(k, None)
@@ -795,9 +808,11 @@ class Pattern:
         if len(sizes) != len(ids) or any(len(x) != 2 for x in sizes):
             raise ProfileError(f"{where}: target_sizes_m must hold (diameter_m, standoff_m) per target")
         object.__setattr__(self, "target_sizes_m", sizes)
-        tables = copy.deepcopy(dict(self.tables or {}))
-        object.__setattr__(self, "tables", tables)
-        object.__setattr__(self, "_parts", {n: c.from_table(tables.get(n), where) for n, c in PATTERN_PARTS.items()})
+        if not (isinstance(self.tables, _Tables) and self.tables.kind == "pattern"):
+            tables = _Tables(copy.deepcopy(dict(self.tables or {})))
+            tables.kind, tables.parts = "pattern", {n: c.from_table(tables.get(n), where) for n, c in PATTERN_PARTS.items()}
+            object.__setattr__(self, "tables", tables)
+        object.__setattr__(self, "_parts", self.tables.parts)
 
     def fingerprint(self) -> tuple:
         """The pattern by content (hashable): name, targets and every table."""
