@@ -193,7 +193,8 @@ def _register_sensitivity(sub) -> None:
                    help="a varied parameter, uniform in LOW:HIGH in the parameter's unit (repeat; at least one; default: none); "
                         "see docs/studies.md for the names and units")
     s.add_argument("--fixed", action="append", default=[], metavar="PARAM=VALUE",
-                   help="hold a parameter at VALUE, in its unit (repeat; default: the trial kind's nominal values)")
+                   help="hold a parameter at VALUE, in its unit, or at a choice's word (f_number=profile, "
+                        "threshold=otsu; repeat; default: the trial kind's nominal values)")
     s.add_argument("--method", choices=("sobol", "morris"), default="sobol",
                    help="sobol: first-order and total indices (n (d + 2) trials); morris: elementary effects, mu* "
                         "(n (d + 1) trials, cheaper for screening); default %(default)s")
