@@ -162,7 +162,6 @@ def read_toml(path, kind: str) -> dict:
     return copy.deepcopy(cached("toml", (str(path),), (path,), parse))
 
 
-_read_toml = read_toml
 
 
 def fitted_overlay_path(profile_path, key: str | None = None) -> Path | None:
@@ -220,7 +219,7 @@ def read_fitted_overlay(path, base: dict | None = None) -> list[dict]:
         ``table.name`` or names a geometry table, a value outside its range, a key twice.
     """
     path = Path(path)
-    data = _read_toml(path, "fitted overlay")
+    data = read_toml(path, "fitted overlay")
     fits = data.get("fit")
     where = f"fitted overlay {str(path)!r}"
     if not isinstance(fits, list) or not fits:
@@ -518,7 +517,7 @@ class Camera:
         if isinstance(name_or_path, Camera):
             return name_or_path
         path = _resolve(name_or_path, CAMERAS_DIR, "camera profile")
-        data = _read_toml(path, "camera profile")
+        data = read_toml(path, "camera profile")
         overlay = _camera_overlay(path, data) if fitted else None
         if overlay is not None:
             cls.from_dict(data, source=str(path), default_name=path.stem)  # the file's own values checked too
@@ -850,7 +849,7 @@ class Pattern:
         if isinstance(name_or_path, Pattern):
             return name_or_path
         path = _resolve(name_or_path, PATTERNS_DIR, "target pattern")
-        data = _read_toml(path, "target pattern")
+        data = read_toml(path, "target pattern")
         name = str(data.get("name", path.stem))
         where = f"target pattern {str(path)!r}"
         targets = data.get("target")
@@ -911,7 +910,7 @@ def load_camera(name_or_path, *, fitted: bool = True) -> Camera:
     if isinstance(name_or_path, Camera):
         return name_or_path
     path = _resolve(name_or_path, CAMERAS_DIR, "camera profile")
-    overlay = _camera_overlay(path, _read_toml(path, "camera profile")) if fitted else None
+    overlay = _camera_overlay(path, read_toml(path, "camera profile")) if fitted else None
     files = (path,) if overlay is None else (path, overlay)
     return cached("camera", (str(path), bool(fitted)), files, lambda: Camera.load(path, fitted=fitted))
 
