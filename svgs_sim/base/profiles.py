@@ -131,6 +131,11 @@ _CACHE: dict = {}
 _CACHE_SIZE = 256
 
 
+def _read_shared(path, kind: str) -> dict:
+    """As :func:`read_toml`, but the cached parse itself, not a copy: for lookups that only read it."""
+    return _shared_toml(Path(path), _toml_parser(Path(path), kind))
+
+
 def read_toml(path, kind: str) -> dict:
     """A TOML file of the project's kinds, parsed (a fresh copy: callers may change it).
 
@@ -146,6 +151,11 @@ def read_toml(path, kind: str) -> dict:
         Naming the file: not TOML, not UTF-8, unreadable.
     """
     path = Path(path)
+    return copy.deepcopy(_shared_toml(path, _toml_parser(path, kind)))
+
+
+def _toml_parser(path: Path, kind: str):
+    """A function that parses ``path`` (ProfileError naming the file and ``kind`` when it cannot)."""
 
     def parse():
         try:
@@ -159,7 +169,12 @@ def read_toml(path, kind: str) -> dict:
         except OSError as exc:
             raise ProfileError(f"{kind} file {str(path)!r} cannot be read: {exc}") from None
 
-    return copy.deepcopy(cached("toml", (str(path),), (path,), parse))
+    return parse
+
+
+def _shared_toml(path: Path, parse):
+    """The cached parse of ``path`` itself (read-only: the loader's own lookups, no copy)."""
+    return cached("toml", (str(path),), (path,), parse)
 
 
 
@@ -910,7 +925,7 @@ def load_camera(name_or_path, *, fitted: bool = True) -> Camera:
     if isinstance(name_or_path, Camera):
         return name_or_path
     path = _resolve(name_or_path, CAMERAS_DIR, "camera profile")
-    overlay = _camera_overlay(path, read_toml(path, "camera profile")) if fitted else None
+    overlay = _camera_overlay(path, _read_shared(path, "camera profile")) if fitted else None
     files = (path,) if overlay is None else (path, overlay)
     return cached("camera", (str(path), bool(fitted)), files, lambda: Camera.load(path, fitted=fitted))
 
