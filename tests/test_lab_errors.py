@@ -78,7 +78,7 @@ def test_stand_errors_move_the_actual_pose_by_the_stands_own_geometry():
     from svgs_sim.sim.closed_loop import Scenario
     from svgs_sim.svgs.frames import pose_to_state
 
-    sc = Scenario(camera="galaxy-nexus", range_m=10.0, mount="stand", yaw_deg=10.0,
+    sc = Scenario(camera="galaxy-nexus", rail_m=10.0, mount="stand", yaw_deg=10.0,
                   stand_error=(0.0, 0.0, 0.03, 0.0, -0.015))
     cmd, act = pose_to_state(*sc.commanded_pose()), pose_to_state(*sc.pose())
     assert np.rad2deg(act[5] - cmd[5]) == pytest.approx(0.03, abs=1e-9)
@@ -108,7 +108,7 @@ def test_campaign_draws_the_stands_errors_within_the_lab_accuracies_and_records_
     for tr in trials:
         sc = tr.scenario
         ri = [5.0, 10.0].index(sc["nominal_range_m"])
-        assert sc["range_m"] == readings[ri] and sc["range_m"] + sc["rail_err_m"] == pytest.approx(sc["nominal_range_m"])
+        assert sc["rail_m"] == readings[ri] and sc["rail_m"] + sc["rail_err_m"] == pytest.approx(sc["nominal_range_m"])
         for a in ("roll", "pitch", "yaw"):
             assert abs(sc[f"stand_err_{a}_deg"]) <= lab["gimbal_accuracy_deg"]
         assert abs(sc["stand_err_stage_m"]) <= lab["stage_accuracy_m"]
@@ -135,7 +135,7 @@ def test_rendered_spots_move_by_the_angle_of_arrival():
 
     cn2 = 1e-11
     def scatter(c):
-        sc = render_trial_scenario(camera="galaxy-nexus", range_m=30.0, stand=1.0, turbulence_cn2=c)
+        sc = render_trial_scenario(camera="galaxy-nexus", rail_m=30.0, stand=1.0, turbulence_cn2=c)
         rows = np.array([[render_trial(sc, s)[f"cen_{a}_px_{k}"] for k in range(4) for a in ("du", "dv")]
                          for s in range(10)])
         return rows.var(axis=0, ddof=1).mean()

@@ -97,7 +97,8 @@ def test_an_absurd_vary_high_is_refused_before_any_work(kind, name, warm, tmp_pa
     p = get_trial_kind(kind).parameters[name]
     out = tmp_path / "out"
     coded = any(p.default == c.value for c in p.codes)
-    low = p.default if not coded or p.choice_only else (p.lower if not p.lower_open else p.lower + 0.5 * (p.upper - p.lower))
+    quantity = p.lower if not p.lower_open else p.lower + 0.5 * (p.upper - p.lower)
+    low = quantity if p.default is None else p.default if not coded or p.choice_only else quantity
     argv = ["sensitivity", "--camera", "galaxy-nexus", "--trial-kind", kind, "--vary", f"{name}={low!r}:1e308",
             "--vary", _other(name), "--out", str(out)]
     t0 = time.perf_counter()

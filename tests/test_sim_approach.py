@@ -125,7 +125,7 @@ def test_stand_file_uses_the_test_stand_chain(tmp_path):
     np.testing.assert_allclose(R, R0)
     np.testing.assert_allclose(t, t0)
     mid = traj.at(1.0)
-    assert mid["range_m"] == pytest.approx(9.0) and mid["yaw_deg"] == pytest.approx(-5.0)
+    assert mid["rail_m"] == pytest.approx(9.0) and mid["yaw_deg"] == pytest.approx(-5.0)
 
 
 def test_scenario_from_pose_round_trips(nexus):

@@ -136,12 +136,12 @@ def test_bad_stand_input_is_refused(nexus, pattern):
 def test_scenario_on_the_stand_turns_the_phone():
     from svgs_sim.sim.closed_loop import Scenario
 
-    s = Scenario(range_m=10.0, pitch_deg=8.0, yaw_deg=10.0, roll_deg=10.0, mount="stand", stage_m=0.05)
+    s = Scenario(rail_m=10.0, pitch_deg=8.0, yaw_deg=10.0, roll_deg=10.0, mount="stand", stage_m=0.05)
     R, t = s.pose()
     R2, t2 = TestStand().pose(10.0, stage_m=0.05, roll_deg=10.0, pitch_deg=8.0, yaw_deg=10.0)
     assert np.allclose(R, R2) and np.allclose(t, t2)
     with pytest.raises(InputError, match="no lateral stage"):
-        Scenario(range_m=10.0, target_x_m=0.2, mount="stand")
+        Scenario(rail_m=10.0, target_x_m=0.2, mount="stand")
     with pytest.raises(InputError, match="only the test stand"):
         Scenario(range_m=10.0, stage_m=0.1)
     with pytest.raises(InputError, match="mount"):

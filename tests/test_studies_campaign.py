@@ -38,11 +38,11 @@ def test_campaign_design_follows_the_sensor_mount_envelope():
     assert cfg.trial_kind == "render" and cfg.calibration == "paper" and cfg.poses_per_range == 50
     trials = campaign_trials(cfg)
     assert len(trials) == 5 * 200 and [t.trial_id for t in trials] == list(range(1000))
-    s = {k: np.array([t.scenario[k] for t in trials]) for k in ("roll_deg", "pitch_deg", "yaw_deg", "range_m", "stage_m",
+    s = {k: np.array([t.scenario[k] for t in trials]) for k in ("roll_deg", "pitch_deg", "yaw_deg", "rail_m", "stage_m",
                                                                  "nominal_range_m", "pose_index", "stand",
                                                                  "rail_err_m")}
     # the recorded range (the rangefinder's reading) plus its error is the rail's true position
-    assert np.all(s["stand"] == 1) and np.allclose(s["range_m"] + s["rail_err_m"], s["nominal_range_m"])
+    assert np.all(s["stand"] == 1) and np.allclose(s["rail_m"] + s["rail_err_m"], s["nominal_range_m"])
     assert 0 < np.abs(s["rail_err_m"]).max() < 0.1
     assert np.abs(s["roll_deg"]).max() <= 25 and np.abs(s["pitch_deg"]).max() <= 25
     assert np.abs(s["yaw_deg"]).max() <= 45 and np.abs(s["yaw_deg"]).max() > 43  # about the line of sight: in view

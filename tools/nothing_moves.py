@@ -16,7 +16,8 @@ an older checkout: ``PYTHONPATH=OLD_CHECKOUT python tools/nothing_moves.py run O
 
 ``compare`` walks both trees and compares every file: JSON and JSON-lines objects key by key and
 CSV files cell by cell after dropping the keys and columns of :data:`DROPPED_KEYS` (wall and CPU
-times and versions, which are expected to differ), HTML reports as text with the time they were
+times and versions, which are expected to differ) and mapping renamed columns to the current
+results-store layout (:func:`_renamed`, :func:`_current_manifest`), HTML reports as text with the time they were
 made and the project's version masked (:data:`MASKED_TEXT`), ``.npy`` arrays bit for bit, PNG images pixel by pixel
 (their metadata may name a library version), any other file byte for byte. It prints one line per
 difference and exits 1 if there is any, 0 if the runs are identical.
@@ -134,7 +135,33 @@ def _diff(a, b, where: str, out: list[str]) -> None:
 
 def _csv_rows(path: Path) -> list[dict]:
     with open(path, newline="") as fh:
-        return [{k: v for k, v in row.items() if k not in DROPPED_KEYS} for row in csv.DictReader(fh)]
+        return [_renamed({k: v for k, v in row.items() if k not in DROPPED_KEYS}) for row in csv.DictReader(fh)]
+
+
+def _renamed(row: dict) -> dict:
+    """A results row in the store's current layout (format 2): a row of format 1 (``stand`` and
+    ``range_m``, no ``rail_m``) had the stand's rail position in ``range_m``; it moves to ``rail_m``.
+    Written here, not imported, so the mapping is checked against the store's own."""
+    if "stand" not in row or "range_m" not in row or "rail_m" in row:
+        return row
+    on_stand = row["stand"] not in ("", None) and float(row["stand"]) == 1.0
+    out = {}
+    for k, v in row.items():
+        if k == "range_m":
+            out["range_m"], out["rail_m"] = ("", v) if on_stand else (v, "")
+        else:
+            out[k] = v
+    return out
+
+
+def _current_manifest(doc):
+    """A store manifest of format 1 as format 2 writes it (the ``rail_m`` column after ``range_m``)."""
+    if not (isinstance(doc, dict) and doc.get("format_version") == 1 and isinstance(doc.get("columns"), list)):
+        return doc
+    cols = list(doc["columns"])
+    if "range_m" in cols and "stand" in cols and "rail_m" not in cols:
+        cols.insert(cols.index("range_m") + 1, "rail_m")
+    return {**doc, "format_version": 2, "columns": cols}
 
 
 def compare_file(a: Path, b: Path, rel: str) -> list[str]:
@@ -142,7 +169,10 @@ def compare_file(a: Path, b: Path, rel: str) -> list[str]:
     out: list[str] = []
     suffix = a.suffix
     if suffix in (".json", ".jsonl", ".stdout"):
-        _diff(_drop(_json_docs(a.read_text())), _drop(_json_docs(b.read_text())), rel, out)
+        x, y = _drop(_json_docs(a.read_text())), _drop(_json_docs(b.read_text()))
+        if a.name == "manifest.json":
+            x, y = [_current_manifest(d) for d in x], [_current_manifest(d) for d in y]
+        _diff(x, y, rel, out)
     elif suffix == ".csv":
         _diff(_csv_rows(a), _csv_rows(b), rel, out)
     elif suffix == ".npy":

@@ -162,9 +162,6 @@ class Scenario(TargetPose):
 
     def _check_distances(self) -> None:
         """``range_m`` (the target) or ``rail_m`` (the stand): present, finite and positive."""
-        if self.mount == "stand" and self.rail_m is None and self.range_m is not None:
-            object.__setattr__(self, "rail_m", self.range_m)  # a stand's rail position given as range_m
-            object.__setattr__(self, "range_m", None)
         if self.range_m is None and self.rail_m is None:  # the default distance, 10 m
             object.__setattr__(self, "rail_m" if self.mount == "stand" else "range_m", 10.0)
         if self.mount == "stand" and self.range_m is not None:

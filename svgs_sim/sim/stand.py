@@ -13,7 +13,7 @@ The chain, target (world) frame first (ASSUMPTIONS marked; each is a parameter o
 
 1. **Rail**: along the line from the target origin to the camera's nominal position (the
    camera facing the target, the pattern's own attitude zero: :func:`pose_from_scenario` at
-   zero angles). The cart puts the gimbal's pivot at ``range_m`` plus the stage's
+   zero angles). The cart puts the gimbal's pivot at ``rail_m`` plus the stage's
    ``stage_m`` (positive: away from the target) along it.
 2. **Gimbal**, named as the paper names the relative attitude (its roll, pitch, yaw = phi,
    theta, psi; :mod:`svgs_sim.svgs.frames`): ``roll`` turns the camera about its horizontal axis,
@@ -124,13 +124,13 @@ class TestStand:
         mr, mp, my = self.misalignment_deg
         return R @ _axis_rotation("pitch", mp) @ _axis_rotation("roll", mr) @ _axis_rotation("yaw", my)
 
-    def pose(self, range_m: float, *, stage_m: float = 0.0, roll_deg: float = 0.0, pitch_deg: float = 0.0,
+    def pose(self, rail_m: float, *, stage_m: float = 0.0, roll_deg: float = 0.0, pitch_deg: float = 0.0,
              yaw_deg: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """The camera's pose for a stand setting.
 
         Parameters
         ----------
-        range_m : float
+        rail_m : float
             Rail position: the pivot's distance from the target origin with the stage at 0, m.
         stage_m : float
             Translation stage, m, positive away from the target (+/-0.15 m on the paper's stand).
@@ -147,20 +147,21 @@ class TestStand:
             if not np.isfinite(float(v)):
                 raise InputError(f"{name}: expected a finite number, got {v!r}")
         o = np.asarray(self.pivot_to_camera_m, float)
-        R0, t0 = pose_from_scenario(range_m)  # nominal: the camera faces the target along the rail
+        R0, t0 = pose_from_scenario(rail_m)  # nominal: the camera faces the target along the rail
         R_t_c0 = R0.T  # target <- nominal camera
         p_c0 = -R0.T @ t0  # nominal camera position, target frame
         rail = p_c0 / np.linalg.norm(p_c0)  # from the target towards the camera
-        # the pivot: where the nominal camera's pivot is (camera at range_m), moved by the stage
+        # the pivot: where the nominal camera's pivot is (camera at rail_m), moved by the stage
         pivot = p_c0 - R_t_c0 @ o + rail * float(stage_m)
         R_t_c = R_t_c0 @ self.gimbal_rotation(roll_deg, pitch_deg, yaw_deg)
         p_c = pivot + R_t_c @ o
         R = R_t_c.T
         return R, -R @ p_c
 
-    def state(self, range_m: float, **setting) -> np.ndarray:
-        """The truth state (paper convention, :func:`svgs_sim.svgs.frames.pose_to_state`) of a setting."""
-        return pose_to_state(*self.pose(range_m, **setting))
+    def state(self, rail_m: float, **setting) -> np.ndarray:
+        """The truth state (paper convention, :func:`svgs_sim.svgs.frames.pose_to_state`) of a setting
+        (``rail_m``: the rail position, m)."""
+        return pose_to_state(*self.pose(rail_m, **setting))
 
 
 def targets_in_view(camera, pattern, R, t, margin_frac: float = 0.02) -> bool:
@@ -175,7 +176,7 @@ def targets_in_view(camera, pattern, R, t, margin_frac: float = 0.02) -> bool:
                        & (uv[:, 1] >= my) & (uv[:, 1] <= camera.height - 1 - my)))
 
 
-def sample_in_view(rng: np.random.Generator, camera, pattern, range_m: float, n: int, *,
+def sample_in_view(rng: np.random.Generator, camera, pattern, rail_m: float, n: int, *,
                    stand: TestStand | None = None, limits_deg: dict | None = None,
                    stage_limit_m: float = STAGE_LIMIT_M, margin_frac: float = 0.02, max_draws: int | None = None):
     """Draw ``n`` stand settings uniformly over the gimbal's envelope, keeping those in which
@@ -187,7 +188,8 @@ def sample_in_view(rng: np.random.Generator, camera, pattern, range_m: float, n:
         Seeded: the same seed gives the same settings.
     camera : svgs.Camera
     pattern : svgs.Pattern
-    range_m : float
+    rail_m : float
+        The rail position, m.
     n : int
     stand : TestStand, optional
     limits_deg : dict, optional
@@ -218,11 +220,11 @@ def sample_in_view(rng: np.random.Generator, camera, pattern, range_m: float, n:
         if draws >= max_draws:
             raise InputError(
                 f"sample_in_view: only {len(out)} of {n} settings keep the target in view after {draws} draws "
-                f"at {range_m:g} m over roll/pitch/yaw +/-{lim['roll_deg']:g}/{lim['pitch_deg']:g}/{lim['yaw_deg']:g} deg")
+                f"at the rail position {rail_m:g} m over roll/pitch/yaw +/-{lim['roll_deg']:g}/{lim['pitch_deg']:g}/{lim['yaw_deg']:g} deg")
         draws += 1
         s = {"stage_m": float(rng.uniform(-stage_limit_m, stage_limit_m)),
              **{k: float(rng.uniform(-lim[k], lim[k])) for k in ("roll_deg", "pitch_deg", "yaw_deg")}}
-        R, t = stand.pose(range_m, **s)
+        R, t = stand.pose(rail_m, **s)
         if targets_in_view(camera, pattern, R, t, margin_frac):
             out.append(s)
     span = {f"{k}_span_deg": [min(s[f"{k}_deg"] for s in out), max(s[f"{k}_deg"] for s in out)] for k in ("roll", "pitch")}

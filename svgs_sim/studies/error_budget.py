@@ -230,7 +230,7 @@ def geometric_trials(baseline: list, config, centroids: list[dict]) -> list:
     sigma = {c["range_m"]: c["scatter_px"] if np.isfinite(c["scatter_px"]) else 0.0 for c in centroids}
     out = []
     for tr in baseline:
-        sc = {k: tr.scenario[k] for k in ("camera", "pattern", "range_m", "stand", "stage_m", "roll_deg", "pitch_deg",
+        sc = {k: tr.scenario[k] for k in ("camera", "pattern", "range_m", "rail_m", "stand", "stage_m", "roll_deg", "pitch_deg",
                                           "yaw_deg")}
         sc["sigma_px"] = sigma[tr.scenario["nominal_range_m"]]
         labels = {k: tr.scenario[k] for k in ("nominal_range_m", "pose_index", "exposure_index")}

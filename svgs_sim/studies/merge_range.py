@@ -118,7 +118,7 @@ def make_config(camera: str, *, ranges_m=None, vary=None, exposures: int = 2, se
     render_trial_scenario(camera=camera, pattern=pattern)  # the camera and pattern exist
     rs = []
     for r in (DEFAULT_RANGES_M if ranges_m is None else ranges_m):
-        rs.append(RENDER.parameters["range_m"].check(r, "--ranges"))
+        rs.append(RENDER.parameters["rail_m"].check(r, "--ranges"))  # rail positions on the stand
     if len(rs) < 2 or sorted(rs) != rs or len(set(rs)) != len(rs):
         raise InputError(f"--ranges: expected at least two increasing ranges, got {rs}")
     if isinstance(exposures, bool) or not isinstance(exposures, (int, np.integer)) or exposures < 1:
@@ -201,7 +201,7 @@ def analyse(table: dict, config: MergeRangeConfig) -> list[dict]:
         sel = cases == case
         margins, solved, reasons = [], [], []
         for r in config.ranges_m:
-            m = sel & (table["range_m"] == r)
+            m = sel & (table["rail_m"] == r)  # the stand's rail position (the study's ranges)
             v = np.asarray(table["merge_margin_dn"][m], float)
             margins.append(float(np.mean(v)) if v.size and np.all(np.isfinite(v)) else float("nan"))
             ok = table["ok"][m] == 1

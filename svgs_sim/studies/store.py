@@ -66,8 +66,14 @@ REJECTED = "results.rejected.csv"
 LOCK = ".lock"
 #: Malformed rows named one by one in a warning or error (the rest are counted).
 MAX_WARNINGS = 10
-#: Bumped when the on-disk layout changes.
-FORMAT_VERSION = 1
+#: Bumped when the on-disk layout changes. A store of an older format is read in the current
+#: layout (:func:`read_rows`) and upgraded on disk when its study is run again
+#: (:class:`ResultStore`); a store of a newer format is refused.
+#:
+#: - 1 -> 2: the test stand's rail position got its own column, ``rail_m`` (after ``range_m``).
+#:   Format 1 held it in ``range_m`` on rows with ``stand = 1``; ``range_m`` is now only the
+#:   boresight distance, empty on stand rows, and ``rail_m`` is empty on the others.
+FORMAT_VERSION = 2
 
 
 def _jsonable(obj):
@@ -308,6 +314,93 @@ def _diff(a: dict, b: dict, prefix: str = "") -> list[str]:
     return out
 
 
+def _is_format1_header(columns) -> bool:
+    """A header of format 1 with the stand's rail position in ``range_m`` (see :data:`FORMAT_VERSION`)."""
+    return "range_m" in columns and "stand" in columns and "rail_m" not in columns
+
+
+def upgraded_columns(columns) -> list:
+    """``columns`` of a format-1 store in the current layout (``rail_m`` after ``range_m``);
+    current columns come back unchanged."""
+    cols = list(columns)
+    if _is_format1_header(cols):
+        cols.insert(cols.index("range_m") + 1, "rail_m")
+    return cols
+
+
+def upgraded_fields(header, fields) -> list:
+    """One format-1 row's fields (text, as in the file) in the current layout: on a stand row
+    (``stand`` is 1) the ``range_m`` text moves to ``rail_m``; otherwise ``rail_m`` is empty.
+    The text is moved, never reformatted, so the numbers are the same bits. A row of another
+    header, or with the wrong number of fields (malformed either way), comes back unchanged."""
+    header, fields = list(header), list(fields)
+    if not _is_format1_header(header) or len(fields) != len(header):
+        return fields
+    i = header.index("range_m")
+    on_stand = _parse(fields[header.index("stand")]) == 1
+    distance = fields[i]
+    fields[i] = "" if on_stand else distance
+    fields.insert(i + 1, distance if on_stand else "")
+    return fields
+
+
+def _current_manifest(have):
+    """A stored manifest as the current format would write it (in memory; see :func:`_upgrade_store`)."""
+    if not isinstance(have, dict) or have.get("format_version") != 1:
+        return have
+    out = {**have, "format_version": FORMAT_VERSION}
+    if isinstance(have.get("columns"), list):
+        out["columns"] = upgraded_columns(have["columns"])
+    return out
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+def _upgrade_store(out_dir: Path) -> bool:
+    """Rewrite an older store in ``out_dir`` in the current format (see :data:`FORMAT_VERSION`):
+    ``results.csv`` first (its complete lines, each value's text moved, not reformatted; a torn
+    tail is dropped, as :meth:`ResultStore.open` would), then ``manifest.json``, each atomically.
+    A crash between the two leaves a results file already upgraded, which the next upgrade
+    recognises by its header. Returns whether anything was rewritten."""
+    path = out_dir / MANIFEST
+    have = json.loads(path.read_text())
+    if have.get("format_version") == FORMAT_VERSION:
+        return False
+    new = _current_manifest(have)
+    results = out_dir / RESULTS
+    moved = isinstance(have.get("columns"), list) and _is_format1_header(have["columns"])
+    if results.exists():
+        data = results.read_bytes().replace(b"\r\n", b"\n")
+        lines = data.split(b"\n")[:-1]
+        if lines:
+            header = next(csv.reader((lines[0].decode("utf-8", errors="replace"),)), [])
+            if _is_format1_header(header):
+                buf = io.StringIO()
+                w = csv.writer(buf, lineterminator="\n")
+                w.writerow(upgraded_columns(header))
+                for raw in lines[1:]:
+                    try:
+                        fields = next(csv.reader((raw.decode("utf-8"),), strict=True), [])
+                    except (UnicodeDecodeError, csv.Error):
+                        buf.write(raw.decode("utf-8", errors="surrogateescape") + "\n")  # malformed: kept as is
+                        continue
+                    w.writerow(upgraded_fields(header, fields))
+                _write_atomic(results, buf.getvalue().encode("utf-8", errors="surrogateescape"))
+    _write_atomic(path, (json.dumps(new, indent=2, sort_keys=True) + "\n").encode())
+    _fsync_dir(out_dir)
+    what = ("the stand's rail position moved from range_m to its own column rail_m; no value changed" if moved
+            else "no column or value changed")
+    _warn(f"{out_dir}: a store of format {have.get('format_version')} upgraded to format {FORMAT_VERSION} ({what})")
+    return True
+
+
 def _refuse_other_study(out_dir: Path, want: dict, ignore=()) -> None:
     """:class:`InputError` when ``out_dir``'s manifest is unreadable or differs from ``want`` (a
     full manifest: format, parameters, columns) in anything but the parameters in ``ignore``."""
@@ -317,6 +410,12 @@ def _refuse_other_study(out_dir: Path, want: dict, ignore=()) -> None:
     except (OSError, ValueError) as exc:
         raise InputError(f"--out: {str(path)!r} is not a readable study manifest ({exc}); "
                          "choose another --out directory") from None
+    version = have.get("format_version") if isinstance(have, dict) else None
+    if isinstance(version, int) and version > FORMAT_VERSION:
+        raise InputError(f"--out: {str(out_dir)!r} holds a study of results-store format {version}, written by a "
+                         f"newer svgs-sim (this one reads formats 1 to {FORMAT_VERSION}); upgrade svgs-sim or "
+                         "choose another --out directory")
+    have = _current_manifest(have)
     if ignore and isinstance(have, dict) and isinstance(have.get("parameters"), dict):
         have = {**have, "parameters": {k: v for k, v in have["parameters"].items() if k not in ignore}}
         want = {**want, "parameters": {k: v for k, v in want["parameters"].items() if k not in ignore}}
@@ -365,7 +464,7 @@ def check_resumable(out_dir, manifest: dict, columns=None, *, ignore=()) -> bool
             "columns": None if columns is None else list(columns)}
     if columns is None:
         try:
-            want["columns"] = json.loads((out_dir / MANIFEST).read_text()).get("columns")
+            want["columns"] = _current_manifest(json.loads((out_dir / MANIFEST).read_text())).get("columns")
         except (OSError, ValueError, AttributeError):
             pass  # refused as unreadable below
     _refuse_other_study(out_dir, want, ignore)
@@ -461,7 +560,8 @@ class ResultStore:
     def _check_manifest(self) -> None:
         want = self._full_manifest()
         if self.manifest_path.exists():
-            _refuse_other_study(self.dir, want)
+            _refuse_other_study(self.dir, want)  # compared in the current format, then upgraded
+            self._upgrade()
         else:
             stray = [p.name for p in self.dir.iterdir() if p.name in (RESULTS,)]
             if stray:
@@ -476,6 +576,19 @@ class ResultStore:
             os.replace(tmp, self.manifest_path)
             _fsync_dir(self.dir)
             self._fresh = True
+
+    def _upgrade(self) -> None:
+        """Rewrite this study's older-format store in the current format, under the directory lock."""
+        lock_fd = os.open(self.dir / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            try:
+                fcntl.flock(lock_fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                raise InputError(f"--out: another run is writing to {str(self.dir)!r}; wait for it or choose "
+                                 "another --out") from None
+            _upgrade_store(self.dir)
+        finally:
+            os.close(lock_fd)
 
     # ------------------------------------------------------------------ open / close
     def open(self) -> ResultStore:
@@ -704,11 +817,17 @@ def read_rows(path, columns=None, *, trial_ids=None, text_columns=None) -> list[
         header = next(csv.reader((lines[0].decode("utf-8"),), strict=True), [])
     except (UnicodeDecodeError, csv.Error):
         header = None
+    old_header = header if header and _is_format1_header(header) else None
+    if old_header:  # format 1: read in the current layout (see FORMAT_VERSION)
+        header = upgraded_columns(old_header)
     if header is None or (columns is not None and header != list(columns)) or not header or header[0] != "trial_id":
         want = f"{','.join(columns)!r}" if columns is not None else "one starting with 'trial_id'"
         raise InputError(f"results file {str(path)!r} line 1: the header is "
                          f"{lines[0].decode(errors='replace')!r}, expected {want}")
-    good, bad = _check_lines(lines[1:], header, trial_ids=trial_ids, text_columns=text_columns)
+    body = lines[1:]
+    if old_header:
+        body = [_upgraded_line(old_header, raw) for raw in body]
+    good, bad = _check_lines(body, header, trial_ids=trial_ids, text_columns=text_columns)
     if bad:
         where = "; ".join(f"line {line_no}: {problem}" for line_no, problem, _ in bad[:MAX_WARNINGS])
         more = f" (and {len(bad) - MAX_WARNINGS} more)" if len(bad) > MAX_WARNINGS else ""
@@ -718,6 +837,17 @@ def read_rows(path, columns=None, *, trial_ids=None, text_columns=None) -> list[
     rows = [dict(zip(header, (_parse(x) for x in fields))) for _, fields in good]
     rows.sort(key=lambda r: r["trial_id"])
     return rows
+
+
+def _upgraded_line(header, raw: bytes) -> bytes:
+    """One data line of a format-1 file in the current layout (a line that does not parse is kept)."""
+    try:
+        fields = next(csv.reader((raw.decode("utf-8"),), strict=True), [])
+    except (UnicodeDecodeError, csv.Error):
+        return raw
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="").writerow(upgraded_fields(header, fields))
+    return buf.getvalue().encode()
 
 
 def read_table(path, columns=None, *, trial_ids=None, text_columns=None) -> dict:

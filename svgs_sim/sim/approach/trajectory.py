@@ -24,8 +24,9 @@ STATE_COLUMNS = STATE_KEYS
 STAND_COLUMNS = ("rail_m", "stage_m", "roll_deg", "pitch_deg", "yaw_deg")
 #: Internal form of a target-mounted trajectory: :class:`svgs_sim.sim.closed_loop.Scenario`'s fields.
 TARGET_FIELDS = ("range_m", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg")
-#: Internal form of a stand trajectory.
-STAND_FIELDS = ("range_m", "stage_m", "roll_deg", "pitch_deg", "yaw_deg")
+#: Internal form of a stand trajectory: the file's own columns (the rail position is ``rail_m``,
+#: never ``range_m``, which is the boresight distance).
+STAND_FIELDS = STAND_COLUMNS
 #: Time step of the central difference that gives the image velocity of the spots, s.
 VELOCITY_STEP_S = 1e-3
 #: Most frames one approach may have.
@@ -104,7 +105,8 @@ class Trajectory:
     def scenario(self, t_s: float, base: Scenario) -> Scenario:
         """``base`` (camera, lab, ...) at this trajectory's pose at time ``t_s`` (s): a
         :class:`~svgs_sim.sim.closed_loop.Scenario` with this trajectory's mount."""
-        return base.replace(mount=self.mount, **self.at(t_s))
+        other = {"range_m": None} if self.mount == "stand" else {"rail_m": None}  # one distance, by the mount
+        return base.replace(mount=self.mount, **other, **self.at(t_s))
 
     def frame_times(self, fps: float) -> np.ndarray:
         """Frame timestamps ``t0 + k / fps`` within the span.

@@ -29,8 +29,12 @@ from svgs_sim.svgs.solver import solve_centroids
 GEOMETRIC_PARAMETERS = {
     p.name: p
     for p in (
-        Parameter("range_m", "m", "distance from the camera to the target origin along the boresight", 10.0, True,
-                  lower=0.0, upper=RANGE_LIMIT_M, lower_open=True),
+        Parameter("range_m", "m", "distance from the camera to the target origin along the boresight (stand = 0 "
+                  "only; a stand trial gives rail_m)", 10.0, True, lower=0.0, upper=RANGE_LIMIT_M, lower_open=True,
+                  optional=True),
+        Parameter("rail_m", "m", "the gimbal pivot's position on the test stand's rail, the distance the lab "
+                  "recorded (stand = 1 only, where it is required)", None, True, lower=0.0, upper=RANGE_LIMIT_M,
+                  lower_open=True, optional=True),
         Parameter("target_x_m", "m", "lateral offset of the target origin from the boresight, camera right", 0.0, True,
                   **bounds("target_x_m")),
         Parameter("target_y_m", "m", "lateral offset of the target origin from the boresight, camera up", 0.0, True,
@@ -54,8 +58,9 @@ GEOMETRIC_PARAMETERS = {
         Parameter("merge_px", "px", "spots closer than this in the image merge into one (0: never)", 0.0, True,
                   **bounds("merge_px")),
         # the paper's test stand (svgs_sim.sim.stand): the gimbal turns the phone, the target stays still
-        Parameter("stand", "1", "1: the angles turn the phone on the test stand's gimbal about its pivot, range_m is "
-                  "the rail position (svgs_sim.sim.stand.TestStand); 0: they turn the target in front of the camera", 0.0, True,
+        Parameter("stand", "1", "1: the angles turn the phone on the test stand's gimbal about its pivot, rail_m gives "
+                  "the rail position (svgs_sim.sim.stand.TestStand); 0: they turn the target in front of the camera, "
+                  "range_m away", 0.0, True,
                   lower=0.0, upper=1.0),
         Parameter("stage_m", "m", "the stand's translation stage along the rail, positive away from the target "
                   "(stand = 1 only)", 0.0, True, **bounds("stage_m")),

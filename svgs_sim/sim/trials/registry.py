@@ -83,17 +83,22 @@ class Parameter:
     codes : tuple of Code
         Values that stand for a choice (the profile's value, the renderer's default, the app's
         threshold): written and shown as words, held in the store's row as their numbers.
+    optional : bool
+        The parameter does not apply to every scenario of its kind (``range_m`` and ``rail_m``:
+        a trial has one of them, by its mount): ``None`` (an empty cell in the store; NaN in a
+        table) means "not given", and the kind's scenario says when it must be given.
     """
 
     name: str
     unit: str
     meaning: str
-    default: float
+    default: float | None
     needs_render: bool
     lower: float | None = None
     upper: float | None = None
     lower_open: bool = False
     codes: tuple = ()
+    optional: bool = False
 
     @property
     def choice_only(self) -> bool:
@@ -130,19 +135,23 @@ class Parameter:
                 return c.word
         return _number(value)
 
-    def check(self, value, what: str = "", *, codes: bool = True) -> float:
+    def check(self, value, what: str = "", *, codes: bool = True) -> float | None:
         """The row's number of ``value`` (a number in the domain, or - with ``codes`` - a code's
         word or the code's number, as a store holds it), else :class:`InputError`.
 
         Parameters
         ----------
-        value : float or str
+        value : float, str or None
+            None (or NaN, an empty cell read into a table) only where the parameter is
+            :attr:`optional`; it is returned as None.
         what : str
             The input's name for the message (default the parameter's).
         codes : bool
             Accept the codes (False: a quantity only, e.g. the bounds of a varied range).
         """
         label = what or self.name
+        if self.optional and (value is None or (isinstance(value, (float, np.floating)) and np.isnan(value))):
+            return None
         if isinstance(value, str) and codes:
             for c in self.codes:
                 if value.strip().lower() == c.word:

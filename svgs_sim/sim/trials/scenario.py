@@ -21,7 +21,7 @@ from svgs_sim.sim.target_pose import TargetPose
 from svgs_sim.sim.trials.registry import ID_COLUMNS, TIMING_COLUMNS, TrialKind, get_trial_kind
 
 #: Scenario keys of the pose (the geometric kind's render key; the render kind adds its own).
-POSE_KEYS = ("range_m", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg", "stand", "stage_m",
+POSE_KEYS = ("range_m", "rail_m", "target_x_m", "target_y_m", "roll_deg", "pitch_deg", "yaw_deg", "stand", "stage_m",
              "misalign_yaw_deg", "misalign_pitch_deg", "misalign_roll_deg", "stand_err_roll_deg",
              "stand_err_pitch_deg", "stand_err_yaw_deg", "stand_err_stage_m", "rail_err_m")
 
@@ -32,6 +32,11 @@ TRUTH_KEYS = ("truth_actual", "truth_stand", "truth_rail")
 
 #: Row columns of every study that are not scenario values (their ids, seeds, timings).
 _NON_SCENARIO = (*ID_COLUMNS, *TIMING_COLUMNS)
+
+
+def _given(value) -> bool:
+    """A row value that is there (not None, not the NaN of an empty cell)."""
+    return value is not None and not (isinstance(value, (float, np.floating)) and np.isnan(value))
 
 
 class RowView(Mapping):
@@ -148,7 +153,9 @@ class TrialScenario(RowView):
             keys = part().row_values()
             out[name] = part.from_row({k: values.pop(k) for k in keys if k in values})
         for k, v in values.items():
-            if k in cls._OPTIONAL and v == cls._OPTIONAL[k]:
+            if v is None:  # an optional parameter not given (range_m or rail_m, by the mount)
+                out[k] = None
+            elif k in cls._OPTIONAL and v == cls._OPTIONAL[k]:
                 out[k] = None
             elif k in cls._BOOLS:
                 if v not in (0.0, 1.0):
@@ -259,8 +266,8 @@ class PoseScenario(TrialScenario, TargetPose):
     range_m : float or None
         The boresight distance to the target origin, m (``mount="target"``; default 10).
     rail_m : float or None
-        The gimbal pivot's rail position, m (``mount="stand"``, required); the row's
-        ``range_m`` column holds it with ``stand = 1``.
+        The gimbal pivot's rail position, m (``mount="stand"``, required). The row has both
+        columns; the one that does not apply is empty.
     target_x_m, target_y_m, roll_deg, pitch_deg, yaw_deg : float
         The pose besides the range (keyword-only, :class:`svgs_sim.sim.target_pose.TargetPose`).
     mount : {"target", "stand"}
@@ -307,21 +314,32 @@ class PoseScenario(TrialScenario, TargetPose):
 
     @classmethod
     def from_values(cls, values: Mapping, labels: Mapping | None = None) -> "PoseScenario":
-        """As :meth:`TrialScenario.from_values`, and the pose by its typed names: ``mount``
-        (``"target"`` or ``"stand"``) and ``rail_m`` (the stand's rail position) for the row's
-        ``stand`` and ``range_m`` codes (a design never writes ``"stand": 1.0``)."""
+        """As :meth:`TrialScenario.from_values`, the distance by its one meaning: ``range_m`` (the
+        boresight distance) on a target scenario, ``rail_m`` (the stand's rail position) on a stand
+        scenario (``stand = 1``), never both. The mount may be given by its name, ``mount``
+        (``"target"`` or ``"stand"``), instead of the row's ``stand`` code; ``rail_m`` alone
+        implies the stand."""
         values = dict(values)
-        if "mount" in values or "rail_m" in values:
-            mount = values.pop("mount", "stand" if "rail_m" in values else "target")
+        if "mount" in values:
+            mount = values.pop("mount")
             if mount not in ("target", "stand"):
                 raise InputError(f"mount: expected 'target' or 'stand', got {mount!r}")
             if "stand" in values:
                 raise InputError("give the mount as mount='stand' or 'target', not also as stand")
             values["stand"] = 1.0 if mount == "stand" else 0.0
-            if "rail_m" in values:
-                if mount != "stand" or "range_m" in values:
-                    raise InputError("rail_m: the stand's rail position, with mount='stand' and no range_m")
-                values["range_m"] = values.pop("rail_m")
+        elif "stand" not in values and values.get("rail_m") is not None:
+            values["stand"] = 1.0
+        stand = cls.kind().parameters["stand"].check(values.get("stand", 0.0))
+        given = {k for k in ("range_m", "rail_m") if _given(values.get(k))}
+        if stand == 1.0:
+            if "range_m" in given:
+                raise InputError("range_m: the boresight distance of a target scenario; a stand scenario "
+                                 "(stand = 1, mount='stand') gives the rail position as rail_m")
+            if "rail_m" not in given:
+                raise InputError("rail_m: a stand scenario (stand = 1, mount='stand') needs the rail position, m")
+            values["range_m"] = None
+        elif "rail_m" in given:
+            raise InputError("rail_m: only the test stand (stand = 1, mount='stand') has a rail; give range_m")
         return super().from_values(values, labels)
 
     @classmethod
@@ -330,15 +348,13 @@ class PoseScenario(TrialScenario, TargetPose):
         stand = values.pop("stand")
         if stand not in (0.0, 1.0):
             raise InputError(f"stand: expected 0 (target turned) or 1 (phone on the stand's gimbal), got {stand!r}")
-        distance = values.pop("range_m")
         out = super()._decode(values)
         out["mount"] = "stand" if stand == 1.0 else "target"
-        out["rail_m" if stand == 1.0 else "range_m"] = float(distance)
         return out
 
-    def _row_value(self, key: str) -> float:
-        if key == "range_m":  # the row's range_m: the rail position on the stand
-            return float(self.distance_m)
+    def _row_value(self, key: str):
+        if key in ("range_m", "rail_m"):  # one of them, by the mount; the other's cell is empty
+            return getattr(self, key)
         if key == "stand":
             return 1.0 if self.mount == "stand" else 0.0
         return super()._row_value(key)

@@ -174,7 +174,8 @@ def make_config(camera: str, *, ranges_m=None, trials_per_range: int = 200, seed
 
 
 def _check_ranges_m(ranges_m, camera_key: str | None, kind) -> list[float]:
-    """The campaign's test ranges, checked against the trial kind's ``range_m`` parameter.
+    """The campaign's test ranges (the stand's rail positions), checked against the trial kind's
+    ``rail_m`` parameter.
 
     Parameters
     ----------
@@ -184,7 +185,7 @@ def _check_ranges_m(ranges_m, camera_key: str | None, kind) -> list[float]:
         The loaded camera's key (:attr:`svgs_sim.base.profiles.Camera.key`, to look up
         :data:`PAPER_RANGES_M`).
     kind : TrialKind
-        The trial kind whose ``range_m`` parameter checks each range.
+        The trial kind whose ``rail_m`` parameter checks each range.
 
     Returns
     -------
@@ -198,7 +199,7 @@ def _check_ranges_m(ranges_m, camera_key: str | None, kind) -> list[float]:
         ranges_m = PAPER_RANGES_M[camera_key]
     rs = []
     for r in ranges_m:
-        rs.append(kind.parameters["range_m"].check(r, "--ranges"))
+        rs.append(kind.parameters["rail_m"].check(r, "--ranges"))
     if not rs:
         raise InputError("--ranges: no ranges given")
     if len(set(rs)) != len(rs):
