@@ -219,6 +219,9 @@ def _random_trial_scenario(kind, rng):
         if (stand and name in _TARGET_ONLY) or (not stand and name in _STAND_ONLY):
             continue
         values[name] = _random_value(p, rng, (*kind.scenario_type._BOOLS, *kind.scenario_type._INTS))
+    if values.get("environment") == "orbit":  # black space: no backdrop, no room light
+        values.pop("backdrop_distance_m", None)
+        values.pop("ambient_radiance_w_m2_sr", None)
     distance = float(rng.uniform(1.0, 30.0))
     values.update({"mount": "stand", "rail_m": distance} if stand else {"range_m": distance})
     if stand:  # inside the stand's small geometry

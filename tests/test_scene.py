@@ -15,12 +15,18 @@ from svgs_sim.sim.render_trial import RENDER_PARAMETERS, RenderScenario, render_
 from svgs_sim.sim.scene import Scene, scene_from_args
 from svgs_sim.studies.range_sweep import make_config
 
-RENDERING_COMMANDS = (("render",), ("render-and-solve",), ("range-sweep",))
+RENDERING_COMMANDS = (("render",), ("render-and-solve",), ("range-sweep",), ("approach",))
 
 
 def _random_scene(rng) -> Scene:
     kw = {}
+    orbit = rng.random() < 0.3
     for name, q in Scene.quantities().items():
+        if q.choices:
+            kw[name] = "orbit" if orbit else "lab"
+            continue
+        if orbit and name in ("backdrop_distance_m", "ambient_radiance_w_m2_sr"):
+            continue  # none in orbit
         hi = min(q.upper, 50.0)
         v = float(rng.uniform(q.lower, hi))
         if q.lower_open and v == q.lower:
@@ -72,6 +78,7 @@ def test_every_trial_quantity_is_a_row_column_an_option_and_a_key_field():
     for name in trial:
         p, q = RENDER_PARAMETERS[name], params[name]
         assert (p.unit, p.lower, p.upper) == (q.unit, q.lower, q.upper)
+        assert [c.word for c in p.codes] == list(q.choices)  # a choice's words are its codes
     parser = build_parser()
     sub = next(a for a in parser._actions if a.dest == "command").choices
     for (cmd,) in RENDERING_COMMANDS:
@@ -80,6 +87,9 @@ def test_every_trial_quantity_is_a_row_column_an_option_and_a_key_field():
             q = params[name]
             flag = q.flag or "--" + name.replace("_", "-")
             assert flag in flags, (cmd, flag)
+            if q.choices:  # a choice: its words, checked by argparse
+                assert tuple(flags[flag].choices) == q.choices
+                continue
             lo, hi, _ = flags[flag].bounds
             assert (lo, hi) == (q.lower, q.upper)
     # a different scene is a different render (the key holds the part)
@@ -129,3 +139,54 @@ def test_the_range_sweep_config_holds_a_scene_and_writes_the_old_manifest():
     assert cfg.spp is None and cfg.exposure_s is None
     with pytest.raises(InputError, match="scene"):
         make_config("galaxy-nexus", [5.0], scene={"backdrop_distance_m": 1.0})
+
+
+# ---------------------------------------------------------------- the environment: lab or orbit
+def test_orbit_has_no_backdrop_and_no_room_light_and_refuses_the_labs_options(capsys):
+    s = Scene(environment="orbit")
+    assert (s.backdrop_distance_m, s.ambient_radiance_w_m2_sr) == (None, 0.0)
+    assert Scene.from_row(s.row_values()) == s and s.row_values()["environment"] == 1.0
+    assert Scene().environment == "lab" and Scene().row_values()["environment"] == 0.0
+    with pytest.raises(InputError, match="orbit"):
+        Scene(environment="orbit", ambient_radiance_w_m2_sr=0.5)
+    with pytest.raises(InputError, match="environment"):
+        Scene(environment="mars")
+    for cmd in ("render", "render-and-solve", "approach"):
+        rng = ["--range", "5"] if cmd != "approach" else ["--from", "6", "--to", "5", "--duration", "1", "--fps", "1"]
+        rc = main([cmd, "--camera", "galaxy-nexus", *rng, "--environment", "orbit", "--ambient", "0.1",
+                   "--out", "never-made"])
+        err = capsys.readouterr().err
+        assert rc == 2 and "--ambient" in err and "orbit" in err and "Traceback" not in err, (cmd, err)
+
+
+def test_the_approach_records_a_scene_only_when_it_is_not_the_lab():
+    from svgs_sim.sim.approach import Trajectory
+    from svgs_sim.studies.approach import make_config, scene_of
+
+    traj = Trajectory.straight(6.0, 5.0, 1.0)
+    lab = make_config("galaxy-nexus", traj, 1.0)
+    assert "scene" not in lab and scene_of(lab) == Scene()  # a folder made before the option resumes
+    orbit = make_config("galaxy-nexus", traj, 1.0, scene=Scene(environment="orbit"))
+    assert scene_of(orbit) == Scene(environment="orbit")
+
+
+@pytest.mark.render
+def test_in_orbit_space_is_black_and_the_flash_lit_target_still_solves(tmp_path):
+    """Black space: every pixel that sees no part of the target gets no photon at all (no source
+    behind it), where the lab's backdrop and room light reach every pixel; the spots are the same
+    flash-lit spots, and the pose solves."""
+    import json
+
+    for env in ("lab", "orbit"):
+        rc = main(["render", "--camera", "galaxy-nexus", "--range", "5", "--environment", env, "--seed", "1",
+                   "--out", str(tmp_path / env)])
+        assert rc == 0
+    orbit, lab = np.load(tmp_path / "orbit" / "flux.npy"), np.load(tmp_path / "lab" / "flux.npy")
+    assert (orbit == 0).mean() > 0.99 and (lab > 0).all()
+    truth = json.loads((tmp_path / "orbit" / "truth.json").read_text())
+    assert truth["scenario"]["environment"] == "orbit" and truth["scenario"]["backdrop_distance_m"] is None
+    # the corner of the frame: the lab's closed-form radiance, nothing in orbit
+    assert orbit[:50, :50].max() == 0.0 and lab[:50, :50].min() > 0
+    rc = main(["render-and-solve", "--camera", "galaxy-nexus", "--range", "5", "--environment", "orbit", "--seed", "1",
+               "--json"])
+    assert rc == 0

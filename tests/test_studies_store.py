@@ -262,3 +262,27 @@ def test_a_campaign_rerun_sets_a_garbage_line_aside_and_completes(tmp_path, caps
     assert campaign(tmp_path / "hurt") == 2
     err = capsys.readouterr().err
     assert "Traceback" not in err and f"{results}' line 1: the header is" in err
+
+
+def test_a_store_without_a_parameter_added_since_is_upgraded_with_its_default(tmp_path, capsys):
+    """A study folder written before its trial kind gained a parameter resumes: the new column is
+    filled with the parameter's default in every stored row (which is what those trials ran with),
+    every other value's text unchanged; a store that lacks a column not declared as added, or has
+    one the study does not write, is still refused."""
+    old_cols = ["trial_id", "seed", "range_m", "err_x_m"]
+    with ResultStore(tmp_path / "s", {"n": 2}, old_cols) as store:
+        store.append([{"trial_id": 0, "seed": 5, "range_m": 5.0, "err_x_m": 0.1},
+                      {"trial_id": 1, "seed": 6, "range_m": 10.0, "err_x_m": 0.30000000000000004}])
+    new_cols = ["trial_id", "seed", "range_m", "environment", "err_x_m"]
+    with pytest.raises(InputError, match="environment"):  # not declared as added: another study
+        ResultStore(tmp_path / "s", {"n": 2}, new_cols)
+    with pytest.raises(InputError, match="different parameters"):  # a column dropped is never an upgrade
+        ResultStore(tmp_path / "s", {"n": 2}, ["trial_id", "seed", "environment"], added_columns={"environment": "0.0"})
+    with ResultStore(tmp_path / "s", {"n": 2}, new_cols, added_columns={"environment": "0.0", "other": "1"}) as store:
+        assert store.done_ids == {0, 1}
+        assert "environment added with environment = 0.0" in capsys.readouterr().err
+    assert (tmp_path / "s" / "results.csv").read_text().splitlines() == [
+        "trial_id,seed,range_m,environment,err_x_m", "0,5,5.0,0.0,0.1", "1,6,10.0,0.0,0.30000000000000004"]
+    assert json.loads((tmp_path / "s" / "manifest.json").read_text())["columns"] == new_cols
+    with ResultStore(tmp_path / "s", {"n": 2}, new_cols, added_columns={"environment": "0.0"}) as store:
+        assert store.done_ids == {0, 1} and capsys.readouterr().err == ""  # upgraded once

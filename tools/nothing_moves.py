@@ -95,11 +95,21 @@ def run(out: Path, svgs: list[str], only: set[str] | None) -> int:
     return bad
 
 
+#: Parameters added since an older run, with the values that mean what the older run did (its
+#: default): a key or column of one of them at such a value is dropped before comparing, so an
+#: older run's output compares with a newer one's; at any other value it stays (and differs).
+ADDED_AT_DEFAULT = {"environment": ("lab", 0.0, "0.0", None)}  # None: an option not given
+
+
+def _added_at_default(key, value) -> bool:
+    return key in ADDED_AT_DEFAULT and value in ADDED_AT_DEFAULT[key]
+
+
 def _drop(obj):
     if isinstance(obj, dict):
-        return {k: _drop(v) for k, v in obj.items() if k not in DROPPED_KEYS}
+        return {k: _drop(v) for k, v in obj.items() if k not in DROPPED_KEYS and not _added_at_default(k, v)}
     if isinstance(obj, list):
-        return [_drop(v) for v in obj]
+        return [_drop(v) for v in obj if not (isinstance(v, str) and v in ADDED_AT_DEFAULT)]
     return obj
 
 
@@ -135,7 +145,8 @@ def _diff(a, b, where: str, out: list[str]) -> None:
 
 def _csv_rows(path: Path) -> list[dict]:
     with open(path, newline="") as fh:
-        return [_renamed({k: v for k, v in row.items() if k not in DROPPED_KEYS}) for row in csv.DictReader(fh)]
+        return [_renamed({k: v for k, v in row.items() if k not in DROPPED_KEYS and not _added_at_default(k, v)})
+                for row in csv.DictReader(fh)]
 
 
 def _renamed(row: dict) -> dict:

@@ -64,6 +64,9 @@ def register(sub) -> None:
     p.add_argument("--threshold", default=None,
                    help="detector threshold: 'app' (the app's brightness threshold for the camera, "
                         "assets/app/svgs-app.toml; the default), a level in 8-bit counts, 'auto' or 'otsu'")
+    from svgs_sim.sim.scene import add_scene_options  # the scene around the target: --environment, --backdrop-m, --ambient
+
+    add_scene_options(p)
     p.add_argument("--out", required=True, help="output folder (a rerun with the same arguments resumes it)")
     p.add_argument("--overlap-render", action="store_true",
                    help="render the next frame in a background thread while the phone model works on this one "
@@ -78,6 +81,7 @@ def config_from_args(args) -> dict:
     checked by :func:`svgs_sim.studies.approach.check_config` before any work, and the profile's kind by
     :mod:`svgs_sim.cli.validate`)."""
     from svgs_sim.sim.approach import Trajectory
+    from svgs_sim.sim.scene import scene_from_args
     from svgs_sim.studies.approach import make_config
 
     straight = [a is not None for a in (args.from_m, args.to_m, args.duration_s)]
@@ -92,7 +96,7 @@ def config_from_args(args) -> dict:
                                    lateral_m=_floats(args.lateral, 2, "--lateral"),
                                    attitude_deg=_floats(args.attitude, 3, "--attitude"))
     return make_config(args.camera, traj, args.fps, seed=args.seed, preview=args.preview, motion=not args.no_motion,
-                       crlb=not args.no_crlb, pattern=args.pattern, threshold=args.threshold)
+                       crlb=not args.no_crlb, pattern=args.pattern, threshold=args.threshold, scene=scene_from_args(args))
 
 
 def print_summary(s: dict, file=None) -> None:
@@ -142,6 +146,9 @@ def command_line(args) -> str:
               if on]
     if args.threshold not in (None, "app"):
         parts.append(f"--threshold {quote(str(args.threshold))}")
+    from svgs_sim.sim.scene import scene_option_words
+
+    parts += scene_option_words(args)
     parts.append(f"--out {quote(args.out)}")
     return " ".join(parts)
 

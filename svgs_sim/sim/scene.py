@@ -72,6 +72,9 @@ class Quantity:
         The CLI option (default ``--`` and the field's name with dashes).
     help : str or None
         The CLI option's help (default the meaning, the unit and the default).
+    choices : tuple of str
+        A choice, not a quantity: the words it takes (the field holds the word; a results row
+        holds its index in ``choices``, the first being the default's code 0).
     """
 
     unit: str
@@ -84,6 +87,7 @@ class Quantity:
     trial: bool = True
     flag: str | None = None
     help: str | None = None
+    choices: tuple = ()
 
 
 def quantity(default, **declaration) -> Any:
@@ -92,6 +96,8 @@ def quantity(default, **declaration) -> Any:
 
 
 def _domain(q: Quantity) -> str:
+    if q.choices:
+        return "one of " + ", ".join(repr(c) for c in q.choices)
     unit = "" if q.unit in ("", "1") else f" {q.unit}"
     if q.lower is not None and q.upper is not None:
         lo = f"> {q.lower:g} and <= {q.upper:g}" if q.lower_open else f"{q.lower:g} to {q.upper:g}"
@@ -103,12 +109,20 @@ def _domain(q: Quantity) -> str:
     return out + (f" (or None for {q.none_means})" if q.none_means else "")
 
 
+#: The environments a scene may be in (:attr:`Scene.environment`): the first is the default.
+ENVIRONMENTS = ("lab", "orbit")
+
+
 @dataclass(frozen=True)
 class Scene:
     """The scene around the target (frozen, hashable; the defaults are the paper's lab).
 
     Attributes
     ----------
+    environment : {"lab", "orbit"}
+        ``"lab"``: the paper's (the backdrop and the room's light below). ``"orbit"``: black space;
+        the backdrop is None and the ambient radiance 0 (left at the lab's defaults, they are set
+        so; any other value is refused), the flash still lights the target.
     backdrop_distance_m : float or None
         A grey Lambertian backdrop this far behind the target origin, m (None: no backdrop).
     backdrop_reflectance : float
@@ -117,6 +131,12 @@ class Scene:
         Uniform scene radiance from the room's lights in the camera's band, W m^-2 sr^-1.
     """
 
+    environment: str = quantity(
+        "lab", unit="1", choices=ENVIRONMENTS,
+        meaning="what surrounds the target: 'lab' (the paper's: a grey backdrop and the room's light), 'orbit' "
+        "(black space: no backdrop, no room light; the flash still lights the target)",
+        help="what surrounds the target: 'lab' (the paper's, the default: a grey backdrop, --backdrop-m, and the "
+        "room's light, --ambient) or 'orbit' (black space: no backdrop and no room light; the flash still on)")
     backdrop_distance_m: float | None = quantity(
         LAB.backdrop_distance_m, unit="m", meaning="grey backdrop behind the target",
         lower=0.0, upper=INPUT_BOUNDS["backdrop_m"][1], lower_open=True, none_means="none", row_none=0.0,
@@ -138,6 +158,20 @@ class Scene:
             if v is None and q.none_means:
                 continue
             object.__setattr__(self, f.name, check_quantity(f.name, q, v))
+        if self.environment == "orbit":
+            self._no_lab()
+
+    def _no_lab(self) -> None:
+        """In orbit: no backdrop and no room light (the lab's defaults read so; other values are refused)."""
+        lab = {"backdrop_distance_m": (None, LAB.backdrop_distance_m),
+               "ambient_radiance_w_m2_sr": (0.0, LAB.ambient_radiance_w_m2_sr)}
+        for name, (none, lab_default) in lab.items():
+            v = getattr(self, name)
+            if v not in (none, lab_default):
+                q = self.quantities()[name]
+                raise InputError(f"{name}: the environment 'orbit' has no {q.meaning} (got {v!r}); give "
+                                 f"{_flag(name, q)} only with --environment lab")
+            object.__setattr__(self, name, none)
 
     @staticmethod
     def quantities() -> dict:
@@ -158,7 +192,8 @@ class Scene:
         for name, q in self.quantities().items():
             if q.trial:
                 v = getattr(self, name)
-                out[name] = float(q.row_none) if v is None else float(v)
+                out[name] = (float(q.choices.index(v)) if q.choices else float(q.row_none) if v is None
+                             else float(v))
         return out
 
     @classmethod
@@ -168,13 +203,33 @@ class Scene:
         kw = {}
         for name, q in cls.quantities().items():
             if q.trial and name in values:
-                v = float(values[name])
+                v = values[name]
+                if q.choices:
+                    kw[name] = _choice_of_code(name, q, v)
+                    continue
+                v = float(v)
                 kw[name] = None if (q.none_means and v == q.row_none) else v
         return cls(**kw)
 
 
-def check_quantity(name: str, q: Quantity, value) -> float:
-    """``float(value)`` within the quantity's domain, else :class:`InputError` naming ``name``."""
+def _choice_of_code(name: str, q: Quantity, value) -> str:
+    """The word of a results row's code (its index in the choices; a word is taken as it is)."""
+    if isinstance(value, str):
+        return value
+    v = float(value)
+    if v != int(v) or not 0 <= v < len(q.choices):
+        raise InputError(f"{name}: expected a code 0 to {len(q.choices) - 1} ({_domain(q)}), got {value!r}")
+    return q.choices[int(v)]
+
+
+def check_quantity(name: str, q: Quantity, value):
+    """``float(value)`` within the quantity's domain (a choice: the word, one of its words), else
+    :class:`InputError` naming ``name``."""
+    if q.choices:
+        word = value.strip().lower() if isinstance(value, str) else value
+        if word not in q.choices:
+            raise InputError(f"{name}: expected {_domain(q)}, got {value!r} - {q.meaning}")
+        return word
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -191,12 +246,16 @@ def scene_parameters() -> dict:
     name -> parameter, in declaration order): every :class:`Quantity` with ``trial``. A row writes
     None as ``row_none``, which the parameter's domain then includes."""
     # not at module level: a cycle (the trial kinds' scenarios hold the closed loop's Scenario, which holds a Scene)
-    from svgs_sim.sim.trials import Parameter
+    from svgs_sim.sim.trials import Code, Parameter
 
     default = Scene()
     out = {}
     for name, q in Scene.quantities().items():
         if not q.trial:
+            continue
+        if q.choices:  # a choice: held fixed by a study (its words), never varied
+            out[name] = Parameter(name, "1", q.meaning, 0.0, True,
+                                  codes=tuple(Code(float(i), w, f"the {w} {name}") for i, w in enumerate(q.choices)))
             continue
         d = getattr(default, name)
         lower, lower_open = q.lower, q.lower_open
@@ -227,6 +286,10 @@ def add_scene_options(parser) -> None:
         if not q.trial:
             continue
         text = q.help
+        if q.choices:
+            parser.add_argument(_flag(name, q), choices=q.choices, default=None,
+                                help=text or f"{q.meaning} (default {getattr(default, name)})")
+            continue
         if text is None:
             d = getattr(default, name)
             unit = "" if q.unit in ("", "1") else f", {q.unit}"
@@ -249,4 +312,23 @@ def scene_from_args(args, base: Scene | None = None) -> Scene:
         v = getattr(args, _dest(_flag(name, q)), None)
         if v is not None:
             kw[name] = None if (q.none_means and v == q.row_none) else v
+    if kw.get("environment", base.environment) == "orbit":
+        lab_given = [_flag(n, Scene.quantities()[n]) for n in ("backdrop_distance_m", "ambient_radiance_w_m2_sr")
+                     if n in kw]
+        if lab_given:
+            raise InputError(f"{', '.join(lab_given)}: the lab's; --environment orbit has no backdrop and no room "
+                             "light (give them only with --environment lab)")
     return base.replace(**kw) if kw else base
+
+
+def scene_option_words(args) -> list[str]:
+    """The scene options given in ``args`` as command-line words (``["--environment", "orbit"]``
+    ...), for a report's command that rebuilds the same study."""
+    out = []
+    for name, q in Scene.quantities().items():
+        if not q.trial:
+            continue
+        v = getattr(args, _dest(_flag(name, q)), None)
+        if v is not None:
+            out += [_flag(name, q), v if isinstance(v, str) else repr(float(v))]
+    return out

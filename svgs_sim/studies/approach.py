@@ -30,6 +30,8 @@ from svgs_sim.base.errors import InputError
 from svgs_sim.base.profiles import load_camera, load_pattern
 from svgs_sim.sim import hard_stop
 from svgs_sim.sim.approach import MEASUREMENT_COLUMNS, TIMING_KEYS, ApproachSensor, Trajectory, check_visible
+from svgs_sim.sim.closed_loop import Scenario
+from svgs_sim.sim.scene import Scene
 from svgs_sim.studies.diagnosis import FAR_ABOVE_BOUND, bound_ratios, cause_text, far_above, glint_targets_of_state
 from svgs_sim.studies.execution import StoredProgress
 from svgs_sim.studies.progress import progress_bar
@@ -49,16 +51,26 @@ TEXT_COLUMNS = ("reason",)
 
 
 def make_config(camera: str, trajectory: Trajectory, fps: float, *, seed: int = 0, preview: bool = False,
-                motion: bool = True, crlb: bool = True, pattern: str = "svgs-3u", threshold=None) -> dict:
+                motion: bool = True, crlb: bool = True, pattern: str = "svgs-3u", threshold=None,
+                scene: Scene | None = None) -> dict:
     """The approach's parameters (the store's manifest): what decides the numbers. ``threshold``:
     the detector's (None or ``"app"``: the app's for the camera, :mod:`svgs_sim.svgs.app`; ``"auto"``,
-    ``"otsu"`` or a level in 8-bit counts)."""
+    ``"otsu"`` or a level in 8-bit counts). ``scene``: around the target (default the paper's lab;
+    recorded as ``scene`` only when it is another, so a study folder made before the option resumes)."""
     from svgs_sim.svgs.detect import parse_threshold
 
     t = parse_threshold(None if threshold is None else str(threshold))
-    return {"study": "approach", "camera": str(camera), "pattern": str(pattern), "fps": float(fps), "seed": int(seed),
-            "preview": bool(preview), "motion": bool(motion), "crlb": bool(crlb), "trajectory": trajectory.to_json(),
-            "threshold": "app" if t is None else t if isinstance(t, str) else float(t)}
+    cfg = {"study": "approach", "camera": str(camera), "pattern": str(pattern), "fps": float(fps), "seed": int(seed),
+           "preview": bool(preview), "motion": bool(motion), "crlb": bool(crlb), "trajectory": trajectory.to_json(),
+           "threshold": "app" if t is None else t if isinstance(t, str) else float(t)}
+    if scene is not None and scene != Scene():
+        cfg["scene"] = scene.to_json()
+    return cfg
+
+
+def scene_of(cfg: dict) -> Scene:
+    """The scene around the target of a config (:func:`make_config`)."""
+    return Scene(**cfg["scene"]) if "scene" in cfg else Scene()
 
 
 def _threshold(cfg: dict):
@@ -163,7 +175,7 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
         if todo:
             sensor = ApproachSensor(cam, cfg["pattern"], seed=cfg["seed"], motion=cfg["motion"], crlb=cfg["crlb"],
                                     keep_images=True, frame_rate_hz=cfg["fps"], threshold=_threshold(cfg),
-                                    overlap_render=overlap_render)
+                                    overlap_render=overlap_render, base=Scenario(scene=scene_of(cfg)))
             if todo[0] > 0:
                 last = {r["trial_id"]: r for r in store.read_rows()}[todo[0] - 1]
                 sensor.restore(todo[0], last["next_exposure_s"], last["next_iso"])

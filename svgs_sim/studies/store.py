@@ -98,6 +98,11 @@ def _format(value) -> str:
     return s
 
 
+def cell_text(value) -> str:
+    """How a row writes ``value`` in ``results.csv`` (``repr`` of a float, empty for None/NaN)."""
+    return _format(value)
+
+
 def _parse(text: str):
     if text == "":
         return None
@@ -363,47 +368,91 @@ def _write_atomic(path: Path, data: bytes) -> None:
     os.replace(tmp, path)
 
 
-def _upgrade_store(out_dir: Path) -> bool:
-    """Rewrite an older store in ``out_dir`` in the current format (see :data:`FORMAT_VERSION`):
-    ``results.csv`` first (its complete lines, each value's text moved, not reformatted; a torn
-    tail is dropped, as :meth:`ResultStore.open` would), then ``manifest.json``, each atomically.
-    A crash between the two leaves a results file already upgraded, which the next upgrade
-    recognises by its header. Returns whether anything was rewritten."""
+def _with_added_columns(have, columns, added):
+    """A stored manifest whose columns are ``columns`` but for some of ``added`` (the columns a newer
+    version of the study writes, a parameter with its default), with those columns in: the stored
+    rows then read as rows of ``columns`` (:func:`_upgrade_store`). Any other difference is kept,
+    and refused by the comparison."""
+    if not added or not isinstance(have, dict) or not isinstance(have.get("columns"), list) or columns is None:
+        return have
+    cols, want = have["columns"], list(columns)
+    missing = [c for c in want if c not in cols]
+    if not missing or set(missing) - set(added) or [c for c in want if c in cols] != cols:
+        return have
+    return {**have, "columns": want}
+
+
+def _with_added_parameters(have, parameters, added):
+    """A stored manifest with the study parameters a newer version added (a trial kind's new
+    parameter, e.g. a scene quantity, in ``added``) filled in where ``parameters`` (the requested
+    ones) hold that parameter's default: a study stored before the parameter existed ran with it."""
+    if not added or not isinstance(have, dict) or not isinstance(have.get("parameters"), dict) \
+            or not isinstance(parameters, dict):
+        return have
+    fill = {k: v for k, v in parameters.items() if k not in have["parameters"] and k in added and _format(v) == added[k]}
+    return {**have, "parameters": {**have["parameters"], **fill}} if fill else have
+
+
+def _upgrade_store(out_dir: Path, columns=None, added=None, parameters=None) -> bool:
+    """Rewrite an older store in ``out_dir`` in the current layout: the current format (see
+    :data:`FORMAT_VERSION`) and, given ``columns`` and ``added`` (column -> the text a row written
+    before that column existed stands for: the parameter's default), the columns a newer version
+    of the study added. ``results.csv`` first (its complete lines, each value's text moved, never
+    reformatted; a torn tail is dropped, as :meth:`ResultStore.open` would), then
+    ``manifest.json``, each atomically. A crash between the two leaves a results file already
+    upgraded, which the next upgrade recognises by its header. Returns whether anything was
+    rewritten."""
     path = out_dir / MANIFEST
     have = json.loads(path.read_text())
-    if have.get("format_version") == FORMAT_VERSION:
+    new = _with_added_parameters(_with_added_columns(_current_manifest(have), columns, added), parameters, added)
+    if new == have:
         return False
-    new = _current_manifest(have)
     results = out_dir / RESULTS
     moved = isinstance(have.get("columns"), list) and _is_format1_header(have["columns"])
-    if results.exists():
+    target = new.get("columns")
+    if results.exists() and isinstance(target, list):
         data = results.read_bytes().replace(b"\r\n", b"\n")
         lines = data.split(b"\n")[:-1]
-        if lines:
-            header = next(csv.reader((lines[0].decode("utf-8", errors="replace"),)), [])
-            if _is_format1_header(header):
-                buf = io.StringIO()
-                w = csv.writer(buf, lineterminator="\n")
-                w.writerow(upgraded_columns(header))
-                for raw in lines[1:]:
-                    try:
-                        fields = next(csv.reader((raw.decode("utf-8"),), strict=True), [])
-                    except (UnicodeDecodeError, csv.Error):
-                        buf.write(raw.decode("utf-8", errors="surrogateescape") + "\n")  # malformed: kept as is
-                        continue
-                    w.writerow(upgraded_fields(header, fields))
-                _write_atomic(results, buf.getvalue().encode("utf-8", errors="surrogateescape"))
+        header = next(csv.reader((lines[0].decode("utf-8", errors="replace"),)), []) if lines else []
+        if lines and header != target:
+            current = upgraded_columns(header)
+            buf = io.StringIO()
+            w = csv.writer(buf, lineterminator="\n")
+            w.writerow(target)
+            for raw in lines[1:]:
+                try:
+                    fields = next(csv.reader((raw.decode("utf-8"),), strict=True), [])
+                except (UnicodeDecodeError, csv.Error):
+                    fields = None
+                if fields is None or len(fields) != len(header):
+                    buf.write(raw.decode("utf-8", errors="surrogateescape") + "\n")  # malformed: kept as is
+                    continue
+                row = dict(zip(current, upgraded_fields(header, fields)))
+                w.writerow([row[c] if c in row else (added or {}).get(c, "") for c in target])
+            _write_atomic(results, buf.getvalue().encode("utf-8", errors="surrogateescape"))
     _write_atomic(path, (json.dumps(new, indent=2, sort_keys=True) + "\n").encode())
     _fsync_dir(out_dir)
-    what = ("the stand's rail position moved from range_m to its own column rail_m; no value changed" if moved
-            else "no column or value changed")
-    _warn(f"{out_dir}: a store of format {have.get('format_version')} upgraded to format {FORMAT_VERSION} ({what})")
+    what = []
+    if moved:
+        what.append("the stand's rail position moved from range_m to its own column rail_m")
+    extra = [c for c in (target or ()) if c not in upgraded_columns(have.get("columns") or [])]
+    params = sorted(set(new.get("parameters") or {}) - set(have.get("parameters") or {}))
+    if params:
+        what.append(f"parameter{'s' if len(params) > 1 else ''} {', '.join(params)} recorded at the default")
+    if extra:
+        what.append(f"column{'s' if len(extra) > 1 else ''} {', '.join(extra)} added with "
+                    + ", ".join(f"{c} = {added[c] or 'empty'}" for c in extra) + " in every stored row")
+    old = have.get("format_version")
+    change = (f"a store of format {old} upgraded to format {FORMAT_VERSION}" if old != FORMAT_VERSION
+              else "a store upgraded to this version's columns")
+    _warn(f"{out_dir}: {change} ({'; '.join(what) or 'no column changed'}; no stored value changed)")
     return True
 
 
-def _refuse_other_study(out_dir: Path, want: dict, ignore=()) -> None:
+def _refuse_other_study(out_dir: Path, want: dict, ignore=(), added=None) -> None:
     """:class:`InputError` when ``out_dir``'s manifest is unreadable or differs from ``want`` (a
-    full manifest: format, parameters, columns) in anything but the parameters in ``ignore``."""
+    full manifest: format, parameters, columns) in anything but the parameters in ``ignore`` and
+    the columns in ``added`` that it lacks (see :func:`_upgrade_store`)."""
     path = Path(out_dir) / MANIFEST
     try:
         have = json.loads(path.read_text())
@@ -415,7 +464,8 @@ def _refuse_other_study(out_dir: Path, want: dict, ignore=()) -> None:
         raise InputError(f"--out: {str(out_dir)!r} holds a study of results-store format {version}, written by a "
                          f"newer svgs-sim (this one reads formats 1 to {FORMAT_VERSION}); upgrade svgs-sim or "
                          "choose another --out directory")
-    have = _current_manifest(have)
+    have = _with_added_columns(_current_manifest(have), want.get("columns"), added)
+    have = _with_added_parameters(have, want.get("parameters"), added)
     if ignore and isinstance(have, dict) and isinstance(have.get("parameters"), dict):
         have = {**have, "parameters": {k: v for k, v in have["parameters"].items() if k not in ignore}}
         want = {**want, "parameters": {k: v for k, v in want["parameters"].items() if k not in ignore}}
@@ -428,7 +478,7 @@ def _refuse_other_study(out_dir: Path, want: dict, ignore=()) -> None:
         )
 
 
-def check_resumable(out_dir, manifest: dict, columns=None, *, ignore=()) -> bool:
+def check_resumable(out_dir, manifest: dict, columns=None, *, ignore=(), added_columns=None) -> bool:
     """Whether ``out_dir`` holds this study's store, refusing one with other parameters - as
     :class:`ResultStore` would, but without making, changing or locking anything (a study checks
     it before work that comes before its store, and before it writes beside the store).
@@ -442,6 +492,8 @@ def check_resumable(out_dir, manifest: dict, columns=None, *, ignore=()) -> bool
         The store's columns; None: not compared (not known yet).
     ignore : collection of str
         Parameters not compared (decided by work still to come).
+    added_columns : mapping of str -> str, optional
+        As for :class:`ResultStore`.
 
     Returns
     -------
@@ -467,7 +519,7 @@ def check_resumable(out_dir, manifest: dict, columns=None, *, ignore=()) -> bool
             want["columns"] = _current_manifest(json.loads((out_dir / MANIFEST).read_text())).get("columns")
         except (OSError, ValueError, AttributeError):
             pass  # refused as unreadable below
-    _refuse_other_study(out_dir, want, ignore)
+    _refuse_other_study(out_dir, want, ignore, added_columns)
     return True
 
 
@@ -502,6 +554,11 @@ class ResultStore:
         Columns that may hold text; all others must hold numbers. When not given,
         :meth:`open` infers the numeric columns from the stored rows (see the module
         docstring).
+    added_columns : mapping of str -> str, optional
+        Columns a newer version of the study added (a trial kind's new parameter), each with
+        the text a row stored before it existed stands for (the parameter's default, as a row
+        writes it). A store that lacks only some of them is rewritten with them filled in when
+        opened (a warning says so); without this, it is refused as another study's.
 
     Raises
     ------
@@ -515,8 +572,9 @@ class ResultStore:
         :meth:`open` moved to ``results.rejected.csv``.
     """
 
-    def __init__(self, out_dir, manifest: dict, columns, *, trial_ids=None, text_columns=None):
+    def __init__(self, out_dir, manifest: dict, columns, *, trial_ids=None, text_columns=None, added_columns=None):
         self.dir = Path(out_dir)
+        self.added_columns = dict(added_columns or {})
         self.columns = list(columns)
         if not self.columns or self.columns[0] != "trial_id":
             raise ValueError("results store: the first column must be 'trial_id'")
@@ -560,7 +618,7 @@ class ResultStore:
     def _check_manifest(self) -> None:
         want = self._full_manifest()
         if self.manifest_path.exists():
-            _refuse_other_study(self.dir, want)  # compared in the current format, then upgraded
+            _refuse_other_study(self.dir, want, added=self.added_columns)  # in the current layout, then upgraded
             self._upgrade()
         else:
             stray = [p.name for p in self.dir.iterdir() if p.name in (RESULTS,)]
@@ -586,7 +644,7 @@ class ResultStore:
             except OSError:
                 raise InputError(f"--out: another run is writing to {str(self.dir)!r}; wait for it or choose "
                                  "another --out") from None
-            _upgrade_store(self.dir)
+            _upgrade_store(self.dir, self.columns, self.added_columns, _jsonable(self.manifest))
         finally:
             os.close(lock_fd)
 

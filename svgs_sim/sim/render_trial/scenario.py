@@ -85,8 +85,8 @@ RENDER_PARAMETERS = {
                           codes=(Code(0.0, "profile", "the profile's [cfa] demosaic"),
                                  Code(1.0, "bilinear", "bilinear (OpenCV)"), Code(2.0, "edge_aware", "edge-aware (OpenCV)"),
                                  Code(3.0, "vng", "VNG (OpenCV)"))),
-    "jpeg_quality": Parameter("jpeg_quality", "1", "JPEG quality 1-100 (0: no JPEG round trip)", -1.0, False,
-                              lower=0.0, upper=100.0, codes=(Code(-1.0, "profile", "the profile's [isp] jpeg_quality"),)),
+    "jpeg_quality": Parameter("jpeg_quality", "1", "JPEG quality 1-100 (the switch jpeg = 0 turns the JPEG round "
+                              "trip off)", -1.0, False, lower=1.0, upper=100.0, codes=(Code(-1.0, "profile", "the profile's [isp] jpeg_quality"),)),
     "jpeg_grid_offset_u_px": Parameter("jpeg_grid_offset_u_px", "px", "the JPEG block grid moved right by this "
                                        "many pixels against the image, added to the profile's (0-15)", 0.0, False,
                                        lower=0.0, upper=15.0),

@@ -24,7 +24,7 @@ from svgs_sim.sim import hard_stop
 from svgs_sim.sim.trials import TrialKind
 
 from ..progress import progress_bar
-from ..store import ResultStore
+from ..store import ResultStore, cell_text
 from .executors import (
     ExecutorSpec,
     InlineExecutor,
@@ -306,7 +306,7 @@ def run_stored_study(kind: TrialKind, trials: list[Trial], out_dir, manifest: di
 
     check_executor(spec)
     store = ResultStore(out_dir, manifest, kind.columns(list(trials[0].scenario)),
-                        trial_ids=[t.trial_id for t in trials])
+                        trial_ids=[t.trial_id for t in trials], added_columns=added_columns(kind))
     stats = None
     with store:
         if {t.trial_id for t in trials} - store.done_ids:
@@ -315,6 +315,13 @@ def run_stored_study(kind: TrialKind, trials: list[Trial], out_dir, manifest: di
                                   n_workers=max(spec.n_workers, 1), progress=progress, description=description,
                                   spec=spec)
     return store, stats
+
+
+def added_columns(kind) -> dict:
+    """The kind's parameter columns with the text of each default in a results row: what a row
+    stored before the parameter existed stands for (a :class:`ResultStore` fills it in when it
+    upgrades such a store; codes as their numbers, None as empty)."""
+    return {name: cell_text(p.default) for name, p in kind.parameters.items()}
 
 
 def library_versions() -> dict:
