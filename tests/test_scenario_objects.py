@@ -222,6 +222,12 @@ def _random_trial_scenario(kind, rng):
     if values.get("environment") == "orbit":  # black space: no backdrop, no room light
         values.pop("backdrop_distance_m", None)
         values.pop("ambient_radiance_w_m2_sr", None)
+    if values.get("environment") == "orbit" and ("sun_azimuth_deg" in values) != ("sun_elevation_deg" in values):
+        values.pop("sun_azimuth_deg", None)  # the sun: both angles or neither (eclipse)
+        values.pop("sun_elevation_deg", None)
+    elif values.get("environment") != "orbit":  # no sun in the lab
+        values.pop("sun_azimuth_deg", None)
+        values.pop("sun_elevation_deg", None)
     distance = float(rng.uniform(1.0, 30.0))
     values.update({"mount": "stand", "rail_m": distance} if stand else {"range_m": distance})
     if stand:  # inside the stand's small geometry

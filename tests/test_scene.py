@@ -21,7 +21,11 @@ RENDERING_COMMANDS = (("render",), ("render-and-solve",), ("range-sweep",), ("ap
 def _random_scene(rng) -> Scene:
     kw = {}
     orbit = rng.random() < 0.3
+    sun = orbit and rng.random() < 0.7
     for name, q in Scene.quantities().items():
+        if q.component is not None:  # the sun: both components, on orbit only
+            kw[name] = float(rng.uniform(q.lower, q.upper)) if sun else None
+            continue
         if q.choices:
             kw[name] = "orbit" if orbit else "lab"
             continue
@@ -63,8 +67,9 @@ def test_random_scenes_round_trip_exactly_through_the_row():
         r = _random_render_scenario(rng)
         row = r.to_row()
         # floats; the one distance that does not apply (rail_m on a target mount) is empty
-        assert all(isinstance(v, float) for k, v in row.items() if k not in ("camera", "pattern", "rail_m")), row
-        assert row["rail_m"] is None
+        optional = ("rail_m", "sun_azimuth_deg", "sun_elevation_deg")  # empty where they do not apply
+        assert all(isinstance(v, float) for k, v in row.items() if k not in ("camera", "pattern", *optional)), row
+        assert row["rail_m"] is None and all(row[k] is None or isinstance(row[k], float) for k in optional)
         back = RenderScenario.from_row(row)
         assert back == r, (r, back)
         assert render_key(back) == render_key(r)
@@ -79,6 +84,7 @@ def test_every_trial_quantity_is_a_row_column_an_option_and_a_key_field():
         p, q = RENDER_PARAMETERS[name], params[name]
         assert (p.unit, p.lower, p.upper) == (q.unit, q.lower, q.upper)
         assert [c.word for c in p.codes] == list(q.choices)  # a choice's words are its codes
+        assert p.optional == (q.none_means is not None and q.row_none is None)  # none as an empty cell
     parser = build_parser()
     sub = next(a for a in parser._actions if a.dest == "command").choices
     for (cmd,) in RENDERING_COMMANDS:
@@ -89,6 +95,8 @@ def test_every_trial_quantity_is_a_row_column_an_option_and_a_key_field():
             assert flag in flags, (cmd, flag)
             if q.choices:  # a choice: its words, checked by argparse
                 assert tuple(flags[flag].choices) == q.choices
+                continue
+            if q.component is not None:  # a component of a shared option (--sun-deg AZ,EL): checked by the scene
                 continue
             lo, hi, _ = flags[flag].bounds
             assert (lo, hi) == (q.lower, q.upper)
@@ -190,3 +198,21 @@ def test_in_orbit_space_is_black_and_the_flash_lit_target_still_solves(tmp_path)
     rc = main(["render-and-solve", "--camera", "galaxy-nexus", "--range", "5", "--environment", "orbit", "--seed", "1",
                "--json"])
     assert rc == 0
+
+
+def test_the_sun_is_given_as_az_el_on_orbit_only(capsys):
+    parser = build_parser()
+    args = parser.parse_args(["render", "--camera", "galaxy-nexus", "--range", "5", "--environment", "orbit",
+                              "--sun-deg=-30,10", "--out", "never-made"])
+    s = scene_from_args(args)
+    assert (s.sun_azimuth_deg, s.sun_elevation_deg) == (-30.0, 10.0)
+    d = np.array(s.sun_direction_target)
+    assert d == pytest.approx([np.cos(np.deg2rad(10)) * np.cos(np.deg2rad(-30)),
+                               np.cos(np.deg2rad(10)) * np.sin(np.deg2rad(-30)), np.sin(np.deg2rad(10))])
+    assert Scene(environment="orbit").sun_direction_target is None  # eclipse
+    assert Scene.from_row(s.row_values()) == s and Scene.from_row(Scene(environment="orbit").row_values()).sun_azimuth_deg is None
+    for argv, words in ((["--sun-deg=30,10"], "orbit only"), (["--environment", "orbit", "--sun-deg", "30"], "2 numbers"),
+                        (["--environment", "orbit", "--sun-deg=30,100"], "sun_elevation_deg")):
+        rc = main(["render", "--camera", "galaxy-nexus", "--range", "5", *argv, "--out", "never-made"])
+        err = capsys.readouterr().err
+        assert rc == 2 and words in err and "Traceback" not in err, (argv, err)

@@ -77,6 +77,10 @@ class RenderResult(RenderedFrame):
         The rest of ``flux`` (the flash through the cubes, guided method) as samples at exact
         film positions, photons/s each: the camera applies its PSF to them before pixel
         integration (:meth:`film`).
+    flux_sun : ndarray of float32, shape (H, W), optional
+        The sun's part of ``flux`` and ``flux_diffuse`` (a scene with the sun,
+        :mod:`svgs_sim.render.sun`), photons/s per pixel counted with the sun's mean photon
+        energy in the band.
     truth : dict
         Pose, projections, every physical parameter used (JSON-serialisable; keyword-only).
     timings_s : dict
@@ -87,6 +91,7 @@ class RenderResult(RenderedFrame):
     radiance: np.ndarray
     flux_diffuse: np.ndarray | None = None
     points: PointFlux | None = None
+    flux_sun: np.ndarray | None = None
 
     def film(self) -> tuple[np.ndarray, PointFlux | None]:
         """What the camera model takes: ``(flux already integrated over pixels (H, W), point
@@ -196,6 +201,9 @@ class Renderer:
         self.variant = select_variant(variant)
         t0 = time.perf_counter()
         self._load_scene(extra_meshes)
+        self._sun = None
+        if self.options.sun_direction_target is not None:
+            self._load_sun_scene(extra_meshes)
         self.load_time_s = time.perf_counter() - t0
         self._factor_full = None
 
@@ -229,6 +237,20 @@ class Renderer:
                                        0.5 * self.flash.emitter_diameter_m, self.flash.radiance_w_m2_sr,
                                        self.flash.cos_exponent, self.options.max_depth, self.camera.width,
                                        self.camera.height, sampler=self.spot_sampler)
+
+    def _load_sun_scene(self, extra_meshes) -> None:
+        """The sun's scene: the same target without the flash, the sun as a disk emitter
+        (:mod:`svgs_sim.render.sun`); its sensors share the flash scene's camera model."""
+        from .sun import sun_in_band
+
+        light = sun_in_band(self.optics.band_nm)
+        scene, h = build_scene(self.camera, self.pattern, self.optics, self.flash, self.reflector, self.options,
+                               self.roi_size_px, self.n_windows, extra_meshes=extra_meshes, method=self.method,
+                               sun=(self.options.sun_direction_target, light["radiance_w_m2_sr"]))
+        for s in (h["sensor_full"], h["sensor_roi"], *h["sensor_tiles"].values()):
+            s.set_model(self.model)
+        h["sensor_full"].set_windows(np.zeros((1, 2)), self.camera.height)
+        self._sun = {"scene": scene, "full": h["sensor_full"], "tiles": h["sensor_tiles"], "light": light}
 
     def set_focus_distance(self, focus_distance_m: float) -> None:
         """Refocus the lens (an autofocus following the target along an approach) without
@@ -310,9 +332,10 @@ class Renderer:
                 for lab, s_, r_, c in zip(labels, src, rad, counts) if c > 0]
         return img, info, samples
 
-    def _radiance(self, sensor, spp, seed):
-        """Mean radiance image of one sensor, float64, shape (h, w)."""
+    def _radiance(self, sensor, spp, seed, scene=None):
+        """Mean radiance image of one sensor (of ``scene``, default the flash's), float64, shape (h, w)."""
         mi = self._mi
+        scene = self.scene if scene is None else scene
         fs = sensor.film().size()
         npx = int(fs[0]) * int(fs[1])
         per_pass = spp
@@ -322,7 +345,7 @@ class Renderer:
         acc = None
         seeds = np.random.SeedSequence(int(seed)).generate_state(n_pass, dtype=np.uint32)
         for k in range(n_pass):
-            a = render_film(mi, self.scene, sensor, per_pass, int(seeds[k]))
+            a = render_film(mi, scene, sensor, per_pass, int(seeds[k]))
             acc = a if acc is None else acc + a
         return acc / n_pass
 
@@ -356,33 +379,48 @@ class Renderer:
             )
         return targets_px, visible
 
-    def _background(self, R, t, spp: int, seed: int, timings: dict):
+    def _background(self, R, t, spp: int, seed: int, timings: dict, sun: bool = False):
         """The diffuse background at ``spp``: over the tiles covering the projected scene (or the
         full frame), zeros elsewhere; float64 (H, W), and the box ``(y0, y1, x0, x1)`` that holds
-        it (None when ``spp == 0``: zeros)."""
+        it (None when ``spp == 0``: zeros). ``sun``: the sun's scene, over the full frame when the
+        sun's disk is in view (the tiles cover the target only)."""
 
         H, W = self.camera.height, self.camera.width
         rad = np.zeros((H, W))
         if spp <= 0:
             return rad, None
         t0 = time.perf_counter()
+        key = "sun_" if sun else "background_"
+        scene, full, tile_sensors = ((self._sun["scene"], self._sun["full"], self._sun["tiles"]) if sun else
+                                     (self.scene, self._sensor_full, self._sensor_tiles))
         tiles = background_tiles(self.camera, self._scene_corners, R, t, T, TILE_COUNTS)
-        if tiles is None:
-            rad = self._radiance(self._sensor_full, spp, seed)
-            timings["background_tiles"] = "full frame"
+        if tiles is None or (sun and self._sun_in_view(R)):
+            rad = self._radiance(full, spp, seed, scene)
+            timings[key + "tiles"] = "full frame"
             box = (0, H, 0, W)
         else:
-            n = next(c for c in sorted(self._sensor_tiles) if c >= len(tiles))
+            n = next(c for c in sorted(tile_sensors) if c >= len(tiles))
             org = np.concatenate([tiles, np.repeat(tiles[-1:], n - len(tiles), axis=0)])
-            sensor = self._sensor_tiles[n]
+            sensor = tile_sensors[n]
             sensor.set_windows(org, T)
-            mosaic = self._radiance(sensor, spp, seed)
+            mosaic = self._radiance(sensor, spp, seed, scene)
             for k, (x0, y0) in enumerate(tiles):
                 rad[y0:y0 + T, x0:x0 + T] = mosaic[k * T:(k + 1) * T, :][: H - y0, : W - x0]
-            timings["background_tiles"] = int(len(tiles))
+            timings[key + "tiles"] = int(len(tiles))
             box = _union_box([(int(y0), min(H, int(y0) + T), int(x0), min(W, int(x0) + T)) for x0, y0 in tiles])
-        timings["background_s"] = time.perf_counter() - t0
+        timings[key + "s"] = time.perf_counter() - t0
         return rad, box
+
+    def _sun_in_view(self, R) -> bool:
+        """Whether the sun's disk (or its edge) projects into the image at this attitude."""
+        from .sun import SUN_ANGULAR_DIAMETER_DEG
+
+        d = np.asarray(R, float) @ np.asarray(self.options.sun_direction_target, float)  # camera frame
+        if d[2] <= 0:
+            return False
+        uv = self.camera.project(d[None, :] * 1e6)[0]
+        m = float(np.sqrt(self.camera.fx * self.camera.fy)) * np.tan(np.deg2rad(SUN_ANGULAR_DIAMETER_DEG)) + 2.0
+        return bool(-m <= uv[0] <= self.camera.width - 1 + m and -m <= uv[1] <= self.camera.height - 1 + m)
 
     def _render_windows(self, rad, spots, roi_spp: int, seed: int, timings: dict):
         """Render the window around every spot (one mosaic pass) into ``rad`` (in place; where
@@ -475,10 +513,31 @@ class Renderer:
         if sl is not None:
             radiance[sl] = rad[sl]
         timings["convert_s"] = time.perf_counter() - t0
+        flux_sun = None
+        if self._sun is not None:
+            flux_sun, sun_rad = self._sun_flux(R, t, max(spp, 1), seed, factor, timings)
+            flux += flux_sun
+            radiance += sun_rad
+            if flux_diffuse is not None:
+                flux_diffuse = flux_diffuse + flux_sun
         truth = self.truth(R, t, targets_px, visible, spots, seed=seed, spp=spp, roi_spp=roi_spp,
                            full_frame=full_frame, rois=rois, timings=timings, strategies=strategies)
+        if self._sun is not None:
+            truth["sun"] = {"direction_target": list(self.options.sun_direction_target),
+                            "in_view": self._sun_in_view(R), **self._sun["light"]}
         return RenderResult(flux=flux, truth=truth, radiance=radiance, timings_s=timings,
-                            flux_diffuse=flux_diffuse, points=points)
+                            flux_diffuse=flux_diffuse, points=points, flux_sun=flux_sun)
+
+    def _sun_flux(self, R, t, spp: int, seed: int, factor, timings: dict):
+        """The sun's flux (photons/s per pixel, float32 (H, W); the flash's radiance-to-photon
+        factor times the ratio of the flash's mean photon energy to the sun's) and radiance."""
+        rad, box = self._background(R, t, spp, seed + 0x2545F491, timings, sun=True)
+        ratio = self.flash.photometry["mean_photon_energy_j"] / self._sun["light"]["mean_photon_energy_j"]
+        flux = np.zeros((self.camera.height, self.camera.width), np.float32)
+        if box is not None:
+            sl = _box_slices(box)
+            flux[sl] = (rad[sl] * factor[sl] * ratio).astype(np.float32)
+        return flux, rad.astype(np.float32)
 
     def _add_spots(self, R, t, rad, lit: list, factor, seed: int, timings: dict):
         """Add the guided spot estimator's image to ``rad`` (in place) and box it in ``lit``.

@@ -430,6 +430,9 @@ class SceneOptions(OptionsMixin):
         Path length limit of the integrator (>= 8 for the cube paths).
     anchor : {"apparent-vertex", "front-face"}
         Which point of a cube sits on the pattern's target position.
+    sun_direction_target : tuple of 3 float or None
+        Unit vector toward the sun in the target frame (None: no sun, eclipse or the lab). The
+        sun is rendered in a pass of its own (:mod:`svgs_sim.render.sun`).
     """
 
     body: str = "plate"
@@ -441,6 +444,7 @@ class SceneOptions(OptionsMixin):
     focus_distance_m: float | None = None
     max_depth: int = DEFAULT_MAX_DEPTH
     anchor: str = "apparent-vertex"
+    sun_direction_target: tuple | None = None
 
     def __post_init__(self):
         if self.body not in ("plate", "3u", "none"):
@@ -458,10 +462,20 @@ class SceneOptions(OptionsMixin):
         if self.anchor not in ("apparent-vertex", "front-face"):
             raise InputError(f"scene_options.anchor: expected 'apparent-vertex' or 'front-face', got {self.anchor!r}")
         object.__setattr__(self, "distractors", tuple(_check_distractor(d, i) for i, d in enumerate(self.distractors)))
+        if self.sun_direction_target is not None:
+            d = np.asarray(self.sun_direction_target, float).reshape(-1)
+            if d.shape != (3,) or not np.all(np.isfinite(d)) or abs(np.linalg.norm(d) - 1.0) > 1e-6:
+                raise InputError(f"scene_options.sun_direction_target: expected a unit 3-vector or None, got "
+                                 f"{self.sun_direction_target!r}")
+            object.__setattr__(self, "sun_direction_target", tuple(float(x) for x in d))
 
     def to_json(self) -> dict:
         d = asdict(self)
         d["distractors"] = [dict(x) for x in self.distractors]
+        if d["sun_direction_target"] is None:  # no sun: the record of a dark scene, as before the sun
+            del d["sun_direction_target"]
+        else:
+            d["sun_direction_target"] = list(d["sun_direction_target"])
         return d
 
 

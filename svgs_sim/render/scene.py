@@ -79,7 +79,7 @@ def film_dict(width: int, height: int) -> dict:
 
 
 def build_scene(camera, pattern, optics: Optics, flash: Flash, refl: Reflector, opts: SceneOptions,
-                roi_size_px: int, n_windows: int, extra_meshes=(), method: str = "guided"):
+                roi_size_px: int, n_windows: int, extra_meshes=(), method: str = "guided", sun=None):
     """Load the scene.
 
     Parameters
@@ -98,6 +98,11 @@ def build_scene(camera, pattern, optics: Optics, flash: Flash, refl: Reflector, 
         ``"guided"``: LEDs as point lights for the diffuse part, spots by
         :mod:`svgs_sim.render.spots`; ``"path"``: LEDs as disk area emitters, everything by the
         ``path`` integrator (brute force, the reference).
+    sun : (direction, radiance_w_m2_sr) or None
+        The sun's scene instead of the flash's: no LED, the sun as a disk area emitter
+        (:func:`svgs_sim.render.sun.sun_disk_to_world`) of this band radiance, everything by the
+        ``path`` integrator (the sun's disk is far wider than a pixel's footprint, so camera
+        paths find it through mirrors and glass).
 
     Returns
     -------
@@ -127,7 +132,14 @@ def build_scene(camera, pattern, optics: Optics, flash: Flash, refl: Reflector, 
         d[spec.name] = _mesh(spec, mats[spec.material])
     flash_keys = []
     r_led = 0.5 * flash.emitter_diameter_m
-    for i in range(flash.led_offsets_m.shape[0]):
+    if sun is not None:
+        from .sun import sun_disk_to_world
+
+        direction, radiance = sun
+        d["sun"] = {"type": "disk", "to_world": mi.ScalarTransform4f(sun_disk_to_world(direction).tolist()),
+                    "emitter": {"type": "area", "radiance": {"type": "uniform", "value": float(radiance)}},
+                    "bsdf": {"type": "diffuse", "reflectance": {"type": "uniform", "value": 0.0}}}
+    for i in range(0 if sun is not None else flash.led_offsets_m.shape[0]):
         key = f"flash{i}"
         if method == "path":
             # brute force: the LED as a Lambertian disk area emitter of its real size
@@ -150,6 +162,9 @@ def build_scene(camera, pattern, optics: Optics, flash: Flash, refl: Reflector, 
             d[f"distractor{i}"] = {"type": "sphere", "to_world": to_world,
                                    "bsdf": {"type": "conductor", "material": "none",
                                             "specular_reflectance": {"type": "uniform", "value": dd["reflectance"]}}}
+        elif sun is not None:  # a lamp glows in the flash's pass only (its radiance is counted there); here it is black
+            d[f"distractor{i}"] = {"type": "sphere", "to_world": to_world,
+                                   "bsdf": {"type": "diffuse", "reflectance": {"type": "uniform", "value": 0.0}}}
         else:
             d[f"distractor{i}"] = {"type": "sphere", "to_world": to_world,
                                    "emitter": {"type": "area", "radiance": {"type": "uniform", "value": dd["radiance_w_m2_sr"]}},

@@ -495,6 +495,8 @@ def render_scenario(scenario: Scenario, *, seed: int = 0, options: RenderOptions
     focus = scenario.focus_distance_m if scenario.focus_distance_m is not None else float(np.linalg.norm(t))
     scene_options = {"focus_distance_m": focus} if options.body is None else {"body": options.body,
                                                                             "focus_distance_m": focus}
+    if scenario.scene.sun_direction_target is not None:  # the sun: a pass of its own (svgs_sim.render.sun)
+        scene_options["sun_direction_target"] = scenario.scene.sun_direction_target
     res = render_flux(camera, pattern, R, t, seed=int(seed), scene_options=scene_options, method=options.method,
                       reflector=options.reflector, full_frame=options.full_frame,
                       spot_samples=DEFAULT_SPOT_SAMPLES if options.spot_samples is None else int(options.spot_samples),

@@ -75,6 +75,9 @@ class Quantity:
     choices : tuple of str
         A choice, not a quantity: the words it takes (the field holds the word; a results row
         holds its index in ``choices``, the first being the default's code 0).
+    component : int or None
+        One component of a CLI option that several quantities share (the same ``flag``, given
+        as ``A,B``): this quantity's place in it.
     """
 
     unit: str
@@ -88,6 +91,7 @@ class Quantity:
     flag: str | None = None
     help: str | None = None
     choices: tuple = ()
+    component: int | None = None
 
 
 def quantity(default, **declaration) -> Any:
@@ -123,6 +127,10 @@ class Scene:
         ``"lab"``: the paper's (the backdrop and the room's light below). ``"orbit"``: black space;
         the backdrop is None and the ambient radiance 0 (left at the lab's defaults, they are set
         so; any other value is refused), the flash still lights the target.
+    sun_azimuth_deg, sun_elevation_deg : float or None
+        The direction toward the sun in the target frame, deg (orbit only; both None: no sun, the
+        target in eclipse): azimuth from +x toward +y, elevation from the pattern plane toward +z
+        (:func:`svgs_sim.render.sun.sun_direction_target`).
     backdrop_distance_m : float or None
         A grey Lambertian backdrop this far behind the target origin, m (None: no backdrop).
     backdrop_reflectance : float
@@ -137,6 +145,18 @@ class Scene:
         "(black space: no backdrop, no room light; the flash still lights the target)",
         help="what surrounds the target: 'lab' (the paper's, the default: a grey backdrop, --backdrop-m, and the "
         "room's light, --ambient) or 'orbit' (black space: no backdrop and no room light; the flash still on)")
+    sun_azimuth_deg: float | None = quantity(
+        None, unit="deg", meaning="azimuth of the direction toward the sun in the target frame, from +x toward +y",
+        lower=-360.0, upper=360.0, none_means="no sun (eclipse, or the lab)", row_none=None, flag="--sun-deg",
+        component=0,
+        help="orbit only: the direction toward the sun in the target frame, deg: azimuth from +x toward +y, "
+        "elevation from the pattern plane toward +z, the face normal (toward a head-on camera); default: none, the "
+        "target in eclipse. "
+        "Negative values: --sun-deg=-30,10")
+    sun_elevation_deg: float | None = quantity(
+        None, unit="deg", meaning="elevation of the direction toward the sun from the pattern plane toward +z",
+        lower=-90.0, upper=90.0, none_means="no sun (eclipse, or the lab)", row_none=None, flag="--sun-deg",
+        component=1)
     backdrop_distance_m: float | None = quantity(
         LAB.backdrop_distance_m, unit="m", meaning="grey backdrop behind the target",
         lower=0.0, upper=INPUT_BOUNDS["backdrop_m"][1], lower_open=True, none_means="none", row_none=0.0,
@@ -160,6 +180,20 @@ class Scene:
             object.__setattr__(self, f.name, check_quantity(f.name, q, v))
         if self.environment == "orbit":
             self._no_lab()
+        sun = (self.sun_azimuth_deg, self.sun_elevation_deg)
+        if (sun[0] is None) != (sun[1] is None):
+            raise InputError("sun_azimuth_deg, sun_elevation_deg: give both (--sun-deg AZ,EL) or neither (eclipse)")
+        if sun[0] is not None and self.environment != "orbit":
+            raise InputError("--sun-deg: the sun lights the target on orbit only (give --environment orbit)")
+
+    @property
+    def sun_direction_target(self) -> tuple | None:
+        """Unit vector toward the sun in the target frame (None: no sun)."""
+        if self.sun_azimuth_deg is None:
+            return None
+        from svgs_sim.render.sun import sun_direction_target
+
+        return tuple(float(x) for x in sun_direction_target(self.sun_azimuth_deg, self.sun_elevation_deg))
 
     def _no_lab(self) -> None:
         """In orbit: no backdrop and no room light (the lab's defaults read so; other values are refused)."""
@@ -192,8 +226,8 @@ class Scene:
         for name, q in self.quantities().items():
             if q.trial:
                 v = getattr(self, name)
-                out[name] = (float(q.choices.index(v)) if q.choices else float(q.row_none) if v is None
-                             else float(v))
+                out[name] = (float(q.choices.index(v)) if q.choices else None if v is None and q.row_none is None
+                             else float(q.row_none) if v is None else float(v))
         return out
 
     @classmethod
@@ -206,6 +240,9 @@ class Scene:
                 v = values[name]
                 if q.choices:
                     kw[name] = _choice_of_code(name, q, v)
+                    continue
+                if v is None or (q.row_none is None and isinstance(v, float) and np.isnan(v)):
+                    kw[name] = None  # an empty cell: none (a quantity whose row writes none as empty)
                     continue
                 v = float(v)
                 kw[name] = None if (q.none_means and v == q.row_none) else v
@@ -260,6 +297,10 @@ def scene_parameters() -> dict:
         d = getattr(default, name)
         lower, lower_open = q.lower, q.lower_open
         meaning = q.meaning
+        if q.none_means and q.row_none is None:  # none: an empty cell
+            out[name] = Parameter(name, q.unit, f"{meaning} (empty: {q.none_means})", d, True, lower=lower,
+                                  upper=q.upper, lower_open=lower_open, optional=True)
+            continue
         if q.none_means:
             meaning = f"{meaning} ({q.row_none:g}: {q.none_means})"
             if q.row_none == q.lower:
@@ -283,9 +324,14 @@ def add_scene_options(parser) -> None:
     :func:`svgs_sim.cli.validate.check_args` before any work)."""
     default = Scene()
     for name, q in Scene.quantities().items():
-        if not q.trial:
+        if not q.trial or (q.component or 0) > 0:  # a shared option is added with its first component
             continue
         text = q.help
+        if q.component is not None:
+            parts = [n for n, x in Scene.quantities().items() if x.flag == q.flag]
+            parser.add_argument(_flag(name, q), default=None, metavar=",".join(p.split("_")[1][:2].upper()
+                                                                               for p in parts), help=text)
+            continue
         if q.choices:
             parser.add_argument(_flag(name, q), choices=q.choices, default=None,
                                 help=text or f"{q.meaning} (default {getattr(default, name)})")
@@ -310,6 +356,8 @@ def scene_from_args(args, base: Scene | None = None) -> Scene:
         if not q.trial:
             continue
         v = getattr(args, _dest(_flag(name, q)), None)
+        if v is not None and q.component is not None:
+            v = _component(v, q)
         if v is not None:
             kw[name] = None if (q.none_means and v == q.row_none) else v
     if kw.get("environment", base.environment) == "orbit":
@@ -321,14 +369,31 @@ def scene_from_args(args, base: Scene | None = None) -> Scene:
     return base.replace(**kw) if kw else base
 
 
+def _component(text, q: Quantity) -> float:
+    """Component ``q.component`` of a shared option's ``A,B`` text (InputError naming the option)."""
+    parts = [n for n, x in Scene.quantities().items() if x.flag == q.flag]
+    try:
+        vals = [float(x) for x in str(text).split(",")]
+    except ValueError:
+        vals = []
+    if len(vals) != len(parts) or not all(np.isfinite(vals)):
+        raise InputError(f"{q.flag}: expected {len(parts)} numbers separated by a comma "
+                         f"({', '.join(parts)}), got {text!r}")
+    return vals[q.component]
+
+
 def scene_option_words(args) -> list[str]:
     """The scene options given in ``args`` as command-line words (``["--environment", "orbit"]``
     ...), for a report's command that rebuilds the same study."""
     out = []
     for name, q in Scene.quantities().items():
-        if not q.trial:
+        if not q.trial or (q.component or 0) > 0:
             continue
         v = getattr(args, _dest(_flag(name, q)), None)
-        if v is not None:
+        if v is None:
+            continue
+        if q.component is not None:  # one word, A,B after "=" (a negative A is not taken for an option)
+            out.append(f"{_flag(name, q)}={v}")
+        else:
             out += [_flag(name, q), v if isinstance(v, str) else repr(float(v))]
     return out
