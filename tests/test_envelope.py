@@ -9,7 +9,7 @@ shorter side of the frame.
 import numpy as np
 import pytest
 
-from svgs_sim.cli.main import build_parser, main
+from svgs_sim.cli.main import build_parser
 from svgs_sim.cli.validate import check_args
 from refusal import refused
 from svgs_sim.sim.approach.trajectory import Trajectory, check_envelope

@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 
 from refusal import refused
-from svgs_sim.base.errors import InputError
 from svgs_sim.svgs.frames import pose_from_scenario
 
 REPO = Path(__file__).resolve().parents[1]

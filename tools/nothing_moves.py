@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import io
 import json
 import os
 import re
@@ -99,7 +98,8 @@ def run(out: Path, svgs: list[str], only: set[str] | None) -> int:
 #: default): a key or column of one of them at such a value is dropped before comparing, so an
 #: older run's output compares with a newer one's; at any other value it stays (and differs).
 ADDED_AT_DEFAULT = {"environment": ("lab", 0.0, "0.0", None), "sun_azimuth_deg": (None, ""),
-                    "sun_elevation_deg": (None, ""), "sun_deg": (None,)}  # None: an option not given
+                    "sun_elevation_deg": (None, ""), "sun_deg": (None,), "body_material": (None,),
+                    "body_materials": (None,)}  # None: an option not given
 
 
 def _added_at_default(key, value) -> bool:

@@ -33,7 +33,15 @@ def register(sub) -> None:
     scenario_args(p, with_threshold=False)  # the options of render-and-solve, declared once
     p.add_argument("--spot-samples", type=int, default=None, help="guided samples per spot strategy (default 16384, placed by the 4-D R4 sequence)")
     p.add_argument("--reflector", default=None, help="'solid', 'hollow' or a model name (default: the pattern's)")
-    p.add_argument("--body", default=None, choices=("plate", "3u", "none"), help="target body (default plate)")
+    p.add_argument("--body", default=None,
+                   help="target body: 'plate' (the default: the lab's breadboard), '3u', 'none', or a mesh file "
+                   "ending in .ply or .obj (metres, target frame) with --body-material or --body-materials")
+    p.add_argument("--body-material", default=None, metavar="NAME",
+                   help="a mesh body's surface, from the library svgs_sim/assets/materials/surfaces.toml: "
+                   "lambertian-white, white-paint, solar-cell, mli, anodised-aluminium (default: none; required with a "
+                   "mesh body unless --body-materials names every part)")
+    p.add_argument("--body-materials", default=None, metavar="FILE.toml",
+                   help="a mesh body's parts and their surfaces, one line each: part = \"surface\" (default: none)")
     p.add_argument("--method", default="guided", choices=("guided", "path"),
                    help="'guided' (default) or 'path' (brute force, the reference; slow beyond a few metres)")
     p.add_argument("--full-frame", action="store_true", help="render the whole frame at --spp, no windows")
@@ -62,9 +70,24 @@ def cmd_render(args) -> int:
     check_camera_renderable(args.camera)  # ProfileError naming a missing [optics] or [flash], before any heavy import
     scen = scenario_from_args(args)  # the scenario of render-and-solve: pose, scene, samples, focus (InputError naming the input)
     options = RenderOptions(method=args.method, reflector=args.reflector, body=args.body,
-                            spot_samples=args.spot_samples, full_frame=args.full_frame)
+                            spot_samples=args.spot_samples, full_frame=args.full_frame,
+                            body_material=args.body_material, body_materials=body_materials_of(args.body_materials))
     with output_folder(args.out):  # made and probed before the render; removed again if refused
         return _render(args, scen, options)
+
+
+def body_materials_of(path) -> dict:
+    """Part -> surface of a ``--body-materials`` TOML file (``part = "surface"`` lines); {} for None."""
+    if path is None:
+        return {}
+    from svgs_sim.base.profiles import read_toml
+
+    data = read_toml(path, "--body-materials")
+    bad = {k: v for k, v in data.items() if not isinstance(v, str)}
+    if bad:
+        raise InputError(f"--body-materials {path}: each line is part = \"surface\"; not a surface name: "
+                         f"{', '.join(f'{k} = {v!r}' for k, v in bad.items())}")
+    return dict(data)
 
 
 #: Samples per second the renderer draws on this kind of machine (LLVM, two cores): the demo

@@ -49,6 +49,7 @@ from .scene import TILE_SIZE_PX as T
 from .scene import build_scene
 from .sensor import CameraModel
 from .spots import SPOT_SAMPLERS, SpotEstimator
+from .sun import SUN_ANGULAR_DIAMETER_DEG, sun_in_band
 from .truth import svgs_frame_truth
 from .variant import select_variant
 from .windows import background_tiles, spot_windows
@@ -241,8 +242,6 @@ class Renderer:
     def _load_sun_scene(self, extra_meshes) -> None:
         """The sun's scene: the same target without the flash, the sun as a disk emitter
         (:mod:`svgs_sim.render.sun`); its sensors share the flash scene's camera model."""
-        from .sun import sun_in_band
-
         light = sun_in_band(self.optics.band_nm)
         scene, h = build_scene(self.camera, self.pattern, self.optics, self.flash, self.reflector, self.options,
                                self.roi_size_px, self.n_windows, extra_meshes=extra_meshes, method=self.method,
@@ -413,8 +412,6 @@ class Renderer:
 
     def _sun_in_view(self, R) -> bool:
         """Whether the sun's disk (or its edge) projects into the image at this attitude."""
-        from .sun import SUN_ANGULAR_DIAMETER_DEG
-
         d = np.asarray(R, float) @ np.asarray(self.options.sun_direction_target, float)  # camera frame
         if d[2] <= 0:
             return False

@@ -31,13 +31,16 @@ point, S the LED), see :mod:`svgs_sim.render.predict`.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 
 from svgs_sim.base.errors import InputError, check_finite, check_finite_positive
 from svgs_sim.base.profile_schema import REFLECTOR_MODELS, check_reflector_table
 
+from .materials import surface
 from .constants import DEFAULT_MAX_DEPTH, DEFAULT_MESH_SEGMENTS, nbk7_index
 
 #: Named reflector models (``[reflector] model`` in a pattern file): :data:`REFLECTOR_MODELS`,
@@ -406,10 +409,18 @@ class SceneOptions(OptionsMixin):
 
     Attributes
     ----------
-    body : {"plate", "3u", "none"}
+    body : {"plate", "3u", "none"} or str
         Target body: a flat plate (the paper's test used a Thorlabs MS12B/M optical
         breadboard), a 3U cubesat mock-up (10 x 34 x 10 cm box, enlarged to carry
-        the mounts if needed), or nothing (cubes and mounts only).
+        the mounts if needed), nothing (cubes and mounts only), or a mesh file (a path ending
+        in ``.ply`` or ``.obj``; metres, target frame: :mod:`svgs_sim.render.body_mesh`).
+    body_material : str or None
+        A mesh body's surface (:mod:`svgs_sim.render.materials`), for its parts not in
+        ``body_materials``.
+    body_materials : tuple of (str, str)
+        A mesh body's parts and their surfaces.
+    body_file_sha1 : str or None
+        Set from the mesh file (the renderer's cache key holds it).
     body_reflectance : float
         Diffuse (Lambertian) reflectance of body and boom; dark by default.
     body_thickness_m : float
@@ -445,10 +456,34 @@ class SceneOptions(OptionsMixin):
     max_depth: int = DEFAULT_MAX_DEPTH
     anchor: str = "apparent-vertex"
     sun_direction_target: tuple | None = None
+    body_material: str | None = None
+    body_materials: tuple = ()
+    body_file_sha1: str | None = None
+
+    @property
+    def mesh_body(self) -> bool:
+        """Whether the body is a mesh file."""
+        return isinstance(self.body, str) and self.body.lower().endswith((".ply", ".obj"))
 
     def __post_init__(self):
-        if self.body not in ("plate", "3u", "none"):
-            raise InputError(f"scene_options.body: expected 'plate', '3u' or 'none', got {self.body!r}")
+        if isinstance(self.body_materials, dict):
+            object.__setattr__(self, "body_materials", tuple(sorted(self.body_materials.items())))
+        if self.mesh_body:
+            if self.body_material is None and not self.body_materials:
+                raise InputError(f"--body {self.body}: a mesh body needs its surface: --body-material NAME "
+                                 "(or --body-materials FILE.toml)")
+            for name in [self.body_material, *(m for _, m in self.body_materials)]:
+                if name is not None:
+                    surface(name)
+            try:
+                object.__setattr__(self, "body_file_sha1", hashlib.sha1(Path(self.body).read_bytes()).hexdigest())
+            except OSError as exc:
+                raise InputError(f"--body: cannot read {self.body!r}: {exc}") from None
+        elif self.body not in ("plate", "3u", "none"):
+            raise InputError(f"scene_options.body: expected 'plate', '3u', 'none' or a .ply/.obj mesh file, got "
+                             f"{self.body!r}")
+        elif self.body_material is not None or self.body_materials:
+            raise InputError("--body-material: only a mesh body (--body FILE.ply or .obj) takes a surface")
         v = check_finite(self.body_reflectance, "scene_options.body_reflectance")
         if not 0 <= v <= 1:
             raise InputError(f"scene_options.body_reflectance: expected a reflectance in [0, 1], got {v!r}")
@@ -476,6 +511,11 @@ class SceneOptions(OptionsMixin):
             del d["sun_direction_target"]
         else:
             d["sun_direction_target"] = list(d["sun_direction_target"])
+        for k in ("body_material", "body_materials", "body_file_sha1"):  # a mesh body's only
+            if not d[k]:
+                del d[k]
+        if "body_materials" in d:
+            d["body_materials"] = dict(d["body_materials"])
         return d
 
 
@@ -555,7 +595,9 @@ def build_target(pattern, refl: Reflector, opts: SceneOptions, band_nm=(400.0, 7
     z_face = float(mount_base.min())
     R_out = 0.5 * refl.mount_outer_diameter_m
     info = {"face_z_m": z_face, "body": opts.body}
-    if opts.body != "none":
+    if opts.mesh_body:
+        pass  # the mesh's parts are added by the scene (svgs_sim.render.body_mesh)
+    elif opts.body != "none":
         lo_xy = pts[:, :2].min(0) - R_out - opts.body_margin_m
         hi_xy = pts[:, :2].max(0) + R_out + opts.body_margin_m
         depth = opts.body_thickness_m

@@ -12,8 +12,11 @@ from __future__ import annotations
 import numpy as np
 
 from .geometry import Reflector, SceneOptions, TargetGeometry, build_target
+from .body_mesh import body_meshes
+from .materials import PREFIX, bsdf_dict
 from .optics import Flash, Optics
 from .sensor import PLUGIN_NAME, sensor_class
+from .sun import sun_disk_to_world
 
 #: The background pass renders only square tiles covering the projected scene (outside
 #: it the radiance is exactly 0): sensors with these tile counts exist, each a fixed
@@ -128,13 +131,16 @@ def build_scene(camera, pattern, optics: Optics, flash: Flash, refl: Reflector, 
     for n in TILE_COUNTS:
         d[f"sensor_tiles{n}"] = {"type": PLUGIN_NAME, "svgs_role": f"tiles{n}", "film": film_dict(TILE_SIZE_PX, TILE_SIZE_PX * n),
                                  "sampler": {"type": "ldsampler", "sample_count": 4}}
-    for spec in list(target.meshes) + list(extra_meshes):
+    body = body_meshes(opts.body, opts.body_material, dict(opts.body_materials)) if opts.mesh_body else []
+    if body:
+        target.info.update(body_file_sha1=opts.body_file_sha1, body_parts=[m.material for m in body])
+    for spec in list(target.meshes) + body + list(extra_meshes):
+        if spec.material not in mats:  # a library surface (svgs_sim.render.materials): a mesh body's part
+            mats[spec.material] = mi.load_dict(bsdf_dict(spec.material.removeprefix(PREFIX)))
         d[spec.name] = _mesh(spec, mats[spec.material])
     flash_keys = []
     r_led = 0.5 * flash.emitter_diameter_m
     if sun is not None:
-        from .sun import sun_disk_to_world
-
         direction, radiance = sun
         d["sun"] = {"type": "disk", "to_world": mi.ScalarTransform4f(sun_disk_to_world(direction).tolist()),
                     "emitter": {"type": "area", "radiance": {"type": "uniform", "value": float(radiance)}},

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from pathlib import Path
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -29,6 +30,7 @@ from svgs_sim.base.profiles import Camera, Pattern, load_camera, load_pattern
 from svgs_sim.render.api import render_flux
 from svgs_sim.render.constants import DEFAULT_SPOT_SAMPLES
 from svgs_sim.render.optics import Flash, Optics, radiance_to_photon_rate
+from svgs_sim.render.materials import surface
 from svgs_sim.sim.metrics import no_pose_errors, pose_errors
 from svgs_sim.sim.scene import Scene
 from svgs_sim.sim.stand import TestStand
@@ -444,8 +446,13 @@ class RenderOptions:
         beyond a few metres).
     reflector : str or None
         ``"solid"``, ``"hollow"`` or a reflector model name (None: the pattern's).
-    body : {"plate", "3u", "none"} or None
-        The target's body (None: the renderer's, a plate).
+    body : {"plate", "3u", "none"}, str or None
+        The target's body (None: the renderer's, a plate), or a mesh file (``.ply`` / ``.obj``,
+        metres in the target frame; :mod:`svgs_sim.render.body_mesh`).
+    body_material : str or None
+        A mesh body's surface from the library (:mod:`svgs_sim.render.materials`).
+    body_materials : tuple of (str, str)
+        A mesh body's parts and their surfaces (a dict is accepted).
     spot_samples : int or None
         Guided samples per spot strategy (None: the renderer's, 16384).
     full_frame : bool
@@ -457,12 +464,28 @@ class RenderOptions:
     body: str | None = None
     spot_samples: int | None = None
     full_frame: bool = False
+    body_material: str | None = None
+    body_materials: tuple = ()
 
     def __post_init__(self):
         if self.method not in ("guided", "path"):
             raise InputError(f"method: expected 'guided' or 'path', got {self.method!r}")
-        if self.body not in (None, "plate", "3u", "none"):
-            raise InputError(f"body: expected 'plate', '3u' or 'none' (or None: the renderer's), got {self.body!r}")
+        if isinstance(self.body_materials, dict):
+            object.__setattr__(self, "body_materials", tuple(sorted(self.body_materials.items())))
+        if isinstance(self.body, str) and self.body.lower().endswith((".ply", ".obj")):
+            if not Path(self.body).is_file():
+                raise InputError(f"--body: mesh file {self.body!r} does not exist")
+            if self.body_material is None and not self.body_materials:
+                raise InputError(f"--body-material: the mesh body {self.body!r} needs a surface (one of the library's, "
+                                 "svgs_sim/assets/materials/surfaces.toml), or --body-materials FILE.toml")
+            for name in [self.body_material, *(m for _, m in self.body_materials)]:
+                if name is not None:
+                    surface(name)
+        elif self.body not in (None, "plate", "3u", "none"):
+            raise InputError(f"--body: expected 'plate', '3u', 'none' or a mesh file ending in .ply or .obj, got "
+                             f"{self.body!r}")
+        elif self.body_material is not None or self.body_materials:
+            raise InputError("--body-material: only a mesh body (--body FILE.ply or FILE.obj) takes a surface")
         if self.spot_samples is not None and (isinstance(self.spot_samples, bool) or int(self.spot_samples) < 1):
             raise InputError(f"spot_samples: expected a positive whole number (or None: the renderer's), got "
                              f"{self.spot_samples!r}")
@@ -495,6 +518,8 @@ def render_scenario(scenario: Scenario, *, seed: int = 0, options: RenderOptions
     focus = scenario.focus_distance_m if scenario.focus_distance_m is not None else float(np.linalg.norm(t))
     scene_options = {"focus_distance_m": focus} if options.body is None else {"body": options.body,
                                                                             "focus_distance_m": focus}
+    if options.body_material is not None or options.body_materials:  # a mesh body's surfaces
+        scene_options.update(body_material=options.body_material, body_materials=options.body_materials)
     if scenario.scene.sun_direction_target is not None:  # the sun: a pass of its own (svgs_sim.render.sun)
         scene_options["sun_direction_target"] = scenario.scene.sun_direction_target
     res = render_flux(camera, pattern, R, t, seed=int(seed), scene_options=scene_options, method=options.method,

@@ -40,6 +40,7 @@ import numpy as np
 
 from svgs_sim.base.errors import InputError
 from svgs_sim.base.limits import INPUT_BOUNDS
+from svgs_sim.render.sun import sun_direction_target
 from svgs_sim.sim.lab import load_lab
 
 #: The paper's lab (:mod:`svgs_sim.sim.lab`, ``assets/labs/msfc-frl.toml``): a matt grey backdrop
@@ -191,8 +192,6 @@ class Scene:
         """Unit vector toward the sun in the target frame (None: no sun)."""
         if self.sun_azimuth_deg is None:
             return None
-        from svgs_sim.render.sun import sun_direction_target
-
         return tuple(float(x) for x in sun_direction_target(self.sun_azimuth_deg, self.sun_elevation_deg))
 
     def _no_lab(self) -> None:

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..base.errors import InputError
-from ..base.profiles import Camera, Pattern, load_camera, load_pattern
+from ..base.profiles import Camera, load_camera, load_pattern
 from .app import consistency, settings
 from .identify import identify
 from .result import Failure

@@ -30,7 +30,6 @@ import math
 import cv2
 import numpy as np
 from numba import njit, prange
-from scipy.signal import fftconvolve
 
 from svgs_sim.camera.backend import get_backend
 from svgs_sim.camera.phone.params import GlareParams

@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
 
 from svgs_sim.base.errors import InputError
 from svgs_sim.base.jsonable import to_jsonable

@@ -5,7 +5,6 @@ under each reading of the paper's mean error."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
