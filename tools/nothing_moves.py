@@ -102,15 +102,19 @@ ADDED_AT_DEFAULT = {"environment": ("lab", 0.0, "0.0", None), "sun_azimuth_deg":
                     "body_materials": (None,)}  # None: an option not given
 
 
+#: Outputs added since an older run (new numbers, not moved ones): dropped before comparing.
+NEW_OUTPUTS = frozenset({"match_err_max_px", "stray_px", "stray_saturated_px"})
+
+
 def _added_at_default(key, value) -> bool:
-    return key in ADDED_AT_DEFAULT and value in ADDED_AT_DEFAULT[key]
+    return key in NEW_OUTPUTS or (key in ADDED_AT_DEFAULT and value in ADDED_AT_DEFAULT[key])
 
 
 def _drop(obj):
     if isinstance(obj, dict):
         return {k: _drop(v) for k, v in obj.items() if k not in DROPPED_KEYS and not _added_at_default(k, v)}
     if isinstance(obj, list):
-        return [_drop(v) for v in obj if not (isinstance(v, str) and v in ADDED_AT_DEFAULT)]
+        return [_drop(v) for v in obj if not (isinstance(v, str) and (v in ADDED_AT_DEFAULT or v in NEW_OUTPUTS))]
     return obj
 
 
@@ -248,7 +252,9 @@ def main(argv=None) -> int:
         print(line)
     n_files = sum(1 for p in args.old.rglob("*") if p.is_file())
     print(f"{len(diffs)} differences over {n_files} files (dropped keys: {', '.join(sorted(DROPPED_KEYS))}; "
-          "masked in HTML: the generation time, wall times, the svgs-sim version)")
+          f"new outputs, not compared: {', '.join(sorted(NEW_OUTPUTS))}; parameters added since, dropped at their "
+          f"default: {', '.join(sorted(ADDED_AT_DEFAULT))}; masked in HTML: the generation time, wall times, the "
+          "svgs-sim version)")
     return 1 if diffs else 0
 
 

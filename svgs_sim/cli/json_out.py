@@ -236,6 +236,15 @@ SCHEMAS = {
  "effects": [{{"parameter", "low", "high", "merge_range_low_m", "merge_range_high_m", "nominal_m", "span_m"}}],
  "outputs": {{"results_csv", "merge_ranges_csv", "report", "summary_json": path}},
  {_RUN}}}""",
+    "svgs sun-study": """\
+{"camera": str, "pattern": str, "trials_per_cell": int, "pose": str, "wrong_lock_px": str,
+ "cells": [{"range_m": float, "sun_azimuth_deg": float, "sun_elevation_deg": float,
+            "phase_angle_deg": float,       # target->sun against target->camera (head-on)
+            "trials": int, "solved": int, "wrong_lock": int, "wrong_lock_flagged": int,
+            "reasons": {reason: int},        # solved + wrong_lock + sum(reasons) == trials
+            "mechanisms": {"sun_in_fov", "lit_body", "glint", "saturation", "earth_background": int}}],
+ "outputs": {"results_csv", "figure", "readme", "summary_json": path},
+ "run": {"trials_run": int, "trials": int}}""",
     "svgs calibrate study": """\
 {"config": {...},                  # every option of the study
  "key_numbers": {...},             # e.g. n_views_max, focal_only_error_pct

@@ -56,7 +56,7 @@ COMMANDS = (
     ("tof", "svgs_sim.cli.tof", ("solve",)),
     ("tof", "svgs_sim.cli.tof_render", ("render-and-solve",)),
     ("tof", "svgs_sim.cli.tof_stability", ("stability", "study")),
-    (None, "svgs_sim.cli.studies", ("campaign", "sensitivity")),
+    (None, "svgs_sim.cli.studies", ("campaign", "sensitivity", "merge-range", "sun-study")),
     (None, "svgs_sim.cli.approach", ("approach",)),
 )
 

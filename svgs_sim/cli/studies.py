@@ -7,6 +7,7 @@ before any trial runs).
 
 from __future__ import annotations
 
+import re
 import shlex
 import sys
 from pathlib import Path
@@ -125,6 +126,7 @@ def register(sub) -> None:
     _register_campaign(sub)
     _register_sensitivity(sub)
     _register_merge_range(sub)
+    _register_sun_study(sub)
 
 
 def _register_campaign(sub) -> None:
@@ -239,6 +241,87 @@ def _register_merge_range(sub) -> None:
     m.add_argument("--json", action="store_true", help="print one JSON object on stdout; also DIR/summary.json")
     add_executor_options(m, plan_only=True)
     m.set_defaults(func=cmd_merge_range)
+
+
+#: A list of numbers that may start with a minus (``-60,0,60``): a value, not an option.
+NEGATIVE_LIST = re.compile(r"^-\d*\.?\d+([eE][-+]?\d+)?(,-?\d*\.?\d+([eE][-+]?\d+)?)*$")
+
+
+def allow_negative_lists(parser) -> None:
+    """Let ``parser`` take ``--opt -60,0,60`` (argparse reads a word starting with a minus as an
+    option unless it looks like a negative number; a list of them now does too)."""
+    parser._negative_number_matcher = NEGATIVE_LIST
+
+
+def _register_sun_study(sub) -> None:
+    """Add the ``sun-study`` subcommand to ``sub``."""
+    p = sub.add_parser(
+        "sun-study",
+        help="on orbit: at which ranges and sun directions SVGS holds lock, loses it, or locks onto a glint",
+        description="Rendered trials on orbit (--environment orbit) over a grid of ranges and sun directions in the "
+        "target frame, TRIALS per cell, each pose drawn over the paper's test envelope (roll, pitch uniform in +/-25 "
+        "deg, yaw in +/-45 deg, the target on the boresight). Each trial is solved, a wrong lock (a pose the paper's "
+        "app would report with an identified blob that is not its target's spot) or a failure by its reason; the "
+        "mechanisms (sun in the field of view, a lit body, a glint, saturation) are counted per cell. Writes "
+        "DIR/results.csv (resumable), DIR/summary.json (the cells) and DIR/sun_study.png. Negative values work as "
+        "they are: --sun-elevations-deg -60,0,60. Exit 0 done, 2 bad input.",
+    )
+    p.add_argument("--camera", required=True, help="camera profile (galaxy-nexus, htc-amaze-4g, or a .toml path)")
+    p.add_argument("--ranges", required=True, metavar="R1,R2,...", help="boresight distances, m")
+    p.add_argument("--sun-azimuths-deg", required=True, metavar="A1,A2,...",
+                   help="sun azimuths in the target frame, from +x toward +y, deg")
+    p.add_argument("--sun-elevations-deg", required=True, metavar="E1,E2,...",
+                   help="sun elevations from the pattern plane toward +z (the face normal), deg")
+    p.add_argument("--trials", type=int, required=True, metavar="N", help="trials per cell (each a render, ~1-2 s of one core)")
+    p.add_argument("--out", required=True, metavar="DIR", help="study directory (a rerun with the same arguments resumes it)")
+    p.add_argument("--seed", type=int, default=0, help="study seed (default 0)")
+    p.add_argument("--pattern", default="svgs-3u", help="target pattern name or .toml path (default %(default)s)")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout; also DIR/summary.json")
+    add_executor_options(p, plan_only=True)
+    allow_negative_lists(p)
+    p.set_defaults(func=cmd_sun_study)
+
+
+def _numbers(text, flag) -> list[float]:
+    try:
+        return [float(x) for x in str(text).split(",") if x.strip() != ""]
+    except ValueError:
+        raise InputError(f"{flag}: expected comma-separated numbers, got {text!r}") from None
+
+
+def cmd_sun_study(args) -> int:
+    from svgs_sim.cli.json_out import emit, text_to_stderr
+    from svgs_sim.cli.outdir import output_folder
+    from svgs_sim.studies.sun_study import make_config, run_sun_study
+
+    spec = executor_from_args(args)
+    config = make_config(args.camera, _numbers(args.ranges, "--ranges"), _numbers(args.sun_azimuths_deg, "--sun-azimuths-deg"),
+                         _numbers(args.sun_elevations_deg, "--sun-elevations-deg"), args.trials, seed=args.seed,
+                         pattern=args.pattern)
+    out = Path(args.out)
+    lists = {k: ",".join(f"{x:g}" for x in v) for k, v in (("--ranges", config.ranges_m),
+                                                             ("--sun-azimuths-deg", config.azimuths_deg),
+                                                             ("--sun-elevations-deg", config.elevations_deg))}
+    argv = ["svgs", "sun-study", "--camera", config.camera] + [w for k, v in lists.items() for w in (f"{k}={v}",)] + [
+        "--trials", str(config.trials), "--out", str(out), "--seed", str(config.seed), "--pattern", config.pattern,
+        *executor_argv(args)]
+    if announce_plan(args, "render", config.n_trials, config.n_trials, spec):
+        return 0
+    with output_folder(out), text_to_stderr(args.json):  # --out made and probed before any work
+        s = run_sun_study(config, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress,
+                          command=shlex.join(argv))
+        tot = {k: sum(c[k] for c in s["cells"]) for k in ("trials", "solved", "wrong_lock", "wrong_lock_flagged")}
+        print(f"{config.camera} on orbit: {tot['solved']} of {tot['trials']} trials solved, {tot['wrong_lock']} wrong "
+              f"lock(s) ({tot['wrong_lock_flagged']} flagged by the consistency test), over {len(s['cells'])} cells")
+        for r in config.ranges_m:
+            cs = [c for c in s["cells"] if c["range_m"] == r]
+            n = sum(c["trials"] for c in cs)
+            print(f"  {r:g} m: solved {sum(c['solved'] for c in cs)}/{n}, wrong locks {sum(c['wrong_lock'] for c in cs)}")
+        print(f"results: {out}/results.csv  summary: {out}/summary.json  figure: {out}/sun_study.png")
+    obj = {k: s[k] for k in ("camera", "pattern", "trials_per_cell", "pose", "wrong_lock_px", "cells", "outputs")}
+    obj["run"] = s["run"]
+    emit(obj, args.json, out)
+    return 0
 
 
 def _ranges(text):

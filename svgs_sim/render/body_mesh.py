@@ -18,15 +18,6 @@ from svgs_sim.base.errors import InputError
 from .geometry import MeshSpec
 from .materials import PREFIX, surface
 
-#: File name endings read as a mesh body.
-MESH_SUFFIXES = (".ply", ".obj")
-
-
-def is_mesh_body(body) -> bool:
-    """Whether a ``--body`` value names a mesh file (by its ending) rather than a built-in body."""
-    return isinstance(body, str) and body.lower().endswith(MESH_SUFFIXES)
-
-
 def _parts(path: Path) -> dict:
     """Part name -> (vertices (V, 3), faces (F, 3)) of a mesh file."""
     try:

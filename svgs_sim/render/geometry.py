@@ -40,7 +40,7 @@ import numpy as np
 from svgs_sim.base.errors import InputError, check_finite, check_finite_positive
 from svgs_sim.base.profile_schema import REFLECTOR_MODELS, check_reflector_table
 
-from .materials import surface
+from .materials import check_body, is_mesh_body
 from .constants import DEFAULT_MAX_DEPTH, DEFAULT_MESH_SEGMENTS, nbk7_index
 
 #: Named reflector models (``[reflector] model`` in a pattern file): :data:`REFLECTOR_MODELS`,
@@ -463,27 +463,16 @@ class SceneOptions(OptionsMixin):
     @property
     def mesh_body(self) -> bool:
         """Whether the body is a mesh file."""
-        return isinstance(self.body, str) and self.body.lower().endswith((".ply", ".obj"))
+        return is_mesh_body(self.body)
 
     def __post_init__(self):
         if isinstance(self.body_materials, dict):
             object.__setattr__(self, "body_materials", tuple(sorted(self.body_materials.items())))
-        if self.mesh_body:
-            if self.body_material is None and not self.body_materials:
-                raise InputError(f"--body {self.body}: a mesh body needs its surface: --body-material NAME "
-                                 "(or --body-materials FILE.toml)")
-            for name in [self.body_material, *(m for _, m in self.body_materials)]:
-                if name is not None:
-                    surface(name)
+        if check_body(self.body, self.body_material, self.body_materials):
             try:
                 object.__setattr__(self, "body_file_sha1", hashlib.sha1(Path(self.body).read_bytes()).hexdigest())
             except OSError as exc:
                 raise InputError(f"--body: cannot read {self.body!r}: {exc}") from None
-        elif self.body not in ("plate", "3u", "none"):
-            raise InputError(f"scene_options.body: expected 'plate', '3u', 'none' or a .ply/.obj mesh file, got "
-                             f"{self.body!r}")
-        elif self.body_material is not None or self.body_materials:
-            raise InputError("--body-material: only a mesh body (--body FILE.ply or .obj) takes a surface")
         v = check_finite(self.body_reflectance, "scene_options.body_reflectance")
         if not 0 <= v <= 1:
             raise InputError(f"scene_options.body_reflectance: expected a reflectance in [0, 1], got {v!r}")

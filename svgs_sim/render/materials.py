@@ -9,6 +9,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from svgs_sim.assets import ASSETS_DIR
 from svgs_sim.base.errors import InputError, ProfileError
 from svgs_sim.base.profiles import cached, read_toml
@@ -55,6 +57,37 @@ def surface(name: str) -> dict:
         raise InputError(f"--body-material: unknown surface {name!r}; the library "
                          f"(svgs_sim/assets/materials/surfaces.toml) has {', '.join(sorted(lib))}")
     return lib[name]
+
+
+#: File name endings read as a mesh body (:mod:`svgs_sim.render.body_mesh`).
+MESH_SUFFIXES = (".ply", ".obj")
+
+
+def is_mesh_body(body) -> bool:
+    """Whether a ``--body`` value names a mesh file (by its ending) rather than a built-in body."""
+    return isinstance(body, str) and body.lower().endswith(MESH_SUFFIXES)
+
+
+def check_body(body, body_material=None, body_materials=(), builtin=("plate", "3u", "none")) -> bool:
+    """A body and its surfaces, checked before any work (InputError naming the option): one of
+    ``builtin``, or an existing ``.ply``/``.obj`` file with a library surface for every part
+    (``body_material``, and ``body_materials``: (part, surface) pairs). Returns whether it is a mesh."""
+    if is_mesh_body(body):
+        if not Path(body).is_file():
+            raise InputError(f"--body: mesh file {body!r} does not exist")
+        if body_material is None and not body_materials:
+            raise InputError(f"--body-material: the mesh body {body!r} needs a surface (one of the library's, "
+                             "svgs_sim/assets/materials/surfaces.toml), or --body-materials FILE.toml")
+        for name in [body_material, *(m for _, m in body_materials)]:
+            if name is not None:
+                surface(name)
+        return True
+    if body not in builtin:
+        raise InputError(f"--body: expected {', '.join(repr(b) for b in builtin if b is not None)} or a mesh file "
+                         f"ending in .ply or .obj, got {body!r}")
+    if body_material is not None or body_materials:
+        raise InputError("--body-material: only a mesh body (--body FILE.ply or FILE.obj) takes a surface")
+    return False
 
 
 def bsdf_dict(name: str) -> dict:

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from pathlib import Path
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,7 +29,7 @@ from svgs_sim.base.profiles import Camera, Pattern, load_camera, load_pattern
 from svgs_sim.render.api import render_flux
 from svgs_sim.render.constants import DEFAULT_SPOT_SAMPLES
 from svgs_sim.render.optics import Flash, Optics, radiance_to_photon_rate
-from svgs_sim.render.materials import surface
+from svgs_sim.render.materials import check_body
 from svgs_sim.sim.metrics import no_pose_errors, pose_errors
 from svgs_sim.sim.scene import Scene
 from svgs_sim.sim.stand import TestStand
@@ -472,20 +471,7 @@ class RenderOptions:
             raise InputError(f"method: expected 'guided' or 'path', got {self.method!r}")
         if isinstance(self.body_materials, dict):
             object.__setattr__(self, "body_materials", tuple(sorted(self.body_materials.items())))
-        if isinstance(self.body, str) and self.body.lower().endswith((".ply", ".obj")):
-            if not Path(self.body).is_file():
-                raise InputError(f"--body: mesh file {self.body!r} does not exist")
-            if self.body_material is None and not self.body_materials:
-                raise InputError(f"--body-material: the mesh body {self.body!r} needs a surface (one of the library's, "
-                                 "svgs_sim/assets/materials/surfaces.toml), or --body-materials FILE.toml")
-            for name in [self.body_material, *(m for _, m in self.body_materials)]:
-                if name is not None:
-                    surface(name)
-        elif self.body not in (None, "plate", "3u", "none"):
-            raise InputError(f"--body: expected 'plate', '3u', 'none' or a mesh file ending in .ply or .obj, got "
-                             f"{self.body!r}")
-        elif self.body_material is not None or self.body_materials:
-            raise InputError("--body-material: only a mesh body (--body FILE.ply or FILE.obj) takes a surface")
+        check_body(self.body, self.body_material, self.body_materials, builtin=(None, "plate", "3u", "none"))
         if self.spot_samples is not None and (isinstance(self.spot_samples, bool) or int(self.spot_samples) < 1):
             raise InputError(f"spot_samples: expected a positive whole number (or None: the renderer's), got "
                              f"{self.spot_samples!r}")

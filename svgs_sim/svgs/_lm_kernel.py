@@ -417,6 +417,7 @@ def posit_batch(xy, P, Bmat, n_iter, R, t):
         for m in range(n - 1):
             eps[m] = 0.0
         Z0 = 1.0
+        bad = False
         for _ in range(n_iter):
             for a in range(3):
                 si = 0.0
@@ -428,7 +429,8 @@ def posit_batch(xy, P, Bmat, n_iter, R, t):
                 J[a] = sj
             nI = np.sqrt(I[0] * I[0] + I[1] * I[1] + I[2] * I[2])
             nJ = np.sqrt(J[0] * J[0] + J[1] * J[1] + J[2] * J[2])
-            if not (nI > 0 and nJ > 0):
+            if not (nI > 0 and nJ > 0):  # degenerate image points (coincident): no pose
+                bad = True
                 break
             for a in range(3):
                 I[a] /= nI
@@ -437,12 +439,21 @@ def posit_batch(xy, P, Bmat, n_iter, R, t):
             k[1] = I[2] * J[0] - I[0] * J[2]
             k[2] = I[0] * J[1] - I[1] * J[0]
             nk = np.sqrt(k[0] * k[0] + k[1] * k[1] + k[2] * k[2])
+            if not nk > 0:  # I parallel to J (collinear image points): no pose
+                bad = True
+                break
             for a in range(3):
                 k[a] /= nk
             Z0 = 1.0 / np.sqrt(nI * nJ)
             for m in range(n - 1):
                 eps[m] = ((P[m + 1, 0] - P[0, 0]) * k[0] + (P[m + 1, 1] - P[0, 1]) * k[1]
                           + (P[m + 1, 2] - P[0, 2]) * k[2]) / Z0
+        if bad:  # NaN: the caller's residual is then not finite and the set is not a candidate
+            for a in range(3):
+                t[f, a] = np.nan
+                for b in range(3):
+                    R[f, a, b] = np.nan
+            continue
         # j = k x i makes the rows orthonormal and right-handed
         R[f, 0, 0], R[f, 0, 1], R[f, 0, 2] = I[0], I[1], I[2]
         R[f, 1, 0] = k[1] * I[2] - k[2] * I[1]

@@ -470,7 +470,12 @@ def _posit_rank(pts, sets, camera, pattern, max_residual_px, max_verify):
     rank : ndarray of int, shape (<= max_verify,)
         Indices of the sets worth solving, best first.
     """
+    from ._lm_kernel import check_points_batch  # numba: compiled kernels load on first use, as the solver's
+
     pres = _posit_residual(pts[sets], camera, pattern)
+    flags = np.empty(len(sets), np.int64)
+    check_points_batch(np.ascontiguousarray(pts[sets], dtype=np.float64), flags)
+    pres[flags != 0] = np.inf  # coincident or collinear blobs (sunlit clutter): no pose, not worth solving
     rank = np.argsort(pres, kind="stable")
     rank = rank[pres[rank] <= max(POSIT_GATE_FACTOR * max_residual_px, POSIT_GATE_MIN_PX)][:max_verify]
     return pres, rank

@@ -265,9 +265,54 @@ def _solve_one(scenario: RenderScenario, seed: int, frame, exposers: dict) -> di
 
             out["p_value_crlb"] = consistency(sol.residual_rms_px, len(pat.ids), sigma_px=rms).p_value
             out.update({f"crlb_sensor_{k}": float(v) for k, v in pose_crlb(sol, rms).items()})
+    _clutter(out, row, sol, cam, pat, R, t, level, frame.truth.get("spots_px_predicted"))
     if out["message"] is not None:
         out["message"] = " ".join(str(out["message"]).split())  # one line (a CSV field)
     return out
+
+
+#: Pixels this far beyond a target's spot (its cube's image radius) are "away from the targets", px.
+STRAY_MARGIN_PX = 10.0
+#: The cube aperture the spot radius is taken from where the pattern gives no target sizes, m (1 in).
+STRAY_CUBE_DIAMETER_M = 0.0254
+
+
+def _clutter(out: dict, row: dict, sol, cam, pat, R, t, level, spots_px=None) -> None:
+    """What else the sensor saw, for the on-orbit studies: ``match_err_max_px`` (the largest distance
+    of an identified blob from its target's spot, px - the renderer's predicted spot centroid, which
+    the flash's offset from the lens moves off the target's projection by a few pixels at close range
+    - for a solution the app would report: solved, or refused only by the consistency test; else
+    None), ``stray_px`` (pixels at or above the detector's threshold away from every target's spot:
+    a lit body, a glint, the sun) and ``stray_saturated_px`` (those at full scale)."""
+    img = row["_exposure"].image
+    uv = solver_camera(cam, img.shape).project_target(pat.points_m, R, t)
+    if spots_px is not None:  # the spots' predicted centroids, full-frame pixels -> the delivered image's
+        scale = img.shape[1] / cam.width
+        uv = np.array([spots_px[str(int(i))] for i in pat.ids], float) * scale
+    targets = None
+    if row["state"] is not None and sol:
+        targets = {int(k): v for k, v in sol.targets_px.items()}
+    elif row.get("reason") == "inconsistent" and sol is not None and "targets_px" in getattr(sol, "details", {}):
+        targets = {int(k): v for k, v in sol.details["targets_px"].items()}
+    if targets is not None:
+        found = np.array([targets[int(i)] for i in pat.ids], float)
+        out["match_err_max_px"] = float(np.max(np.linalg.norm(found - uv, axis=1)))
+    if level is None:
+        return
+    gray = img if img.ndim == 2 else img.max(axis=2)
+    v, u = np.nonzero(gray >= float(level))
+    z = (np.asarray(pat.points_m, float) @ np.asarray(R, float).T + t)[:, 2]
+    sizes = [d for d, _ in pat.target_sizes_m if d is not None]
+    diam = max(sizes) if sizes else STRAY_CUBE_DIAMETER_M
+    radius = np.sqrt(cam.fx * cam.fy) * 0.5 * diam / z * (img.shape[1] / cam.width) + STRAY_MARGIN_PX
+    if u.size:
+        d = np.hypot(u[:, None] - uv[None, :, 0], v[:, None] - uv[None, :, 1]) - radius[None, :]
+        away = np.all(d > 0, axis=1)
+        out["stray_px"] = int(away.sum())
+        full = 255 if img.dtype == np.uint8 else float(np.max(gray))
+        out["stray_saturated_px"] = int(np.sum(gray[v[away], u[away]] >= full))
+    else:
+        out["stray_px"] = out["stray_saturated_px"] = 0
 
 
 def trial_picture(scenario, seed: int) -> dict:

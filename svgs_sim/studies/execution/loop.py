@@ -320,8 +320,11 @@ def run_stored_study(kind: TrialKind, trials: list[Trial], out_dir, manifest: di
 def added_columns(kind) -> dict:
     """The kind's parameter columns with the text of each default in a results row: what a row
     stored before the parameter existed stands for (a :class:`ResultStore` fills it in when it
-    upgrades such a store; codes as their numbers, None as empty)."""
-    return {name: cell_text(p.default) for name, p in kind.parameters.items()}
+    upgrades such a store; codes as their numbers, None as empty); its outputs empty (a row stored
+    before an output existed does not know it)."""
+    out = {name: "" for name in kind.outputs}  # an output added since: unknown (empty) in older rows
+    out.update({name: cell_text(p.default) for name, p in kind.parameters.items()})
+    return out
 
 
 def library_versions() -> dict:

@@ -1,0 +1,305 @@
+"""``svgs sun-study``: where SVGS holds lock on orbit, loses it, or locks onto a glint.
+
+A grid of ranges and sun directions (azimuth, elevation in the target frame:
+:func:`svgs_sim.render.sun.sun_direction_target`), ``trials`` rendered trials per cell on the study
+engine (plan, progress, resume, a process pool or Dask): the render trial kind with the scene's
+``environment = "orbit"`` and the sun. Each trial's pose is drawn over the paper's test envelope
+at the cell's range: roll and pitch uniform in +/-25 deg, yaw uniform in +/-45 deg, the target on
+the boresight (``design_rng`` of the trial: the same draw on a rerun, a resume or a cluster).
+
+Each trial is one of (``solved + wrong_lock + sum(reasons) == trials``):
+
+- **solved**: the sensor reported a pose and every identified blob is its target's spot;
+- **wrong_lock**: a pose the paper's app would report (it reports every solution: solved, or refused
+  only by this simulator's consistency test) with an identified blob that is not its target's spot:
+  farther than ``max(3 px, the spot's image radius)`` from the spot's predicted centroid
+  (:data:`WRONG_LOCK_PX`; the spot's own centroid lies up to a few pixels from the target's
+  projection at close range, by the flash's offset from the lens). ``wrong_lock_flagged`` of them
+  the consistency test refused;
+- a failure, counted by its reason in ``reasons`` (``inconsistent``: refused by the consistency
+  test with the right blobs).
+
+Mechanisms, counted per cell (a trial may show several): ``sun_in_fov`` (the sun's disk projects
+into the image), ``lit_body`` (pixels at or above the detector's threshold away from every spot:
+the sunlit body or a glint), ``glint`` (more blobs passed the detector's gates than there are
+targets), ``saturation`` (pixels at full scale away from the spots), ``earth_background`` (0: the
+Earth is not rendered yet).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from svgs_sim.base.errors import InputError
+from svgs_sim.base.profiles import load_camera, load_pattern
+from svgs_sim.render.sun import SUN_ANGULAR_DIAMETER_DEG, sun_direction_target
+from svgs_sim.sim.render_trial import RENDER, render_trial_scenario
+from svgs_sim.studies.execution import Trial, library_versions, run_stored_study
+from svgs_sim.studies.seeding import check_seed, design_rng, trial_seed
+from svgs_sim.svgs.envelope import PAPER_ENVELOPE, check_range_m
+from svgs_sim.svgs.frames import pose_from_scenario
+
+#: A wrong lock: an identified blob farther than this from its target's spot, px (or than the
+#: spot's image radius, where that is larger).
+WRONG_LOCK_PX = 3.0
+#: The mechanisms counted per cell.
+MECHANISMS = ("sun_in_fov", "lit_body", "glint", "saturation", "earth_background")
+#: The cube aperture for the spot radius where the pattern gives no target sizes, m (1 in).
+CUBE_DIAMETER_M = 0.0254
+
+
+@dataclass(frozen=True)
+class SunStudyConfig:
+    """What a sun study computes (its manifest).
+
+    Attributes
+    ----------
+    camera, pattern : str
+    ranges_m : tuple of float
+        Boresight distances of the grid, m.
+    azimuths_deg, elevations_deg : tuple of float
+        Sun directions of the grid in the target frame, deg.
+    trials : int
+        Trials per cell.
+    seed : int
+    """
+
+    camera: str
+    pattern: str
+    ranges_m: tuple
+    azimuths_deg: tuple
+    elevations_deg: tuple
+    trials: int
+    seed: int = 0
+
+    def cells(self) -> list[tuple[float, float, float]]:
+        """``(range_m, azimuth_deg, elevation_deg)`` of every cell, in the trials' order."""
+        return [(r, a, e) for r in self.ranges_m for a in self.azimuths_deg for e in self.elevations_deg]
+
+    @property
+    def n_trials(self) -> int:
+        return len(self.cells()) * self.trials
+
+    def manifest(self) -> dict:
+        return {"study": "sun-study", "trial_kind": "render", **{k: list(v) if isinstance(v, tuple) else v
+                                                                 for k, v in asdict(self).items()}}
+
+
+def _angles(values, what: str, lim: float) -> tuple:
+    out = []
+    for v in values:
+        try:
+            x = float(v)
+        except (TypeError, ValueError):
+            raise InputError(f"{what}: expected numbers in deg, got {v!r}") from None
+        if not (np.isfinite(x) and -lim <= x <= lim):
+            raise InputError(f"{what}: expected -{lim:g} to {lim:g} deg, got {v!r}")
+        out.append(x)
+    if not out or len(set(out)) != len(out):
+        raise InputError(f"{what}: expected distinct values, got {list(values)!r}")
+    return tuple(out)
+
+
+def make_config(camera: str, ranges_m, azimuths_deg, elevations_deg, trials: int, *, seed: int = 0,
+                pattern: str = "svgs-3u") -> SunStudyConfig:
+    """A checked configuration (InputError naming the input, before any work)."""
+    cam, pat = load_camera(camera), load_pattern(pattern)
+    for t in ("optics", "flash"):
+        cam.table(t)
+    rs = tuple(check_range_m(ranges_m, cam, pat, "--ranges"))
+    if len(set(rs)) != len(rs):
+        raise InputError(f"--ranges: repeated range in {list(rs)}")
+    if isinstance(trials, bool) or not isinstance(trials, (int, np.integer)) or trials < 1:
+        raise InputError(f"--trials: expected a whole number >= 1, got {trials!r}")
+    return SunStudyConfig(str(camera), str(pattern), rs, _angles(azimuths_deg, "--sun-azimuths-deg", 360.0),
+                          _angles(elevations_deg, "--sun-elevations-deg", 90.0), int(trials), check_seed(seed))
+
+
+def _pose(rng) -> dict:
+    """A pose over the paper's test envelope: roll, pitch, yaw uniform within its limits."""
+    env = PAPER_ENVELOPE
+    return {"roll_deg": float(rng.uniform(-env.roll_deg, env.roll_deg)),
+            "pitch_deg": float(rng.uniform(-env.pitch_deg, env.pitch_deg)),
+            "yaw_deg": float(rng.uniform(-env.yaw_deg, env.yaw_deg))}
+
+
+def sun_study_trials(config: SunStudyConfig) -> list:
+    """Every trial: cell by cell (range, then azimuth, then elevation), ``trials`` per cell."""
+    out = []
+    for c, (r, az, el) in enumerate(config.cells()):
+        for k in range(config.trials):
+            i = c * config.trials + k
+            scen = render_trial_scenario(
+                camera=config.camera, pattern=config.pattern, range_m=r, **_pose(design_rng(config.seed, i)),
+                environment="orbit", sun_azimuth_deg=az, sun_elevation_deg=el,
+                labels={"cell": c, "trial_in_cell": k})
+            out.append(Trial(i, scen, trial_seed(config.seed, i)))
+    return out
+
+
+def phase_angle_deg(azimuth_deg: float, elevation_deg: float) -> float:
+    """Target -> sun against target -> camera (the camera on the target's +z, head-on), deg."""
+    return float(np.degrees(np.arccos(np.clip(sun_direction_target(azimuth_deg, elevation_deg)[2], -1.0, 1.0))))
+
+
+def sun_in_fov(camera, row: dict) -> bool:
+    """Whether the sun's disk projects into the image for a trial's pose and sun."""
+    R, t = pose_from_scenario(row["range_m"], 0.0, 0.0, row["roll_deg"], row["pitch_deg"], row["yaw_deg"])
+    d = R @ sun_direction_target(row["sun_azimuth_deg"], row["sun_elevation_deg"])
+    if d[2] <= 0:
+        return False
+    uv = camera.project(d[None, :] * 1e6)[0]
+    m = float(np.sqrt(camera.fx * camera.fy)) * np.tan(np.deg2rad(SUN_ANGULAR_DIAMETER_DEG))
+    return bool(-m <= uv[0] <= camera.width - 1 + m and -m <= uv[1] <= camera.height - 1 + m)
+
+
+def wrong_lock_px(camera, pattern, range_m: float) -> float:
+    """The distance beyond which an identified blob is not its target's spot, px (:data:`WRONG_LOCK_PX`)."""
+    sizes = [d for d, _ in pattern.target_sizes_m if d is not None]
+    diam = max(sizes) if sizes else CUBE_DIAMETER_M
+    return max(WRONG_LOCK_PX, float(np.sqrt(camera.fx * camera.fy)) * 0.5 * diam / float(range_m))
+
+
+def classify(rows, camera, pattern) -> list[dict]:
+    """Each trial's outcome (``solved``, ``wrong_lock`` or its failure reason), whether the consistency
+    test flagged it, and its mechanisms."""
+    out = []
+    n_t = len(pattern.ids)
+    for row in rows:
+        err = row.get("match_err_max_px")
+        reported = bool(row["ok"]) or row.get("reason") == "inconsistent"
+        wrong = reported and err is not None and err == err and err > wrong_lock_px(camera, pattern, row["range_m"])
+        outcome = "wrong_lock" if wrong else "solved" if row["ok"] else str(row.get("reason") or "unknown")
+        stray = row.get("stray_px") or 0
+        out.append({"outcome": outcome, "flagged": wrong and not row["ok"],
+                    "sun_in_fov": sun_in_fov(camera, row), "lit_body": stray > 0,
+                    "glint": (row.get("n_blobs") or 0) > n_t, "saturation": (row.get("stray_saturated_px") or 0) > 0,
+                    "earth_background": False})
+    return out
+
+
+def cells(config: SunStudyConfig, rows) -> list[dict]:
+    """The cells of the study (see the module docstring), in the grid's order."""
+    cam, pat = load_camera(config.camera), load_pattern(config.pattern)
+    by = {}
+    for row, c in zip(rows, classify(rows, cam, pat)):
+        by.setdefault(int(row["cell"]), []).append(c)
+    out = []
+    for i, (r, az, el) in enumerate(config.cells()):
+        cs = by.get(i, [])
+        reasons = {}
+        for c in cs:
+            if c["outcome"] not in ("solved", "wrong_lock"):
+                reasons[c["outcome"]] = reasons.get(c["outcome"], 0) + 1
+        out.append({"range_m": r, "sun_azimuth_deg": az, "sun_elevation_deg": el,
+                    "phase_angle_deg": phase_angle_deg(az, el), "trials": len(cs),
+                    "solved": sum(c["outcome"] == "solved" for c in cs),
+                    "wrong_lock": sum(c["outcome"] == "wrong_lock" for c in cs),
+                    "wrong_lock_flagged": sum(c["flagged"] for c in cs),
+                    "reasons": dict(sorted(reasons.items())),
+                    "mechanisms": {m: sum(bool(c[m]) for c in cs) for m in MECHANISMS}})
+    return out
+
+
+def figure(config: SunStudyConfig, table: list, path) -> Path:
+    """Availability (solved fraction) against the sun's direction, one row of panels per range: the
+    sun above the pattern plane (elevation >= 0) and below it; wrong locks marked with a red ring."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = len(config.ranges_m)
+    fig, axes = plt.subplots(n, 2, figsize=(9, 3.6 * n), subplot_kw={"projection": "polar"}, squeeze=False)
+    for row_ax, r in zip(axes, config.ranges_m):
+        for ax, above in zip(row_ax, (True, False)):
+            cs = [c for c in table if c["range_m"] == r and (c["sun_elevation_deg"] >= 0) == above]
+            if cs:
+                th = np.deg2rad([c["sun_azimuth_deg"] for c in cs])
+                rad = [90.0 - abs(c["sun_elevation_deg"]) for c in cs]  # the centre: the sun on the face normal
+                avail = [c["solved"] / c["trials"] if c["trials"] else np.nan for c in cs]
+                sc = ax.scatter(th, rad, c=avail, cmap="RdYlGn", vmin=0, vmax=1, s=160, edgecolors="k", linewidths=0.5)
+                wl = [c for c in cs if c["wrong_lock"]]
+                if wl:
+                    ax.scatter(np.deg2rad([c["sun_azimuth_deg"] for c in wl]), [90 - abs(c["sun_elevation_deg"]) for c in wl],
+                               s=320, facecolors="none", edgecolors="red", linewidths=2)
+                fig.colorbar(sc, ax=ax, shrink=0.7, label="solved fraction")
+            ax.set_ylim(0, 90)
+            ax.set_yticks([0, 30, 60, 90])
+            ax.set_yticklabels(["+z" if above else "-z", "60", "30", "0"], fontsize=7)
+            ax.set_title(f"{r:g} m, sun {'above' if above else 'below'} the pattern plane\n"
+                         "(centre: along the face normal; angle: azimuth)", fontsize=9)
+    fig.suptitle(f"SVGS availability on orbit: {config.camera}, {config.trials} trials a cell (red ring: wrong lock)",
+                 fontsize=10)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def _frac(cs, key="solved") -> str:
+    n = sum(c["trials"] for c in cs)
+    return f"{sum(c[key] for c in cs)}/{n} ({100.0 * sum(c[key] for c in cs) / n:.0f} %)" if n else "-"
+
+
+def write_readme(config: SunStudyConfig, table: list, path, command: str = "") -> Path:
+    """``README.md`` of a study folder: the command, the grid, and the solved fraction and wrong locks by
+    range and by the sun's elevation (summed over azimuth), each number from ``table``."""
+    els = config.elevations_deg
+    lines = [f"# SVGS on orbit: {config.camera}", "",
+             "Made by (rerun it to rebuild this folder; a killed run resumes):", "", f"    {command}", "",
+             f"Grid: ranges {', '.join(f'{r:g}' for r in config.ranges_m)} m; sun azimuths "
+             f"{', '.join(f'{a:g}' for a in config.azimuths_deg)} deg; elevations {', '.join(f'{e:g}' for e in els)} deg; "
+             f"{config.trials} trials a cell ({config.n_trials} in all). Poses: roll, pitch uniform in +/-25 deg, yaw in "
+             "+/-45 deg, the target on the boresight. The sun's elevation is from the pattern plane toward the face "
+             "normal (+z, toward a head-on camera): above 0 the sun lights the face, below 0 it is behind the target. "
+             "See docs/orbit.md for the definitions.", "",
+             "| range, m | solved | wrong locks | " + " | ".join(f"solved, el {e:g}" for e in els) + " |",
+             "|---|---|---|" + "---|" * len(els)]
+    for r in config.ranges_m:
+        cs = [c for c in table if c["range_m"] == r]
+        lines.append(f"| {r:g} | {_frac(cs)} | {sum(c['wrong_lock'] for c in cs)} | "
+                     + " | ".join(_frac([c for c in cs if c["sun_elevation_deg"] == e]) for e in els) + " |")
+    reasons, mech = {}, {m: 0 for m in MECHANISMS}
+    for c in table:
+        for k, v in c["reasons"].items():
+            reasons[k] = reasons.get(k, 0) + v
+        for k, v in c["mechanisms"].items():
+            mech[k] += v
+    flagged = sum(c["wrong_lock_flagged"] for c in table)
+    lines += ["", f"All cells: solved {_frac(table)}; wrong locks {sum(c['wrong_lock'] for c in table)} "
+              f"({flagged} of them flagged by the consistency test); failures by reason: "
+              + (", ".join(f"{k} {v}" for k, v in sorted(reasons.items(), key=lambda kv: -kv[1])) or "none") + ".",
+              "", "Mechanisms (trials showing each): " + ", ".join(f"{k} {v}" for k, v in mech.items()) + ".",
+              "", "![availability](sun_study.png)", ""]
+    path = Path(path)
+    path.write_text("\n".join(lines))
+    return path
+
+
+def run_sun_study(config: SunStudyConfig, out_dir, spec, *, chunk_size=None, progress: bool = True,
+                  command: str = "") -> dict:
+    """Run (or resume) the study into ``out_dir``; write ``cells.json``, ``sun_study.png`` and
+    ``summary.json``; return the summary (``cells``, ``outputs``, ``run``)."""
+    out = Path(out_dir)
+    trials = sun_study_trials(config)
+    store, stats = run_stored_study(RENDER, trials, out, config.manifest(), spec, chunk_size=chunk_size,
+                                    progress=progress, description=f"sun study {config.camera}")
+    rows = store.read_rows()
+    table = cells(config, rows)
+    fig = figure(config, table, out / "sun_study.png")
+    readme = write_readme(config, table, out / "README.md", command)
+    summary = {"camera": config.camera, "pattern": config.pattern, "trials_per_cell": config.trials,
+               "pose": "roll, pitch uniform in +/-25 deg, yaw in +/-45 deg (the paper's test envelope), on the boresight",
+               "wrong_lock_px": f"max({WRONG_LOCK_PX:g} px, the spot's image radius)",
+               "cells": table, "command": command, "versions": library_versions(),
+               "outputs": {"results_csv": str(out / "results.csv"), "figure": str(fig), "readme": str(readme),
+                           "summary_json": str(out / "summary.json")},
+               "run": {"trials_run": stats.n_run if stats else 0, "trials": config.n_trials}}
+    (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+    return summary
