@@ -49,7 +49,7 @@ from .scene import TILE_SIZE_PX as T
 from .scene import build_scene
 from .sensor import CameraModel
 from .spots import SPOT_SAMPLERS, SpotEstimator
-from .sun import SUN_ANGULAR_DIAMETER_DEG, sun_in_band
+from .sun import sun_in_band, sun_in_image
 from .truth import svgs_frame_truth
 from .variant import select_variant
 from .windows import background_tiles, spot_windows
@@ -412,12 +412,7 @@ class Renderer:
 
     def _sun_in_view(self, R) -> bool:
         """Whether the sun's disk (or its edge) projects into the image at this attitude."""
-        d = np.asarray(R, float) @ np.asarray(self.options.sun_direction_target, float)  # camera frame
-        if d[2] <= 0:
-            return False
-        uv = self.camera.project(d[None, :] * 1e6)[0]
-        m = float(np.sqrt(self.camera.fx * self.camera.fy)) * np.tan(np.deg2rad(SUN_ANGULAR_DIAMETER_DEG)) + 2.0
-        return bool(-m <= uv[0] <= self.camera.width - 1 + m and -m <= uv[1] <= self.camera.height - 1 + m)
+        return sun_in_image(self.camera, R, self.options.sun_direction_target, margin_px=2.0)
 
     def _render_windows(self, rad, spots, roi_spp: int, seed: int, timings: dict):
         """Render the window around every spot (one mosaic pass) into ``rad`` (in place; where

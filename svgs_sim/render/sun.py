@@ -105,6 +105,17 @@ def sun_direction_target(azimuth_deg: float, elevation_deg: float) -> np.ndarray
     return np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
 
 
+def sun_in_image(camera, R_cam_target, direction_target, margin_px: float = 0.0) -> bool:
+    """Whether the sun's disk (its centre within a disk radius plus ``margin_px``) projects into the
+    image of ``camera`` at the attitude ``R_cam_target``, the sun toward ``direction_target``."""
+    d = np.asarray(R_cam_target, float) @ np.asarray(direction_target, float)  # camera frame
+    if d[2] <= 0:
+        return False
+    uv = camera.project(d[None, :] * 1e6)[0]
+    m = float(np.sqrt(camera.fx * camera.fy)) * np.tan(np.deg2rad(SUN_ANGULAR_DIAMETER_DEG)) + margin_px
+    return bool(-m <= uv[0] <= camera.width - 1 + m and -m <= uv[1] <= camera.height - 1 + m)
+
+
 def sun_disk_to_world(direction) -> np.ndarray:
     """The 4x4 ``to_world`` of Mitsuba's unit ``disk`` that is the sun: centred
     :data:`SUN_DISTANCE_M` along ``direction``, radius the sun's angular radius at that

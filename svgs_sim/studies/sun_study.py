@@ -36,8 +36,9 @@ import numpy as np
 
 from svgs_sim.base.errors import InputError
 from svgs_sim.base.profiles import load_camera, load_pattern
-from svgs_sim.render.sun import SUN_ANGULAR_DIAMETER_DEG, sun_direction_target
+from svgs_sim.render.sun import sun_direction_target, sun_in_image
 from svgs_sim.sim.render_trial import RENDER, render_trial_scenario
+from svgs_sim.sim.render_trial.run import spot_radius_px
 from svgs_sim.studies.execution import Trial, library_versions, run_stored_study
 from svgs_sim.studies.seeding import check_seed, design_rng, trial_seed
 from svgs_sim.svgs.envelope import PAPER_ENVELOPE, check_range_m
@@ -48,8 +49,6 @@ from svgs_sim.svgs.frames import pose_from_scenario
 WRONG_LOCK_PX = 3.0
 #: The mechanisms counted per cell.
 MECHANISMS = ("sun_in_fov", "lit_body", "glint", "saturation", "earth_background")
-#: The cube aperture for the spot radius where the pattern gives no target sizes, m (1 in).
-CUBE_DIAMETER_M = 0.0254
 
 
 @dataclass(frozen=True)
@@ -148,20 +147,13 @@ def phase_angle_deg(azimuth_deg: float, elevation_deg: float) -> float:
 
 def sun_in_fov(camera, row: dict) -> bool:
     """Whether the sun's disk projects into the image for a trial's pose and sun."""
-    R, t = pose_from_scenario(row["range_m"], 0.0, 0.0, row["roll_deg"], row["pitch_deg"], row["yaw_deg"])
-    d = R @ sun_direction_target(row["sun_azimuth_deg"], row["sun_elevation_deg"])
-    if d[2] <= 0:
-        return False
-    uv = camera.project(d[None, :] * 1e6)[0]
-    m = float(np.sqrt(camera.fx * camera.fy)) * np.tan(np.deg2rad(SUN_ANGULAR_DIAMETER_DEG))
-    return bool(-m <= uv[0] <= camera.width - 1 + m and -m <= uv[1] <= camera.height - 1 + m)
+    R, _ = pose_from_scenario(row["range_m"], 0.0, 0.0, row["roll_deg"], row["pitch_deg"], row["yaw_deg"])
+    return sun_in_image(camera, R, sun_direction_target(row["sun_azimuth_deg"], row["sun_elevation_deg"]))
 
 
 def wrong_lock_px(camera, pattern, range_m: float) -> float:
     """The distance beyond which an identified blob is not its target's spot, px (:data:`WRONG_LOCK_PX`)."""
-    sizes = [d for d, _ in pattern.target_sizes_m if d is not None]
-    diam = max(sizes) if sizes else CUBE_DIAMETER_M
-    return max(WRONG_LOCK_PX, float(np.sqrt(camera.fx * camera.fy)) * 0.5 * diam / float(range_m))
+    return max(WRONG_LOCK_PX, float(spot_radius_px(camera, pattern, float(range_m))))
 
 
 def classify(rows, camera, pattern) -> list[dict]:

@@ -277,6 +277,14 @@ STRAY_MARGIN_PX = 10.0
 STRAY_CUBE_DIAMETER_M = 0.0254
 
 
+def spot_radius_px(camera, pattern, depth_m):
+    """The image radius of a target's cube aperture at ``depth_m`` along the boresight, px (the
+    pattern's largest target diameter, else :data:`STRAY_CUBE_DIAMETER_M`); ``depth_m`` may be an array."""
+    sizes = [d for d, _ in pattern.target_sizes_m if d is not None]
+    diam = max(sizes) if sizes else STRAY_CUBE_DIAMETER_M
+    return np.sqrt(camera.fx * camera.fy) * 0.5 * diam / np.asarray(depth_m, float)
+
+
 def _clutter(out: dict, row: dict, sol, cam, pat, R, t, level, spots_px=None) -> None:
     """What else the sensor saw, for the on-orbit studies: ``match_err_max_px`` (the largest distance
     of an identified blob from its target's spot, px - the renderer's predicted spot centroid, which
@@ -302,9 +310,7 @@ def _clutter(out: dict, row: dict, sol, cam, pat, R, t, level, spots_px=None) ->
     gray = img if img.ndim == 2 else img.max(axis=2)
     v, u = np.nonzero(gray >= float(level))
     z = (np.asarray(pat.points_m, float) @ np.asarray(R, float).T + t)[:, 2]
-    sizes = [d for d, _ in pat.target_sizes_m if d is not None]
-    diam = max(sizes) if sizes else STRAY_CUBE_DIAMETER_M
-    radius = np.sqrt(cam.fx * cam.fy) * 0.5 * diam / z * (img.shape[1] / cam.width) + STRAY_MARGIN_PX
+    radius = spot_radius_px(cam, pat, z) * (img.shape[1] / cam.width) + STRAY_MARGIN_PX
     if u.size:
         d = np.hypot(u[:, None] - uv[None, :, 0], v[:, None] - uv[None, :, 1]) - radius[None, :]
         away = np.all(d > 0, axis=1)
