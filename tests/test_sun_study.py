@@ -40,8 +40,11 @@ def test_each_trial_is_solved_a_wrong_lock_or_a_failure_by_its_reason():
             _row(ok=False, reason="inconsistent", match_err_max_px=0.3),  # right blobs, refused: a failure
             _row(ok=False, reason="merged_spots", match_err_max_px=None, stray_px=900, n_blobs=1),
             _row(ok=False, reason="no_blobs", match_err_max_px=None, stray_px=10 ** 6, stray_saturated_px=10 ** 5,
-                 sun_azimuth_deg=0.0, sun_elevation_deg=-89.0)]
-    out = classify(rows, cam, pat)
+                 sun_azimuth_deg=0.0, sun_elevation_deg=-89.0),
+            # right with the physical envelope's gates; the paper's gates locked onto a glint
+            _row(paper_gates_reported=True, paper_gates_match_err_max_px=lim + 2.0)]
+    out = classify(rows, cam, pat)[:6]
+    assert [c["wrong_lock_paper_gates"] for c in classify(rows, cam, pat)] == [False] * 6 + [True]
     assert [c["outcome"] for c in out] == ["solved", "wrong_lock", "wrong_lock", "inconsistent", "merged_spots", "no_blobs"]
     assert [c["flagged"] for c in out] == [False, False, True, False, False, False]
     assert [c["lit_body"] for c in out] == [False, False, False, False, True, True]
@@ -55,7 +58,7 @@ def test_the_cells_add_up_and_name_every_key():
             _row(n_blobs=6)]
     (c,) = cells(cfg, rows)
     assert set(c) == {"range_m", "sun_azimuth_deg", "sun_elevation_deg", "phase_angle_deg", "trials", "solved",
-                      "wrong_lock", "wrong_lock_flagged", "reasons", "mechanisms"}
+                      "wrong_lock", "wrong_lock_flagged", "wrong_lock_paper_gates", "reasons", "mechanisms"}
     assert c["solved"] + c["wrong_lock"] + sum(c["reasons"].values()) == c["trials"] == 6
     assert (c["solved"], c["wrong_lock"], c["reasons"]) == (2, 1, {"merged_spots": 2, "no_blobs": 1})
     assert set(c["mechanisms"]) == set(MECHANISMS) and c["mechanisms"]["glint"] == 1

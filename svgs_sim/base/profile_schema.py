@@ -427,6 +427,7 @@ CAMERA_KEYS = ("name", "key", "description", "intrinsics", "distortion", "source
 REFLECTOR_KEYS = {
     "model": Choice(tuple(REFLECTOR_MODELS)),
     "diameter_m": Num(0, 1, lo_open=True, why="a corner cube's clear aperture"),
+    "acceptance_deg": Num(0, 90, lo_open=True, why="the largest incidence at which the cubes return light to the lens"),
 }
 TARGET_KEYS = {
     "id": Num(0, 2**31 - 1, integer=True),

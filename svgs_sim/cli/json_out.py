@@ -98,7 +98,8 @@ SCHEMAS = {
     "svgs solve": f"""\
 {_SOLUTION},
  {_DETECTOR},
- # solved: "iterations": int, "crlb_std": {{...state keys}}, "crlb_sigma_px": float
+ # solved: "iterations": int, "crlb_std": {{...state keys}}, "crlb_sigma_px": float,
+ #   "outside_test_envelope": bool   # the pose lies outside the paper's test envelope (inside the physical one)
  # unsolved: "message": str, "details": {{...}}}}""",
     "svgs render": """\
 {"out": {"flux", "truth", "preview", "raw", "image": path,    # raw, image: unless --no-expose
@@ -112,6 +113,7 @@ SCHEMAS = {
  ...}                                                         # the backend's report""",
     "svgs render-and-solve": f"""\
 {{"ok": bool, "reason": str | null, "message": str | null, "n_blobs": int,
+ "outside_test_envelope": bool | null,         # solved outside the paper's test envelope (inside the physical one)
  "truth_state": {_STATE}, "state": {{...}} | null,
  "exposure_s": float, "iso": float, "expose_s": float, "solve_s": float, "render_s": float,
  "residual_rms_px": float | null, "chi2": float | null, "chi2_dof": int | null,
@@ -241,6 +243,7 @@ SCHEMAS = {
  "cells": [{"range_m": float, "sun_azimuth_deg": float, "sun_elevation_deg": float,
             "phase_angle_deg": float,       # target->sun against target->camera (head-on)
             "trials": int, "solved": int, "wrong_lock": int, "wrong_lock_flagged": int,
+            "wrong_lock_paper_gates": int,   # the same images with the paper's test-envelope gates
             "reasons": {reason: int},        # solved + wrong_lock + sum(reasons) == trials
             "mechanisms": {"sun_in_fov", "lit_body", "glint", "saturation", "earth_background": int}}],
  "outputs": {"results_csv", "figure", "readme", "summary_json": path},

@@ -188,6 +188,10 @@ def _render_and_solve(args, scen, thr) -> int:
         print(describe_detector(out["detector"]))
         if row["ok"]:
             print_state_table(row, crlb)
+            if row.get("outside_test_envelope"):
+                from svgs_sim.svgs.envelope import OUTSIDE_TEST_ENVELOPE_NOTE
+
+                print(f"note: {OUTSIDE_TEST_ENVELOPE_NOTE}")
             note = bound_line(row, crlb, frame.truth, frame.pattern)
             if note:
                 print(note)

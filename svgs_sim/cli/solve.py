@@ -127,6 +127,10 @@ def print_solution(result, out=None) -> None:
     )
     for tid, uv in result.targets_px.items():
         print(f"  target {tid}: u {uv[0]:.3f}  v {uv[1]:.3f} px", file=out)
+    if getattr(result, "outside_test_envelope", None):
+        from svgs_sim.svgs.envelope import OUTSIDE_TEST_ENVELOPE_NOTE
+
+        print(f"  note: {OUTSIDE_TEST_ENVELOPE_NOTE}", file=out)
 
 
 def cmd_solve(args) -> int:

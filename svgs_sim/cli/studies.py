@@ -310,9 +310,11 @@ def cmd_sun_study(args) -> int:
     with output_folder(out), text_to_stderr(args.json):  # --out made and probed before any work
         s = run_sun_study(config, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress,
                           command=shlex.join(argv))
-        tot = {k: sum(c[k] for c in s["cells"]) for k in ("trials", "solved", "wrong_lock", "wrong_lock_flagged")}
+        tot = {k: sum(c[k] for c in s["cells"])
+               for k in ("trials", "solved", "wrong_lock", "wrong_lock_flagged", "wrong_lock_paper_gates")}
         print(f"{config.camera} on orbit: {tot['solved']} of {tot['trials']} trials solved, {tot['wrong_lock']} wrong "
-              f"lock(s) ({tot['wrong_lock_flagged']} flagged by the consistency test), over {len(s['cells'])} cells")
+              f"lock(s) ({tot['wrong_lock_flagged']} flagged by the consistency test; {tot['wrong_lock_paper_gates']} "
+              f"with the paper's test-envelope gates), over {len(s['cells'])} cells")
         for r in config.ranges_m:
             cs = [c for c in s["cells"] if c["range_m"] == r]
             n = sum(c["trials"] for c in cs)

@@ -576,7 +576,8 @@ def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposu
     Returns
     -------
     dict
-        ``ok``, ``reason``, ``message``, ``n_blobs``, ``state`` (solved, paper keys) or None,
+        ``ok``, ``reason``, ``message``, ``n_blobs``, ``outside_test_envelope`` (solved: the pose
+        lies outside the paper's test envelope; None when unsolved), ``state`` (solved, paper keys) or None,
         ``truth_state``, the :data:`svgs_sim.sim.metrics.POSE_ERROR_KEYS` (``pos_err_vec_m``,
         ``att_err_vec_deg``, ``pos_err_norm_m``, ``rot_err_deg``; None when unsolved),
         ``residual_rms_px``, ``chi2``, ``chi2_dof``, ``p_value`` (the consistency test,
@@ -611,6 +612,7 @@ def solve_exposure(frame: Frame, ex, *, threshold=None, solver_camera_profile: C
         "reason": None if sol else sol.reason,
         "message": None if sol else sol.message,
         "n_blobs": sol.n_blobs if sol else sol.details.get("n_blobs"),
+        "outside_test_envelope": bool(sol.outside_test_envelope) if sol else None,
         "truth_state": state_dict(truth_state),
         "exposure_s": ex.exposure_s,
         "iso": ex.iso,

@@ -15,7 +15,9 @@ Each trial is one of (``solved + wrong_lock + sum(reasons) == trials``):
   farther than ``max(3 px, the spot's image radius)`` from the spot's predicted centroid
   (:data:`WRONG_LOCK_PX`; the spot's own centroid lies up to a few pixels from the target's
   projection at close range, by the flash's offset from the lens). ``wrong_lock_flagged`` of them
-  the consistency test refused;
+  the consistency test refused; ``wrong_lock_paper_gates``: the wrong locks of the same images
+  identified with the gates of earlier versions (the paper's test envelope instead of the sensor's
+  physical one, :func:`svgs_sim.svgs.envelope.physical_envelope`): the wider gates' cost;
 - a failure, counted by its reason in ``reasons`` (``inconsistent``: refused by the consistency
   test with the right blobs).
 
@@ -164,10 +166,13 @@ def classify(rows, camera, pattern) -> list[dict]:
     for row in rows:
         err = row.get("match_err_max_px")
         reported = bool(row["ok"]) or row.get("reason") == "inconsistent"
-        wrong = reported and err is not None and err == err and err > wrong_lock_px(camera, pattern, row["range_m"])
+        lim = wrong_lock_px(camera, pattern, row["range_m"])
+        wrong = reported and err is not None and err == err and err > lim
         outcome = "wrong_lock" if wrong else "solved" if row["ok"] else str(row.get("reason") or "unknown")
+        err_p = row.get("paper_gates_match_err_max_px")
+        wrong_p = bool(row.get("paper_gates_reported")) and err_p is not None and err_p == err_p and err_p > lim
         stray = row.get("stray_px") or 0
-        out.append({"outcome": outcome, "flagged": wrong and not row["ok"],
+        out.append({"outcome": outcome, "flagged": wrong and not row["ok"], "wrong_lock_paper_gates": wrong_p,
                     "sun_in_fov": sun_in_fov(camera, row), "lit_body": stray > 0,
                     "glint": (row.get("n_blobs") or 0) > n_t, "saturation": (row.get("stray_saturated_px") or 0) > 0,
                     "earth_background": False})
@@ -192,6 +197,7 @@ def cells(config: SunStudyConfig, rows) -> list[dict]:
                     "solved": sum(c["outcome"] == "solved" for c in cs),
                     "wrong_lock": sum(c["outcome"] == "wrong_lock" for c in cs),
                     "wrong_lock_flagged": sum(c["flagged"] for c in cs),
+                    "wrong_lock_paper_gates": sum(c["wrong_lock_paper_gates"] for c in cs),
                     "reasons": dict(sorted(reasons.items())),
                     "mechanisms": {m: sum(bool(c[m]) for c in cs) for m in MECHANISMS}})
     return out
@@ -264,8 +270,10 @@ def write_readme(config: SunStudyConfig, table: list, path, command: str = "") -
         for k, v in c["mechanisms"].items():
             mech[k] += v
     flagged = sum(c["wrong_lock_flagged"] for c in table)
+    before = sum(c.get("wrong_lock_paper_gates", 0) for c in table)
     lines += ["", f"All cells: solved {_frac(table)}; wrong locks {sum(c['wrong_lock'] for c in table)} "
-              f"({flagged} of them flagged by the consistency test); failures by reason: "
+              f"({flagged} of them flagged by the consistency test; {before} with the paper's test-envelope gates "
+              "instead of the physical envelope's, on the same images); failures by reason: "
               + (", ".join(f"{k} {v}" for k, v in sorted(reasons.items(), key=lambda kv: -kv[1])) or "none") + ".",
               "", "Mechanisms (trials showing each): " + ", ".join(f"{k} {v}" for k, v in mech.items()) + ".",
               "", "![availability](sun_study.png)", ""]

@@ -44,7 +44,7 @@ import numpy as np
 
 from ..base.errors import InputError
 from ..base.profiles import Camera, Pattern, load_camera, load_pattern
-from .envelope import PAPER_ENVELOPE, Envelope
+from .envelope import PAPER_ENVELOPE, Envelope, incidence_deg, physical_envelope
 from .frames import D_CAM_PHOTO, angles_from_rotation, rotation_from_angles
 from .result import Failure
 from .solver import posit, solve_centroids
@@ -111,6 +111,9 @@ class Identification:
         that passed the geometric gates, candidate sets solved.
     score : float
         Geometric score of the chosen set (mean squared normalised gate distance).
+    outside_test_envelope : bool
+        The verifying pose lies outside the paper's test envelope (:data:`PAPER_ENVELOPE`):
+        inside the sensor's physical envelope, where the paper did not test it.
     """
 
     points_px: np.ndarray
@@ -124,6 +127,7 @@ class Identification:
     n_verified: int = 0
     score: float = float("nan")
     details: dict = field(default_factory=dict)
+    outside_test_envelope: bool = False
 
     ok = True
     reason = None
@@ -147,6 +151,7 @@ class Identification:
             "n_pairs": self.n_pairs,
             "n_candidates": self.n_candidates,
             "n_verified": self.n_verified,
+            "outside_test_envelope": bool(self.outside_test_envelope),
         }
 
 
@@ -165,7 +170,13 @@ class _Gates:
 
 
 def _envelope_poses(env: Envelope, n: int, seed: int = 0):
-    """Poses over an (inflated) envelope: random draws plus all corners. R (m,3,3), t (m,3)."""
+    """Poses over an (inflated) envelope: random draws plus all corners. R (m,3,3), t (m,3).
+
+    An envelope with :attr:`Envelope.max_incidence_deg` is drawn by rejection (the attitude box,
+    then the face normal within the acceptance plus :data:`GATE_MARGIN_DEG` of the line of sight;
+    its box corners lie outside it, so none are added)."""
+    if env.max_incidence_deg is not None:
+        return _incidence_poses(env, n, seed)
     rng = np.random.default_rng(seed)
     lo, hi = env.range_interval_m[0] / GATE_MARGIN_RANGE, env.range_interval_m[1] * GATE_MARGIN_RANGE
     lat = env.lateral_fraction + GATE_MARGIN_LATERAL
@@ -176,11 +187,36 @@ def _envelope_poses(env: Envelope, n: int, seed: int = 0):
     rc = np.where(corners[:, 0] < 0, lo, hi)
     r = np.concatenate([r, rc])
     f = np.concatenate([f, corners[:, 1:]])
+    return _poses(r, f, lat, am)
+
+
+def _poses(r, f, lat, am):
+    """Poses from ranges ``r`` (m,) and unit draws ``f`` (m, 5): lateral offsets (fraction ``lat``
+    of the range) and roll, pitch, yaw (``am`` degrees)."""
     off = f[:, :2] * lat * r[:, None]
     ang = np.deg2rad(f[:, 2:] * am)
     R = D_CAM_PHOTO @ rotation_from_angles(ang[:, 0], ang[:, 1], ang[:, 2])
     t = (D_CAM_PHOTO @ np.stack([off[:, 0], off[:, 1], -r], 1).T).T
     return R, t
+
+
+def _incidence_poses(env: Envelope, n: int, seed: int):
+    """``n`` poses of an envelope with an incidence limit, by rejection; a fifth of them at its
+    nearest or farthest range (the gates' extremes)."""
+    rng = np.random.default_rng(seed)
+    lo, hi = env.range_interval_m[0] / GATE_MARGIN_RANGE, env.range_interval_m[1] * GATE_MARGIN_RANGE
+    lat = env.lateral_fraction + GATE_MARGIN_LATERAL
+    am = np.minimum(np.array([env.roll_deg, env.pitch_deg, env.yaw_deg]) + GATE_MARGIN_DEG, 180.0)
+    Rs, ts, have = [], [], 0
+    while have < n:
+        m = 4 * n
+        r = np.exp(rng.uniform(np.log(lo), np.log(hi), m))
+        r[rng.uniform(size=m) < 0.2] = np.where(rng.uniform(size=m) < 0.5, lo, hi)[:1]
+        R, t = _poses(r, rng.uniform(-1, 1, (m, 5)), lat, am)
+        keep = incidence_deg(R, t) <= env.max_incidence_deg + GATE_MARGIN_DEG
+        Rs.append(R[keep]), ts.append(t[keep])
+        have += int(keep.sum())
+    return np.concatenate(Rs)[:n], np.concatenate(ts)[:n]
 
 
 @lru_cache(maxsize=32)
@@ -295,14 +331,14 @@ def _merge_hint(blobs, idx_all) -> tuple[str, dict]:
 
 
 def _pose_in_envelope(R, t, env: Envelope, margin_deg, margin_lateral, margin_range):
-    """Boolean (N,) - verified poses inside the envelope with margins."""
-    ang = np.degrees(angles_from_rotation(D_CAM_PHOTO @ R))  # (N, 3) roll, pitch, yaw
-    lim = np.array([env.roll_deg, env.pitch_deg, env.yaw_deg]) + margin_deg
-    ang_ok = np.all(np.abs(ang) <= lim, axis=1)
-    rng = t[:, 2]
-    rng_ok = (rng >= env.range_interval_m[0] / margin_range) & (rng <= env.range_interval_m[1] * margin_range)
-    lat = np.max(np.abs(t[:, :2]), axis=1) / np.maximum(rng, 1e-9)
-    return ang_ok & rng_ok & (lat <= env.lateral_fraction + margin_lateral)
+    """Boolean (N,) - verified poses inside the envelope with margins (:meth:`Envelope.contains`)."""
+    return env.contains(R, t, margin_deg=margin_deg, margin_lateral=margin_lateral, margin_range=margin_range)
+
+
+def outside_test_envelope(R_cam_target, t_cam_target_m) -> bool:
+    """Whether a pose lies outside the paper's test envelope (:data:`PAPER_ENVELOPE`, no margin):
+    solved, but where the paper did not test the sensor."""
+    return not PAPER_ENVELOPE.contains(R_cam_target, t_cam_target_m)
 
 
 # ------------------------------------------------------------------ main entry
@@ -312,7 +348,7 @@ def identify(
     pattern="svgs-3u",
     *,
     verify: bool = True,
-    envelope: Envelope = PAPER_ENVELOPE,
+    envelope: Envelope | None = None,
     tolerance_px: float = TOLERANCE_PX,
     max_blobs: int = MAX_BLOBS,
     max_verify: int = MAX_VERIFY,
@@ -333,8 +369,12 @@ def identify(
     verify : bool
         Solve the best candidates and keep the consistent one with the smallest residual
         (default). Without it the best geometric score wins (no solve).
-    envelope : Envelope
-        Operating envelope the gates are built for (default the paper's).
+    envelope : Envelope, optional
+        Envelope the gates and the verified-pose check are built for; default the sensor's
+        physical one (:func:`svgs_sim.svgs.envelope.physical_envelope`: the cubes' acceptance,
+        the field of view, the range limits). :data:`PAPER_ENVELOPE` gives the paper's test
+        envelope (the gates of earlier versions). A pose outside the paper's test envelope is
+        returned with :attr:`Identification.outside_test_envelope` set.
     tolerance_px : float
         Centroid tolerance of the geometric gates, px.
     max_blobs : int
@@ -360,6 +400,8 @@ def identify(
     """
     camera = load_camera(camera)
     pattern = load_pattern(pattern)
+    if envelope is None:
+        envelope = physical_envelope(camera, pattern)
     _check_options(tolerance_px, max_residual_px, max_blobs, max_verify)
     pts, blobs = _as_points(blobs_or_points)
     n_t = pattern.n
@@ -489,9 +531,11 @@ def _identification(pts, idx_all, pattern, vsets, batch, good, best, score, posi
     sol = batch[best]
     sol.targets_px = {int(i): pts[sel[k]].tolist() for k, i in enumerate(pattern.ids)}
     sol.n_blobs = counts["n_blobs"]
+    sol.outside_test_envelope = outside_test_envelope(sol.R_cam_target, sol.t_cam_target_m)
     ok_res = np.sort(res[good])
     return Identification(
         pts[sel], idx_all[sel], pattern.ids.copy(), residual_rms_px=float(res[best]), solution=sol, score=score,
+        outside_test_envelope=sol.outside_test_envelope,
         details={"n_consistent": int(good.sum()), "second_residual_px": float(ok_res[1]) if ok_res.size > 1 else None,
                  "posit_residual_px": posit_residual_px},
         **counts,
@@ -678,4 +722,4 @@ def _consistent(batch, max_residual_px, envelope, pose_margin_deg) -> np.ndarray
     return good
 
 
-__all__ = ["identify", "Identification", "Envelope", "PAPER_ENVELOPE", "pattern_gates"]
+__all__ = ["identify", "Identification", "Envelope", "PAPER_ENVELOPE", "pattern_gates", "outside_test_envelope"]

@@ -16,7 +16,7 @@ import numpy as np
 from ..base.errors import InputError
 from ..base.profiles import Camera, load_camera, load_pattern
 from .app import consistency, settings
-from .identify import identify
+from .identify import identify, outside_test_envelope
 from .result import Failure
 from .solver import solve_centroids
 
@@ -373,6 +373,8 @@ def solve_image(
     sol = ident.solution  # identification verified the set with the solver already
     if sol is None or not sol or getattr(sol, "sigma_px", None) != sigma_px:
         sol = solve_centroids(ident.points_px, camera, pattern, sigma_px=sigma_px)
+        if sol:
+            sol.outside_test_envelope = outside_test_envelope(sol.R_cam_target, sol.t_cam_target_m)
     if not sol:
         sol.details["n_blobs"] = len(blobs)
         sol.details["threshold_used"] = float(blobs.threshold_used)

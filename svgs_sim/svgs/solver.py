@@ -164,6 +164,10 @@ class Solution(Solved):
     consistency : svgs_sim.svgs.app.Consistency or None
         The residual's chi-square test against the stated centroid noise
         (:func:`svgs_sim.svgs.pipeline.solve_image`).
+    outside_test_envelope : bool or None
+        Set by the identification (:func:`svgs_sim.svgs.identify.identify`): the pose lies outside
+        the paper's test envelope (solved where the paper did not test the sensor). ``None``: not
+        judged (a solve of given centroids); then absent from :meth:`to_json`.
     """
 
     state: np.ndarray
@@ -177,6 +181,7 @@ class Solution(Solved):
     n_blobs: int | None = None
     threshold_used: float | None = None
     consistency: object = None
+    outside_test_envelope: bool | None = None
 
     @property
     def std(self) -> np.ndarray:
@@ -199,6 +204,7 @@ class Solution(Solved):
                 [float(v) for v in np.concatenate([self.std[:3], np.degrees(self.std[3:])])],
             )),
             "crlb_sigma_px": float(self.sigma_px),
+            **({} if self.outside_test_envelope is None else {"outside_test_envelope": bool(self.outside_test_envelope)}),
             **(self.consistency.to_json() if self.consistency is not None else {}),
         }
 

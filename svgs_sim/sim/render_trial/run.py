@@ -32,6 +32,7 @@ from svgs_sim.sim.trials import TrialKind, camera_with_calibration_errors, regis
 from svgs_sim.sim.turbulence import image_shifts_px
 from svgs_sim.svgs.app import consistency
 from svgs_sim.svgs.frames import STATE_KEYS
+from svgs_sim.svgs.pipeline import solve_image
 
 
 def merge_margin_dn(image: np.ndarray, targets_px: np.ndarray, threshold: float, step_px: float = 0.25) -> float:
@@ -228,6 +229,7 @@ def _solve_one(scenario: RenderScenario, seed: int, frame, exposers: dict) -> di
     out.update({k: row[k] for k in ("ok", "reason", "message", "n_blobs", "residual_rms_px", "chi2", "chi2_dof",
                                     "p_value", "expose_s", "solve_s", POS_ERR_NORM_M, ROT_ERR_DEG)})
     out["ok"] = bool(row["ok"])
+    out["outside_test_envelope"] = row["outside_test_envelope"]
     out["exposure_s_used"], out["iso_used"] = float(row["exposure_s"]), float(row["iso"])
     out.update({f"true_{k}": v for k, v in row["truth_state"].items()})
     R, t = frame.scenario.pose()
@@ -266,6 +268,8 @@ def _solve_one(scenario: RenderScenario, seed: int, frame, exposers: dict) -> di
             out["p_value_crlb"] = consistency(sol.residual_rms_px, len(pat.ids), sigma_px=rms).p_value
             out.update({f"crlb_sensor_{k}": float(v) for k, v in pose_crlb(sol, rms).items()})
     _clutter(out, row, sol, cam, pat, R, t, level, frame.truth.get("spots_px_predicted"))
+    if scenario.scene.environment == "orbit":
+        _paper_gates(out, row, scenario, cam, pat, R, t, frame.truth.get("spots_px_predicted"))
     if out["message"] is not None:
         out["message"] = " ".join(str(out["message"]).split())  # one line (a CSV field)
     return out
@@ -319,6 +323,25 @@ def _clutter(out: dict, row: dict, sol, cam, pat, R, t, level, spots_px=None) ->
         out["stray_saturated_px"] = int(np.sum(gray[v[away], u[away]] >= full))
     else:
         out["stray_px"] = out["stray_saturated_px"] = 0
+
+
+def _paper_gates(out: dict, row: dict, scenario, cam, pat, R, t, spots_px=None) -> None:
+    """The same image solved with the identification's gates of earlier versions (the paper's test
+    envelope, :data:`svgs_sim.svgs.envelope.PAPER_ENVELOPE`) instead of the physical envelope, for the
+    on-orbit studies' wrong locks before and after: ``paper_gates_reported`` (a pose the app would
+    report: solved, or refused only by the consistency test) and ``paper_gates_match_err_max_px``
+    (as ``match_err_max_px``)."""
+    from svgs_sim.svgs.envelope import PAPER_ENVELOPE
+
+    img = row["_exposure"].image
+    scam = camera_with_calibration_errors(cam, scenario)
+    sol = solve_image(img, solver_camera(scam, img.shape), pat, threshold=scenario.threshold,
+                      identify_options={"envelope": PAPER_ENVELOPE})
+    alt = {"state": sol.state_dict if sol else None, "reason": None if sol else sol.reason, "_exposure": row["_exposure"]}
+    tmp = {"match_err_max_px": None}
+    _clutter(tmp, alt, sol, cam, pat, R, t, None, spots_px)
+    out["paper_gates_reported"] = bool(sol) or sol.reason == "inconsistent"
+    out["paper_gates_match_err_max_px"] = tmp["match_err_max_px"]
 
 
 def trial_picture(scenario, seed: int) -> dict:

@@ -135,7 +135,8 @@ RENDER_OUTPUTS = (
     "centroid_err_rms_px", *(f"cen_{a}_px_{k}" for k in range(4) for a in ("du", "dv")), "crlb_centroid_px",
     *(f"crlb_sensor_{k}" for k in STATE_KEYS),
     "exposure_s_used", "iso_used", "expose_s", "solve_s",
-    "match_err_max_px", "stray_px", "stray_saturated_px",
+    "match_err_max_px", "stray_px", "stray_saturated_px", "outside_test_envelope",
+    "paper_gates_reported", "paper_gates_match_err_max_px",
 )
 
 
