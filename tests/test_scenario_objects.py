@@ -197,7 +197,7 @@ def _random_value(p, rng, integers=()):
     from the registry's own bounds (capped where they are astronomically wide)."""
     if p.codes and (p.choice_only or rng.random() < 0.3):
         return p.codes[int(rng.integers(len(p.codes)))].word
-    lo, hi = p.lower, min(p.upper, 50.0 if p.lower >= 0 else p.upper)
+    lo, hi = p.lower, min(p.upper, max(50.0, 10.0 * p.lower) if p.lower >= 0 else p.upper)
     if p.name.endswith("_deg") and p.name in ("roll_deg", "pitch_deg", "yaw_deg"):
         lo, hi = max(lo, -20.0), min(hi, 20.0)
     v = float(rng.uniform(lo, hi))
@@ -222,12 +222,14 @@ def _random_trial_scenario(kind, rng):
     if values.get("environment") == "orbit":  # black space: no backdrop, no room light
         values.pop("backdrop_distance_m", None)
         values.pop("ambient_radiance_w_m2_sr", None)
-    if values.get("environment") == "orbit" and ("sun_azimuth_deg" in values) != ("sun_elevation_deg" in values):
-        values.pop("sun_azimuth_deg", None)  # the sun: both angles or neither (eclipse)
-        values.pop("sun_elevation_deg", None)
-    elif values.get("environment") != "orbit":  # no sun in the lab
-        values.pop("sun_azimuth_deg", None)
-        values.pop("sun_elevation_deg", None)
+    for body in ("sun", "earth"):  # both angles or neither (eclipse; no Earth); none in the lab
+        az, el = f"{body}_azimuth_deg", f"{body}_elevation_deg"
+        if values.get("environment") != "orbit" or (az in values) != (el in values):
+            values.pop(az, None)
+            values.pop(el, None)
+    if "earth_azimuth_deg" not in values:  # the Earth's altitude and albedo: with it only
+        values.pop("altitude_km", None)
+        values.pop("earth_albedo", None)
     distance = float(rng.uniform(1.0, 30.0))
     values.update({"mount": "stand", "rail_m": distance} if stand else {"range_m": distance})
     if stand:  # inside the stand's small geometry

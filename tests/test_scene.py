@@ -21,16 +21,20 @@ RENDERING_COMMANDS = (("render",), ("render-and-solve",), ("range-sweep",), ("ap
 def _random_scene(rng) -> Scene:
     kw = {}
     orbit = rng.random() < 0.3
-    sun = orbit and rng.random() < 0.7
+    given = {flag: orbit and rng.random() < 0.7 for flag in ("--sun-deg", "--earth-deg")}
     for name, q in Scene.quantities().items():
-        if q.component is not None:  # the sun: both components, on orbit only
-            kw[name] = float(rng.uniform(q.lower, q.upper)) if sun else None
+        if q.component is not None:  # the sun, the Earth: both components, on orbit only
+            kw[name] = float(rng.uniform(q.lower, q.upper)) if given[q.flag] else None
             continue
         if q.choices:
             kw[name] = "orbit" if orbit else "lab"
             continue
         if orbit and name in ("backdrop_distance_m", "ambient_radiance_w_m2_sr"):
             continue  # none in orbit
+        if name in ("altitude_km", "earth_albedo"):  # the Earth's: with it only
+            if given["--earth-deg"]:
+                kw[name] = float(rng.uniform(q.lower, min(q.upper, 2000.0)))
+            continue
         hi = min(q.upper, 50.0)
         v = float(rng.uniform(q.lower, hi))
         if q.lower_open and v == q.lower:
@@ -67,7 +71,8 @@ def test_random_scenes_round_trip_exactly_through_the_row():
         r = _random_render_scenario(rng)
         row = r.to_row()
         # floats; the one distance that does not apply (rail_m on a target mount) is empty
-        optional = ("rail_m", "sun_azimuth_deg", "sun_elevation_deg")  # empty where they do not apply
+        optional = ("rail_m", "sun_azimuth_deg", "sun_elevation_deg", "earth_azimuth_deg",
+                    "earth_elevation_deg")  # empty where they do not apply
         assert all(isinstance(v, float) for k, v in row.items() if k not in ("camera", "pattern", *optional)), row
         assert row["rail_m"] is None and all(row[k] is None or isinstance(row[k], float) for k in optional)
         back = RenderScenario.from_row(row)

@@ -103,7 +103,7 @@ ADDED_AT_DEFAULT = {"environment": ("lab", 0.0, "0.0", None), "sun_azimuth_deg":
 
 
 #: Outputs added since an older run (new numbers, not moved ones): dropped before comparing.
-NEW_OUTPUTS = frozenset({"match_err_max_px", "stray_px", "stray_saturated_px", "outside_test_envelope"})
+NEW_OUTPUTS = frozenset({"match_err_max_px", "stray_px", "stray_saturated_px", "outside_test_envelope", "identified_px"})
 
 
 def _added_at_default(key, value) -> bool:

@@ -277,6 +277,15 @@ def _register_sun_study(sub) -> None:
     p.add_argument("--seed", type=int, default=0, help="study seed (default 0)")
     p.add_argument("--pattern", default="svgs-3u", help="target pattern name or .toml path (default %(default)s)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout; also DIR/summary.json")
+    p.add_argument("--earth-deg", default=None, metavar="AZ,EL",
+                   help="the Earth in every trial: the direction toward its centre in the target frame, deg (as "
+                   "svgs render --earth-deg); default: none")
+    from svgs_sim.sim.scene import Scene
+
+    q = Scene.quantities()
+    for dest, flag in (("altitude_km", "--altitude-km"), ("earth_albedo", "--earth-albedo")):
+        a = p.add_argument(flag, type=float, default=Scene.__dataclass_fields__[dest].default, help=q[dest].help)
+        a.bounds = (q[dest].lower, q[dest].upper, q[dest].unit)  # the scene quantity's domain
     add_executor_options(p, plan_only=True)
     allow_negative_lists(p)
     p.set_defaults(func=cmd_sun_study)
@@ -295,15 +304,25 @@ def cmd_sun_study(args) -> int:
     from svgs_sim.studies.sun_study import make_config, run_sun_study
 
     spec = executor_from_args(args)
+    earth = None
+    if args.earth_deg is not None:
+        ae = _numbers(args.earth_deg, "--earth-deg")
+        if len(ae) != 2:
+            raise InputError(f"--earth-deg: expected AZ,EL (two numbers), got {args.earth_deg!r}")
+        earth = (*ae, args.altitude_km, args.earth_albedo)
+    elif (args.altitude_km, args.earth_albedo) != (400.0, 0.3):
+        raise InputError("--altitude-km, --earth-albedo: the Earth's; give them with --earth-deg AZ,EL")
     config = make_config(args.camera, _numbers(args.ranges, "--ranges"), _numbers(args.sun_azimuths_deg, "--sun-azimuths-deg"),
                          _numbers(args.sun_elevations_deg, "--sun-elevations-deg"), args.trials, seed=args.seed,
-                         pattern=args.pattern)
+                         pattern=args.pattern, earth=earth)
     out = Path(args.out)
     lists = {k: ",".join(f"{x:g}" for x in v) for k, v in (("--ranges", config.ranges_m),
                                                              ("--sun-azimuths-deg", config.azimuths_deg),
                                                              ("--sun-elevations-deg", config.elevations_deg))}
     argv = ["svgs", "sun-study", "--camera", config.camera] + [w for k, v in lists.items() for w in (f"{k}={v}",)] + [
         "--trials", str(config.trials), "--out", str(out), "--seed", str(config.seed), "--pattern", config.pattern,
+        *([f"--earth-deg={config.earth[0]:g},{config.earth[1]:g}", "--altitude-km", f"{config.earth[2]:g}",
+           "--earth-albedo", f"{config.earth[3]:g}"] if config.earth else []),
         *executor_argv(args)]
     if announce_plan(args, "render", config.n_trials, config.n_trials, spec):
         return 0

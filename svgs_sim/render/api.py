@@ -203,7 +203,7 @@ class Renderer:
         t0 = time.perf_counter()
         self._load_scene(extra_meshes)
         self._sun = None
-        if self.options.sun_direction_target is not None:
+        if self.options.light_pass:
             self._load_sun_scene(extra_meshes)
         self.load_time_s = time.perf_counter() - t0
         self._factor_full = None
@@ -241,11 +241,20 @@ class Renderer:
 
     def _load_sun_scene(self, extra_meshes) -> None:
         """The sun's scene: the same target without the flash, the sun as a disk emitter
-        (:mod:`svgs_sim.render.sun`); its sensors share the flash scene's camera model."""
+        (:mod:`svgs_sim.render.sun`; none when the Earth eclipses it) and the Earth as an environment
+        map (:mod:`svgs_sim.render.earth`); its sensors share the flash scene's camera model."""
+        from .earth import earth_map
+
+        o = self.options
         light = sun_in_band(self.optics.band_nm)
+        earth = None
+        if o.earth_direction_target is not None:
+            earth = earth_map(o.earth_direction_target, o.sun_direction_target, o.altitude_m, o.earth_albedo,
+                              light["irradiance_w_m2"], o.earth_uniform_radiance_w_m2_sr)
+        sun_dir = None if o.eclipsed else o.sun_direction_target
         scene, h = build_scene(self.camera, self.pattern, self.optics, self.flash, self.reflector, self.options,
                                self.roi_size_px, self.n_windows, extra_meshes=extra_meshes, method=self.method,
-                               sun=(self.options.sun_direction_target, light["radiance_w_m2_sr"]))
+                               sun=(sun_dir, light["radiance_w_m2_sr"]), earth=earth)
         for s in (h["sensor_full"], h["sensor_roi"], *h["sensor_tiles"].values()):
             s.set_model(self.model)
         h["sensor_full"].set_windows(np.zeros((1, 2)), self.camera.height)
@@ -397,6 +406,9 @@ class Renderer:
             rad = self._radiance(full, spp, seed, scene)
             timings[key + "tiles"] = "full frame"
             box = (0, H, 0, W)
+        elif len(tiles) == 0:  # nothing of the scene projects into the image
+            timings[key + "tiles"] = 0
+            box = None
         else:
             n = next(c for c in sorted(tile_sensors) if c >= len(tiles))
             org = np.concatenate([tiles, np.repeat(tiles[-1:], n - len(tiles), axis=0)])
@@ -411,8 +423,17 @@ class Renderer:
         return rad, box
 
     def _sun_in_view(self, R) -> bool:
-        """Whether the sun's disk (or its edge) projects into the image at this attitude."""
-        return sun_in_image(self.camera, R, self.options.sun_direction_target, margin_px=2.0)
+        """Whether the sun's disk (or its edge) or the Earth projects into the image at this attitude
+        (the natural-light pass then covers the full frame)."""
+        o = self.options
+        if o.sun_direction_target is not None and not o.eclipsed and sun_in_image(self.camera, R, o.sun_direction_target,
+                                                                                  margin_px=2.0):
+            return True
+        if o.earth_direction_target is not None:
+            from .earth import earth_in_image
+
+            return earth_in_image(self.camera, R, o.earth_direction_target, o.altitude_m)
+        return False
 
     def _render_windows(self, rad, spots, roi_spp: int, seed: int, timings: dict):
         """Render the window around every spot (one mosaic pass) into ``rad`` (in place; where
@@ -514,9 +535,18 @@ class Renderer:
                 flux_diffuse = flux_diffuse + flux_sun
         truth = self.truth(R, t, targets_px, visible, spots, seed=seed, spp=spp, roi_spp=roi_spp,
                            full_frame=full_frame, rois=rois, timings=timings, strategies=strategies)
-        if self._sun is not None:
-            truth["sun"] = {"direction_target": list(self.options.sun_direction_target),
-                            "in_view": self._sun_in_view(R), **self._sun["light"]}
+        o = self.options
+        if self._sun is not None and o.sun_direction_target is not None:
+            truth["sun"] = {"direction_target": list(o.sun_direction_target), "eclipsed": o.eclipsed,
+                            "in_view": (not o.eclipsed) and sun_in_image(self.camera, R, o.sun_direction_target, 2.0),
+                            **self._sun["light"]}
+        if o.earth_direction_target is not None:
+            from .earth import earth_half_angle_deg, earth_in_image
+
+            truth["earth"] = {"direction_target": list(o.earth_direction_target), "altitude_m": o.altitude_m,
+                              "albedo": o.earth_albedo, "half_angle_deg": earth_half_angle_deg(o.altitude_m),
+                              "in_view": earth_in_image(self.camera, R, o.earth_direction_target, o.altitude_m),
+                              "shadow_model": "cylindrical, umbra only (svgs_sim.render.earth)"}
         return RenderResult(flux=flux, truth=truth, radiance=radiance, timings_s=timings,
                             flux_diffuse=flux_diffuse, points=points, flux_sun=flux_sun)
 

@@ -411,8 +411,8 @@ class SceneOptions(OptionsMixin):
     ----------
     body : {"plate", "3u", "none"} or str
         Target body: a flat plate (the paper's test used a Thorlabs MS12B/M optical
-        breadboard), a 3U cubesat mock-up (10 x 34 x 10 cm box, enlarged to carry
-        the mounts if needed), nothing (cubes and mounts only), or a mesh file (a path ending
+        breadboard), a 3U CubeSat (100 x 340.5 x 100 mm, rails, MLI, body-mounted cells:
+        :mod:`svgs_sim.render.cubesat`), nothing (cubes and mounts only), or a mesh file (a path ending
         in ``.ply`` or ``.obj``; metres, target frame: :mod:`svgs_sim.render.body_mesh`).
     body_material : str or None
         A mesh body's surface (:mod:`svgs_sim.render.materials`), for its parts not in
@@ -444,6 +444,15 @@ class SceneOptions(OptionsMixin):
     sun_direction_target : tuple of 3 float or None
         Unit vector toward the sun in the target frame (None: no sun, eclipse or the lab). The
         sun is rendered in a pass of its own (:mod:`svgs_sim.render.sun`).
+    earth_direction_target : tuple of 3 float or None
+        Unit vector toward the Earth's centre in the target frame (None: no Earth); rendered with
+        the sun's pass as an environment map (:mod:`svgs_sim.render.earth`), lit by the sun.
+    altitude_m : float
+        The target's altitude above the Earth, m (the Earth's size and the eclipse).
+    earth_albedo : float
+        The Earth's Lambertian albedo, 0-1.
+    earth_uniform_radiance_w_m2_sr : float or None
+        For checks only: the Earth's disk at this uniform band radiance, unlit by the sun.
     """
 
     body: str = "plate"
@@ -456,6 +465,10 @@ class SceneOptions(OptionsMixin):
     max_depth: int = DEFAULT_MAX_DEPTH
     anchor: str = "apparent-vertex"
     sun_direction_target: tuple | None = None
+    earth_direction_target: tuple | None = None
+    altitude_m: float = 400e3
+    earth_albedo: float = 0.3
+    earth_uniform_radiance_w_m2_sr: float | None = None
     body_material: str | None = None
     body_materials: tuple = ()
     body_file_sha1: str | None = None
@@ -492,6 +505,33 @@ class SceneOptions(OptionsMixin):
                 raise InputError(f"scene_options.sun_direction_target: expected a unit 3-vector or None, got "
                                  f"{self.sun_direction_target!r}")
             object.__setattr__(self, "sun_direction_target", tuple(float(x) for x in d))
+        if self.earth_direction_target is not None:
+            d = np.asarray(self.earth_direction_target, float).reshape(-1)
+            if d.shape != (3,) or not np.all(np.isfinite(d)) or abs(np.linalg.norm(d) - 1.0) > 1e-6:
+                raise InputError(f"scene_options.earth_direction_target: expected a unit 3-vector or None, got "
+                                 f"{self.earth_direction_target!r}")
+            object.__setattr__(self, "earth_direction_target", tuple(float(x) for x in d))
+        check_finite_positive(self.altitude_m, "scene_options.altitude_m")
+        a = check_finite(self.earth_albedo, "scene_options.earth_albedo")
+        if not 0 <= a <= 1:
+            raise InputError(f"scene_options.earth_albedo: expected an albedo in [0, 1], got {a!r}")
+        if self.earth_uniform_radiance_w_m2_sr is not None:
+            check_finite_positive(self.earth_uniform_radiance_w_m2_sr, "scene_options.earth_uniform_radiance_w_m2_sr")
+
+    @property
+    def eclipsed(self) -> bool:
+        """Whether the Earth hides the sun from the target (:func:`svgs_sim.render.earth.in_eclipse`)."""
+        from .earth import in_eclipse
+
+        return (self.sun_direction_target is not None and self.earth_direction_target is not None
+                and in_eclipse(self.sun_direction_target, self.earth_direction_target, self.altitude_m))
+
+    @property
+    def light_pass(self) -> bool:
+        """Whether the scene has a pass of natural light (the sun, or an Earth the sun lights or a
+        check lights uniformly)."""
+        return self.sun_direction_target is not None or (
+            self.earth_direction_target is not None and self.earth_uniform_radiance_w_m2_sr is not None)
 
     def to_json(self) -> dict:
         d = asdict(self)
@@ -500,6 +540,13 @@ class SceneOptions(OptionsMixin):
             del d["sun_direction_target"]
         else:
             d["sun_direction_target"] = list(d["sun_direction_target"])
+        if d["earth_direction_target"] is None:  # no Earth: as before the Earth
+            for k in ("earth_direction_target", "altitude_m", "earth_albedo", "earth_uniform_radiance_w_m2_sr"):
+                del d[k]
+        else:
+            d["earth_direction_target"] = list(d["earth_direction_target"])
+            if d["earth_uniform_radiance_w_m2_sr"] is None:
+                del d["earth_uniform_radiance_w_m2_sr"]
         for k in ("body_material", "body_materials", "body_file_sha1"):  # a mesh body's only
             if not d[k]:
                 del d[k]
@@ -586,16 +633,24 @@ def build_target(pattern, refl: Reflector, opts: SceneOptions, band_nm=(400.0, 7
     info = {"face_z_m": z_face, "body": opts.body}
     if opts.mesh_body:
         pass  # the mesh's parts are added by the scene (svgs_sim.render.body_mesh)
+    elif opts.body == "3u":
+        from .cubesat import cubesat_3u_meshes
+
+        boom = None
+        for tid, p, base in zip(pattern.ids, pts, mount_base):
+            if base > z_face + 1e-4 and int(tid) == 3:
+                boom = (float(p[0]), float(p[1]), z_face, float(base))
+        centre = 0.5 * (pts[:, :2].min(0) + pts[:, :2].max(0))
+        meshes += cubesat_3u_meshes(z_face, boom, centre)
+        info.update(boom_3u=boom, body_centre_xy_m=centre.tolist(), body_parts=[m.material for m in meshes if m.name.startswith("cubesat_")])
+        for tid, v, base in zip(pattern.ids, vertices, mount_base):
+            if base > z_face + 1e-4 and int(tid) != 3:
+                meshes.append(cylinder_mesh(f"boom{tid}", v[:2], z_face, base, opts.boom_radius_m, "body"))
+                info.setdefault("booms", []).append({"target": int(tid), "z0_m": z_face, "z1_m": float(base)})
     elif opts.body != "none":
         lo_xy = pts[:, :2].min(0) - R_out - opts.body_margin_m
         hi_xy = pts[:, :2].max(0) + R_out + opts.body_margin_m
         depth = opts.body_thickness_m
-        if opts.body == "3u":
-            # 10 x 34.05 cm long face (3U), 10 cm deep; enlarged to carry the mounts
-            size = np.maximum(hi_xy - lo_xy, [0.10, 0.3405])
-            c = 0.5 * (lo_xy + hi_xy)
-            lo_xy, hi_xy = c - size / 2, c + size / 2
-            depth = 0.10
         lo = np.array([lo_xy[0], lo_xy[1], z_face - depth])
         hi = np.array([hi_xy[0], hi_xy[1], z_face])
         meshes.append(box_mesh("body", lo, hi, "body"))

@@ -82,7 +82,7 @@ def film_dict(width: int, height: int) -> dict:
 
 
 def build_scene(camera, pattern, optics: Optics, flash: Flash, refl: Reflector, opts: SceneOptions,
-                roi_size_px: int, n_windows: int, extra_meshes=(), method: str = "guided", sun=None):
+                roi_size_px: int, n_windows: int, extra_meshes=(), method: str = "guided", sun=None, earth=None):
     """Load the scene.
 
     Parameters
@@ -105,7 +105,11 @@ def build_scene(camera, pattern, optics: Optics, flash: Flash, refl: Reflector, 
         The sun's scene instead of the flash's: no LED, the sun as a disk area emitter
         (:func:`svgs_sim.render.sun.sun_disk_to_world`) of this band radiance, everything by the
         ``path`` integrator (the sun's disk is far wider than a pixel's footprint, so camera
-        paths find it through mirrors and glass).
+        paths find it through mirrors and glass). ``direction`` None: the sun hidden (eclipse),
+        the pass lit by the Earth alone.
+    earth : (radiance, to_world) or None
+        With ``sun``: the Earth as an ``envmap`` emitter (:func:`svgs_sim.render.earth.earth_map`:
+        a float32 (rows, 2 rows) band radiance map and its 4x4 ``to_world``).
 
     Returns
     -------
@@ -140,7 +144,11 @@ def build_scene(camera, pattern, optics: Optics, flash: Flash, refl: Reflector, 
         d[spec.name] = _mesh(spec, mats[spec.material])
     flash_keys = []
     r_led = 0.5 * flash.emitter_diameter_m
-    if sun is not None:
+    if earth is not None:
+        emap, to_world = earth
+        d["earth"] = {"type": "envmap", "bitmap": mi.Bitmap(np.repeat(np.asarray(emap, np.float32)[..., None], 3, -1)),
+                      "to_world": mi.ScalarTransform4f(np.asarray(to_world, float).tolist())}
+    if sun is not None and sun[0] is not None:
         direction, radiance = sun
         d["sun"] = {"type": "disk", "to_world": mi.ScalarTransform4f(sun_disk_to_world(direction).tolist()),
                     "emitter": {"type": "area", "radiance": {"type": "uniform", "value": float(radiance)}},

@@ -508,6 +508,9 @@ def render_scenario(scenario: Scenario, *, seed: int = 0, options: RenderOptions
         scene_options.update(body_material=options.body_material, body_materials=options.body_materials)
     if scenario.scene.sun_direction_target is not None:  # the sun: a pass of its own (svgs_sim.render.sun)
         scene_options["sun_direction_target"] = scenario.scene.sun_direction_target
+    if scenario.scene.earth_direction_target is not None:  # the Earth, in the sun's pass (svgs_sim.render.earth)
+        scene_options.update(earth_direction_target=scenario.scene.earth_direction_target,
+                             altitude_m=1e3 * scenario.scene.altitude_km, earth_albedo=scenario.scene.earth_albedo)
     res = render_flux(camera, pattern, R, t, seed=int(seed), scene_options=scene_options, method=options.method,
                       reflector=options.reflector, full_frame=options.full_frame,
                       spot_samples=DEFAULT_SPOT_SAMPLES if options.spot_samples is None else int(options.spot_samples),
@@ -577,7 +580,9 @@ def expose_and_solve(frame: Frame, exposer, *, seed: int, threshold=None, exposu
     -------
     dict
         ``ok``, ``reason``, ``message``, ``n_blobs``, ``outside_test_envelope`` (solved: the pose
-        lies outside the paper's test envelope; None when unsolved), ``state`` (solved, paper keys) or None,
+        lies outside the paper's test envelope; None when unsolved), ``identified_px`` (the identified
+        blobs' centroids by target id, px, in the delivered image: solved or ``inconsistent``; else
+        None), ``state`` (solved, paper keys) or None,
         ``truth_state``, the :data:`svgs_sim.sim.metrics.POSE_ERROR_KEYS` (``pos_err_vec_m``,
         ``att_err_vec_deg``, ``pos_err_norm_m``, ``rot_err_deg``; None when unsolved),
         ``residual_rms_px``, ``chi2``, ``chi2_dof``, ``p_value`` (the consistency test,
@@ -613,6 +618,8 @@ def solve_exposure(frame: Frame, ex, *, threshold=None, solver_camera_profile: C
         "message": None if sol else sol.message,
         "n_blobs": sol.n_blobs if sol else sol.details.get("n_blobs"),
         "outside_test_envelope": bool(sol.outside_test_envelope) if sol else None,
+        "identified_px": ({str(k): [float(x) for x in v] for k, v in sol.targets_px.items()} if sol
+                          else sol.details.get("targets_px")),
         "truth_state": state_dict(truth_state),
         "exposure_s": ex.exposure_s,
         "iso": ex.iso,

@@ -132,6 +132,13 @@ class Scene:
         The direction toward the sun in the target frame, deg (orbit only; both None: no sun, the
         target in eclipse): azimuth from +x toward +y, elevation from the pattern plane toward +z
         (:func:`svgs_sim.render.sun.sun_direction_target`).
+    earth_azimuth_deg, earth_elevation_deg : float or None
+        The direction toward the Earth's centre in the target frame, deg (orbit only; both None: no
+        Earth). The Earth: :mod:`svgs_sim.render.earth`.
+    altitude_km : float
+        The target's altitude above the Earth, km (with the Earth).
+    earth_albedo : float
+        The Earth's Lambertian albedo (with the Earth).
     backdrop_distance_m : float or None
         A grey Lambertian backdrop this far behind the target origin, m (None: no backdrop).
     backdrop_reflectance : float
@@ -158,6 +165,24 @@ class Scene:
         None, unit="deg", meaning="elevation of the direction toward the sun from the pattern plane toward +z",
         lower=-90.0, upper=90.0, none_means="no sun (eclipse, or the lab)", row_none=None, flag="--sun-deg",
         component=1)
+    earth_azimuth_deg: float | None = quantity(
+        None, unit="deg", meaning="azimuth of the direction toward the Earth's centre in the target frame, from +x "
+        "toward +y", lower=-360.0, upper=360.0, none_means="no Earth", row_none=None, flag="--earth-deg", component=0,
+        help="orbit only: the direction toward the Earth's centre in the target frame, deg (azimuth, elevation as "
+        "--sun-deg); default: none, no Earth. The Earth is a Lambertian sphere lit by the sun (its shine lights the "
+        "target); the target is in eclipse when the Earth hides the sun. Negative values: --earth-deg=0,-60")
+    earth_elevation_deg: float | None = quantity(
+        None, unit="deg", meaning="elevation of the direction toward the Earth's centre from the pattern plane toward +z",
+        lower=-90.0, upper=90.0, none_means="no Earth", row_none=None, flag="--earth-deg", component=1)
+    altitude_km: float = quantity(
+        400.0, unit="km", meaning="the target's altitude above the Earth (its apparent size and the eclipse)",
+        lower=100.0, upper=100000.0, flag="--altitude-km",
+        help="orbit only, with --earth-deg: the target's altitude above the Earth, km (default 400)")
+    earth_albedo: float = quantity(
+        0.3, unit="1", meaning="the Earth's Lambertian albedo (0.3 the Bond albedo; 0.05 ocean, 0.8 a cloud deck)",
+        lower=0.0, upper=1.0, flag="--earth-albedo",
+        help="orbit only, with --earth-deg: the Earth's Lambertian albedo (default 0.3, its Bond albedo; 0.05 open "
+        "ocean, 0.8 a bright cloud deck)")
     backdrop_distance_m: float | None = quantity(
         LAB.backdrop_distance_m, unit="m", meaning="grey backdrop behind the target",
         lower=0.0, upper=INPUT_BOUNDS["backdrop_m"][1], lower_open=True, none_means="none", row_none=0.0,
@@ -186,6 +211,13 @@ class Scene:
             raise InputError("sun_azimuth_deg, sun_elevation_deg: give both (--sun-deg AZ,EL) or neither (eclipse)")
         if sun[0] is not None and self.environment != "orbit":
             raise InputError("--sun-deg: the sun lights the target on orbit only (give --environment orbit)")
+        earth = (self.earth_azimuth_deg, self.earth_elevation_deg)
+        if (earth[0] is None) != (earth[1] is None):
+            raise InputError("earth_azimuth_deg, earth_elevation_deg: give both (--earth-deg AZ,EL) or neither")
+        if earth[0] is not None and self.environment != "orbit":
+            raise InputError("--earth-deg: the Earth is in the scene on orbit only (give --environment orbit)")
+        if earth[0] is None and (self.altitude_km != 400.0 or self.earth_albedo != 0.3):
+            raise InputError("--altitude-km, --earth-albedo: the Earth's; give them with --earth-deg AZ,EL")
 
     @property
     def sun_direction_target(self) -> tuple | None:
@@ -193,6 +225,21 @@ class Scene:
         if self.sun_azimuth_deg is None:
             return None
         return tuple(float(x) for x in sun_direction_target(self.sun_azimuth_deg, self.sun_elevation_deg))
+
+    @property
+    def earth_direction_target(self) -> tuple | None:
+        """Unit vector toward the Earth's centre in the target frame (None: no Earth)."""
+        if self.earth_azimuth_deg is None:
+            return None
+        return tuple(float(x) for x in sun_direction_target(self.earth_azimuth_deg, self.earth_elevation_deg))
+
+    @property
+    def eclipsed(self) -> bool:
+        """Whether the Earth hides the sun from the target (:func:`svgs_sim.render.earth.in_eclipse`)."""
+        from svgs_sim.render.earth import in_eclipse
+
+        return (self.sun_direction_target is not None and self.earth_direction_target is not None
+                and in_eclipse(self.sun_direction_target, self.earth_direction_target, 1e3 * self.altitude_km))
 
     def _no_lab(self) -> None:
         """In orbit: no backdrop and no room light (the lab's defaults read so; other values are refused)."""

@@ -24,8 +24,8 @@ Each trial is one of (``solved + wrong_lock + sum(reasons) == trials``):
 Mechanisms, counted per cell (a trial may show several): ``sun_in_fov`` (the sun's disk projects
 into the image), ``lit_body`` (pixels at or above the detector's threshold away from every spot:
 the sunlit body or a glint), ``glint`` (more blobs passed the detector's gates than there are
-targets), ``saturation`` (pixels at full scale away from the spots), ``earth_background`` (0: the
-Earth is not rendered yet).
+targets), ``saturation`` (pixels at full scale away from the spots), ``earth_background`` (the
+Earth in the image, with ``--earth-deg``).
 """
 
 from __future__ import annotations
@@ -67,6 +67,9 @@ class SunStudyConfig:
     trials : int
         Trials per cell.
     seed : int
+    earth : tuple or None
+        ``(azimuth_deg, elevation_deg, altitude_km, albedo)`` of the Earth in every trial (the
+        target frame; :mod:`svgs_sim.render.earth`), or None: no Earth.
     """
 
     camera: str
@@ -76,6 +79,7 @@ class SunStudyConfig:
     elevations_deg: tuple
     trials: int
     seed: int = 0
+    earth: tuple | None = None
 
     def cells(self) -> list[tuple[float, float, float]]:
         """``(range_m, azimuth_deg, elevation_deg)`` of every cell, in the trials' order."""
@@ -86,8 +90,17 @@ class SunStudyConfig:
         return len(self.cells()) * self.trials
 
     def manifest(self) -> dict:
-        return {"study": "sun-study", "trial_kind": "render", **{k: list(v) if isinstance(v, tuple) else v
-                                                                 for k, v in asdict(self).items()}}
+        d = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+        if d["earth"] is None:  # no Earth: the manifest of a study made before the Earth
+            del d["earth"]
+        return {"study": "sun-study", "trial_kind": "render", **d}
+
+    def earth_parameters(self) -> dict:
+        """The Earth's scene parameters of every trial (empty: no Earth)."""
+        if self.earth is None:
+            return {}
+        az, el, alt, albedo = self.earth
+        return {"earth_azimuth_deg": az, "earth_elevation_deg": el, "altitude_km": alt, "earth_albedo": albedo}
 
 
 def _angles(values, what: str, lim: float) -> tuple:
@@ -106,8 +119,9 @@ def _angles(values, what: str, lim: float) -> tuple:
 
 
 def make_config(camera: str, ranges_m, azimuths_deg, elevations_deg, trials: int, *, seed: int = 0,
-                pattern: str = "svgs-3u") -> SunStudyConfig:
-    """A checked configuration (InputError naming the input, before any work)."""
+                pattern: str = "svgs-3u", earth=None) -> SunStudyConfig:
+    """A checked configuration (InputError naming the input, before any work). ``earth``:
+    ``(azimuth_deg, elevation_deg, altitude_km, albedo)`` or None."""
     cam, pat = load_camera(camera), load_pattern(pattern)
     for t in ("optics", "flash"):
         cam.table(t)
@@ -116,8 +130,14 @@ def make_config(camera: str, ranges_m, azimuths_deg, elevations_deg, trials: int
         raise InputError(f"--ranges: repeated range in {list(rs)}")
     if isinstance(trials, bool) or not isinstance(trials, (int, np.integer)) or trials < 1:
         raise InputError(f"--trials: expected a whole number >= 1, got {trials!r}")
+    if earth is not None:
+        from svgs_sim.sim.scene import Scene
+
+        az, el, alt, albedo = (float(x) for x in earth)
+        Scene(environment="orbit", earth_azimuth_deg=az, earth_elevation_deg=el, altitude_km=alt, earth_albedo=albedo)
+        earth = (az, el, alt, albedo)
     return SunStudyConfig(str(camera), str(pattern), rs, _angles(azimuths_deg, "--sun-azimuths-deg", 360.0),
-                          _angles(elevations_deg, "--sun-elevations-deg", 90.0), int(trials), check_seed(seed))
+                          _angles(elevations_deg, "--sun-elevations-deg", 90.0), int(trials), check_seed(seed), earth)
 
 
 def _pose(rng) -> dict:
@@ -136,7 +156,7 @@ def sun_study_trials(config: SunStudyConfig) -> list:
             i = c * config.trials + k
             scen = render_trial_scenario(
                 camera=config.camera, pattern=config.pattern, range_m=r, **_pose(design_rng(config.seed, i)),
-                environment="orbit", sun_azimuth_deg=az, sun_elevation_deg=el,
+                environment="orbit", sun_azimuth_deg=az, sun_elevation_deg=el, **config.earth_parameters(),
                 labels={"cell": c, "trial_in_cell": k})
             out.append(Trial(i, scen, trial_seed(config.seed, i)))
     return out
@@ -151,6 +171,17 @@ def sun_in_fov(camera, row: dict) -> bool:
     """Whether the sun's disk projects into the image for a trial's pose and sun."""
     R, _ = pose_from_scenario(row["range_m"], 0.0, 0.0, row["roll_deg"], row["pitch_deg"], row["yaw_deg"])
     return sun_in_image(camera, R, sun_direction_target(row["sun_azimuth_deg"], row["sun_elevation_deg"]))
+
+
+def earth_in_view(camera, row: dict) -> bool:
+    """Whether the Earth lies in the image for a trial's pose (False without the Earth)."""
+    az, el = row.get("earth_azimuth_deg"), row.get("earth_elevation_deg")
+    if az is None or el is None or az != az:
+        return False
+    from svgs_sim.render.earth import earth_in_image
+
+    R, _ = pose_from_scenario(row["range_m"], 0.0, 0.0, row["roll_deg"], row["pitch_deg"], row["yaw_deg"])
+    return earth_in_image(camera, R, sun_direction_target(az, el), 1e3 * float(row.get("altitude_km") or 400.0))
 
 
 def wrong_lock_px(camera, pattern, range_m: float) -> float:
@@ -175,7 +206,7 @@ def classify(rows, camera, pattern) -> list[dict]:
         out.append({"outcome": outcome, "flagged": wrong and not row["ok"], "wrong_lock_paper_gates": wrong_p,
                     "sun_in_fov": sun_in_fov(camera, row), "lit_body": stray > 0,
                     "glint": (row.get("n_blobs") or 0) > n_t, "saturation": (row.get("stray_saturated_px") or 0) > 0,
-                    "earth_background": False})
+                    "earth_background": earth_in_view(camera, row)})
     return out
 
 
