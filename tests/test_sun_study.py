@@ -137,3 +137,20 @@ def test_posit_of_collinear_or_coincident_points_is_no_pose_not_a_crash():
     R, t = posit(np.concatenate([line, cam.pixels_to_normalized(np.array(
         [[1200.0, 900.0], [1200.0, 1000.0], [1200.0, 950.0], [1240.0, 950.0]]))[None]]), P)
     assert np.isnan(R[0]).all() and np.isfinite(R[1]).all()  # one degenerate frame spoils no other
+
+
+@pytest.mark.parametrize("beta_deg", [0.0, 30.0, 60.0, 75.0])
+def test_the_sun_path_spends_the_eclipse_fraction_in_shadow(beta_deg):
+    """The fraction of an orbit in the Earth's (cylindrical) shadow, (1 / pi) acos(sqrt(h^2 + 2 R h) /
+    ((R + h) cos beta)) (0 beyond beta* = asin(R / (R + h)), 70.2 deg at 400 km: the orbit never enters it);
+    and noon at beta 0: the sun radial out, on the target's +x; a quarter orbit later, on its face normal."""
+    from svgs_sim.studies.sun_study import sun_path_vbar
+
+    R, h = 6371.0088, 400.0
+    az, el, ecl = sun_path_vbar(beta_deg, altitude_km=h, n=20001)
+    x = np.sqrt(h * h + 2 * R * h) / ((R + h) * np.cos(np.radians(beta_deg)))
+    expected = np.arccos(x) / np.pi if x < 1 else 0.0
+    assert ecl[:-1].mean() == pytest.approx(expected, abs=2e-4)
+    if beta_deg == 0.0:
+        assert (az[0], el[0]) == pytest.approx((0.0, 0.0), abs=1e-9)
+        assert el[len(el) // 4] == pytest.approx(90.0, abs=0.05)

@@ -240,7 +240,8 @@ SCHEMAS = {
  "outputs": {{"results_csv", "merge_ranges_csv", "report", "summary_json": path}},
  {_RUN}}}""",
     "svgs sun-study": """\
-{"camera": str, "pattern": str, "trials_per_cell": int, "pose": str, "wrong_lock_px": str,
+{"camera": str, "pattern": str, "trials_per_cell": int, "pose": str, "wrong_lock_px": str, "body": str,
+ "earth": {"azimuth_deg", "elevation_deg", "altitude_km", "albedo": float} | null,
  "cells": [{"range_m": float, "sun_azimuth_deg": float, "sun_elevation_deg": float,
             "phase_angle_deg": float,       # target->sun against target->camera (head-on)
             "trials": int, "solved": int, "wrong_lock": int, "wrong_lock_flagged": int,

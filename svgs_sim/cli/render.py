@@ -33,15 +33,7 @@ def register(sub) -> None:
     scenario_args(p, with_threshold=False)  # the options of render-and-solve, declared once
     p.add_argument("--spot-samples", type=int, default=None, help="guided samples per spot strategy (default 16384, placed by the 4-D R4 sequence)")
     p.add_argument("--reflector", default=None, help="'solid', 'hollow' or a model name (default: the pattern's)")
-    p.add_argument("--body", default=None,
-                   help="target body: 'plate' (the default: the lab's breadboard), '3u', 'none', or a mesh file "
-                   "ending in .ply or .obj (metres, target frame) with --body-material or --body-materials")
-    p.add_argument("--body-material", default=None, metavar="NAME",
-                   help="a mesh body's surface, from the library svgs_sim/assets/materials/surfaces.toml: "
-                   "lambertian-white, white-paint, solar-cell, mli, anodised-aluminium (default: none; required with a "
-                   "mesh body unless --body-materials names every part)")
-    p.add_argument("--body-materials", default=None, metavar="FILE.toml",
-                   help="a mesh body's parts and their surfaces, one line each: part = \"surface\" (default: none)")
+    body_args(p)
     p.add_argument("--method", default="guided", choices=("guided", "path"),
                    help="'guided' (default) or 'path' (brute force, the reference; slow beyond a few metres)")
     p.add_argument("--full-frame", action="store_true", help="render the whole frame at --spp, no windows")
@@ -69,11 +61,31 @@ def cmd_render(args) -> int:
 
     check_camera_renderable(args.camera)  # ProfileError naming a missing [optics] or [flash], before any heavy import
     scen = scenario_from_args(args)  # the scenario of render-and-solve: pose, scene, samples, focus (InputError naming the input)
-    options = RenderOptions(method=args.method, reflector=args.reflector, body=args.body,
-                            spot_samples=args.spot_samples, full_frame=args.full_frame,
-                            body_material=args.body_material, body_materials=body_materials_of(args.body_materials))
+    options = RenderOptions(method=args.method, reflector=args.reflector, spot_samples=args.spot_samples,
+                            full_frame=args.full_frame, **body_options(args))
     with output_folder(args.out):  # made and probed before the render; removed again if refused
         return _render(args, scen, options)
+
+
+def body_args(p) -> None:
+    """The target body's options (``--body``, ``--body-material``, ``--body-materials``), declared once
+    for ``svgs render`` and ``svgs render-and-solve``."""
+    p.add_argument("--body", default=None,
+                   help="target body: 'plate' (the default: the lab's breadboard), '3u' (a 3U CubeSat: rails, MLI, "
+                   "body-mounted cells; svgs_sim.render.cubesat), 'none', or a mesh file ending in .ply or .obj "
+                   "(metres, target frame) with --body-material or --body-materials")
+    p.add_argument("--body-material", default=None, metavar="NAME",
+                   help="a mesh body's surface, from the library svgs_sim/assets/materials/surfaces.toml: "
+                   "lambertian-white, white-paint, solar-cell, mli, anodised-aluminium (default: none; required with a "
+                   "mesh body unless --body-materials names every part)")
+    p.add_argument("--body-materials", default=None, metavar="FILE.toml",
+                   help="a mesh body's parts and their surfaces, one line each: part = \"surface\" (default: none)")
+
+
+def body_options(args) -> dict:
+    """The :class:`svgs_sim.sim.closed_loop.RenderOptions` fields of the body options."""
+    return {"body": args.body, "body_material": args.body_material,
+            "body_materials": body_materials_of(args.body_materials)}
 
 
 def body_materials_of(path) -> dict:

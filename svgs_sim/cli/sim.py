@@ -140,11 +140,15 @@ def cmd_render_and_solve(args) -> int:
     check_camera_renderable(args.camera)
     scen = scenario_from_args(args)
     thr = _threshold(args.threshold)
+    from svgs_sim.cli.render import body_options
+    from svgs_sim.sim.closed_loop import RenderOptions
+
+    options = RenderOptions(**body_options(args))  # the body checked before the render
     with output_folder_if(args.out):  # made and probed before the render; removed again if refused
-        return _render_and_solve(args, scen, thr)
+        return _render_and_solve(args, scen, thr, options)
 
 
-def _render_and_solve(args, scen, thr) -> int:
+def _render_and_solve(args, scen, thr, options=None) -> int:
     """``svgs render-and-solve`` once its inputs are checked and ``--out`` is ready."""
     import time
 
@@ -163,7 +167,7 @@ def _render_and_solve(args, scen, thr) -> int:
     from svgs_sim.sim import hard_stop
 
     with hard_stop.scope():  # Ctrl-C stops the render within a second (nothing is written yet)
-        frame = render_scenario(scen, seed=args.seed)
+        frame = render_scenario(scen, seed=args.seed, options=options)
         print(f"  rendered in {time.perf_counter() - t0:.1f} s; exposing (phone camera model) and solving ...",
               file=sys.stderr, flush=True)
         exposer = frame.exposer()
@@ -265,6 +269,9 @@ def register(sub) -> None:
                        "phone camera model, run the SVGS detector and solver on the delivered image, and print "
                        "truth, solution and errors (pos_err_vec_m, att_err_vec_deg). Exit 0 solved, 1 no solution, 2 bad input.")
     scenario_args(p)
+    from svgs_sim.cli.render import body_args
+
+    body_args(p)
     p.add_argument("--mount", choices=("target", "stand"), default="target",
                    help="what --roll/--pitch/--yaw turn: 'target' (default: the target's attitude in front of the "
                    "camera) or 'stand' (the paper's test stand: the target fixed, the phone turned by the gimbal "

@@ -339,7 +339,8 @@ def cmd_sun_study(args) -> int:
             n = sum(c["trials"] for c in cs)
             print(f"  {r:g} m: solved {sum(c['solved'] for c in cs)}/{n}, wrong locks {sum(c['wrong_lock'] for c in cs)}")
         print(f"results: {out}/results.csv  summary: {out}/summary.json  figure: {out}/sun_study.png")
-    obj = {k: s[k] for k in ("camera", "pattern", "trials_per_cell", "pose", "wrong_lock_px", "cells", "outputs")}
+    obj = {k: s[k] for k in ("camera", "pattern", "trials_per_cell", "pose", "wrong_lock_px", "body", "earth", "cells",
+                             "outputs")}
     obj["run"] = s["run"]
     emit(obj, args.json, out)
     return 0

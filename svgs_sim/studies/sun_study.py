@@ -234,9 +234,48 @@ def cells(config: SunStudyConfig, rows) -> list[dict]:
     return out
 
 
+#: The target's body in every trial (the render trial's default; the study does not take another yet).
+BODY = ("the lab's breadboard (`plate`: the pattern's mounts on a dark Lambertian plate 12 mm beyond them, "
+        "reflectance 0.05)")
+
+#: The beta angles (deg) of the sun paths drawn on the study's figure.
+PATH_BETAS_DEG = (0.0, 30.0, 60.0)
+
+
+def sun_path_vbar(beta_deg: float, altitude_km: float = 400.0, n: int = 721):
+    """The sun's direction in the target frame over one orbit, for a target that holds the local
+    orbital frame with its pattern facing a chaser on the V-bar behind it.
+
+    Basilisk's Hill frame: x radial (out), y along track, z orbit normal. The target's face normal
+    (+z) points along -y (toward a chaser on -y looking +y); its +x is radial out, its +y the orbit
+    normal: ``(x, y, z)_target = (x, z, -y)_Hill``. Over the orbit the sun turns once in the Hill
+    frame: ``s = (cos b cos u, -cos b sin u, sin b)``, ``u`` the orbit angle from the point nearest
+    the sun and ``b`` the beta angle (the sun's elevation above the orbit plane). The target is in
+    eclipse where the sun lies inside the Earth's disk (:func:`svgs_sim.render.earth.in_eclipse`;
+    the Earth's centre along -x_Hill).
+
+    Returns
+    -------
+    azimuth_deg, elevation_deg : ndarray, shape (n,)
+        The sun's direction in the target frame (:func:`svgs_sim.render.sun.sun_direction_target`).
+    eclipsed : ndarray of bool, shape (n,)
+    """
+    from svgs_sim.render.earth import in_eclipse
+
+    b = np.radians(float(beta_deg))
+    u = np.linspace(0.0, 2 * np.pi, n)
+    s_hill = np.stack([np.cos(b) * np.cos(u), -np.cos(b) * np.sin(u), np.full_like(u, np.sin(b))], 1)
+    s = np.stack([s_hill[:, 0], s_hill[:, 2], -s_hill[:, 1]], 1)
+    earth = np.array([-1.0, 0.0, 0.0])  # -x_Hill in the target frame
+    ecl = np.array([in_eclipse(v, earth, 1e3 * altitude_km) for v in s])
+    return (np.degrees(np.arctan2(s[:, 1], s[:, 0])), np.degrees(np.arcsin(np.clip(s[:, 2], -1, 1))), ecl)
+
+
 def figure(config: SunStudyConfig, table: list, path) -> Path:
     """Availability (solved fraction) against the sun's direction, one row of panels per range: the
-    sun above the pattern plane (elevation >= 0) and below it; wrong locks marked with a red ring."""
+    sun above the pattern plane (elevation >= 0) and below it; wrong locks marked with a red ring;
+    the sun's path over an orbit for the beta angles :data:`PATH_BETAS_DEG` (:func:`sun_path_vbar`:
+    sunlit solid, in eclipse dotted)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -257,6 +296,17 @@ def figure(config: SunStudyConfig, table: list, path) -> Path:
                     ax.scatter(np.deg2rad([c["sun_azimuth_deg"] for c in wl]), [90 - abs(c["sun_elevation_deg"]) for c in wl],
                                s=320, facecolors="none", edgecolors="red", linewidths=2)
                 fig.colorbar(sc, ax=ax, shrink=0.7, label="solved fraction")
+            for beta, colour in zip(PATH_BETAS_DEG, ("tab:blue", "tab:purple", "tab:gray")):
+                az, el, ecl = sun_path_vbar(beta)
+                side = (el >= 0) == above
+                for lit, style in ((True, "-"), (False, ":")):
+                    m = side & (ecl != lit)
+                    y = np.where(m, 90.0 - np.abs(el), np.nan)
+                    ax.plot(np.deg2rad(az), y, style, color=colour, lw=1.2,
+                            label=f"beta {beta:g} deg" if (lit and above and r == config.ranges_m[0]) else None)
+            if above and r == config.ranges_m[0]:
+                ax.legend(loc="lower left", bbox_to_anchor=(-0.35, -0.15), fontsize=7,
+                          title="sun over an orbit (V-bar; dotted: eclipse)", title_fontsize=7)
             ax.set_ylim(0, 90)
             ax.set_yticks([0, 30, 60, 90])
             ax.set_yticklabels(["+z" if above else "-z", "60", "30", "0"], fontsize=7)
@@ -287,7 +337,9 @@ def write_readme(config: SunStudyConfig, table: list, path, command: str = "") -
              f"{config.trials} trials a cell ({config.n_trials} in all). Poses: roll, pitch uniform in +/-25 deg, yaw in "
              "+/-45 deg, the target on the boresight. The sun's elevation is from the pattern plane toward the face "
              "normal (+z, toward a head-on camera): above 0 the sun lights the face, below 0 it is behind the target. "
-             "See docs/orbit.md for the definitions.", "",
+             f"Body: {BODY}. " + (f"Earth: toward azimuth {config.earth[0]:g}, elevation {config.earth[1]:g} deg, "
+                                  f"{config.earth[2]:g} km below, albedo {config.earth[3]:g}. " if config.earth else
+                                  "No Earth. ") + "See docs/orbit.md for the definitions.", "",
              "| range, m | solved | wrong locks | " + " | ".join(f"solved, el {e:g}" for e in els) + " |",
              "|---|---|---|" + "---|" * len(els)]
     for r in config.ranges_m:
@@ -327,7 +379,9 @@ def run_sun_study(config: SunStudyConfig, out_dir, spec, *, chunk_size=None, pro
     readme = write_readme(config, table, out / "README.md", command)
     summary = {"camera": config.camera, "pattern": config.pattern, "trials_per_cell": config.trials,
                "pose": "roll, pitch uniform in +/-25 deg, yaw in +/-45 deg (the paper's test envelope), on the boresight",
-               "wrong_lock_px": f"max({WRONG_LOCK_PX:g} px, the spot's image radius)",
+               "wrong_lock_px": f"max({WRONG_LOCK_PX:g} px, the spot's image radius)", "body": BODY,
+               "earth": None if config.earth is None else dict(zip(("azimuth_deg", "elevation_deg", "altitude_km",
+                                                                     "albedo"), config.earth)),
                "cells": table, "command": command, "versions": library_versions(),
                "outputs": {"results_csv": str(out / "results.csv"), "figure": str(fig), "readme": str(readme),
                            "summary_json": str(out / "summary.json")},

@@ -139,10 +139,14 @@ def range_envelope_m(camera, pattern="svgs-3u") -> tuple[float, float]:
         frame; ``far_m``: it spans :data:`MIN_SPAN_PX` pixels (its spots merge into one).
     """
     cam, pat = load_camera(camera), load_pattern(pattern)
-    P = np.asarray(pat.points_m, float)[:, :2]
-    span = float(max(np.linalg.norm(a - b) for a in P for b in P))
-    f = float(np.sqrt(cam.fx * cam.fy))
+    span, f = _span_m(pat), float(np.sqrt(cam.fx * cam.fy))
     return f * span / (MAX_FILL * min(cam.width, cam.height)), f * span / MIN_SPAN_PX
+
+
+def _span_m(pattern) -> float:
+    """The pattern's widest span in its plane, m."""
+    P = np.asarray(pattern.points_m, float)[:, :2]
+    return float(max(np.linalg.norm(a - b) for a in P for b in P))
 
 
 def field_of_view_fraction(camera) -> float:
@@ -190,10 +194,7 @@ def physical_envelope(camera, pattern="svgs-3u") -> Envelope:
     Envelope
     """
     cam, pat = load_camera(camera), load_pattern(pattern)
-    P = np.asarray(pat.points_m, float)[:, :2]
-    span = float(max(np.linalg.norm(a - b) for a in P for b in P))
-    f = float(np.sqrt(cam.fx * cam.fy))
-    near = f * span / float(np.hypot(cam.width, cam.height))
+    near = float(np.sqrt(cam.fx * cam.fy)) * _span_m(pat) / float(np.hypot(cam.width, cam.height))
     far = range_envelope_m(cam, pat)[1]
     acc = getattr(pat.reflector, "acceptance_deg", None)
     return Envelope(range_interval_m=(near, far), roll_deg=ATTITUDE_LIMITS_DEG["roll_deg"],
