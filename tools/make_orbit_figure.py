@@ -6,7 +6,7 @@ Run::
     python tools/make_orbit_figure.py [--out docs/figures/orbit_sun_vs_eclipse.png]
 
 Renders both frames with ``svgs render-and-solve --environment orbit --body 3u --earth-deg=0,-25``
-(``--seed 1``; the Earth's centre 65 deg off the boresight, its limb 5 deg inside the frame) - the sun
+(``--seed 1``; the Earth's centre 65 deg off the boresight: the target seen against it, its limb 5 deg from the centre) - the sun
 at azimuth 90, elevation 45 deg in the first, at 0,-10 (behind the Earth: eclipse) in the second -
 into a temporary folder and shows the delivered 8-bit images whole (top) and cropped around the
 target (bottom), with each frame's outcome in its title.
@@ -62,7 +62,7 @@ def main() -> int:
             for ax in axes[:, k]:
                 ax.set_xticks([])
                 ax.set_yticks([])
-    fig.suptitle("Galaxy Nexus at 5 m on orbit: the 3U body, the Earth's limb (right of each frame), the spots\n"
+    fig.suptitle("Galaxy Nexus at 5 m on orbit: the 3U body, the target seen against the Earth (its limb at left), the spots\n"
                  "(svgs render-and-solve --environment orbit --body 3u --earth-deg=0,-25 --seed 1)", fontsize=11)
     fig.tight_layout()
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
