@@ -22,6 +22,8 @@ from scipy.spatial.transform import Rotation
 
 from svgs_sim.svgs.frames import D_CAM_PHOTO
 
+from .api import Renderer
+
 
 def pose(theta_deg: float, phi_deg: float, psi_deg: float, range_m: float):
     """``R_cam_target`` (3, 3), ``t_cam_target_m`` (3,) (OpenCV camera frame): the target on the
@@ -63,8 +65,6 @@ def acceptance(camera, pattern="svgs-3u", *, range_m: float = 5.0, fraction: flo
         ``acceptance_deg``, ``phi_deg``, ``psi_deg`` (the direction that reaches it) and
         ``by_direction`` (``[phi, psi, theta]`` rows).
     """
-    from .api import Renderer
-
     r = Renderer(camera, pattern, scene_options={"body": "none"}, spp=0)
 
     def flux(theta, phi, psi):

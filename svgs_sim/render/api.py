@@ -50,6 +50,7 @@ from .scene import build_scene
 from .sensor import CameraModel
 from .spots import SPOT_SAMPLERS, SpotEstimator
 from .sun import sun_in_band, sun_in_image
+from .earth import earth_half_angle_deg, earth_in_image, earth_map
 from .truth import svgs_frame_truth
 from .variant import select_variant
 from .windows import background_tiles, spot_windows
@@ -243,8 +244,6 @@ class Renderer:
         """The sun's scene: the same target without the flash, the sun as a disk emitter
         (:mod:`svgs_sim.render.sun`; none when the Earth eclipses it) and the Earth as an environment
         map (:mod:`svgs_sim.render.earth`); its sensors share the flash scene's camera model."""
-        from .earth import earth_map
-
         o = self.options
         light = sun_in_band(self.optics.band_nm)
         earth = None
@@ -430,8 +429,6 @@ class Renderer:
                                                                                   margin_px=2.0):
             return True
         if o.earth_direction_target is not None:
-            from .earth import earth_in_image
-
             return earth_in_image(self.camera, R, o.earth_direction_target, o.altitude_m)
         return False
 
@@ -541,8 +538,6 @@ class Renderer:
                             "in_view": (not o.eclipsed) and sun_in_image(self.camera, R, o.sun_direction_target, 2.0),
                             **self._sun["light"]}
         if o.earth_direction_target is not None:
-            from .earth import earth_half_angle_deg, earth_in_image
-
             truth["earth"] = {"direction_target": list(o.earth_direction_target), "altitude_m": o.altitude_m,
                               "albedo": o.earth_albedo, "half_angle_deg": earth_half_angle_deg(o.altitude_m),
                               "in_view": earth_in_image(self.camera, R, o.earth_direction_target, o.altitude_m),

@@ -31,6 +31,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .materials import PREFIX
+
 SIZE_X_M, SIZE_Y_M, DEPTH_M = 0.100, 0.3405, 0.100  # CubeSat Design Specification rev. 14, 3U
 RAIL_M = 0.0085  # the rails' minimum width (CDS rev. 14)
 BOOM_RADIUS_M = 0.004  # svgs_sim.render.geometry.SceneOptions.boom_radius_m
@@ -104,8 +106,8 @@ def parts(face_z_m: float, boom, centre_xy_m=(0.04375, 0.0)) -> dict:
 
 
 def cubesat_3u_meshes(face_z_m: float, boom, centre_xy_m=(0.04375, 0.0)) -> list:
-    """The body's :class:`svgs_sim.render.geometry.MeshSpec` list, one per part, each with its library
-    surface (material key ``surface:NAME``).
+    """The body's parts, each with its library surface: the fields of a
+    :class:`svgs_sim.render.geometry.MeshSpec` (which :func:`svgs_sim.render.geometry.build_target` makes of them).
 
     Parameters
     ----------
@@ -118,14 +120,10 @@ def cubesat_3u_meshes(face_z_m: float, boom, centre_xy_m=(0.04375, 0.0)) -> list
 
     Returns
     -------
-    list of MeshSpec
+    list of (name, vertices (V, 3), faces (F, 3) uint32, material ``surface:NAME``)
     """
-    from .geometry import MeshSpec
-    from .materials import PREFIX
-
     out = []
     for name, tris in parts(face_z_m, boom, centre_xy_m).items():
         v = np.asarray(tris, float).reshape(-1, 3)
-        out.append(MeshSpec(f"cubesat_{name}", v, np.arange(len(v), dtype=np.uint32).reshape(-1, 3),
-                            PREFIX + SURFACES[name]))
+        out.append((f"cubesat_{name}", v, np.arange(len(v), dtype=np.uint32).reshape(-1, 3), PREFIX + SURFACES[name]))
     return out

@@ -41,6 +41,8 @@ from svgs_sim.base.errors import InputError, check_finite, check_finite_positive
 from svgs_sim.base.profile_schema import REFLECTOR_MODELS, check_reflector_table
 
 from .materials import check_body, is_mesh_body
+from .cubesat import cubesat_3u_meshes
+from .earth import in_eclipse
 from .constants import DEFAULT_MAX_DEPTH, DEFAULT_MESH_SEGMENTS, nbk7_index
 
 #: Named reflector models (``[reflector] model`` in a pattern file): :data:`REFLECTOR_MODELS`,
@@ -521,8 +523,6 @@ class SceneOptions(OptionsMixin):
     @property
     def eclipsed(self) -> bool:
         """Whether the Earth hides the sun from the target (:func:`svgs_sim.render.earth.in_eclipse`)."""
-        from .earth import in_eclipse
-
         return (self.sun_direction_target is not None and self.earth_direction_target is not None
                 and in_eclipse(self.sun_direction_target, self.earth_direction_target, self.altitude_m))
 
@@ -634,14 +634,12 @@ def build_target(pattern, refl: Reflector, opts: SceneOptions, band_nm=(400.0, 7
     if opts.mesh_body:
         pass  # the mesh's parts are added by the scene (svgs_sim.render.body_mesh)
     elif opts.body == "3u":
-        from .cubesat import cubesat_3u_meshes
-
         boom = None
         for tid, p, base in zip(pattern.ids, pts, mount_base):
             if base > z_face + 1e-4 and int(tid) == 3:
                 boom = (float(p[0]), float(p[1]), z_face, float(base))
         centre = 0.5 * (pts[:, :2].min(0) + pts[:, :2].max(0))
-        meshes += cubesat_3u_meshes(z_face, boom, centre)
+        meshes += [MeshSpec(*part) for part in cubesat_3u_meshes(z_face, boom, centre)]
         info.update(boom_3u=boom, body_centre_xy_m=centre.tolist(), body_parts=[m.material for m in meshes if m.name.startswith("cubesat_")])
         for tid, v, base in zip(pattern.ids, vertices, mount_base):
             if base > z_face + 1e-4 and int(tid) != 3:

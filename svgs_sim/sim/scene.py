@@ -41,6 +41,7 @@ import numpy as np
 from svgs_sim.base.errors import InputError
 from svgs_sim.base.limits import INPUT_BOUNDS
 from svgs_sim.render.sun import sun_direction_target
+from svgs_sim.render.earth import in_eclipse
 from svgs_sim.sim.lab import load_lab
 
 #: The paper's lab (:mod:`svgs_sim.sim.lab`, ``assets/labs/msfc-frl.toml``): a matt grey backdrop
@@ -236,8 +237,6 @@ class Scene:
     @property
     def eclipsed(self) -> bool:
         """Whether the Earth hides the sun from the target (:func:`svgs_sim.render.earth.in_eclipse`)."""
-        from svgs_sim.render.earth import in_eclipse
-
         return (self.sun_direction_target is not None and self.earth_direction_target is not None
                 and in_eclipse(self.sun_direction_target, self.earth_direction_target, 1e3 * self.altitude_km))
 

@@ -39,6 +39,8 @@ import numpy as np
 from svgs_sim.base.errors import InputError
 from svgs_sim.base.profiles import load_camera, load_pattern
 from svgs_sim.render.sun import sun_direction_target, sun_in_image
+from svgs_sim.render.earth import earth_in_image, in_eclipse
+from svgs_sim.sim.scene import Scene
 from svgs_sim.sim.render_trial import RENDER, render_trial_scenario
 from svgs_sim.sim.render_trial.run import spot_radius_px
 from svgs_sim.studies.execution import Trial, library_versions, run_stored_study
@@ -131,8 +133,6 @@ def make_config(camera: str, ranges_m, azimuths_deg, elevations_deg, trials: int
     if isinstance(trials, bool) or not isinstance(trials, (int, np.integer)) or trials < 1:
         raise InputError(f"--trials: expected a whole number >= 1, got {trials!r}")
     if earth is not None:
-        from svgs_sim.sim.scene import Scene
-
         az, el, alt, albedo = (float(x) for x in earth)
         Scene(environment="orbit", earth_azimuth_deg=az, earth_elevation_deg=el, altitude_km=alt, earth_albedo=albedo)
         earth = (az, el, alt, albedo)
@@ -178,8 +178,6 @@ def earth_in_view(camera, row: dict) -> bool:
     az, el = row.get("earth_azimuth_deg"), row.get("earth_elevation_deg")
     if az is None or el is None or az != az:
         return False
-    from svgs_sim.render.earth import earth_in_image
-
     R, _ = pose_from_scenario(row["range_m"], 0.0, 0.0, row["roll_deg"], row["pitch_deg"], row["yaw_deg"])
     return earth_in_image(camera, R, sun_direction_target(az, el), 1e3 * float(row.get("altitude_km") or 400.0))
 
@@ -260,8 +258,6 @@ def sun_path_vbar(beta_deg: float, altitude_km: float = 400.0, n: int = 721):
         The sun's direction in the target frame (:func:`svgs_sim.render.sun.sun_direction_target`).
     eclipsed : ndarray of bool, shape (n,)
     """
-    from svgs_sim.render.earth import in_eclipse
-
     b = np.radians(float(beta_deg))
     u = np.linspace(0.0, 2 * np.pi, n)
     s_hill = np.stack([np.cos(b) * np.cos(u), -np.cos(b) * np.sin(u), np.full_like(u, np.sin(b))], 1)

@@ -32,6 +32,7 @@ from svgs_sim.sim.trials import TrialKind, camera_with_calibration_errors, regis
 from svgs_sim.sim.turbulence import image_shifts_px
 from svgs_sim.svgs.app import consistency
 from svgs_sim.svgs.frames import STATE_KEYS
+from svgs_sim.svgs.envelope import PAPER_ENVELOPE
 from svgs_sim.svgs.pipeline import solve_image
 
 
@@ -331,8 +332,6 @@ def _paper_gates(out: dict, row: dict, scenario, cam, pat, R, t, spots_px=None) 
     on-orbit studies' wrong locks before and after: ``paper_gates_reported`` (a pose the app would
     report: solved, or refused only by the consistency test) and ``paper_gates_match_err_max_px``
     (as ``match_err_max_px``)."""
-    from svgs_sim.svgs.envelope import PAPER_ENVELOPE
-
     img = row["_exposure"].image
     scam = camera_with_calibration_errors(cam, scenario)
     sol = solve_image(img, solver_camera(scam, img.shape), pat, threshold=scenario.threshold,
