@@ -501,18 +501,13 @@ class SceneOptions(OptionsMixin):
         if self.anchor not in ("apparent-vertex", "front-face"):
             raise InputError(f"scene_options.anchor: expected 'apparent-vertex' or 'front-face', got {self.anchor!r}")
         object.__setattr__(self, "distractors", tuple(_check_distractor(d, i) for i, d in enumerate(self.distractors)))
-        if self.sun_direction_target is not None:
-            d = np.asarray(self.sun_direction_target, float).reshape(-1)
-            if d.shape != (3,) or not np.all(np.isfinite(d)) or abs(np.linalg.norm(d) - 1.0) > 1e-6:
-                raise InputError(f"scene_options.sun_direction_target: expected a unit 3-vector or None, got "
-                                 f"{self.sun_direction_target!r}")
-            object.__setattr__(self, "sun_direction_target", tuple(float(x) for x in d))
-        if self.earth_direction_target is not None:
-            d = np.asarray(self.earth_direction_target, float).reshape(-1)
-            if d.shape != (3,) or not np.all(np.isfinite(d)) or abs(np.linalg.norm(d) - 1.0) > 1e-6:
-                raise InputError(f"scene_options.earth_direction_target: expected a unit 3-vector or None, got "
-                                 f"{self.earth_direction_target!r}")
-            object.__setattr__(self, "earth_direction_target", tuple(float(x) for x in d))
+        for name in ("sun_direction_target", "earth_direction_target"):  # unit 3-vectors or None
+            v = getattr(self, name)
+            if v is not None:
+                d = np.asarray(v, float).reshape(-1)
+                if d.shape != (3,) or not np.all(np.isfinite(d)) or abs(np.linalg.norm(d) - 1.0) > 1e-6:
+                    raise InputError(f"scene_options.{name}: expected a unit 3-vector or None, got {v!r}")
+                object.__setattr__(self, name, tuple(float(x) for x in d))
         check_finite_positive(self.altitude_m, "scene_options.altitude_m")
         a = check_finite(self.earth_albedo, "scene_options.earth_albedo")
         if not 0 <= a <= 1:
