@@ -119,3 +119,84 @@ def test_module_measurement_equals_approach_sensor(small_camera):
         np.testing.assert_allclose(std[:3], [e.crlb_std[k] for k in ("x_m", "y_m", "z_m")], rtol=1e-9)
         np.testing.assert_allclose(np.degrees(std[3:]), [e.crlb_std[k] for k in ("roll_deg", "pitch_deg", "yaw_deg")],
                                    rtol=1e-9)
+
+
+class _SceneRecorder:
+    """A sensor that records the scenario each frame is measured in (no rendering)."""
+
+    frame_rate_hz = None
+
+    def __init__(self):
+        from svgs_sim.sim.closed_loop import Scenario
+
+        self.base = Scenario()
+        self.frame_index = 0
+        self.scenarios = []
+
+    def measure(self, t_s, R_cam_target=None, t_cam_target_m=None, *, scenario=None, image_velocity_px_s=None):
+        from svgs_sim.sim.basilisk_svgs import IdealSensor
+
+        self.scenarios.append(scenario)
+        R, t = scenario.pose()
+        return IdealSensor().measure(t_s, R, t)
+
+
+@pytest.mark.parametrize("sun_dir,shadow,expect_sun", [
+    ((0.0, 1.0, 0.0), None, (90.0, 0.0)),     # the sun along +y_N: lit, azimuth 90 in the target frame (= N)
+    ((0.0, 1.0, 0.0), 0.2, None),             # Basilisk's eclipse module says shadow: no sun
+    ((-1.0, 0.0, 0.0), None, None),           # the sun behind the Earth: the cylindrical shadow
+])
+def test_the_module_sets_each_frames_sun_and_earth_from_the_orbit(sun_dir, shadow, expect_sun):
+    """The target 400 km above the Earth's surface on +x_N, its frame = N: the Earth's centre lies at
+    azimuth 180, elevation 0 of the target frame (-x), the sun along ``sun_dir``; by hand."""
+    pytest.importorskip("Basilisk", reason="the basilisk extra is not installed (pip install -e \".[basilisk]\")")
+    from Basilisk.architecture import messaging
+    from Basilisk.simulation import spacecraft
+    from Basilisk.utilities import SimulationBaseClass, macros
+
+    from svgs_sim.render.earth import EARTH_RADIUS_M
+    from svgs_sim.sim.basilisk_frames import Mount
+    from svgs_sim.sim.basilisk_svgs import SVGSModule
+
+    r_t = np.array([EARTH_RADIUS_M + 400e3, 0.0, 0.0])
+    sensor = _SceneRecorder()
+    mod = SVGSModule(sensor, Mount(), Mount(), frame_rate_hz=2.0, latency_s=0.0)
+    sim = SimulationBaseClass.SimBaseClass()
+    proc = sim.CreateNewProcess("p")
+    proc.addTask(sim.CreateNewTask("dyn", macros.sec2nano(0.5)))
+    tgt, ch = spacecraft.Spacecraft(), spacecraft.Spacecraft()
+    tgt.hub.r_CN_NInit = r_t.tolist()
+    ch.hub.r_CN_NInit = (r_t + [0.0, 0.0, 6.0]).tolist()
+    ch.hub.sigma_BNInit = [[1.0], [0.0], [0.0]]  # the camera looks down -z_N at the pattern
+    for sc in (tgt, ch):
+        sim.AddModelToTask("dyn", sc, 10)
+    sun = messaging.SpicePlanetStateMsgPayload()
+    sun.PositionVector = (1.496e11 * np.array(sun_dir)).tolist()
+    sun_msg = messaging.SpicePlanetStateMsg().write(sun)
+    mod.sunInMsg.subscribeTo(sun_msg)
+    if shadow is not None:
+        ecl = messaging.EclipseMsgPayload()
+        ecl.illuminationFactor = shadow
+        ecl_msg = messaging.EclipseMsg().write(ecl)
+        mod.eclipseInMsg.subscribeTo(ecl_msg)
+    mod.chaserStateInMsg.subscribeTo(ch.scStateOutMsg)
+    mod.targetStateInMsg.subscribeTo(tgt.scStateOutMsg)
+    sim.AddModelToTask("dyn", mod, 1)
+    sim.InitializeSimulation()
+    sim.ConfigureStopTime(macros.sec2nano(0.5))
+    sim.ExecuteSimulation()
+    assert len(sensor.scenarios) == 2
+    for sc, log in zip(sensor.scenarios, mod.light_log):
+        s = sc.scene
+        assert s.environment == "orbit"
+        assert (s.earth_azimuth_deg, s.earth_elevation_deg) == pytest.approx((180.0, 0.0), abs=1e-9)
+        assert s.altitude_km == pytest.approx(400.0, abs=1e-6)
+        assert sc.range_m == pytest.approx(6.0, abs=1e-6)
+        if expect_sun is None:
+            assert not log["sunlit"]
+            assert s.sun_azimuth_deg is None or s.eclipsed  # dropped, or the renderer's own shadow drops it
+        else:
+            assert log["sunlit"] and log["shadow_factor"] == 1.0
+            # from the target, not the Earth's centre: the sun 1 AU along +y_N is seen 0.0026 deg past 90
+            az = np.degrees(np.arctan2(1.496e11, -r_t[0])) if expect_sun[0] == 90.0 else expect_sun[0]
+            assert (s.sun_azimuth_deg, s.sun_elevation_deg) == pytest.approx((az, expect_sun[1]), abs=1e-9)

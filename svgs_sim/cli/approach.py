@@ -36,7 +36,7 @@ def register(sub) -> None:
         "auto-exposure carried over from the previous frame), detect, identify and solve, with motion blur and "
         "the rolling shutter of the moving target. Either a trajectory file (CSV: t_s and the paper's state "
         "x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg, or the test stand's rail_m,stage_m,roll_deg,pitch_deg,yaw_deg; "
-        "interpolated linearly) or a straight approach --from R0 --to R1 --duration S along the boresight. "
+        "interpolated linearly; on orbit optional columns sun_azimuth_deg,sun_elevation_deg give the sun per row) or a straight approach --from R0 --to R1 --duration S along the boresight. "
         "Writes DIR/measurements.csv (one row per frame: t_s, truth, estimate, error, 1-sigma CRLB, ok, reason, "
         "settings, where the time went), DIR/approach.mp4 (overlays; mp4v, or approach.avi with MJPG), "
         "DIR/approach.png and DIR/summary.json. A killed run continues where it stopped when rerun with the same "
@@ -81,6 +81,7 @@ def config_from_args(args) -> dict:
     checked by :func:`svgs_sim.studies.approach.check_config` before any work, and the profile's kind by
     :mod:`svgs_sim.cli.validate`)."""
     from svgs_sim.sim.approach import Trajectory
+    from svgs_sim.sim.approach.trajectory import SUN_COLUMNS
     from svgs_sim.sim.scene import scene_from_args
     from svgs_sim.studies.approach import make_config
 
@@ -95,8 +96,16 @@ def config_from_args(args) -> dict:
         traj = Trajectory.straight(args.from_m, args.to_m, args.duration_s,
                                    lateral_m=_floats(args.lateral, 2, "--lateral"),
                                    attitude_deg=_floats(args.attitude, 3, "--attitude"))
+    scene = scene_from_args(args)
+    if traj.sun_deg is not None:  # the file's sun, frame by frame
+        if scene.sun_azimuth_deg is not None:
+            raise InputError(f"--sun-deg: the trajectory {args.trajectory!r} gives the sun per row ({', '.join(SUN_COLUMNS)}); "
+                             "give one or the other")
+        if scene.environment != "orbit":
+            raise InputError(f"--trajectory {args.trajectory!r}: its columns {', '.join(SUN_COLUMNS)} light the target on "
+                             "orbit only (give --environment orbit)")
     return make_config(args.camera, traj, args.fps, seed=args.seed, preview=args.preview, motion=not args.no_motion,
-                       crlb=not args.no_crlb, pattern=args.pattern, threshold=args.threshold, scene=scene_from_args(args))
+                       crlb=not args.no_crlb, pattern=args.pattern, threshold=args.threshold, scene=scene)
 
 
 def print_summary(s: dict, file=None) -> None:
@@ -105,6 +114,8 @@ def print_summary(s: dict, file=None) -> None:
           f"({100 * s['solved_fraction']:.0f} %); {s['trajectory']}", file=file)
     if s["failures"]:
         print(f"  failures: {', '.join(f'{k} {v}' for k, v in sorted(s['failures'].items()))}", file=file)
+    if s.get("wrong_locks"):
+        print(f"  WRONG LOCKS: {s['wrong_locks']} frames reported a pose with a blob off its target's spot", file=file)
     print(f"  {'range bin, m':>14s} {'frames':>6s} {'solved':>6s}" + "".join(
         f" {'rms ' + k:>15s}" for k in ("x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg")), file=file)
     for b in s["rms_by_range"]:

@@ -175,6 +175,7 @@ SCHEMAS = {
 {{"camera": str, "preview": bool, "fps": float, "seed": int, "trajectory": str,
  "frames": int, "solved": int, "solved_fraction": float,
  "failures": {{reason: int}},                     # reasons of svgs_sim.svgs.result.REASONS
+ "wrong_locks": int,                             # poses reported with a blob off its target's spot
  "solved_range_m": [float, float] | null,        # nearest and farthest solved frame
  "rms_by_range": [{{"range_m": [lo, hi | null], "frames": int, "solved": int,
                    "rms_err_<k>", "mean_err_<k>", "rms_crlb_<k>": float | null}}],   # k in {_STATE}

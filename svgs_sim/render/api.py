@@ -57,6 +57,9 @@ from .windows import background_tiles, spot_windows
 
 #: Upper bound of samples in one Mitsuba pass (memory: ~100 bytes per lane).
 MAX_SAMPLES_PER_PASS = 1 << 24
+#: The :class:`~svgs_sim.render.geometry.SceneOptions` fields of the natural light, which
+#: :meth:`Renderer.set_natural_light` changes on a built renderer.
+NATURAL_LIGHT_FIELDS = ("sun_direction_target", "earth_direction_target", "altitude_m", "earth_albedo")
 
 
 @dataclass
@@ -202,6 +205,7 @@ class Renderer:
         self.spot_sampler = spot_sampler
         self.variant = select_variant(variant)
         t0 = time.perf_counter()
+        self._extra_meshes = tuple(extra_meshes)
         self._load_scene(extra_meshes)
         self._sun = None
         if self.options.light_pass:
@@ -258,6 +262,32 @@ class Renderer:
             s.set_model(self.model)
         h["sensor_full"].set_windows(np.zeros((1, 2)), self.camera.height)
         self._sun = {"scene": scene, "full": h["sensor_full"], "tiles": h["sensor_tiles"], "light": light}
+
+    def set_natural_light(self, **fields) -> None:
+        """Change the sun and the Earth of a built renderer (the sun moving over an orbit's phase).
+
+        Only the natural light's scene is rebuilt (:meth:`_load_sun_scene`); the flash's scene,
+        its compiled kernels and the camera model are kept, so a frame rendered after the change
+        equals one from a renderer built with the new fields (the same bytes for the same seed).
+        Fields equal to the current ones change nothing.
+
+        Parameters
+        ----------
+        **fields
+            Any of :data:`NATURAL_LIGHT_FIELDS` (:class:`~svgs_sim.render.geometry.SceneOptions`'
+            ``sun_direction_target``, ``earth_direction_target``, ``altitude_m``, ``earth_albedo``),
+            checked as the constructor checks them.
+        """
+        bad = sorted(set(fields) - set(NATURAL_LIGHT_FIELDS))
+        if bad:
+            raise InputError(f"set_natural_light: unknown fields {bad}; known {list(NATURAL_LIGHT_FIELDS)}")
+        new = replace(self.options, **fields)
+        if new == self.options:
+            return
+        self.options = new
+        self._sun = None
+        if new.light_pass:
+            self._load_sun_scene(self._extra_meshes)
 
     def set_focus_distance(self, focus_distance_m: float) -> None:
         """Refocus the lens (an autofocus following the target along an approach) without

@@ -30,6 +30,8 @@ the limb: 2048 rows over 180 deg put the limb within 0.09 deg (about 4 px of a p
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from svgs_sim.base.errors import InputError
@@ -146,9 +148,29 @@ def earth_radiance(directions, earth_direction, sun_direction, altitude_m: float
     return np.where(hit, float(albedo) * float(sun_irradiance_w_m2) * np.maximum(cos_sun, 0.0) / np.pi, 0.0)
 
 
+@functools.lru_cache(maxsize=2)
+def _earth_hits(earth_direction: tuple, altitude_m: float, rows: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The map's frame, the flat indices of the texels whose direction meets the Earth and the
+    points they meet, from the Earth's centre (m, float64, shape (n, 3)): what the map's radiance
+    needs besides the sun. Kept for the last two geometries (a sun that moves over an orbit's phase
+    recomputes only the cosine: :func:`earth_map`); the arithmetic is :func:`earth_radiance`'s."""
+    e = _unit(earth_direction, "earth_direction")
+    frame = map_frame(e)
+    w = map_directions(rows, frame).reshape(-1, 3)
+    R = EARTH_RADIUS_M
+    p = -(R + float(altitude_m)) * e
+    b = w @ p
+    disc = b * b - (p @ p - R * R)
+    hit = np.flatnonzero((disc >= 0) & (b < 0))
+    dist = -b[hit] - np.sqrt(np.maximum(disc[hit], 0.0))
+    q = p + dist[:, None] * w[hit]
+    return frame, hit, q
+
+
 def earth_map(earth_direction, sun_direction, altitude_m: float, albedo: float, sun_irradiance_w_m2: float,
               uniform_radiance_w_m2_sr: float | None = None, rows: int = MAP_ROWS) -> tuple[np.ndarray, np.ndarray]:
-    """The environment map of the Earth and its frame.
+    """The environment map of the Earth and its frame: :func:`earth_radiance` at each texel centre's
+    direction (the geometry kept between calls for the same Earth, :func:`_earth_hits`).
 
     Returns
     -------
@@ -157,12 +179,18 @@ def earth_map(earth_direction, sun_direction, altitude_m: float, albedo: float, 
     to_world : ndarray, shape (4, 4)
         The map's ``to_world`` (a rotation): its pole toward the Earth's centre.
     """
-    frame = map_frame(earth_direction)
-    rad = earth_radiance(map_directions(rows, frame), earth_direction, sun_direction, altitude_m, albedo,
-                         sun_irradiance_w_m2, uniform_radiance_w_m2_sr)
+    e = _unit(earth_direction, "earth_direction")
+    frame, hit, q = _earth_hits(tuple(float(x) for x in e), float(altitude_m), int(rows))
+    rad = np.zeros(rows * 2 * rows)
+    if uniform_radiance_w_m2_sr is not None:
+        rad[hit] = float(uniform_radiance_w_m2_sr)
+    elif sun_direction is not None:
+        s = _unit(sun_direction, "sun_direction")
+        cos_sun = (q @ s) / EARTH_RADIUS_M
+        rad[hit] = float(albedo) * float(sun_irradiance_w_m2) * np.maximum(cos_sun, 0.0) / np.pi
     M = np.eye(4)
     M[:3, :3] = frame
-    return rad.astype(np.float32), M
+    return rad.reshape(rows, 2 * rows).astype(np.float32), M
 
 
 def earth_in_image(camera, R_cam_target, earth_direction, altitude_m: float, grid: int = 24) -> bool:

@@ -23,6 +23,16 @@ Outputs
         knowledge), their covariances from the CRLB, ``valid`` = ``ok``, ``timeTag`` the image
         time, s. An unsolved frame is written with ``valid = 0`` and ``faultDetected = 1``.
 
+The sun and the Earth (optional inputs)
+    ``sunInMsg`` (a ``SpicePlanetStateMsg``: the sun's inertial position) and ``eclipseInMsg``
+    (an ``EclipseMsg``, from Basilisk's ``eclipse`` module for the target). With ``sunInMsg``
+    linked, each frame is rendered on orbit (:mod:`svgs_sim.sim.orbit_light`): the sun's and the
+    Earth's directions in the target frame from the target's state (the Earth is the central body,
+    at the inertial origin), its altitude, and the sun dropped while ``illuminationFactor < 0.5``
+    (without ``eclipseInMsg``: the cylindrical shadow of :func:`svgs_sim.render.earth.in_eclipse`).
+    The renderer cannot dim the sun, so the penumbra (~10 s at 400 km) is lit or not, at half
+    light. ``light_log`` keeps each frame's light.
+
 Timing. The module must run in a task at least as fast as the frame rate. A frame is taken at the
 first update at or after each frame time ``t0 + k / frame_rate_hz`` (``t0``: the first update),
 with the states of that update; its measurement is written at the first update at or after
@@ -34,6 +44,7 @@ raises an ImportError that names the extra. Nothing here needs Vizard.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -47,8 +58,10 @@ except ImportError as exc:  # pragma: no cover - exercised where the extra is mi
 from svgs_sim.base.errors import InputError, check_finite_positive
 from svgs_sim.svgs.frames import STATE_KEYS, pose_to_state, state_dict, state_to_pose
 
-from svgs_sim.sim.approach import OUT_OF_VIEW, Measurement
+from svgs_sim.sim.approach import OUT_OF_VIEW, Measurement, scenario_from_pose
 from svgs_sim.sim.basilisk_frames import Mount, mrp_to_dcm, propagate_body, relative_pose
+from svgs_sim.sim.orbit_light import sun_and_earth_in_target
+from svgs_sim.sim.scene import Scene
 
 #: The phone's frame rate, frames/s (ASSUMPTION: the SVGS papers on these 2011 phones do not give
 #: the rate at which the app delivered solutions; 2 frames/s is the rate the project's own loop
@@ -237,17 +250,29 @@ class SVGSModule(sysModel.SysModel):
         The rate the sensor takes frames at, frames/s (default :data:`PHONE_FRAME_RATE_HZ`).
     latency_s : float
         Image to release, s (default :data:`PROCESSING_LATENCY_S`).
+    scene : svgs_sim.sim.scene.Scene, optional
+        With ``sunInMsg`` linked: the scene each frame's sun and Earth are set in (its
+        ``earth_albedo``; the environment becomes ``orbit``). Default: the sensor's own.
 
     Attributes
     ----------
     chaserStateInMsg, targetStateInMsg : messaging.SCStatesMsgReader
         Subscribe them to the two spacecraft's ``scStateOutMsg``.
+    sunInMsg : messaging.SpicePlanetStateMsgReader
+        Optional: the sun's inertial position (see the module docstring).
+    eclipseInMsg : messaging.EclipseMsgReader
+        Optional: the target's ``illuminationFactor`` (formerly ``shadowFactor``) from Basilisk's ``eclipse`` module.
     measurementOutMsg : MeasurementOutput
     opNavOutMsg : messaging.OpNavMsg
+    light_log : list of dict
+        With the sun: each frame's ``t_s``, ``sun_azimuth_deg``, ``sun_elevation_deg``,
+        ``earth_azimuth_deg``, ``earth_elevation_deg`` (deg, target frame), ``shadow_factor``
+        (Basilisk's, or 0/1 from the cylindrical shadow), ``sunlit`` (bool) and ``altitude_m``.
     """
 
     def __init__(self, sensor, camera_mount: Mount, pattern_mount: Mount, *,
-                 frame_rate_hz: float = PHONE_FRAME_RATE_HZ, latency_s: float = PROCESSING_LATENCY_S):
+                 frame_rate_hz: float = PHONE_FRAME_RATE_HZ, latency_s: float = PROCESSING_LATENCY_S,
+                 scene: Scene | None = None):
         super().__init__()
         self.sensor = sensor
         if not isinstance(camera_mount, Mount) or not isinstance(pattern_mount, Mount):
@@ -262,6 +287,12 @@ class SVGSModule(sysModel.SysModel):
         self.latency_s = check_finite_positive(latency_s, "latency_s", allow_zero=True)
         self.chaserStateInMsg = messaging.SCStatesMsgReader()
         self.targetStateInMsg = messaging.SCStatesMsgReader()
+        self.sunInMsg = messaging.SpicePlanetStateMsgReader()
+        self.eclipseInMsg = messaging.EclipseMsgReader()
+        if scene is not None and not isinstance(scene, Scene):
+            raise InputError(f"scene: expected a svgs_sim.sim.scene.Scene, got {type(scene).__name__}")
+        self.scene = scene
+        self.light_log: list[dict] = []
         self.measurementOutMsg = MeasurementOutput()
         self.opNavOutMsg = messaging.OpNavMsg()
         self._t0_s = None
@@ -273,9 +304,12 @@ class SVGSModule(sysModel.SysModel):
         for name in ("chaserStateInMsg", "targetStateInMsg"):
             if not getattr(self, name).isLinked():
                 self.bskLogger.error(f"SVGSModule.{name} is not linked")
+        if self.sunInMsg.isLinked() and not hasattr(self.sensor, "base"):
+            self.bskLogger.error("SVGSModule.sunInMsg is linked but the sensor renders no scene (an IdealSensor)")
         self._t0_s = None
         self._n_frames = 0
         self._pending = []
+        self.light_log = []
         self.opNavOutMsg.write(messaging.OpNavMsgPayload(), CurrentSimNanos, self.moduleID)
 
     def UpdateState(self, CurrentSimNanos):  # noqa: N802, N803
@@ -324,7 +358,13 @@ class SVGSModule(sysModel.SysModel):
             return SVGSMeasurement(t_s, t_s + self.latency_s, self._next_index(), False, OUT_OF_VIEW, None, None,
                                    None, None, None, None, truth, float(tv[2]), None,
                                    ch["sigma_BN"])
-        m = self.sensor.measure(t_s, R, tv, image_velocity_px_s=self.image_velocity_px_s(ch, tg))
+        vel = self.image_velocity_px_s(ch, tg)
+        scene = self.frame_scene(t_s, tg) if self.sunInMsg.isLinked() and hasattr(self.sensor, "base") else None
+        if scene is None:
+            m = self.sensor.measure(t_s, R, tv, image_velocity_px_s=vel)
+        else:
+            m = self.sensor.measure(t_s, scenario=scenario_from_pose(R, tv, self.sensor.base.replace(scene=scene)),
+                                    image_velocity_px_s=vel)
         m.image = None  # a full frame a measurement is too much to keep
         sv = None
         if m.ok and m.estimate:
@@ -333,6 +373,30 @@ class SVGSModule(sysModel.SysModel):
         return SVGSMeasurement(float(m.t_s), float(m.t_s) + self.latency_s, int(m.frame), bool(m.ok), m.reason,
                                dict(m.estimate) if m.ok and m.estimate else None, sv, crlb_covariance(m),
                                m.crlb_std, m.p_value, m.residual_rms_px, truth, float(m.range_m), m, ch["sigma_BN"])
+
+    def frame_scene(self, t_s: float, tg: dict) -> Scene:
+        """The frame's scene on orbit: the sun (unless the target is in the Earth's shadow) and the
+        Earth in the target frame, from the target's state and the sun's message; logged in
+        :attr:`light_log`."""
+        r_t = tg["r_BN_N"]
+        r_sun = np.array(self.sunInMsg().PositionVector, float)
+        dcm_TN = self.pattern_mount.dcm_frame_body @ mrp_to_dcm(tg["sigma_BN"])
+        geo = sun_and_earth_in_target(r_t, dcm_TN, r_sun - r_t)
+        if self.eclipseInMsg.isLinked():
+            shadow = float(self.eclipseInMsg().illuminationFactor)
+        else:
+            shadow = 0.0 if geo["eclipsed"] else 1.0
+        lit = shadow >= 0.5
+        base = self.scene if self.scene is not None else self.sensor.base.scene
+        scene = dataclasses.replace(
+            base, environment="orbit", sun_azimuth_deg=geo["sun_azimuth_deg"] if lit else None,
+            sun_elevation_deg=geo["sun_elevation_deg"] if lit else None, earth_azimuth_deg=geo["earth_azimuth_deg"],
+            earth_elevation_deg=geo["earth_elevation_deg"], altitude_km=geo["altitude_m"] / 1e3)
+        self.light_log.append({"t_s": float(t_s), **{k: geo[k] for k in ("sun_azimuth_deg", "sun_elevation_deg",
+                                                                         "earth_azimuth_deg", "earth_elevation_deg",
+                                                                         "altitude_m")},
+                               "shadow_factor": shadow, "sunlit": bool(lit and not scene.eclipsed)})
+        return scene
 
     def _next_index(self) -> int:
         k = int(getattr(self.sensor, "frame_index", 0))

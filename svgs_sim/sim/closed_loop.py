@@ -506,11 +506,9 @@ def render_scenario(scenario: Scenario, *, seed: int = 0, options: RenderOptions
                                                                             "focus_distance_m": focus}
     if options.body_material is not None or options.body_materials:  # a mesh body's surfaces
         scene_options.update(body_material=options.body_material, body_materials=options.body_materials)
-    if scenario.scene.sun_direction_target is not None:  # the sun: a pass of its own (svgs_sim.render.sun)
-        scene_options["sun_direction_target"] = scenario.scene.sun_direction_target
-    if scenario.scene.earth_direction_target is not None:  # the Earth, in the sun's pass (svgs_sim.render.earth)
-        scene_options.update(earth_direction_target=scenario.scene.earth_direction_target,
-                             altitude_m=1e3 * scenario.scene.altitude_km, earth_albedo=scenario.scene.earth_albedo)
+    # the sun (a pass of its own, svgs_sim.render.sun) and the Earth (in the sun's pass, svgs_sim.render.earth);
+    # the lab's are the defaults
+    scene_options.update(scenario.scene.natural_light())
     res = render_flux(camera, pattern, R, t, seed=int(seed), scene_options=scene_options, method=options.method,
                       reflector=options.reflector, full_frame=options.full_frame,
                       spot_samples=DEFAULT_SPOT_SAMPLES if options.spot_samples is None else int(options.spot_samples),

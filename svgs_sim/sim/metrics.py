@@ -115,3 +115,77 @@ def error_columns(est_state, true_state, *, R_cam_target_est=None) -> dict:
 def no_pose_errors() -> dict:
     """:data:`POSE_ERROR_KEYS` set to None (an unsolved frame)."""
     return {k: None for k in POSE_ERROR_KEYS}
+
+
+# ----------------------------------------------------------------------------- locks on the right spots
+#: A wrong lock: an identified blob farther than this from its target's spot, px (or than the
+#: spot's image radius, where that is larger: :func:`wrong_lock_px`).
+WRONG_LOCK_PX = 3.0
+#: The cube aperture the spot radius is taken from where the pattern gives no target sizes, m (1 in).
+STRAY_CUBE_DIAMETER_M = 0.0254
+
+
+def spot_radius_px(camera, pattern, depth_m):
+    """The image radius of a target's cube aperture at ``depth_m`` along the boresight, px (the
+    pattern's largest target diameter, else :data:`STRAY_CUBE_DIAMETER_M`); ``depth_m`` may be an array."""
+    sizes = [d for d, _ in pattern.target_sizes_m if d is not None]
+    diam = max(sizes) if sizes else STRAY_CUBE_DIAMETER_M
+    return np.sqrt(camera.fx * camera.fy) * 0.5 * diam / np.asarray(depth_m, float)
+
+
+def wrong_lock_px(camera, pattern, range_m: float) -> float:
+    """The distance beyond which an identified blob is not its target's spot, px (:data:`WRONG_LOCK_PX`)."""
+    return max(WRONG_LOCK_PX, float(spot_radius_px(camera, pattern, float(range_m))))
+
+
+def spot_positions_px(image_camera, pattern, R_cam_target, t_cam_target_m, spots_px=None, scale: float = 1.0):
+    """Where each target's spot lies in the delivered image, px.
+
+    Parameters
+    ----------
+    image_camera : svgs.Camera
+        The delivered image's camera geometry (projects the targets where there are no spots).
+    pattern : svgs.Pattern
+    R_cam_target : array_like, shape (3, 3)
+    t_cam_target_m : array_like, shape (3,)
+    spots_px : dict, optional
+        The renderer's predicted spot centroids, target id (str) -> (u, v) full-frame px (the
+        flash's offset from the lens moves them a few px off the targets' projection at close range).
+    scale : float
+        The delivered image's width over the full frame's (with ``spots_px``).
+
+    Returns
+    -------
+    ndarray, shape (N, 2)
+        In the pattern's target order.
+    """
+    if spots_px is not None:
+        return np.array([spots_px[str(int(i))] for i in pattern.ids], float) * float(scale)
+    return image_camera.project_target(pattern.points_m, R_cam_target, t_cam_target_m)
+
+
+def match_err_max_px(row: dict, solution, spots_uv_px, target_ids) -> float | None:
+    """The largest distance of an identified blob from its target's spot, px, for a solution the
+    paper's app would report (solved, or refused only by the consistency test); None otherwise.
+
+    Parameters
+    ----------
+    row : dict
+        The frame's row (``state`` None when unsolved, ``reason``).
+    solution : svgs.Solution or failure result
+        With ``targets_px`` (solved) or ``details["targets_px"]`` (inconsistent).
+    spots_uv_px : ndarray, shape (N, 2)
+        :func:`spot_positions_px`.
+    target_ids : array_like, shape (N,)
+        The pattern's target ids, in the order of ``spots_uv_px``.
+    """
+    targets = None
+    if row["state"] is not None and solution:
+        targets = solution.targets_px
+    elif row.get("reason") == "inconsistent" and solution is not None and "targets_px" in getattr(solution, "details", {}):
+        targets = solution.details["targets_px"]
+    if targets is None:
+        return None
+    found = {int(k): v for k, v in targets.items()}
+    uv = np.array([found[int(i)] for i in target_ids], float)
+    return float(np.max(np.linalg.norm(uv - np.asarray(spots_uv_px, float), axis=1)))

@@ -234,6 +234,13 @@ class Scene:
             return None
         return tuple(float(x) for x in sun_direction_target(self.earth_azimuth_deg, self.earth_elevation_deg))
 
+    def natural_light(self) -> dict:
+        """The renderer's natural-light fields of this scene (:class:`svgs_sim.render.geometry.SceneOptions`:
+        ``sun_direction_target``, ``earth_direction_target``, ``altitude_m``, ``earth_albedo``;
+        :meth:`svgs_sim.render.api.Renderer.set_natural_light`). The lab's gives the defaults."""
+        return {"sun_direction_target": self.sun_direction_target, "earth_direction_target": self.earth_direction_target,
+                "altitude_m": 1e3 * self.altitude_km, "earth_albedo": self.earth_albedo}
+
     @property
     def eclipsed(self) -> bool:
         """Whether the Earth hides the sun from the target (:func:`svgs_sim.render.earth.in_eclipse`)."""

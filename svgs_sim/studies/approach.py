@@ -90,8 +90,7 @@ def sensor_camera(cfg: dict):
 
 
 def trajectory_of(cfg: dict) -> Trajectory:
-    t = cfg["trajectory"]
-    return Trajectory(np.array(t["t_s"]), np.array(t["values"]), t["mount"], t["source"])
+    return Trajectory.from_json(cfg["trajectory"])
 
 
 def check_config(cfg: dict):
@@ -255,6 +254,8 @@ def summarise(rows: list[dict], cfg: dict) -> dict:
         "camera": cfg["camera"], "preview": cfg["preview"], "fps": cfg["fps"], "seed": cfg["seed"],
         "trajectory": cfg["trajectory"]["source"], "frames": n, "solved": len(ok),
         "solved_fraction": len(ok) / n if n else 0.0, "failures": reasons,
+        # poses the app would report with a blob off its target's spot (svgs_sim.sim.approach.Measurement.wrong_lock)
+        "wrong_locks": sum(int(r.get("wrong_lock") or 0) for r in rows),
         "solved_range_m": [min(solved_ranges), max(solved_ranges)] if solved_ranges else None,
         "rms_by_range": bins, "far_above_bound": far_above_bound(rows, cfg), "timing": timing,
     }

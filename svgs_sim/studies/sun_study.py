@@ -42,15 +42,12 @@ from svgs_sim.render.sun import sun_direction_target, sun_in_image
 from svgs_sim.render.earth import earth_in_image, in_eclipse
 from svgs_sim.sim.scene import Scene
 from svgs_sim.sim.render_trial import RENDER, render_trial_scenario
-from svgs_sim.sim.render_trial.run import spot_radius_px
+from svgs_sim.sim.metrics import WRONG_LOCK_PX, wrong_lock_px
 from svgs_sim.studies.execution import Trial, library_versions, run_stored_study
 from svgs_sim.studies.seeding import check_seed, design_rng, trial_seed
 from svgs_sim.svgs.envelope import PAPER_ENVELOPE, check_range_m
 from svgs_sim.svgs.frames import pose_from_scenario
 
-#: A wrong lock: an identified blob farther than this from its target's spot, px (or than the
-#: spot's image radius, where that is larger).
-WRONG_LOCK_PX = 3.0
 #: The mechanisms counted per cell.
 MECHANISMS = ("sun_in_fov", "lit_body", "glint", "saturation", "earth_background")
 
@@ -180,11 +177,6 @@ def earth_in_view(camera, row: dict) -> bool:
         return False
     R, _ = pose_from_scenario(row["range_m"], 0.0, 0.0, row["roll_deg"], row["pitch_deg"], row["yaw_deg"])
     return earth_in_image(camera, R, sun_direction_target(az, el), 1e3 * float(row.get("altitude_km") or 400.0))
-
-
-def wrong_lock_px(camera, pattern, range_m: float) -> float:
-    """The distance beyond which an identified blob is not its target's spot, px (:data:`WRONG_LOCK_PX`)."""
-    return max(WRONG_LOCK_PX, float(spot_radius_px(camera, pattern, float(range_m))))
 
 
 def classify(rows, camera, pattern) -> list[dict]:

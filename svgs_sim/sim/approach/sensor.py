@@ -11,9 +11,9 @@ import numpy as np
 
 from svgs_sim.base.errors import InputError, check_finite
 from svgs_sim.base.profiles import load_camera, load_pattern
-from svgs_sim.sim.closed_loop import Frame, Scenario, lab_flux, lab_photon_factor, solve_exposure
+from svgs_sim.sim.closed_loop import Frame, Scenario, lab_flux, lab_photon_factor, solve_exposure, solver_camera
 from svgs_sim.sim.crlb import frame_crlb
-from svgs_sim.sim.metrics import state_error
+from svgs_sim.sim.metrics import match_err_max_px, spot_positions_px, state_error, wrong_lock_px
 from svgs_sim.svgs.frames import D_CAM_PHOTO, STATE_KEYS, angles_from_rotation, check_pose, pose_to_state, state_dict
 from svgs_sim.svgs.pipeline import camera_threshold
 
@@ -67,6 +67,13 @@ class Measurement:
         :class:`svgs_sim.svgs.solver.Solution` or the failure result (for overlays).
     blobs_px : ndarray, shape (M, 2), or None
         Every blob the detector found (when the sensor keeps images).
+    match_err_max_px : float or None
+        For a pose the paper's app would report (solved, or refused only by the consistency test):
+        the largest distance of an identified blob from its target's spot, px
+        (:func:`svgs_sim.sim.metrics.match_err_max_px`); None otherwise.
+    wrong_lock : bool
+        That pose locked onto something else: ``match_err_max_px`` beyond
+        :func:`svgs_sim.sim.metrics.wrong_lock_px` (a glint or a lit body taken for a target).
     """
 
     frame: int
@@ -90,6 +97,8 @@ class Measurement:
     image: np.ndarray | None = field(default=None, repr=False)
     solution: object = field(default=None, repr=False)
     blobs_px: np.ndarray | None = field(default=None, repr=False)
+    match_err_max_px: float | None = None
+    wrong_lock: bool = False
 
     def row(self) -> dict:
         """Flat columns (:data:`MEASUREMENT_COLUMNS`)."""
@@ -102,7 +111,8 @@ class Measurement:
         out.update({"ok": int(self.ok), "reason": self.reason or "", "n_blobs": self.n_blobs,
                     "residual_rms_px": self.residual_rms_px, "p_value": self.p_value, "exposure_s": self.exposure_s, "iso": self.iso,
                     "metered_level": self.metered_level, "next_exposure_s": self.next_exposure_s,
-                    "next_iso": self.next_iso})
+                    "next_iso": self.next_iso, "match_err_max_px": self.match_err_max_px,
+                    "wrong_lock": int(self.wrong_lock)})
         for k in TIMING_KEYS:
             out[f"{k}_s"] = self.timings_s.get(k)
         return out
@@ -116,7 +126,8 @@ MEASUREMENT_COLUMNS = (("frame", "t_s", "range_m") + tuple(f"true_{k}" for k in 
                        + tuple(f"est_{k}" for k in STATE_KEYS) + tuple(f"err_{k}" for k in STATE_KEYS)
                        + tuple(f"crlb_{k}" for k in STATE_KEYS)
                        + ("ok", "reason", "n_blobs", "residual_rms_px", "p_value", "exposure_s", "iso", "metered_level",
-                          "next_exposure_s", "next_iso") + tuple(f"{k}_s" for k in TIMING_KEYS))
+                          "next_exposure_s", "next_iso", "match_err_max_px", "wrong_lock")
+                       + tuple(f"{k}_s" for k in TIMING_KEYS))
 
 
 def scenario_from_pose(R_cam_target, t_cam_target_m, base: Scenario) -> Scenario:
@@ -200,7 +211,8 @@ class ApproachSensor:
         self.threshold = threshold
         self.phone = PhoneCamera(self.camera, params=params)
         self.exposure = ExposureStream(self.phone, self.frame_rate_hz)
-        self.renders = RenderStream(self.camera, self.pattern, self.seed, spp=self.base.spp, roi_spp=self.base.roi_spp)
+        self.renders = RenderStream(self.camera, self.pattern, self.seed, spp=self.base.spp, roi_spp=self.base.roi_spp,
+                                    scene_options=self.base.scene.natural_light())
         self._lab_factor = None
         self.frame_index = 0
         self._last_pose = None
@@ -340,6 +352,11 @@ class ApproachSensor:
         self.exposure.after_frame(t_s, settings, exposer.meter)
         crlb = self._crlb(frame, exposer, row, timings)
         m = self._measurement(k, t_s, R, t, row, crlb, settings, level, timings, ex, blobs)
+        m.match_err_max_px = match_err_max_px(row, row["_solution"], spot_positions_px(
+            solver_camera(self.camera, ex.image.shape), self.pattern, R, t, frame.truth.get("spots_px_predicted"),
+            ex.image.shape[1] / self.camera.width), self.pattern.ids)
+        m.wrong_lock = bool(m.match_err_max_px is not None
+                            and m.match_err_max_px > wrong_lock_px(self.camera, self.pattern, float(t[2])))
         self.frame_index = k + 1
         self._last_pose = (float(t_s), R, t)
         return m
@@ -367,9 +384,10 @@ class ApproachSensor:
     def _render(self, k: int, sc: Scenario, R, t, t_s: float, next_frame) -> Frame:
         """Frame ``k`` rendered (or taken from the background thread) with the lab's light around
         it; the next frame's render started when there is one."""
-        res = self.renders.take(k, R, t)
-        if next_frame is not None:  # the next frame renders while this one goes through the phone
-            self.renders.start(k + 1, *next_frame)
+        light = sc.scene.natural_light()  # the frame's sun (a trajectory's sun columns move it)
+        res = self.renders.take(k, R, t, light)
+        if next_frame is not None:  # the next frame renders while this one goes through the phone (this one's light)
+            self.renders.start(k + 1, *next_frame, light)
         lab, info = self._lab(sc)
         truth = dict(res.truth)
         truth.update({"lab": info, "scenario": sc.to_json(), "focus_distance_m": float(np.linalg.norm(t)), "t_s": float(t_s)})

@@ -111,13 +111,18 @@ class RenderStream:
         The stream's seed (frame ``k`` renders with :func:`frame_seeds` ``(seed, k)[0]``).
     spp, roi_spp : int, optional
         Render quality (:class:`svgs_sim.render.api.Renderer`).
+    scene_options : dict, optional
+        The scene around the target (:class:`svgs_sim.render.geometry.SceneOptions` fields: the
+        body, the sun, the Earth); a frame's own natural light (``light`` of :meth:`render_now`)
+        replaces the sun's and the Earth's fields.
     """
 
     def __init__(self, camera: Camera, pattern: Pattern, seed: int, *, spp: int | None = None,
-                 roi_spp: int | None = None):
+                 roi_spp: int | None = None, scene_options: dict | None = None):
         self.camera = camera
         self.pattern = pattern
         self.seed = int(seed)
+        self._options = {**(scene_options or {}), "focus_distance_m": 1.0}  # refocused every frame
         self._quality = {k: int(v) for k, v in (("spp", spp), ("roi_spp", roi_spp)) if v is not None}
         self._renderer = None
         self._pool = None  # the background render thread
@@ -127,7 +132,7 @@ class RenderStream:
         """The :class:`svgs_sim.render.api.Renderer` (made on first use)."""
         if self._renderer is None:
 
-            self._renderer = Renderer(self.camera, self.pattern, scene_options={"focus_distance_m": 1.0}, **self._quality)
+            self._renderer = Renderer(self.camera, self.pattern, scene_options=self._options, **self._quality)
         return self._renderer
 
     @property
@@ -135,30 +140,36 @@ class RenderStream:
         """The background render thread is up."""
         return self._pool is not None
 
-    def render_now(self, k: int, R, t):
-        """Frame ``k`` at ``(R, t)`` rendered in this thread, focused at ``|t|``."""
+    def render_now(self, k: int, R, t, light: dict | None = None):
+        """Frame ``k`` at ``(R, t)`` rendered in this thread, focused at ``|t|``; ``light``: the
+        frame's natural light (:meth:`svgs_sim.sim.scene.Scene.natural_light`), None: the stream's."""
         r = self.renderer()
         r.set_focus_distance(float(np.linalg.norm(t)))
+        if light is not None:
+            r.set_natural_light(**light)
         return r.render(R, t, seed=frame_seeds(self.seed, k)[0])
 
-    def start(self, k: int, R, t) -> None:
+    @staticmethod
+    def _key(k: int, R, t, light: dict | None) -> tuple:
+        return (int(k), np.asarray(R, float).tobytes(), np.asarray(t, float).tobytes(), repr(light))
+
+    def start(self, k: int, R, t, light: dict | None = None) -> None:
         """Render frame ``k`` at ``(R, t)`` in the background thread (one at a time)."""
 
         self.drop()
         if self._pool is None:
             self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="svgs-render")
-        key = (int(k), np.asarray(R, float).tobytes(), np.asarray(t, float).tobytes())
-        self._pending = (key, self._pool.submit(self.render_now, k, R, t))
+        self._pending = (self._key(k, R, t, light), self._pool.submit(self.render_now, k, R, t, light))
 
-    def take(self, k: int, R, t):
+    def take(self, k: int, R, t, light: dict | None = None):
         """Frame ``k``'s render: the background one if it is that frame's, else rendered now."""
         if self._pending is not None:
             key, fut = self._pending
             self._pending = None
             res = fut.result()  # wait for it (and the renderer) in any case; errors surface here
-            if key == (int(k), np.asarray(R, float).tobytes(), np.asarray(t, float).tobytes()):
+            if key == self._key(k, R, t, light):
                 return res
-        return self.render_now(k, R, t)
+        return self.render_now(k, R, t, light)
 
     def drop(self) -> None:
         """Wait for a background render and discard it."""

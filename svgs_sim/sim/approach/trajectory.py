@@ -4,6 +4,7 @@ paper's state or the test stand's chain), and the check that the camera sees the
 from __future__ import annotations
 
 import csv
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,6 +28,14 @@ TARGET_FIELDS = ("range_m", "target_x_m", "target_y_m", "roll_deg", "pitch_deg",
 #: Internal form of a stand trajectory: the file's own columns (the rail position is ``rail_m``,
 #: never ``range_m``, which is the boresight distance).
 STAND_FIELDS = STAND_COLUMNS
+#: Optional columns of a trajectory file: the direction toward the sun in the target frame per
+#: row, deg (as ``--sun-deg AZ,EL``: azimuth from +x toward +y, elevation from the pattern plane
+#: toward +z), for an approach on orbit whose sun moves (an orbit's phase). Both or neither.
+SUN_COLUMNS = ("sun_azimuth_deg", "sun_elevation_deg")
+#: Largest turn of the sun's direction between two rows, deg: the direction is interpolated along
+#: the chord between the rows' unit vectors and renormalised, which is the great circle's path
+#: only for turns well under 180 deg.
+MAX_SUN_TURN_DEG = 90.0
 #: Time step of the central difference that gives the image velocity of the spots, s.
 VELOCITY_STEP_S = 1e-3
 #: Most frames one approach may have.
@@ -56,12 +65,16 @@ class Trajectory:
     mount : {"target", "stand"}
     source : str
         Where it came from (a file, or the generator's parameters).
+    sun_deg : ndarray, shape (N, 2), optional
+        At each knot, the direction toward the sun in the target frame, (azimuth, elevation) deg
+        (:data:`SUN_COLUMNS`); None: the scene's own sun (``--sun-deg``) at every frame.
     """
 
     t_s: np.ndarray
     values: np.ndarray
     mount: str = "target"
     source: str = ""
+    sun_deg: np.ndarray | None = None
 
     def __post_init__(self):
         t = np.asarray(self.t_s, float)
@@ -77,6 +90,8 @@ class Trajectory:
             raise InputError("trajectory: times and values must be finite")
         if np.any(np.diff(t) <= 0):
             raise InputError("trajectory: knot times t_s must increase strictly")
+        if self.sun_deg is not None:
+            object.__setattr__(self, "sun_deg", _checked_sun(self.sun_deg, t.size, f"trajectory ({self.source})"))
 
     @property
     def fields(self) -> tuple:
@@ -102,10 +117,28 @@ class Trajectory:
         t = float(np.clip(t_s, self.t_s[0], self.t_s[-1]))
         return {k: float(np.interp(t, self.t_s, self.values[:, j])) for j, k in enumerate(self.fields)}
 
+    def sun_at(self, t_s: float) -> tuple[float, float] | None:
+        """The direction toward the sun at a time, (azimuth, elevation) deg, or None (no sun columns).
+
+        The knots' unit vectors are interpolated linearly and renormalised (a turn between two
+        rows is at most :data:`MAX_SUN_TURN_DEG`); ``t_s`` is clamped to the span.
+        """
+        if self.sun_deg is None:
+            return None
+        t = float(np.clip(t_s, self.t_s[0], self.t_s[-1]))
+        v = _sun_vectors(self.sun_deg)
+        d = np.array([np.interp(t, self.t_s, v[:, j]) for j in range(3)])
+        d /= np.linalg.norm(d)
+        return (float(np.degrees(np.arctan2(d[1], d[0]))), float(np.degrees(np.arcsin(np.clip(d[2], -1.0, 1.0)))))
+
     def scenario(self, t_s: float, base: Scenario) -> Scenario:
         """``base`` (camera, lab, ...) at this trajectory's pose at time ``t_s`` (s): a
-        :class:`~svgs_sim.sim.closed_loop.Scenario` with this trajectory's mount."""
+        :class:`~svgs_sim.sim.closed_loop.Scenario` with this trajectory's mount (and, with sun
+        columns, its sun at that time in place of the base scene's)."""
         other = {"range_m": None} if self.mount == "stand" else {"rail_m": None}  # one distance, by the mount
+        sun = self.sun_at(t_s)
+        if sun is not None:
+            other["scene"] = dataclasses.replace(base.scene, sun_azimuth_deg=sun[0], sun_elevation_deg=sun[1])
         return base.replace(mount=self.mount, **other, **self.at(t_s))
 
     def frame_times(self, fps: float) -> np.ndarray:
@@ -141,8 +174,18 @@ class Trajectory:
 
     def to_json(self) -> dict:
         """The knots as JSON-ready lists (the study's manifest: a changed file is a changed study)."""
-        return {"mount": self.mount, "fields": list(self.fields), "t_s": self.t_s.tolist(),
-                "values": self.values.tolist(), "source": self.source}
+        out = {"mount": self.mount, "fields": list(self.fields), "t_s": self.t_s.tolist(),
+               "values": self.values.tolist(), "source": self.source}
+        if self.sun_deg is not None:  # only then: a study made before the sun columns resumes
+            out["sun_deg"] = self.sun_deg.tolist()
+        return out
+
+    @classmethod
+    def from_json(cls, d: dict) -> "Trajectory":
+        """The inverse of :meth:`to_json`."""
+        sun = d.get("sun_deg")
+        return cls(np.array(d["t_s"]), np.array(d["values"]), d["mount"], d["source"],
+                   None if sun is None else np.array(sun, float))
 
     # ------------------------------------------------------------------ constructors
     @classmethod
@@ -211,14 +254,15 @@ class Trajectory:
         else:
             raise InputError(f"{where}: the header {header} has neither the paper state ({', '.join(STATE_COLUMNS)}) "
                              f"nor the test stand's chain ({', '.join(STAND_COLUMNS)})")
-        idx = [header.index(c) for c in ("t_s", *cols)]
+        sun_cols = _sun_columns(header, where)
+        idx = [header.index(c) for c in ("t_s", *cols, *sun_cols)]
         data = []
         for i, row in enumerate(rows[1:], start=1):
             n = line_no[i]
             if len(row) != len(header):
                 raise InputError(f"{where}: line {n} has {len(row)} fields, the header {len(header)}")
             vals = []
-            for j, c in zip(idx, ("t_s", *cols)):
+            for j, c in zip(idx, ("t_s", *cols, *sun_cols)):
                 try:
                     x = float(row[j])
                 except ValueError:
@@ -227,11 +271,16 @@ class Trajectory:
                     raise InputError(f"{where}: line {n}, column {c}: {row[j]!r} is not finite")
                 if c in ATTITUDE_LIMITS_DEG:  # the envelope --roll/--pitch/--yaw take
                     check_attitude_deg(c, x, f"{where}: line {n}, column {c}")
+                if c == "sun_elevation_deg" and not -90.0 <= x <= 90.0:
+                    raise InputError(f"{where}: line {n}, column {c}: {row[j]!r} is outside -90 to 90 deg")
                 vals.append(x)
             data.append(vals)
         if len(data) < 2:
             raise InputError(f"{where}: expected at least 2 rows of poses, got {len(data)}")
         a = np.array(data)
+        sun = None
+        if sun_cols:
+            sun, a = a[:, -2:].copy(), a[:, :-2]
         rows_line = line_no[1:]
         dt = np.diff(a[:, 0])
         if np.any(dt <= 0):
@@ -251,7 +300,54 @@ class Trajectory:
                                  f"boresight {t[k, 2]:.3g} m)")
             xyz = t @ D_CAM_PHOTO  # D t: (target_x, target_y, -range) in the paper's camera frame
             values = np.column_stack([t[:, 2], xyz[:, 0], xyz[:, 1], a[:, 4:7]])
-        return cls(a[:, 0], values, mount, str(path))
+        if sun is not None:
+            _check_sun_turns(sun, rows_line, where)
+        return cls(a[:, 0], values, mount, str(path), sun)
+
+
+def _sun_vectors(sun_deg: np.ndarray) -> np.ndarray:
+    """Unit vectors (N, 3) of (azimuth, elevation) deg rows (N, 2), target frame."""
+    az, el = np.radians(sun_deg[:, 0]), np.radians(sun_deg[:, 1])
+    return np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+
+
+def _sun_turns_deg(sun_deg: np.ndarray) -> np.ndarray:
+    """The angle between consecutive rows' sun directions, deg, shape (N - 1,)."""
+    v = _sun_vectors(sun_deg)
+    return np.degrees(np.arccos(np.clip(np.sum(v[1:] * v[:-1], axis=1), -1.0, 1.0)))
+
+
+def _sun_columns(header: list, where: str) -> tuple:
+    """The file's sun columns: :data:`SUN_COLUMNS` or none (InputError for one without the other)."""
+    has = [c in header for c in SUN_COLUMNS]
+    if any(has) and not all(has):
+        raise InputError(f"{where}: the sun's direction needs both columns {', '.join(SUN_COLUMNS)}; found only "
+                         f"{SUN_COLUMNS[has.index(True)]}")
+    return SUN_COLUMNS if all(has) else ()
+
+
+def _check_sun_turns(sun_deg: np.ndarray, rows_line: list, where: str) -> None:
+    """Refuse a turn of the sun's direction over :data:`MAX_SUN_TURN_DEG` between rows, naming the line."""
+    turn = _sun_turns_deg(sun_deg)
+    if turn.size and turn.max() > MAX_SUN_TURN_DEG:
+        k = int(np.argmax(turn))
+        raise InputError(f"{where}: line {rows_line[k + 1]}: the sun's direction turns {turn[k]:.0f} deg from "
+                         f"the row before; at most {MAX_SUN_TURN_DEG:g} deg between rows (add rows between)")
+
+
+def _checked_sun(sun_deg, n: int, where: str) -> np.ndarray:
+    """``sun_deg`` as a checked (n, 2) array of (azimuth, elevation) deg."""
+    a = np.asarray(sun_deg, float)
+    if a.shape != (n, 2) or not np.all(np.isfinite(a)):
+        raise InputError(f"{where}: sun_deg: expected finite (azimuth, elevation) deg at each of the {n} knots, shape "
+                         f"({n}, 2), got shape {a.shape}")
+    if np.any(np.abs(a[:, 1]) > 90.0):
+        raise InputError(f"{where}: sun_deg: elevations must lie within -90 to 90 deg")
+    turn = _sun_turns_deg(a)
+    if turn.size and turn.max() > MAX_SUN_TURN_DEG:
+        raise InputError(f"{where}: sun_deg: the sun's direction turns {turn.max():.0f} deg between two knots; at most "
+                         f"{MAX_SUN_TURN_DEG:g}")
+    return a
 
 
 def check_envelope(trajectory: Trajectory, camera, pattern) -> None:

@@ -19,7 +19,10 @@ from svgs_sim.render.optics import Optics
 from svgs_sim.render.variant import select_variant
 from svgs_sim.sim.closed_loop import render_scenario, solve_exposure, solver_camera
 from svgs_sim.sim.crlb import centroid_crlb_px, pose_crlb
-from svgs_sim.sim.metrics import ATT_ERR_VEC_DEG, ERR_KEYS, POS_ERR_NORM_M, POS_ERR_VEC_M, ROT_ERR_DEG, state_m_deg
+from svgs_sim.sim.metrics import (
+    ATT_ERR_VEC_DEG, ERR_KEYS, POS_ERR_NORM_M, POS_ERR_VEC_M, ROT_ERR_DEG, match_err_max_px, spot_positions_px,
+    spot_radius_px, state_m_deg,
+)
 from svgs_sim.sim.render_trial.scenario import (
     RENDER_OUTPUTS,
     RENDER_PARAMETERS,
@@ -278,16 +281,6 @@ def _solve_one(scenario: RenderScenario, seed: int, frame, exposers: dict) -> di
 
 #: Pixels this far beyond a target's spot (its cube's image radius) are "away from the targets", px.
 STRAY_MARGIN_PX = 10.0
-#: The cube aperture the spot radius is taken from where the pattern gives no target sizes, m (1 in).
-STRAY_CUBE_DIAMETER_M = 0.0254
-
-
-def spot_radius_px(camera, pattern, depth_m):
-    """The image radius of a target's cube aperture at ``depth_m`` along the boresight, px (the
-    pattern's largest target diameter, else :data:`STRAY_CUBE_DIAMETER_M`); ``depth_m`` may be an array."""
-    sizes = [d for d, _ in pattern.target_sizes_m if d is not None]
-    diam = max(sizes) if sizes else STRAY_CUBE_DIAMETER_M
-    return np.sqrt(camera.fx * camera.fy) * 0.5 * diam / np.asarray(depth_m, float)
 
 
 def _clutter(out: dict, row: dict, sol, cam, pat, R, t, level, spots_px=None) -> None:
@@ -298,18 +291,8 @@ def _clutter(out: dict, row: dict, sol, cam, pat, R, t, level, spots_px=None) ->
     None), ``stray_px`` (pixels at or above the detector's threshold away from every target's spot:
     a lit body, a glint, the sun) and ``stray_saturated_px`` (those at full scale)."""
     img = row["_exposure"].image
-    uv = solver_camera(cam, img.shape).project_target(pat.points_m, R, t)
-    if spots_px is not None:  # the spots' predicted centroids, full-frame pixels -> the delivered image's
-        scale = img.shape[1] / cam.width
-        uv = np.array([spots_px[str(int(i))] for i in pat.ids], float) * scale
-    targets = None
-    if row["state"] is not None and sol:
-        targets = {int(k): v for k, v in sol.targets_px.items()}
-    elif row.get("reason") == "inconsistent" and sol is not None and "targets_px" in getattr(sol, "details", {}):
-        targets = {int(k): v for k, v in sol.details["targets_px"].items()}
-    if targets is not None:
-        found = np.array([targets[int(i)] for i in pat.ids], float)
-        out["match_err_max_px"] = float(np.max(np.linalg.norm(found - uv, axis=1)))
+    uv = spot_positions_px(solver_camera(cam, img.shape), pat, R, t, spots_px, img.shape[1] / cam.width)
+    out["match_err_max_px"] = match_err_max_px(row, sol, uv, pat.ids)
     if level is None:
         return
     gray = img if img.ndim == 2 else img.max(axis=2)
