@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 	@if $(PY) -m pip show -q opencv-python-headless opencv-python opencv-contrib-python >/dev/null 2>&1; then \
 	  $(PY) -m pip uninstall -y -q opencv-python-headless opencv-python opencv-contrib-python opencv-contrib-python-headless; fi
 	@echo "installing svgs-sim and its dependencies (a few minutes on a fresh machine; pip lists what it collects) ..."
-	$(PY) -m pip install --progress-bar off -e ".[render,test,dask,docs,orbit]"
+	$(PY) -m pip install --progress-bar off -e ".[render,test,dask,docs,orbit,basilisk]"
 	$(PY) -m svgs_sim.cli.compile_kernels
 	touch $(STAMP)
 

@@ -19,6 +19,19 @@ Run (from the repository root, with ``pip install -e ".[basilisk]"``)::
     python examples/basilisk_docking.py                 # both phones + ideal; figures in docs/figures
     python examples/basilisk_docking.py --quick --out out/dock   # a bounded form: 5 m, preview, ~20 frames
 
+On orbit (``--environment orbit``) the sun comes from the orbit: the inertial direction toward the
+sun at a fixed epoch (:data:`svgs_sim.sim.orbit_light.SUN_EPOCH_UTC`, astropy with IERS downloads off),
+the eclipse from Basilisk's own ``eclipse`` module (the Earth's mean radius, the renderer's), the
+Earth as the central body; each frame's sun and Earth are set in the target frame by
+:class:`svgs_sim.sim.basilisk_svgs.SVGSModule`. The approach starts ``--eclipse-in-s`` before the
+eclipse's entry, so its frames cross a transition; ``--raan-deg`` sets the beta angle (printed).
+``--case`` picks the corridor: ``vbar`` (behind, the Earth's limb in the frame), ``rbar-below`` (from
+below, deep space behind the target), ``rbar-above`` (from above, the Earth behind it). Each phone
+gets an orbit-phase figure (``basilisk_docking_orbit_<case>_phase_<phone>.png``: outcomes, wrong locks,
+the sun's elevation and the exposure against time)::
+
+    python examples/basilisk_docking.py --environment orbit --case rbar-above --start-z-m 10 --max-time-s 300
+
 Every random draw is seeded (``--seed``). Rendering costs 0.4-3 s a frame on a 2-core machine, so
 the sensor runs at ``--sensor-rate-hz`` (default 0.25 frames/s, one frame per 4 s) rather than the
 phone's frame rate; docs/basilisk.md gives the time a run takes.
@@ -37,7 +50,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from svgs_sim.base.errors import InputError  # noqa: E402
-from svgs_sim.svgs.frames import STATE_KEYS, pose_to_state, state_to_pose  # noqa: E402
+from svgs_sim.svgs.frames import pose_to_state, state_to_pose  # noqa: E402
 
 from svgs_sim.sim.basilisk_frames import (  # noqa: E402
     Mount, chaser_from_pose, dcm_to_mrp, hill_dcm, hill_from_inertial, mrp_to_dcm,
@@ -60,6 +73,28 @@ INCLINATION_DEG = 51.6
 PATTERN = Mount([[1, 0, 0], [0, 0, 1], [0, -1, 0]], [0.0, -0.05, 0.0])
 #: The camera on the chaser's +y face: boresight z_C = +y_B, x_C = x_B, y_C = -z_B.
 CAMERA = Mount([[1, 0, 0], [0, 0, -1], [0, 1, 0]], [0.0, 0.1, 0.0])
+#: The approach corridors (``--case``): (the pattern on the target, the camera on the chaser, what
+#: lies behind the target). Both bodies hold Hill's frame (x radial out, y along-track, z orbit
+#: normal); the target's long axis is its body x (radial), so the R-bar faces are its 10 cm ends.
+CASES = {
+    # V-bar: the chaser behind on -y looking +y along-track; from 400 km the horizon dips 19.8 deg,
+    # inside both phones' vertical half-fields (21.6, 24.9 deg): the Earth's limb is in the frame
+    "vbar": (PATTERN, CAMERA, "the chaser on -y (behind) looking +y: the Earth's limb low in the frame"),
+    # R-bar from below: the chaser on -x (nearer the Earth) looking up +x: deep space behind the target
+    "rbar-below": (Mount([[0, 1, 0], [0, 0, -1], [-1, 0, 0]], [-0.17, 0.0, 0.0]),
+                   Mount([[0, 1, 0], [0, 0, 1], [1, 0, 0]], [0.1, 0.0, 0.0]),
+                   "the chaser on -x (below) looking +x (up): deep space behind the target"),
+    # R-bar from above: the chaser on +x looking down -x: the Earth fills the view behind the target
+    "rbar-above": (Mount([[0, 1, 0], [0, 0, 1], [1, 0, 0]], [0.17, 0.0, 0.0]),
+                   Mount([[0, 1, 0], [0, 0, -1], [-1, 0, 0]], [-0.1, 0.0, 0.0]),
+                   "the chaser on +x (above) looking -x (down): the Earth behind the target"),
+}
+#: On orbit (``--environment orbit``): the approach starts this long before the target enters the
+#: Earth's shadow, s (``--eclipse-in-s``), so that its frames cross the eclipse entry.
+ECLIPSE_IN_S = 120.0
+#: The orbit's right ascension of the ascending node, deg (``--raan-deg``): with the sun of
+#: :data:`svgs_sim.sim.orbit_light.SUN_EPOCH_UTC` (near the March equinox) 0 gives beta ~ 0.
+RAAN_DEG = 0.0
 #: The initial sensor pose in the paper's state: the camera at (x, y, z) m in the target frame and
 #: the paper's attitude (deg); the chaser holds this attitude in Hill's frame.
 START_STATE = (0.3, -0.2, 30.0, 2.0, -1.0, 3.0)
@@ -153,8 +188,10 @@ def _make_gnc_class():
     class DockingGNC(sysModel.SysModel):
         """Navigation (CW Kalman filter with latency replay), glide-slope guidance, ideal-force control."""
 
-        def __init__(self, svgs_output, n_rad_s, x0_hat, P0, ideal: bool, pixel_scale: float):
+        def __init__(self, svgs_output, n_rad_s, x0_hat, P0, ideal: bool, pixel_scale: float, camera=CAMERA,
+                     pattern=PATTERN):
             super().__init__()
+            self.camera, self.pattern = camera, pattern
             self.targetStateInMsg = messaging.SCStatesMsgReader()
             self.chaserStateInMsg = messaging.SCStatesMsgReader()
             self.forceOutMsg = messaging.CmdForceInertialMsg()
@@ -180,7 +217,7 @@ def _make_gnc_class():
         # the chaser's camera and the pattern as offsets in Hill's frame (the target is Hill-held)
         def _offsets(self, sigma_chaser_BN, HN):
             HBc = HN @ mrp_to_dcm(sigma_chaser_BN).T
-            return HBc @ CAMERA.origin_body_m - PATTERN.origin_body_m
+            return HBc @ self.camera.origin_body_m - self.pattern.origin_body_m
 
         def Reset(self, CurrentSimNanos):  # noqa: N802, N803
             self.forceOutMsg.write(messaging.CmdForceInertialMsgPayload(), CurrentSimNanos, self.moduleID)
@@ -246,8 +283,10 @@ def _make_gnc_class():
             # new measurements (released by the SVGS module since the last step)
             new = []
             for m in self.svgs.since(self.n_seen):
+                sm = m.sensor_measurement
                 rec = {"t_s": m.t_image_s, "ok": m.ok, "reason": m.reason, "accepted": False, "truth": m.truth,
-                       "state": m.state, "sigma": None}
+                       "state": m.state, "sigma": None, "wrong_lock": bool(getattr(sm, "wrong_lock", False)),
+                       "exposure_s": getattr(sm, "exposure_s", None)}
                 self.meas_log.append(rec)
                 if m.ok and m.state_vector is not None:
                     cov6 = m.covariance if m.covariance is not None else np.zeros((6, 6))
@@ -259,7 +298,7 @@ def _make_gnc_class():
                         cov_att = cov_att + np.diag(f_ang**2)
                     rec["sigma"] = np.sqrt(np.concatenate([np.diag(cov_C), np.diag(cov_att)]))
                     # z: the chaser relative to the target in Hill's frame, from -t_cam_target
-                    HC = HN @ mrp_to_dcm(m.sigma_chaser_BN).T @ CAMERA.dcm_frame_body.T
+                    HC = HN @ mrp_to_dcm(m.sigma_chaser_BN).T @ self.camera.dcm_frame_body.T
                     z = HC @ r_C - d_H
                     new.append((m.t_image_s, z, HC @ cov_C @ HC.T, rec))
                     self._attitude_update(m.t_image_s, m.state_vector[3:], cov_att)
@@ -267,7 +306,7 @@ def _make_gnc_class():
             self.n_seen = len(self.svgs.history)
             x, P = self._estimate(t, new)
             # guidance in the target frame (camera position and velocity), then CW compensation
-            T = PATTERN.dcm_frame_body
+            T = self.pattern.dcm_frame_body
             cam = T @ (x[:3] + d_H)
             vel = T @ x[3:]
             range_m = float(cam[2])
@@ -290,7 +329,7 @@ def _make_gnc_class():
             # the log: truth from the states (for the plots only; nothing above uses it but the
             # Hill frame and the chaser's attitude, which the chaser knows from its own navigation)
             rho, rho_dot = hill_from_inertial(r_t, v_t, r_c, v_c)
-            R_true, t_true = _true_pose(tg, ch)
+            R_true, t_true = _true_pose(tg, ch, self.camera, self.pattern)
             st_true = pose_to_state(R_true, t_true)
             L = self.log
             L["t_s"].append(t)
@@ -322,15 +361,16 @@ def _make_gnc_class():
     return DockingGNC
 
 
-def _true_pose(tg, ch):
+def _true_pose(tg, ch, camera=CAMERA, pattern=PATTERN):
     from svgs_sim.sim.basilisk_frames import relative_pose
 
     return relative_pose(np.array(ch.r_BN_N), np.array(ch.sigma_BN), np.array(tg.r_BN_N), np.array(tg.sigma_BN),
-                         CAMERA, PATTERN)
+                         camera, pattern)
 
 
-def _sensor(phone: str | None, *, preview: bool, seed: int, rate_hz: float):
-    """The SVGS sensor of a phone (None: the ideal sensor)."""
+def _sensor(phone: str | None, *, preview: bool, seed: int, rate_hz: float, orbit: bool = False):
+    """The SVGS sensor of a phone (None: the ideal sensor); ``orbit``: black space around the target
+    (the sun and the Earth set per frame by the module)."""
     from svgs_sim.sim.basilisk_svgs import IdealSensor
 
     if phone is None:
@@ -343,18 +383,116 @@ def _sensor(phone: str | None, *, preview: bool, seed: int, rate_hz: float):
         from svgs_sim.base.profiles import Camera
 
         cam = binned_camera(Camera.load(phone))
-    return ApproachSensor(cam, seed=seed, keep_images=True, frame_rate_hz=rate_hz)
+    base = None
+    if orbit:
+        from svgs_sim.sim.closed_loop import Scenario
+        from svgs_sim.sim.scene import Scene
+
+        base = Scenario(scene=Scene(environment="orbit"))
+    return ApproachSensor(cam, seed=seed, keep_images=True, frame_rate_hz=rate_hz, base=base)
+
+
+def eclipse_entry_phase_deg(sun_N, raan_deg: float, inclination_deg: float, radius_m: float) -> float:
+    """The argument of latitude (deg) at which a circular orbit enters the Earth's shadow
+    (:func:`svgs_sim.sim.orbit_light.sun_and_earth_in_target`'s cylindrical shadow), by a 0.01 deg
+    scan; InputError for an orbit never in shadow (a high beta angle)."""
+    from svgs_sim.render.earth import EARTH_RADIUS_M, in_eclipse
+
+    altitude_m = float(radius_m) - EARTH_RADIUS_M  # above the Earth's mean radius (the renderer's)
+    W, i = np.radians(raan_deg), np.radians(inclination_deg)
+    u = np.radians(np.arange(0.0, 360.0, 0.01))
+    node = np.array([np.cos(W), np.sin(W), 0.0])
+    up = np.array([-np.sin(W) * np.cos(i), np.cos(W) * np.cos(i), np.sin(i)])
+    r_hat = np.cos(u)[:, None] * node + np.sin(u)[:, None] * up
+    dark = np.array([in_eclipse(sun_N, -r, altitude_m) for r in r_hat])
+    enter = np.flatnonzero(dark & ~np.roll(dark, 1))
+    if enter.size == 0:
+        raise InputError(f"--raan-deg {raan_deg:g}: the orbit never enters the Earth's shadow (beta too high); "
+                         "give another node or --eclipse-in-s off")
+    return float(np.degrees(u[enter[0]]))
+
+
+def _place_target(tgt, mu: float, sun_N, raan_deg: float, eclipse_in_s: float):
+    """Set the target's initial state: a circular orbit, its body the Hill frame, spinning at the
+    orbital rate; on orbit (``sun_N`` given) ``eclipse_in_s`` before the shadow's entry. Returns
+    ``(r_N, v_N, [HN], n rad/s, the start's argument of latitude deg)``."""
+    from Basilisk.utilities import orbitalMotion
+
+    oe = orbitalMotion.ClassicElements()
+    oe.a, oe.e, oe.i = orbitalMotion.REQ_EARTH * 1e3 + ALTITUDE_M, 0.0, np.radians(INCLINATION_DEG)
+    n = np.sqrt(mu / oe.a**3)
+    u0_deg = 0.0
+    if sun_N is not None:
+        u0_deg = eclipse_entry_phase_deg(sun_N, raan_deg, INCLINATION_DEG, oe.a) - np.degrees(n * eclipse_in_s)
+    oe.Omega, oe.omega, oe.f = np.radians(raan_deg if sun_N is not None else 0.0), 0.0, np.radians(u0_deg)
+    r_t, v_t = orbitalMotion.elem2rv(mu, oe)
+    HN = hill_dcm(r_t, v_t)
+    tgt.hub.r_CN_NInit, tgt.hub.v_CN_NInit = r_t.tolist(), v_t.tolist()
+    tgt.hub.sigma_BNInit = dcm_to_mrp(HN).reshape(3, 1).tolist()
+    tgt.hub.omega_BN_BInit = [[0.0], [0.0], [n]]
+    return r_t, v_t, HN, n, u0_deg
+
+
+def _place_chaser(ch, start_state, r_t, v_t, HN, n_rad_s, camera_mount, pattern_mount) -> np.ndarray:
+    """Set the chaser's initial state: the start pose (the paper's state) -> inertial position and
+    attitude, at rest in the rotating Hill frame. Returns its position in Hill's frame, m."""
+    s = np.asarray(start_state, float)
+    R0, t0 = state_to_pose(np.concatenate([s[:3], np.radians(s[3:])]))
+    r_c, sig_c = chaser_from_pose(R0, t0, r_t, dcm_to_mrp(HN), camera_mount, pattern_mount)
+    rho = HN @ (r_c - r_t)
+    w_N = HN.T @ np.array([0.0, 0.0, n_rad_s])
+    v_c = v_t + np.cross(w_N, HN.T @ rho)  # at rest in the rotating Hill frame
+    ch.hub.r_CN_NInit, ch.hub.v_CN_NInit = r_c.tolist(), v_c.tolist()
+    ch.hub.sigma_BNInit = sig_c.reshape(3, 1).tolist()
+    ch.hub.omega_BN_BInit = (mrp_to_dcm(sig_c) @ w_N).reshape(3, 1).tolist()
+    return rho
+
+
+def _orbit_light(sim, target, sun_N):
+    """The sun's message (1 AU along ``sun_N``) and Basilisk's eclipse module for the target, with
+    the Earth's mean radius (the renderer's); returned to be kept alive."""
+    from Basilisk.architecture import messaging
+    from Basilisk.simulation import eclipse
+    from Basilisk.utilities import orbitalMotion
+
+    from svgs_sim.render.earth import EARTH_RADIUS_M
+
+    def planet(name, pos_m):
+        p = messaging.SpicePlanetStateMsgPayload()
+        p.PositionVector = [float(x) for x in pos_m]
+        p.PlanetName = name
+        return messaging.SpicePlanetStateMsg().write(p)
+
+    sun_msg = planet("sun", orbitalMotion.AU * 1e3 * np.asarray(sun_N, float))
+    earth_msg = planet("custom", np.zeros(3))  # the central body at the origin, radius rEqCustom
+    ecl = eclipse.Eclipse()
+    ecl.ModelTag = "eclipse"
+    ecl.sunInMsg.subscribeTo(sun_msg)
+    ecl.addPlanetToModel(earth_msg)
+    ecl.rEqCustom = EARTH_RADIUS_M
+    ecl.addSpacecraftToModel(target.scStateOutMsg)
+    sim.AddModelToTask("dyn", ecl, 5)
+    return sun_msg, earth_msg, ecl
 
 
 def run(phone: str | None, *, start_state=START_STATE, sensor_rate_hz=0.25, preview=False, seed=0,
-        max_time_s=1200.0, latency_s=None) -> dict:
-    """One closed-loop approach. ``phone`` None: the ideal sensor (no latency). Returns the logs
-    and the summary numbers."""
+        max_time_s=1200.0, latency_s=None, case: str = "vbar", environment: str = "lab",
+        eclipse_in_s: float = ECLIPSE_IN_S, raan_deg: float = RAAN_DEG) -> dict:
+    """One closed-loop approach. ``phone`` None: the ideal sensor (no latency). ``case``: the
+    corridor (:data:`CASES`); ``environment="orbit"``: the sun from the orbit (astropy, at
+    :data:`svgs_sim.sim.orbit_light.SUN_EPOCH_UTC`), the Earth, Basilisk's eclipse module, the
+    approach starting ``eclipse_in_s`` before the eclipse entry. Returns the logs and the summary
+    numbers."""
     from Basilisk.simulation import extForceTorque, spacecraft
-    from Basilisk.utilities import SimulationBaseClass, macros, orbitalMotion, simIncludeGravBody
+    from Basilisk.utilities import SimulationBaseClass, macros, simIncludeGravBody
 
     from svgs_sim.sim.basilisk_svgs import PROCESSING_LATENCY_S, SVGSModule
+    from svgs_sim.sim.orbit_light import beta_angle_deg, sun_direction_gcrs
     from svgs_sim.base.profiles import Camera
+
+    pattern_mount, camera_mount, _ = CASES[case]
+    orbit = environment == "orbit"
+    sun_N = sun_direction_gcrs() if orbit else None
 
     ideal = phone is None
     lat = 0.0 if ideal else (PROCESSING_LATENCY_S if latency_s is None else float(latency_s))
@@ -378,35 +516,22 @@ def run(phone: str | None, *, start_state=START_STATE, sensor_rate_hz=0.25, prev
     thr = extForceTorque.ExtForceTorque()
     thr.ModelTag = "thrusters"
     ch.addDynamicEffector(thr)
-    # target: circular orbit, body = Hill frame, spinning at the orbital rate
-    oe = orbitalMotion.ClassicElements()
-    oe.a, oe.e, oe.i = orbitalMotion.REQ_EARTH * 1e3 + ALTITUDE_M, 0.0, np.radians(INCLINATION_DEG)
-    oe.Omega, oe.omega, oe.f = 0.0, 0.0, 0.0
-    r_t, v_t = orbitalMotion.elem2rv(mu, oe)
-    n = np.sqrt(mu / oe.a**3)
-    HN = hill_dcm(r_t, v_t)
-    tgt.hub.r_CN_NInit, tgt.hub.v_CN_NInit = r_t.tolist(), v_t.tolist()
-    tgt.hub.sigma_BNInit = dcm_to_mrp(HN).reshape(3, 1).tolist()
-    tgt.hub.omega_BN_BInit = [[0.0], [0.0], [n]]
-    # chaser: the start pose (paper's state) -> inertial position and attitude; at rest in Hill
-    s = np.asarray(start_state, float)
-    R0, t0 = state_to_pose(np.concatenate([s[:3], np.radians(s[3:])]))
-    r_c, sig_c = chaser_from_pose(R0, t0, r_t, dcm_to_mrp(HN), CAMERA, PATTERN)
-    rho = HN @ (r_c - r_t)
-    w_N = HN.T @ np.array([0.0, 0.0, n])
-    v_c = v_t + np.cross(w_N, HN.T @ rho)  # at rest in the rotating Hill frame
-    ch.hub.r_CN_NInit, ch.hub.v_CN_NInit = r_c.tolist(), v_c.tolist()
-    ch.hub.sigma_BNInit = sig_c.reshape(3, 1).tolist()
-    ch.hub.omega_BN_BInit = (mrp_to_dcm(sig_c) @ w_N).reshape(3, 1).tolist()
+    r_t, v_t, HN, n, u0_deg = _place_target(tgt, mu, sun_N, raan_deg, eclipse_in_s)
+    rho = _place_chaser(ch, start_state, r_t, v_t, HN, n, camera_mount, pattern_mount)
     for sc in (tgt, ch):
         sim.AddModelToTask("dyn", sc, 10)
     sim.AddModelToTask("dyn", thr, 9)
     # the sensor
-    sensor = _sensor(phone, preview=preview, seed=seed, rate_hz=sensor_rate_hz)
-    svgs_mod = SVGSModule(sensor, CAMERA, PATTERN, frame_rate_hz=sensor_rate_hz, latency_s=lat)
+    sensor = _sensor(phone, preview=preview, seed=seed, rate_hz=sensor_rate_hz, orbit=orbit)
+    svgs_mod = SVGSModule(sensor, camera_mount, pattern_mount, frame_rate_hz=sensor_rate_hz, latency_s=lat)
     svgs_mod.ModelTag = "svgs"
     svgs_mod.chaserStateInMsg.subscribeTo(ch.scStateOutMsg)
     svgs_mod.targetStateInMsg.subscribeTo(tgt.scStateOutMsg)
+    light = None
+    if orbit and phone is not None:  # the ideal sensor renders nothing: no light to set
+        light = _orbit_light(sim, tgt, sun_N)
+        svgs_mod.sunInMsg.subscribeTo(light[0])
+        svgs_mod.eclipseInMsg.subscribeTo(light[2].eclipseOutMsgs[0])
     sim.AddModelToTask("sensor", svgs_mod)
     # navigation, guidance, control; the filter starts from a seeded draw around the truth
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 27]))
@@ -414,7 +539,7 @@ def run(phone: str | None, *, start_state=START_STATE, sensor_rate_hz=0.25, prev
     x0 = np.concatenate([rho, np.zeros(3)]) + rng.multivariate_normal(np.zeros(6), P0)
     fx_full = Camera.load(phone).fx if phone else 1.0
     pixel_scale = fx_full / sensor.camera.fx if phone else 1.0
-    gnc = _make_gnc_class()(svgs_mod.measurementOutMsg, n, x0, P0, ideal, pixel_scale)
+    gnc = _make_gnc_class()(svgs_mod.measurementOutMsg, n, x0, P0, ideal, pixel_scale, camera_mount, pattern_mount)
     gnc.ModelTag = "gnc"
     gnc.targetStateInMsg.subscribeTo(tgt.scStateOutMsg)
     gnc.chaserStateInMsg.subscribeTo(ch.scStateOutMsg)
@@ -432,7 +557,45 @@ def run(phone: str | None, *, start_state=START_STATE, sensor_rate_hz=0.25, prev
         if hasattr(sensor, "close"):
             sensor.close()
     wall = time.perf_counter() - wall0
-    return _run_summary(gnc, phone, preview, sensor_rate_hz, lat, wall)
+    out = _run_summary(gnc, phone, preview, sensor_rate_hz, lat, wall)
+    out["summary"]["case"] = case
+    out["summary"]["environment"] = environment
+    if orbit:
+        out["summary"]["orbit"] = _orbit_summary(svgs_mod.light_log, gnc.meas_log, n, u0_deg,
+                                                 beta_angle_deg(r_t, v_t, sun_N), raan_deg)
+        out["light"] = svgs_mod.light_log
+    del light
+    return out
+
+
+def _orbit_summary(light_log, meas, n_rad_s, u0_deg, beta_deg, raan_deg) -> dict:
+    """Dropouts and wrong locks against the orbit's phase: sunlit and eclipsed frames, the eclipse's
+    entry and exit within the run, the frames from each transition to the next solution (the
+    auto-exposure's lag)."""
+    lit = {round(x["t_s"], 6): x["sunlit"] for x in light_log}
+    rows = [dict(m, sunlit=lit.get(round(m["t_s"], 6))) for m in meas]
+    trans = [(b["t_s"], "entry" if a["sunlit"] else "exit") for a, b in zip(light_log, light_log[1:])
+             if a["sunlit"] != b["sunlit"]]
+
+    def tally(sel):
+        # solved: a correct pose; a wrong lock: a pose the app would report (solved, or refused only by the
+        # consistency test: then also a dropout "inconsistent") with a blob off its target's spot
+        return {"frames": len(sel), "solved": sum(r["ok"] and not r["wrong_lock"] for r in sel),
+                "wrong_locks": sum(r["wrong_lock"] for r in sel),
+                "wrong_locks_solved": sum(r["ok"] and r["wrong_lock"] for r in sel),
+                "wrong_locks_accepted": sum(r["wrong_lock"] and r["accepted"] for r in sel),
+                "dropouts_by_reason": dict(sorted(((k, sum(1 for r in sel if not r["ok"] and r["reason"] == k))
+                                                   for k in {r["reason"] for r in sel if not r["ok"]})))}
+
+    lag = []
+    for t_tr, kind in trans:
+        after = [r for r in rows if r["t_s"] >= t_tr - 1e-9]
+        first = next((r for r in after if r["ok"]), None)
+        lag.append({"transition": kind, "t_s": t_tr, "frames_to_first_solution": None if first is None
+                    else after.index(first), "time_to_first_solution_s": None if first is None else first["t_s"] - t_tr})
+    return {"beta_deg": beta_deg, "raan_deg": raan_deg, "start_phase_deg": u0_deg,
+            "phase_rate_deg_s": float(np.degrees(n_rad_s)), "transitions": lag,
+            "sunlit": tally([r for r in rows if r["sunlit"]]), "eclipse": tally([r for r in rows if r["sunlit"] is False])}
 
 
 def _run_summary(gnc, phone, preview, sensor_rate_hz, latency_s, wall_s) -> dict:
@@ -458,6 +621,8 @@ def _run_summary(gnc, phone, preview, sensor_rate_hz, latency_s, wall_s) -> dict
         "final_navigation_error_m": (log["cam_hat"][i_end] - final_true).tolist(),
         "frames": len(ml),
         "frames_solved": int(sum(m["ok"] for m in ml)),
+        "wrong_locks": int(sum(m.get("wrong_lock", False) for m in ml)),  # of them, or "inconsistent" dropouts
+        "wrong_locks_accepted": int(sum(m.get("wrong_lock", False) and m["accepted"] for m in ml)),
         "frames_accepted": int(sum(m["accepted"] for m in ml)),
         "dropouts_by_reason": {r: sum(1 for m in ml if not m["ok"] and m["reason"] == r)
                                for r in sorted({m["reason"] for m in ml if not m["ok"]})},
@@ -469,6 +634,49 @@ def _run_summary(gnc, phone, preview, sensor_rate_hz, latency_s, wall_s) -> dict
 
 
 # ----------------------------------------------------------------------------- figures
+def plot_orbit(r: dict, path: Path, title: str) -> None:
+    """Against time (and the orbit's phase): each frame's outcome (solved, dropout by reason, wrong
+    lock), the sun's elevation over the pattern plane and the eclipse, the exposure time."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    ml, light, orb = r["meas"], r["light"], r["summary"]["orbit"]
+    fig = Figure(figsize=(11, 7.5), constrained_layout=True)
+    FigureCanvasAgg(fig)
+    ax1, ax2, ax3 = fig.subplots(3, 1, sharex=True)
+    tl = np.array([x["t_s"] for x in light])
+    dark = np.array([not x["sunlit"] for x in light])
+    for ax in (ax1, ax2, ax3):
+        if tl.size:
+            ax.fill_between(tl, 0, 1, where=dark, transform=ax.get_xaxis_transform(), color="0.85", lw=0,
+                            label="eclipse")
+    t = np.array([m["t_s"] for m in ml])
+    reasons = sorted({m["reason"] for m in ml if not m["ok"]})
+    ys = {"solved": 0, **{k: i + 1 for i, k in enumerate(reasons)}}
+    ok = np.array([m["ok"] and not m["wrong_lock"] for m in ml], bool)
+    ax1.plot(t[ok], np.zeros(ok.sum()), "o", ms=3, color="tab:green", label="solved")
+    for k in reasons:
+        sel = np.array([(not m["ok"]) and m["reason"] == k for m in ml], bool)
+        ax1.plot(t[sel], np.full(sel.sum(), ys[k]), "x", ms=4, label=f"dropout: {k}")
+    wl = np.array([m["wrong_lock"] for m in ml], bool)
+    if wl.any():
+        ax1.plot(t[wl], np.full(wl.sum(), -1), "*", ms=8, color="tab:red", label="WRONG LOCK")
+    ax1.set_yticks([-1, *ys.values()], ["wrong lock", *ys.keys()])
+    ax1.legend(fontsize=7, loc="upper right")
+    ax1.set_title(title, fontsize=10)
+    ax2.plot(tl, [x["sun_elevation_deg"] for x in light], color="tab:orange", label="sun elevation over the pattern plane")
+    ax2.plot(tl, [x["earth_elevation_deg"] for x in light], color="tab:blue", label="Earth's centre elevation")
+    ax2.set_ylabel("deg (target frame)")
+    ax2.legend(fontsize=7)
+    ex = np.array([np.nan if m["exposure_s"] is None else m["exposure_s"] for m in ml], float)
+    ax3.semilogy(t, ex * 1e3, ".-", color="k", lw=0.8, ms=3)
+    ax3.set_ylabel("exposure, ms")
+    ax3.set_xlabel(f"t, s (orbit phase = {orb['start_phase_deg']:.1f} + {orb['phase_rate_deg_s']:.4f} t deg from "
+                   "the ascending node)")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=80)
+
+
 def plot(runs: dict, path: Path, title: str) -> None:
     """True against estimated camera position and attitude in the target frame with the 1-sigma
     bands, the measurements (dropouts marked), and the control effort, for each run."""
@@ -544,27 +752,59 @@ def main(argv=None) -> dict:
     ap.add_argument("--max-time-s", type=float, default=None, help="simulated time limit, s (default 1200)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default="docs/figures", help="folder for basilisk_docking*.png and .json")
+    ap.add_argument("--case", choices=sorted(CASES), default="vbar",
+                    help="the approach corridor: vbar (the default; along-track from behind), rbar-below (from "
+                         "below, deep space behind the target), rbar-above (from above, the Earth behind it)")
+    ap.add_argument("--environment", choices=("lab", "orbit"), default="lab",
+                    help="lab (the default: the paper's dark lab around the target) or orbit (the sun from the "
+                         "orbit at a fixed epoch, the Earth, Basilisk's eclipse module; an orbit-phase figure)")
+    ap.add_argument("--eclipse-in-s", type=float, default=ECLIPSE_IN_S,
+                    help=f"orbit: start this long before the eclipse's entry, s (default {ECLIPSE_IN_S:g})")
+    ap.add_argument("--raan-deg", type=float, default=RAAN_DEG,
+                    help=f"orbit: the right ascension of the ascending node, deg (default {RAAN_DEG:g}; it sets beta)")
+    ap.add_argument("--start-z-m", type=float, default=None,
+                    help="start this far out along the pattern's axis, m (default 30; --quick 5)")
     args = ap.parse_args(argv)
     phones = [p.strip() for p in args.phones.split(",") if p.strip()]
     rate = args.sensor_rate_hz or (0.5 if args.quick else 0.25)
     if not (np.isfinite(rate) and rate > 0):
         raise InputError(f"--sensor-rate-hz: expected a positive rate, got {rate!r}")
     start = (0.1, -0.05, 5.0, 2.0, -1.0, 3.0) if args.quick else START_STATE
+    if args.start_z_m is not None:
+        if not (np.isfinite(args.start_z_m) and GOAL_Z_M < args.start_z_m <= 60.0):
+            raise InputError(f"--start-z-m: expected {GOAL_Z_M:g} < z <= 60 m, got {args.start_z_m!r}")
+        start = (start[0], start[1], float(args.start_z_m), *start[3:])
+    if not np.isfinite(args.eclipse_in_s) or not np.isfinite(args.raan_deg):
+        raise InputError("--eclipse-in-s, --raan-deg: expected finite numbers")
     max_time = args.max_time_s or (40.0 if args.quick else 1200.0)
     preview = args.preview or args.quick
     out = Path(args.out)
     results = {}
     for phone in [None] + phones:
-        r = run(phone, start_state=start, sensor_rate_hz=rate, preview=preview, seed=args.seed, max_time_s=max_time)
+        r = run(phone, start_state=start, sensor_rate_hz=rate, preview=preview, seed=args.seed, max_time_s=max_time,
+                case=args.case, environment=args.environment, eclipse_in_s=args.eclipse_in_s, raan_deg=args.raan_deg)
         results[phone or "ideal"] = r
         print(json.dumps(r["summary"]))
-    tag = "_quick" if args.quick else ""
+    tag = (f"_orbit_{args.case.replace('-', '_')}" if args.environment == "orbit"
+           else "" if args.case == "vbar" else f"_{args.case.replace('-', '_')}") + ("_quick" if args.quick else "")
+    if args.environment == "orbit":
+        for phone in phones:
+            plot_orbit(results[phone], out / f"basilisk_docking{tag}_phase_{phone}.png",
+                       f"{phone}, {args.case} on orbit (beta {results[phone]['summary']['orbit']['beta_deg']:.1f} deg), "
+                       f"{start[2]:g} m start {args.eclipse_in_s:g} s before the eclipse, {rate:g} frames/s"
+                       f"{', preview' if preview else ''}")
     for phone in phones:
         plot({"ideal": results["ideal"], phone: results[phone]}, out / f"basilisk_docking{tag}_{phone}.png",
              f"Basilisk docking, {start[2]:g} -> {GOAL_Z_M:g} m, sensor {rate:g} frames/s, latency "
              f"{results[phone]['summary']['latency_s']:g} s{', preview' if preview else ''}: ideal sensor (left) "
              f"against {phone} (right)")
     summary = {k: v["summary"] for k, v in results.items()}
+    for phone in phones:  # on orbit: each frame's light and outcome, for the phase plots
+        if "light" in results[phone]:
+            summary[phone]["frames_by_time"] = [
+                {"t_s": m["t_s"], "ok": m["ok"], "reason": m["reason"], "wrong_lock": m["wrong_lock"],
+                 "accepted": m["accepted"], "exposure_s": m["exposure_s"]} for m in results[phone]["meas"]]
+            summary[phone]["light"] = results[phone]["light"]
     ideal = summary["ideal"]
     for phone in phones:
         s = summary[phone]

@@ -51,3 +51,28 @@ def test_quick_form_runs_and_writes_its_figures(tmp_path):
     # 16 s at 0.5 frames/s: frames at 0, 2, ..., 16 s, the last released after 16 s
     assert nexus["frames"] == 8 and nexus["frames_solved"] >= 6
     assert nexus["delta_v_m_s"] > 0 and "cost_vs_ideal" in nexus
+
+
+@pytest.mark.render
+def test_the_orbit_form_crosses_the_eclipse_entry_where_basilisk_puts_it(tmp_path):
+    """``--environment orbit``: the approach starts 7 s before the eclipse's entry (our cylindrical
+    shadow with the Earth's mean radius, by the example's own scan), and the frames' light comes
+    from Basilisk's eclipse module: sunlit before 7 s, in shadow from the first frame after it; the
+    sun's elevation over the pattern plane (R-bar from above: the face points up, radially) is the
+    Earth's horizon dip at the shadow's edge, asin(R / (R + h)) - 90 = -19.8 deg from 407 km."""
+    pytest.importorskip("Basilisk", reason="the basilisk extra is not installed (pip install -e \".[basilisk]\")")
+    ex = _example()
+    summary = ex.main(["--quick", "--phones", "galaxy-nexus", "--max-time-s", "16", "--environment", "orbit",
+                       "--case", "rbar-above", "--eclipse-in-s", "7", "--out", str(tmp_path)])
+    assert (tmp_path / "basilisk_docking_orbit_rbar_above_quick_phase_galaxy-nexus.png").is_file()
+    nexus = summary["galaxy-nexus"]
+    light = nexus["light"]
+    assert [x["sunlit"] for x in light] == [x["t_s"] < 7.0 for x in light]
+    orbit = nexus["orbit"]
+    assert [tr["transition"] for tr in orbit["transitions"]] == ["entry"]
+    assert orbit["sunlit"]["frames"] + orbit["eclipse"]["frames"] == nexus["frames"]
+    assert orbit["sunlit"]["wrong_locks"] == orbit["eclipse"]["wrong_locks"] == 0
+    R, h = 6371.0088e3, 6378.1363e3 + 400e3 - 6371.0088e3
+    dip = np.degrees(np.arcsin(R / (R + h))) - 90.0
+    at_entry = min(light, key=lambda x: abs(x["t_s"] - 7.0))
+    assert at_entry["sun_elevation_deg"] == pytest.approx(dip, abs=0.3)

@@ -99,11 +99,14 @@ def run(out: Path, svgs: list[str], only: set[str] | None) -> int:
 #: older run's output compares with a newer one's; at any other value it stays (and differs).
 ADDED_AT_DEFAULT = {"environment": ("lab", 0.0, "0.0", None), "sun_azimuth_deg": (None, ""),
                     "sun_elevation_deg": (None, ""), "sun_deg": (None,), "body_material": (None,),
-                    "body_materials": (None,)}  # None: an option not given
+                    "body_materials": (None,), "earth_azimuth_deg": (None, ""), "earth_elevation_deg": (None, ""),
+                    "earth_deg": (None,), "altitude_km": (400.0, "400.0", 400, None), "earth_albedo": (0.3, "0.3", None),
+                    }  # None: an option not given
 
 
 #: Outputs added since an older run (new numbers, not moved ones): dropped before comparing.
-NEW_OUTPUTS = frozenset({"match_err_max_px", "stray_px", "stray_saturated_px", "outside_test_envelope", "identified_px"})
+NEW_OUTPUTS = frozenset({"match_err_max_px", "stray_px", "stray_saturated_px", "outside_test_envelope", "identified_px",
+                         "wrong_lock", "wrong_locks", "paper_gates_reported", "paper_gates_match_err_max_px"})
 
 
 def _added_at_default(key, value) -> bool:

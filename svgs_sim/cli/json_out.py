@@ -115,6 +115,7 @@ SCHEMAS = {
 {{"ok": bool, "reason": str | null, "message": str | null, "n_blobs": int,
  "outside_test_envelope": bool | null,         # solved outside the paper's test envelope (inside the physical one)
  "identified_px": {{target: [u, v]}} | null,   # the identified blobs (solved or inconsistent), delivered image px
+ "sun_in_view": bool, "saturated_px": int,      # on orbit with --sun-deg only: the sun's disk in the image, full-scale px
  "truth_state": {_STATE}, "state": {{...}} | null,
  "exposure_s": float, "iso": float, "expose_s": float, "solve_s": float, "render_s": float,
  "residual_rms_px": float | null, "chi2": float | null, "chi2_dof": int | null,

@@ -148,6 +148,25 @@ def cmd_render_and_solve(args) -> int:
         return _render_and_solve(args, scen, thr, options)
 
 
+def sun_in_view_note(frame, row: dict) -> dict:
+    """On orbit: ``sun_in_view`` (the sun's disk projects into the image), ``saturated_px`` (pixels
+    of the delivered image at full scale) and, for a frame without a solution with the sun in view,
+    the message extended by why (the sun's glare and blooming; docs/orbit.md). Empty in the lab."""
+    sun = frame.truth.get("sun")
+    if not sun:
+        return {}
+    img = row["_exposure"].image
+    gray = img if img.ndim == 2 else img.max(axis=2)
+    full = 255 if img.dtype.itemsize == 1 else int(np.max(gray))
+    sat = int(np.sum(gray >= full))
+    out = {"sun_in_view": bool(sun.get("in_view")), "saturated_px": sat}
+    if sun.get("in_view") and not row["ok"]:
+        out["message"] = (f"{row['message']}; the sun is in the field of view and {sat} px "
+                          f"({100.0 * sat / gray.size:.1f} % of the frame) are at full scale: its glare and blooming "
+                          "cover the spots (docs/orbit.md)")
+    return out
+
+
 def _render_and_solve(args, scen, thr, options=None) -> int:
     """``svgs render-and-solve`` once its inputs are checked and ``--out`` is ready."""
     import time
@@ -179,6 +198,7 @@ def _render_and_solve(args, scen, thr, options=None) -> int:
     from svgs_sim.svgs.pipeline import describe_detector, detector_settings
 
     out = {k: v for k, v in row.items() if not k.startswith("_")}
+    out.update(sun_in_view_note(frame, row))
     out["detector"] = detector_settings(frame.camera, thr)
     out["crlb"] = crlb
     out["render_s"] = frame.render_s
@@ -200,7 +220,7 @@ def _render_and_solve(args, scen, thr, options=None) -> int:
             if note:
                 print(note)
         else:
-            print(f"NO SOLUTION ({row['reason']}): {row['message']}")
+            print(f"NO SOLUTION ({row['reason']}): {out['message']}")
         for k, v in paths.items():
             print(f"wrote {v}")
     return 0 if row["ok"] else 1

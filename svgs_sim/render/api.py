@@ -51,6 +51,7 @@ from .sensor import CameraModel
 from .spots import SPOT_SAMPLERS, SpotEstimator
 from .sun import sun_in_band, sun_in_image
 from .earth import earth_half_angle_deg, earth_in_image, earth_map
+from .environment import EnvironmentGrid, environment_radiance
 from .truth import svgs_frame_truth
 from .variant import select_variant
 from .windows import background_tiles, spot_windows
@@ -206,6 +207,8 @@ class Renderer:
         self.variant = select_variant(variant)
         t0 = time.perf_counter()
         self._extra_meshes = tuple(extra_meshes)
+        self._env_grid = None  # the closed-form environment's pixel grid (made on first use)
+        self._sun_factor32 = None  # (the flux factor, it times the sun's photon ratio in float32)
         self._load_scene(extra_meshes)
         self._sun = None
         if self.options.light_pass:
@@ -420,24 +423,33 @@ class Renderer:
         """The diffuse background at ``spp``: over the tiles covering the projected scene (or the
         full frame), zeros elsewhere; float64 (H, W), and the box ``(y0, y1, x0, x1)`` that holds
         it (None when ``spp == 0``: zeros). ``sun``: the sun's scene, over the full frame when the
-        sun's disk is in view (the tiles cover the target only)."""
+        sun's disk or the Earth is in view (the tiles cover the target only): with the Earth, the
+        pixels outside the tiles see only the environment and take it in closed form
+        (:meth:`_environment`); with the sun's disk alone the full frame is path traced."""
 
         H, W = self.camera.height, self.camera.width
-        rad = np.zeros((H, W))
         if spp <= 0:
-            return rad, None
+            return np.zeros((H, W)), None
         t0 = time.perf_counter()
         key = "sun_" if sun else "background_"
         scene, full, tile_sensors = ((self._sun["scene"], self._sun["full"], self._sun["tiles"]) if sun else
                                      (self.scene, self._sensor_full, self._sensor_tiles))
         tiles = background_tiles(self.camera, self._scene_corners, R, t, T, TILE_COUNTS)
-        if tiles is None or (sun and self._sun_in_view(R)):
+        box = None
+        if sun and tiles is not None and self._earth_in_view(R):
+            # the Earth in view: every pixel's environment in closed form, the scene's tiles traced over it
+            rad = self._environment(R, t)  # float32
+            timings[key + "environment"] = "closed form"
+            box = (0, H, 0, W)
+        elif tiles is None or (sun and self._sun_in_view(R)):
             rad = self._radiance(full, spp, seed, scene)
             timings[key + "tiles"] = "full frame"
-            box = (0, H, 0, W)
-        elif len(tiles) == 0:  # nothing of the scene projects into the image
+            timings[key + "s"] = time.perf_counter() - t0
+            return rad, (0, H, 0, W)
+        else:
+            rad = np.zeros((H, W))
+        if len(tiles) == 0:  # nothing of the scene projects into the image
             timings[key + "tiles"] = 0
-            box = None
         else:
             n = next(c for c in sorted(tile_sensors) if c >= len(tiles))
             org = np.concatenate([tiles, np.repeat(tiles[-1:], n - len(tiles), axis=0)])
@@ -447,9 +459,30 @@ class Renderer:
             for k, (x0, y0) in enumerate(tiles):
                 rad[y0:y0 + T, x0:x0 + T] = mosaic[k * T:(k + 1) * T, :][: H - y0, : W - x0]
             timings[key + "tiles"] = int(len(tiles))
-            box = _union_box([(int(y0), min(H, int(y0) + T), int(x0), min(W, int(x0) + T)) for x0, y0 in tiles])
+            if box is None:
+                box = _union_box([(int(y0), min(H, int(y0) + T), int(x0), min(W, int(x0) + T)) for x0, y0 in tiles])
         timings[key + "s"] = time.perf_counter() - t0
         return rad, box
+
+    def _earth_in_view(self, R) -> bool:
+        """Whether the Earth projects into the image at this attitude."""
+        o = self.options
+        return o.earth_direction_target is not None and earth_in_image(self.camera, R, o.earth_direction_target,
+                                                                       o.altitude_m)
+
+    def _environment(self, R, t) -> np.ndarray:
+        """The natural-light pass's environment (the Earth, the sun's disk) in every pixel, in closed
+        form (:mod:`svgs_sim.render.environment`), float32 (H, W)."""
+        o = self.options
+        if self._env_grid is None:
+            self._env_grid = EnvironmentGrid(self.camera)
+        light = self._sun["light"]
+        earth = dict(earth_direction=o.earth_direction_target, sun_direction=o.sun_direction_target,
+                     altitude_m=o.altitude_m, albedo=o.earth_albedo, sun_irradiance_w_m2=light["irradiance_w_m2"],
+                     uniform_radiance_w_m2_sr=o.earth_uniform_radiance_w_m2_sr)
+        sun = None if o.eclipsed or o.sun_direction_target is None else {
+            "direction": o.sun_direction_target, "radiance_w_m2_sr": light["radiance_w_m2_sr"]}
+        return environment_radiance(self._env_grid, R, t, earth=earth, sun=sun)
 
     def _sun_in_view(self, R) -> bool:
         """Whether the sun's disk (or its edge) or the Earth projects into the image at this attitude
@@ -580,6 +613,10 @@ class Renderer:
         factor times the ratio of the flash's mean photon energy to the sun's) and radiance."""
         rad, box = self._background(R, t, spp, seed + 0x2545F491, timings, sun=True)
         ratio = self.flash.photometry["mean_photon_energy_j"] / self._sun["light"]["mean_photon_energy_j"]
+        if rad.dtype == np.float32:  # the closed-form environment (the Earth in view): single precision, one pass
+            if self._sun_factor32 is None or self._sun_factor32[0] is not factor:
+                self._sun_factor32 = (factor, (factor * ratio).astype(np.float32))
+            return rad * self._sun_factor32[1], rad
         flux = np.zeros((self.camera.height, self.camera.width), np.float32)
         if box is not None:
             sl = _box_slices(box)

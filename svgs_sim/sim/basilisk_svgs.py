@@ -45,6 +45,7 @@ raises an ImportError that names the extra. Nothing here needs Vizard.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -233,6 +234,18 @@ class IdealSensor:
         pass
 
 
+def illumination_factor(payload) -> float:
+    """An ``EclipseMsgPayload``'s fraction of the sun's disk in view (1 sunlit, 0 umbra). Basilisk
+    renamed ``shadowFactor`` to ``illuminationFactor`` (the same value); the payload a reader returns
+    has one or both, so read the new name where there is one, else the old without its warning."""
+    try:
+        return float(payload.illuminationFactor)
+    except AttributeError:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=".*shadowFactor.*")
+            return float(payload.shadowFactor)
+
+
 class SVGSModule(sysModel.SysModel):
     """The SVGS sensor inside a Basilisk simulation (see the module docstring).
 
@@ -383,7 +396,7 @@ class SVGSModule(sysModel.SysModel):
         dcm_TN = self.pattern_mount.dcm_frame_body @ mrp_to_dcm(tg["sigma_BN"])
         geo = sun_and_earth_in_target(r_t, dcm_TN, r_sun - r_t)
         if self.eclipseInMsg.isLinked():
-            shadow = float(self.eclipseInMsg().illuminationFactor)
+            shadow = illumination_factor(self.eclipseInMsg())
         else:
             shadow = 0.0 if geo["eclipsed"] else 1.0
         lit = shadow >= 0.5
