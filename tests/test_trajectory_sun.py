@@ -101,3 +101,24 @@ def test_the_stream_renders_each_frame_under_its_own_sun(small_camera, tmp_path)
     dark = render_scenario(sc.replace(scene=base.scene), seed=rs)
     lit_photons, dark_photons = float(frame.flux.sum()), float(dark.flux.sum())
     assert lit_photons > 1.5 * dark_photons, (lit_photons, dark_photons)
+
+
+@pytest.mark.render
+def test_the_stream_renders_the_body_it_is_given(small_camera, tmp_path):
+    """``svgs approach --body 3u``: the stream's frame is the isolated chain's with the same body
+    (image for image), and not the default breadboard's."""
+    from svgs_sim.sim.approach import ApproachSensor
+    from svgs_sim.sim.closed_loop import RenderOptions, expose_and_solve, render_scenario
+
+    traj = Trajectory.load(_file(tmp_path, ["0,0,0,6,0,3,-5,45,30", "2,0,0,4,0,0,0,90,30"]))
+    base = Scenario(scene=Scene(environment="orbit"))
+    sensor = ApproachSensor(small_camera, seed=5, motion=False, crlb=False, keep_images=True, base=base,
+                            body={"body": "3u"})
+    m0 = sensor.measure_on(traj, 0.0)
+    rs, ns, _ = sensor.frame_seeds(0)
+    sc = traj.scenario(0.0, Scenario(camera=small_camera, scene=base.scene))
+    frame = render_scenario(sc, seed=rs, options=RenderOptions(body="3u"))
+    row = expose_and_solve(frame, frame.exposer(), seed=ns, exposure_s=m0.exposure_s, iso=m0.iso, truth="actual")
+    np.testing.assert_array_equal(row["_exposure"].image, m0.image)
+    plate = render_scenario(sc, seed=rs)
+    assert not np.array_equal(plate.flux, frame.flux)

@@ -65,8 +65,10 @@ def register(sub) -> None:
                    help="detector threshold: 'app' (the app's brightness threshold for the camera, "
                         "assets/app/svgs-app.toml; the default), a level in 8-bit counts, 'auto' or 'otsu'")
     from svgs_sim.sim.scene import add_scene_options  # the scene around the target: --environment, --backdrop-m, --ambient
+    from svgs_sim.cli.render import body_args
 
     add_scene_options(p)
+    body_args(p)
     p.add_argument("--out", required=True, help="output folder (a rerun with the same arguments resumes it)")
     p.add_argument("--overlap-render", action="store_true",
                    help="render the next frame in a background thread while the phone model works on this one "
@@ -104,8 +106,11 @@ def config_from_args(args) -> dict:
         if scene.environment != "orbit":
             raise InputError(f"--trajectory {args.trajectory!r}: its columns {', '.join(SUN_COLUMNS)} light the target on "
                              "orbit only (give --environment orbit)")
+    from svgs_sim.cli.render import body_options
+
     return make_config(args.camera, traj, args.fps, seed=args.seed, preview=args.preview, motion=not args.no_motion,
-                       crlb=not args.no_crlb, pattern=args.pattern, threshold=args.threshold, scene=scene)
+                       crlb=not args.no_crlb, pattern=args.pattern, threshold=args.threshold, scene=scene,
+                       body=body_options(args))
 
 
 def print_summary(s: dict, file=None) -> None:
@@ -160,6 +165,10 @@ def command_line(args) -> str:
     from svgs_sim.sim.scene import scene_option_words
 
     parts += scene_option_words(args)
+    for flag, v in (("--body", args.body), ("--body-material", args.body_material),
+                    ("--body-materials", args.body_materials)):
+        if v is not None:
+            parts.append(f"{flag} {quote(str(v))}")
     parts.append(f"--out {quote(args.out)}")
     return " ".join(parts)
 

@@ -69,7 +69,7 @@ def cmd_render(args) -> int:
 
 def body_args(p) -> None:
     """The target body's options (``--body``, ``--body-material``, ``--body-materials``), declared once
-    for ``svgs render`` and ``svgs render-and-solve``."""
+    for ``svgs render``, ``svgs render-and-solve`` and ``svgs approach``."""
     p.add_argument("--body", default=None,
                    help="target body: 'plate' (the default: the lab's breadboard), '3u' (a 3U CubeSat: rails, MLI, "
                    "body-mounted cells; svgs_sim.render.cubesat), 'none', or a mesh file ending in .ply or .obj "

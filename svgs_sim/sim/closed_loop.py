@@ -466,6 +466,14 @@ class RenderOptions:
     body_material: str | None = None
     body_materials: tuple = ()
 
+    def scene_options(self) -> dict:
+        """The renderer's :class:`~svgs_sim.render.geometry.SceneOptions` fields of the body (empty
+        for the renderer's own, the plate)."""
+        out = {} if self.body is None else {"body": self.body}
+        if self.body_material is not None or self.body_materials:  # a mesh body's surfaces
+            out.update(body_material=self.body_material, body_materials=self.body_materials)
+        return out
+
     def __post_init__(self):
         if self.method not in ("guided", "path"):
             raise InputError(f"method: expected 'guided' or 'path', got {self.method!r}")
@@ -502,10 +510,7 @@ def render_scenario(scenario: Scenario, *, seed: int = 0, options: RenderOptions
     t0 = time.perf_counter()
     kw = {k: int(getattr(scenario, k)) for k in ("spp", "roi_spp") if getattr(scenario, k) is not None}
     focus = scenario.focus_distance_m if scenario.focus_distance_m is not None else float(np.linalg.norm(t))
-    scene_options = {"focus_distance_m": focus} if options.body is None else {"body": options.body,
-                                                                            "focus_distance_m": focus}
-    if options.body_material is not None or options.body_materials:  # a mesh body's surfaces
-        scene_options.update(body_material=options.body_material, body_materials=options.body_materials)
+    scene_options = {"focus_distance_m": focus, **options.scene_options()}
     # the sun (a pass of its own, svgs_sim.render.sun) and the Earth (in the sun's pass, svgs_sim.render.earth);
     # the lab's are the defaults
     scene_options.update(scenario.scene.natural_light())

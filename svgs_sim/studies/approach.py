@@ -30,7 +30,7 @@ from svgs_sim.base.errors import InputError
 from svgs_sim.base.profiles import load_camera, load_pattern
 from svgs_sim.sim import hard_stop
 from svgs_sim.sim.approach import MEASUREMENT_COLUMNS, TIMING_KEYS, ApproachSensor, Trajectory, check_visible
-from svgs_sim.sim.closed_loop import Scenario
+from svgs_sim.sim.closed_loop import RenderOptions, Scenario
 from svgs_sim.sim.scene import Scene
 from svgs_sim.studies.diagnosis import FAR_ABOVE_BOUND, bound_ratios, cause_text, far_above, glint_targets_of_state
 from svgs_sim.studies.execution import StoredProgress
@@ -52,7 +52,7 @@ TEXT_COLUMNS = ("reason",)
 
 def make_config(camera: str, trajectory: Trajectory, fps: float, *, seed: int = 0, preview: bool = False,
                 motion: bool = True, crlb: bool = True, pattern: str = "svgs-3u", threshold=None,
-                scene: Scene | None = None) -> dict:
+                scene: Scene | None = None, body: dict | None = None) -> dict:
     """The approach's parameters (the store's manifest): what decides the numbers. ``threshold``:
     the detector's (None or ``"app"``: the app's for the camera, :mod:`svgs_sim.svgs.app`; ``"auto"``,
     ``"otsu"`` or a level in 8-bit counts). ``scene``: around the target (default the paper's lab;
@@ -65,6 +65,10 @@ def make_config(camera: str, trajectory: Trajectory, fps: float, *, seed: int = 
            "threshold": "app" if t is None else t if isinstance(t, str) else float(t)}
     if scene is not None and scene != Scene():
         cfg["scene"] = scene.to_json()
+    if body and any(v not in (None, {}, ()) for v in body.values()):  # recorded only when given: older folders resume
+        opts = RenderOptions(**body)  # checked before any work
+        cfg["body"] = {"body": opts.body, "body_material": opts.body_material,
+                       "body_materials": dict(opts.body_materials)}
     return cfg
 
 
@@ -174,7 +178,8 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
         if todo:
             sensor = ApproachSensor(cam, cfg["pattern"], seed=cfg["seed"], motion=cfg["motion"], crlb=cfg["crlb"],
                                     keep_images=True, frame_rate_hz=cfg["fps"], threshold=_threshold(cfg),
-                                    overlap_render=overlap_render, base=Scenario(scene=scene_of(cfg)))
+                                    overlap_render=overlap_render, base=Scenario(scene=scene_of(cfg)),
+                                    body=cfg.get("body"))
             if todo[0] > 0:
                 last = {r["trial_id"]: r for r in store.read_rows()}[todo[0] - 1]
                 sensor.restore(todo[0], last["next_exposure_s"], last["next_iso"])

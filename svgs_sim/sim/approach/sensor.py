@@ -11,7 +11,9 @@ import numpy as np
 
 from svgs_sim.base.errors import InputError, check_finite
 from svgs_sim.base.profiles import load_camera, load_pattern
-from svgs_sim.sim.closed_loop import Frame, Scenario, lab_flux, lab_photon_factor, solve_exposure, solver_camera
+from svgs_sim.sim.closed_loop import (
+    Frame, RenderOptions, Scenario, lab_flux, lab_photon_factor, solve_exposure, solver_camera,
+)
 from svgs_sim.sim.crlb import frame_crlb
 from svgs_sim.sim.metrics import match_err_max_px, spot_positions_px, state_error, wrong_lock_px
 from svgs_sim.svgs.frames import D_CAM_PHOTO, STATE_KEYS, angles_from_rotation, check_pose, pose_to_state, state_dict
@@ -178,6 +180,10 @@ class ApproachSensor:
         The lab around the target (backdrop, ambient light) and render quality; default the
         lab of :mod:`svgs_sim.sim.lab`. Its camera fields (lens offsets, overrides, a fixed focus) are
         refused: give the camera itself.
+    body : RenderOptions or dict, optional
+        The target's body (:class:`svgs_sim.sim.closed_loop.RenderOptions`' ``body``,
+        ``body_material``, ``body_materials``: ``"3u"``, a mesh file...); default the renderer's,
+        the lab's breadboard.
 
     Examples
     --------
@@ -188,7 +194,7 @@ class ApproachSensor:
 
     def __init__(self, camera="galaxy-nexus", pattern="svgs-3u", *, seed: int = 0, motion: bool = True,
                  crlb: bool = True, keep_images: bool = False, threshold=None, base: Scenario | None = None,
-                 frame_rate_hz: float | None = None, overlap_render: bool = False):
+                 frame_rate_hz: float | None = None, overlap_render: bool = False, body=None):
         from svgs_sim.camera.phone import PhoneCamera, PhoneParams
 
         self.camera = load_camera(camera)
@@ -211,8 +217,9 @@ class ApproachSensor:
         self.threshold = threshold
         self.phone = PhoneCamera(self.camera, params=params)
         self.exposure = ExposureStream(self.phone, self.frame_rate_hz)
+        self.body = body if isinstance(body, RenderOptions) else RenderOptions(**(body or {}))  # checked here
         self.renders = RenderStream(self.camera, self.pattern, self.seed, spp=self.base.spp, roi_spp=self.base.roi_spp,
-                                    scene_options=self.base.scene.natural_light())
+                                    scene_options={**self.base.scene.natural_light(), **self.body.scene_options()})
         self._lab_factor = None
         self.frame_index = 0
         self._last_pose = None
