@@ -77,9 +77,9 @@ CAMERA = Mount([[1, 0, 0], [0, 0, -1], [0, 1, 0]], [0.0, 0.1, 0.0])
 #: lies behind the target). Both bodies hold Hill's frame (x radial out, y along-track, z orbit
 #: normal); the target's long axis is its body x (radial), so the R-bar faces are its 10 cm ends.
 CASES = {
-    # V-bar: the chaser behind on -y looking +y along-track; from 400 km the horizon dips 19.8 deg,
-    # inside both phones' vertical half-fields (21.6, 24.9 deg): the Earth's limb is in the frame
-    "vbar": (PATTERN, CAMERA, "the chaser on -y (behind) looking +y: the Earth's limb low in the frame"),
+    # V-bar: the chaser behind on -y looking +y along-track; from 400 km the horizon dips 19.8 deg, inside
+    # both phones' half-fields along the image's x (the camera's x is radial): the Earth's limb at the left edge
+    "vbar": (PATTERN, CAMERA, "the chaser on -y (behind) looking +y: the Earth's limb at the frame's left edge"),
     # R-bar from below: the chaser on -x (nearer the Earth) looking up +x: deep space behind the target
     "rbar-below": (Mount([[0, 1, 0], [0, 0, -1], [-1, 0, 0]], [-0.17, 0.0, 0.0]),
                    Mount([[0, 1, 0], [0, 0, 1], [1, 0, 0]], [0.1, 0.0, 0.0]),
@@ -408,7 +408,7 @@ def eclipse_entry_phase_deg(sun_N, raan_deg: float, inclination_deg: float, radi
     enter = np.flatnonzero(dark & ~np.roll(dark, 1))
     if enter.size == 0:
         raise InputError(f"--raan-deg {raan_deg:g}: the orbit never enters the Earth's shadow (beta too high); "
-                         "give another node or --eclipse-in-s off")
+                         "give another --raan-deg (nearer the sun's plane)")
     return float(np.degrees(u[enter[0]]))
 
 
@@ -590,7 +590,7 @@ def _orbit_summary(light_log, meas, n_rad_s, u0_deg, beta_deg, raan_deg) -> dict
     lag = []
     for t_tr, kind in trans:
         after = [r for r in rows if r["t_s"] >= t_tr - 1e-9]
-        first = next((r for r in after if r["ok"]), None)
+        first = next((r for r in after if r["ok"] and not r["wrong_lock"]), None)
         lag.append({"transition": kind, "t_s": t_tr, "frames_to_first_solution": None if first is None
                     else after.index(first), "time_to_first_solution_s": None if first is None else first["t_s"] - t_tr})
     return {"beta_deg": beta_deg, "raan_deg": raan_deg, "start_phase_deg": u0_deg,

@@ -119,3 +119,18 @@ def test_svgs_render_with_the_earth_and_an_eclipse(tmp_path):
     truth = json.loads((out / "truth.json").read_text())
     assert truth["sun"]["eclipsed"] is True and truth["sun"]["in_view"] is False
     assert truth["earth"]["in_view"] is True
+
+
+def test_the_map_keeps_its_geometry_between_suns_without_changing_a_texel():
+    """earth_map keeps the Earth's ray hits between calls (a sun that moves over an orbit's phase):
+    each map equals earth_radiance evaluated afresh at every texel's direction, bit for bit."""
+    from svgs_sim.render.earth import earth_map, earth_radiance, map_directions, map_frame
+
+    e = np.array([0.3, -0.2, -0.9])
+    e /= np.linalg.norm(e)
+    for s in ([0.0, 1.0, 0.0], [0.6, 0.0, 0.8], [-0.3, 0.9, -0.3]):
+        s = np.array(s) / np.linalg.norm(s)
+        got, M = earth_map(e, s, H_M, 0.3, 535.1, rows=128)
+        ref = earth_radiance(map_directions(128, map_frame(e)), e, s, H_M, 0.3, 535.1).astype(np.float32)
+        assert np.array_equal(got, ref)
+        np.testing.assert_allclose(M[:3, :3], map_frame(e), atol=0)

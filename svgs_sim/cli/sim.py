@@ -157,7 +157,7 @@ def sun_in_view_note(frame, row: dict) -> dict:
         return {}
     img = row["_exposure"].image
     gray = img if img.ndim == 2 else img.max(axis=2)
-    full = 255 if img.dtype.itemsize == 1 else int(np.max(gray))
+    full = np.iinfo(img.dtype).max if np.issubdtype(img.dtype, np.integer) else 1.0  # the image's full scale
     sat = int(np.sum(gray >= full))
     out = {"sun_in_view": bool(sun.get("in_view")), "saturated_px": sat}
     if sun.get("in_view") and not row["ok"]:

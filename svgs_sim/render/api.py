@@ -206,13 +206,13 @@ class Renderer:
         self.spot_sampler = spot_sampler
         self.variant = select_variant(variant)
         t0 = time.perf_counter()
-        self._extra_meshes = tuple(extra_meshes)
+        self._extra_meshes = tuple(extra_meshes)  # once: both scenes (and a later sun) take the same meshes
         self._env_grid = None  # the closed-form environment's pixel grid (made on first use)
-        self._sun_factor32 = None  # (the flux factor, it times the sun's photon ratio in float32)
-        self._load_scene(extra_meshes)
+        self._sun_factor32 = None  # (the flux factor, the sun's photon ratio, their product in float32)
+        self._load_scene(self._extra_meshes)
         self._sun = None
         if self.options.light_pass:
-            self._load_sun_scene(extra_meshes)
+            self._load_sun_scene(self._extra_meshes)
         self.load_time_s = time.perf_counter() - t0
         self._factor_full = None
 
@@ -613,10 +613,10 @@ class Renderer:
         factor times the ratio of the flash's mean photon energy to the sun's) and radiance."""
         rad, box = self._background(R, t, spp, seed + 0x2545F491, timings, sun=True)
         ratio = self.flash.photometry["mean_photon_energy_j"] / self._sun["light"]["mean_photon_energy_j"]
-        if rad.dtype == np.float32:  # the closed-form environment (the Earth in view): single precision, one pass
-            if self._sun_factor32 is None or self._sun_factor32[0] is not factor:
-                self._sun_factor32 = (factor, (factor * ratio).astype(np.float32))
-            return rad * self._sun_factor32[1], rad
+        if timings.get("sun_environment") == "closed form":  # the Earth in view: single precision, one pass
+            if self._sun_factor32 is None or self._sun_factor32[0] is not factor or self._sun_factor32[1] != ratio:
+                self._sun_factor32 = (factor, ratio, (factor * ratio).astype(np.float32))
+            return rad * self._sun_factor32[2], rad
         flux = np.zeros((self.camera.height, self.camera.width), np.float32)
         if box is not None:
             sl = _box_slices(box)

@@ -148,12 +148,13 @@ def earth_radiance(directions, earth_direction, sun_direction, altitude_m: float
     return np.where(hit, float(albedo) * float(sun_irradiance_w_m2) * np.maximum(cos_sun, 0.0) / np.pi, 0.0)
 
 
-@functools.lru_cache(maxsize=2)
+@functools.lru_cache(maxsize=1)
 def _earth_hits(earth_direction: tuple, altitude_m: float, rows: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The map's frame, the flat indices of the texels whose direction meets the Earth and the
     points they meet, from the Earth's centre (m, float64, shape (n, 3)): what the map's radiance
     needs besides the sun. Kept for the last two geometries (a sun that moves over an orbit's phase
-    recomputes only the cosine: :func:`earth_map`); the arithmetic is :func:`earth_radiance`'s."""
+    recomputes only the cosine: :func:`earth_map`; about 100 MB for 2048 rows); the arithmetic is
+    :func:`earth_radiance`'s."""
     e = _unit(earth_direction, "earth_direction")
     frame = map_frame(e)
     w = map_directions(rows, frame).reshape(-1, 3)

@@ -18,9 +18,10 @@ where it can change the result:
   camera with the same parallax as in the path tracer) and drawn over the Earth, as the renderer
   draws it.
 
-The lens's defocus of the environment (the thin lens is focused on the target, a few metres away;
-its blur circle for a source at infinity is under a pixel for these phones) is not applied: the
-limb is sharper by that much (ASSUMPTION). ``tests/test_render_environment.py`` compares it with the
+The lens's defocus of the environment is not applied (ASSUMPTION): the thin lens is focused on the
+target, and its blur circle for a source at infinity is ``f_x D / s`` px (``D`` the aperture, ``s`` the
+focus distance): for the Galaxy Nexus 3.5 px / s, 1.75 px at 2 m, 0.35 px at 10 m. The path-traced
+tiles are blurred, so the limb and the sun's disk are that much sharper outside them. ``tests/test_render_environment.py`` compares it with the
 path tracer's full-frame pass.
 """
 
@@ -62,6 +63,8 @@ class EnvironmentGrid:
     def __init__(self, camera, step_px: int = STEP_PX):
         self.camera = camera
         self.step_px = s = int(step_px)
+        if s < 2 or s % 2:
+            raise ValueError(f"step_px: expected an even number >= 2, got {step_px!r}")
         H, W = camera.height, camera.width
         self.gw, self.gh = -(-W // s), -(-H // s)
         gx = np.arange(self.gw) * s + (s - 1) / 2.0
@@ -91,12 +94,18 @@ class EnvironmentGrid:
         y1 = np.where(js == self.gh - 2, H, (js + 1) * s + h)
         x0 = np.where(is_ == 0, 0, is_ * s + h)
         x1 = np.where(is_ == self.gw - 2, W, (is_ + 1) * s + h)
-        span = s + h  # the largest block side (an edge cell)
+        span = int(max((x1 - x0).max(), (y1 - y0).max()))  # the largest block side (an edge cell)
         oy, ox = np.mgrid[0:span, 0:span]
         ys = y0[:, None] + oy.ravel()[None, :]
         xs = x0[:, None] + ox.ravel()[None, :]
         keep = (ys < np.minimum(y1, H)[:, None]) & (xs < np.minimum(x1, W)[:, None])
         return xs[keep], ys[keep]
+
+
+def _disagree(flags: np.ndarray) -> np.ndarray:
+    """The cells (gh - 1, gw - 1) whose four corner samples do not all agree."""
+    a = flags[:-1, :-1]
+    return (a != flags[1:, :-1]) | (a != flags[:-1, 1:]) | (a != flags[1:, 1:])
 
 
 def _dilate(mask: np.ndarray, k: int) -> np.ndarray:
@@ -151,8 +160,9 @@ def environment_radiance(grid: EnvironmentGrid, R_cam_target, t_cam_target_m, *,
         rad = grid.upsample(coarse)
         # the lit disk's edges (the limb and the terminator, where the radiance has a kink): coarse cells
         # whose corners disagree on whether any light comes, pixel by pixel
-        hit = coarse > 0
-        mixed = (hit[:-1, :-1] != hit[1:, :-1]) | (hit[:-1, :-1] != hit[:-1, 1:]) | (hit[:-1, :-1] != hit[1:, 1:])
+        lit = coarse > 0
+        seen = earth_radiance(w, earth["earth_direction"], None, earth["altitude_m"], 0.0, 0.0, 1.0) > 0
+        mixed = _disagree(lit) | _disagree(seen)  # a lit crescent thinner than a cell lies on the limb
         if mixed.any():
             # next to the edge the radiance bends fast (the surface is seen grazing near the limb, the
             # cosine starts at the terminator): the cells around it at each pixel's centre, then the

@@ -28,10 +28,11 @@ The sun and the Earth (optional inputs)
     (an ``EclipseMsg``, from Basilisk's ``eclipse`` module for the target). With ``sunInMsg``
     linked, each frame is rendered on orbit (:mod:`svgs_sim.sim.orbit_light`): the sun's and the
     Earth's directions in the target frame from the target's state (the Earth is the central body,
-    at the inertial origin), its altitude, and the sun dropped while ``illuminationFactor < 0.5``
-    (without ``eclipseInMsg``: the cylindrical shadow of :func:`svgs_sim.render.earth.in_eclipse`).
-    The renderer cannot dim the sun, so the penumbra (~10 s at 400 km) is lit or not, at half
-    light. ``light_log`` keeps each frame's light.
+    at the inertial origin) and its altitude. The frame is sunlit while ``illuminationFactor >= 0.5``
+    (without ``eclipseInMsg``: the cylindrical shadow of :func:`svgs_sim.render.earth.in_eclipse`)
+    and the renderer's own shadow agrees; in shadow the Earth's day side, where in view, still
+    shines. The renderer cannot dim the sun, so the penumbra (~10 s at 400 km) is lit or not, at
+    half light. ``light_log`` keeps each frame's light.
 
 Timing. The module must run in a task at least as fast as the frame rate. A frame is taken at the
 first update at or after each frame time ``t0 + k / frame_rate_hz`` (``t0``: the first update),
@@ -400,10 +401,14 @@ class SVGSModule(sysModel.SysModel):
         else:
             shadow = 0.0 if geo["eclipsed"] else 1.0
         lit = shadow >= 0.5
+        # the sun's direction stays in the scene when the renderer's own shadow hides it too (it then drops
+        # the disk and the direct light, and still lights the Earth); it goes only where Basilisk says
+        # shadow and the renderer's geometry says sunlit (the two models' seconds apart at the edge)
+        keep = lit or geo["eclipsed"]
         base = self.scene if self.scene is not None else self.sensor.base.scene
         scene = dataclasses.replace(
-            base, environment="orbit", sun_azimuth_deg=geo["sun_azimuth_deg"] if lit else None,
-            sun_elevation_deg=geo["sun_elevation_deg"] if lit else None, earth_azimuth_deg=geo["earth_azimuth_deg"],
+            base, environment="orbit", sun_azimuth_deg=geo["sun_azimuth_deg"] if keep else None,
+            sun_elevation_deg=geo["sun_elevation_deg"] if keep else None, earth_azimuth_deg=geo["earth_azimuth_deg"],
             earth_elevation_deg=geo["earth_elevation_deg"], altitude_km=geo["altitude_m"] / 1e3)
         self.light_log.append({"t_s": float(t_s), **{k: geo[k] for k in ("sun_azimuth_deg", "sun_elevation_deg",
                                                                          "earth_azimuth_deg", "earth_elevation_deg",
