@@ -421,22 +421,24 @@ class Renderer:
 
     def _background(self, R, t, spp: int, seed: int, timings: dict, sun: bool = False):
         """The diffuse background at ``spp``: over the tiles covering the projected scene (or the
-        full frame), zeros elsewhere; float64 (H, W), and the box ``(y0, y1, x0, x1)`` that holds
-        it (None when ``spp == 0``: zeros). ``sun``: the sun's scene, over the full frame when the
+        full frame), zeros elsewhere; float64 (H, W) (float32 with the closed-form environment), the
+        box ``(y0, y1, x0, x1)`` that holds it (None when ``spp == 0``: zeros) and whether the
+        environment was taken in closed form. ``sun``: the sun's scene, over the full frame when the
         sun's disk or the Earth is in view (the tiles cover the target only): with the Earth, the
         pixels outside the tiles see only the environment and take it in closed form
         (:meth:`_environment`); with the sun's disk alone the full frame is path traced."""
 
         H, W = self.camera.height, self.camera.width
         if spp <= 0:
-            return np.zeros((H, W)), None
+            return np.zeros((H, W)), None, False
         t0 = time.perf_counter()
         key = "sun_" if sun else "background_"
         scene, full, tile_sensors = ((self._sun["scene"], self._sun["full"], self._sun["tiles"]) if sun else
                                      (self.scene, self._sensor_full, self._sensor_tiles))
         tiles = background_tiles(self.camera, self._scene_corners, R, t, T, TILE_COUNTS)
         box = None
-        if sun and tiles is not None and self._earth_in_view(R):
+        closed_form = bool(sun and tiles is not None and self._earth_in_view(R))
+        if closed_form:
             # the Earth in view: every pixel's environment in closed form, the scene's tiles traced over it
             rad = self._environment(R, t)  # float32
             timings[key + "environment"] = "closed form"
@@ -445,7 +447,7 @@ class Renderer:
             rad = self._radiance(full, spp, seed, scene)
             timings[key + "tiles"] = "full frame"
             timings[key + "s"] = time.perf_counter() - t0
-            return rad, (0, H, 0, W)
+            return rad, (0, H, 0, W), False
         else:
             rad = np.zeros((H, W))
         if len(tiles) == 0:  # nothing of the scene projects into the image
@@ -462,7 +464,7 @@ class Renderer:
             if box is None:
                 box = _union_box([(int(y0), min(H, int(y0) + T), int(x0), min(W, int(x0) + T)) for x0, y0 in tiles])
         timings[key + "s"] = time.perf_counter() - t0
-        return rad, box
+        return rad, box, closed_form
 
     def _earth_in_view(self, R) -> bool:
         """Whether the Earth projects into the image at this attitude."""
@@ -568,7 +570,7 @@ class Renderer:
             timings["full_frame_s"] = time.perf_counter() - t0
             lit = [(0, H, 0, W)]
         else:
-            rad, bg_box = self._background(R, t, spp, seed, timings)
+            rad, bg_box, _ = self._background(R, t, spp, seed, timings)
             rois, win_box = self._render_windows(rad, spots, roi_spp, seed + 0x9E3779B1, timings)
             lit = [b for b in (bg_box, win_box) if b is not None]
         # the light lies in these boxes, zeros elsewhere: the conversions below work on the box
@@ -611,9 +613,9 @@ class Renderer:
     def _sun_flux(self, R, t, spp: int, seed: int, factor, timings: dict):
         """The sun's flux (photons/s per pixel, float32 (H, W); the flash's radiance-to-photon
         factor times the ratio of the flash's mean photon energy to the sun's) and radiance."""
-        rad, box = self._background(R, t, spp, seed + 0x2545F491, timings, sun=True)
+        rad, box, closed_form = self._background(R, t, spp, seed + 0x2545F491, timings, sun=True)
         ratio = self.flash.photometry["mean_photon_energy_j"] / self._sun["light"]["mean_photon_energy_j"]
-        if timings.get("sun_environment") == "closed form":  # the Earth in view: single precision, one pass
+        if closed_form:  # the Earth in view: single precision, one pass
             if self._sun_factor32 is None or self._sun_factor32[0] is not factor or self._sun_factor32[1] != ratio:
                 self._sun_factor32 = (factor, ratio, (factor * ratio).astype(np.float32))
             return rad * self._sun_factor32[2], rad

@@ -31,6 +31,7 @@ point, S the LED), see :mod:`svgs_sim.render.predict`.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -405,6 +406,13 @@ class OptionsMixin:
         return replace(self, **kw)
 
 
+@functools.lru_cache(maxsize=8)
+def _file_sha1(path: str, mtime_ns: int, size: int) -> str:
+    """SHA-1 of a mesh file, read once per version of it (its modification time and size are the
+    key: a renderer whose sun moves copies its options every frame)."""
+    return hashlib.sha1(Path(path).read_bytes()).hexdigest()
+
+
 @dataclass(frozen=True)
 class SceneOptions(OptionsMixin):
     """Everything about the scene besides camera, pattern, pose and reflector model.
@@ -485,7 +493,8 @@ class SceneOptions(OptionsMixin):
             object.__setattr__(self, "body_materials", tuple(sorted(self.body_materials.items())))
         if check_body(self.body, self.body_material, self.body_materials):
             try:
-                object.__setattr__(self, "body_file_sha1", hashlib.sha1(Path(self.body).read_bytes()).hexdigest())
+                st = Path(self.body).stat()
+                object.__setattr__(self, "body_file_sha1", _file_sha1(str(self.body), st.st_mtime_ns, st.st_size))
             except OSError as exc:
                 raise InputError(f"--body: cannot read {self.body!r}: {exc}") from None
         v = check_finite(self.body_reflectance, "scene_options.body_reflectance")

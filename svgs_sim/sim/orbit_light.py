@@ -35,7 +35,7 @@ import numpy as np
 from svgs_sim.base.errors import InputError
 from svgs_sim.render.earth import EARTH_RADIUS_M, earth_half_angle_deg, in_eclipse
 
-__all__ = ["SUN_EPOCH_UTC", "beta_angle_deg", "sun_and_earth_in_target", "sun_direction_gcrs"]
+__all__ = ["SUN_EPOCH_UTC", "azimuth_elevation_deg", "beta_angle_deg", "sun_and_earth_in_target", "sun_direction_gcrs"]
 
 #: The epoch of the sun's direction, UTC (ISO 8601). Fixed, so that runs are reproducible (the same
 #: orbit gives the same light on any day it is run); near the March equinox of 2026 (20 March,
@@ -61,7 +61,7 @@ def _direction(x, name: str) -> np.ndarray:
     return a / n
 
 
-def _azimuth_elevation_deg(v) -> tuple[float, float]:
+def azimuth_elevation_deg(v) -> tuple[float, float]:
     """Azimuth (from +x toward +y, in (-180, 180]) and elevation (toward +z) of a unit vector, deg."""
     az = float(np.degrees(np.arctan2(v[1], v[0])))
     el = float(np.degrees(np.arcsin(np.clip(v[2], -1.0, 1.0))))
@@ -189,8 +189,8 @@ def sun_and_earth_in_target(r_target_N_m, dcm_target_N, sun_N) -> dict:
                          f"surface ({EARTH_RADIUS_M:.0f} m)")
     e_N = -r / np.linalg.norm(r)
     sun_T, earth_T = dcm @ s_N, dcm @ e_N
-    sun_az, sun_el = _azimuth_elevation_deg(sun_T / np.linalg.norm(sun_T))
-    earth_az, earth_el = _azimuth_elevation_deg(earth_T / np.linalg.norm(earth_T))
+    sun_az, sun_el = azimuth_elevation_deg(sun_T / np.linalg.norm(sun_T))
+    earth_az, earth_el = azimuth_elevation_deg(earth_T / np.linalg.norm(earth_T))
     return {
         "sun_azimuth_deg": sun_az, "sun_elevation_deg": sun_el,
         "earth_azimuth_deg": earth_az, "earth_elevation_deg": earth_el,

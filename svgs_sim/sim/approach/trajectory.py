@@ -16,6 +16,7 @@ from svgs_sim.svgs.envelope import ATTITUDE_LIMITS_DEG, check_attitude_deg, chec
 from svgs_sim.base.profiles import load_camera, load_pattern
 
 from svgs_sim.sim.closed_loop import Scenario
+from svgs_sim.sim.orbit_light import azimuth_elevation_deg
 
 #: Columns of a trajectory file in the paper's state: the camera position in the target frame
 #: and the paper's attitude (x-y-z sequence).
@@ -128,8 +129,7 @@ class Trajectory:
         t = float(np.clip(t_s, self.t_s[0], self.t_s[-1]))
         v = _sun_vectors(self.sun_deg)
         d = np.array([np.interp(t, self.t_s, v[:, j]) for j in range(3)])
-        d /= np.linalg.norm(d)
-        return (float(np.degrees(np.arctan2(d[1], d[0]))), float(np.degrees(np.arcsin(np.clip(d[2], -1.0, 1.0)))))
+        return azimuth_elevation_deg(d / np.linalg.norm(d))
 
     def scenario(self, t_s: float, base: Scenario) -> Scenario:
         """``base`` (camera, lab, ...) at this trajectory's pose at time ``t_s`` (s): a
