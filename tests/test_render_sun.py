@@ -113,6 +113,55 @@ def test_a_mirrors_sun_glint_lands_where_the_law_of_reflection_puts_it():
     assert np.hypot(np.sum(u * w) / w.sum() - uv_pred[0], np.sum(v * w) / w.sum() - uv_pred[1]) < 1.0
 
 
+def _channel_shares(photons, wl):
+    """Each colour filter's share of a photon spectrum over BAND_NM, shape (3,), by direct summation
+    over the wavelength grid (the filters: the camera model's stated ASSUMPTION,
+    svgs_sim.camera.phone.cfa.filter_transmission; the spectra: G173-03 and the flash's LED here)."""
+    from svgs_sim.camera.phone.cfa import filter_transmission
+    from svgs_sim.camera.phone.params import CfaParams
+
+    t = filter_transmission(CfaParams(pattern="RGGB"), wl)
+    return (t * photons).sum(axis=1) / photons.sum()
+
+
+def test_a_sunlit_plate_gives_each_colour_channel_the_photons_its_filter_passes():
+    """Per channel, absolute: through the colour filter array (a perfect lens, no noise), a pixel of
+    colour c on the sunlit plate collects response_c x (the photons of E cos(theta) rho / pi that
+    filter c passes) / (filter c's share of the flash's photons): the sun's colour, not the flash's.
+    The photon spectra are summed here from pvlib's G173-03 table and the flash's LED model."""
+    import dataclasses
+
+    from pvlib.spectrum import get_reference_spectra
+
+    from svgs_sim.camera.phone import PhoneCamera
+    from svgs_sim.camera.phone.cfa import channel_map
+    from svgs_sim.camera.phone.params import CfaParams, PhoneParams
+    from svgs_sim.render.optics import WHITE_LED
+    from svgs_sim.sim.closed_loop import Frame, natural_part
+
+    E, e_ph = _sun_in_band()
+    rho, el = 0.5, 70.0
+    r, res = _render((20.0, el), "body", rho=rho)
+    wl = np.arange(BAND_NM[0], BAND_NM[1] + 0.01, 0.25)
+    s = get_reference_spectra(standard="ASTM G173-03")
+    sun = np.interp(wl, np.asarray(s.index, float), np.asarray(s["extraterrestrial"], float)) * wl
+    led = sum(a * np.exp(-0.5 * ((wl - c) / (f / 2.3548200450309493)) ** 2) for c, f, a in WHITE_LED) * wl
+    weights = _channel_shares(sun, wl) / _channel_shares(led, wl)
+    # the mono photons per pixel of E cos(theta) rho / pi, from the radiance test's chain above
+    photons = E * np.sin(np.deg2rad(el)) * rho / np.pi * r.flux_factor() * r.flash.photometry["mean_photon_energy_j"] / e_ph
+    base = PhoneParams.from_camera(r.camera)
+    params = dataclasses.replace(base, cfa=CfaParams(pattern="RGGB", response=(0.5, 1.0, 0.6)))
+    frame = Frame(None, res.flux, res.truth, target_diffuse=res.flux_diffuse, points=res.points,
+                  natural=natural_part(res), _phone={(True, None, None): PhoneCamera(r.camera, params=params)})
+    got = frame.exposer(stages=("cfa",)).flux_optics[96:160, 96:160]
+    chan = channel_map("RGGB", (256, 256))[96:160, 96:160]
+    for c, resp in enumerate((0.5, 1.0, 0.6)):
+        want = resp * weights[c] * photons[96:160, 96:160][chan == c]
+        assert np.mean(got[chan == c]) == pytest.approx(np.mean(want), rel=3e-3), "RGB"[c]
+    # and the sun is not the flash's colour: red up, green down by more than 10 %
+    assert weights[0] > 1.1 and weights[1] < 0.9
+
+
 # ---------------------------------------------------------------- a mesh body and its surfaces
 def _plate_ply(path):
     """A 0.6 m square plate, 1 cm thick, its face 2 cm behind the pattern plane (metres, target frame)."""

@@ -154,3 +154,34 @@ def test_the_sun_path_spends_the_eclipse_fraction_in_shadow(beta_deg):
     if beta_deg == 0.0:
         assert (az[0], el[0]) == pytest.approx((0.0, 0.0), abs=1e-9)
         assert el[len(el) // 4] == pytest.approx(90.0, abs=0.05)
+
+
+def test_the_earths_albedo_is_an_axis_and_the_body_reaches_every_trial():
+    cfg = make_config("galaxy-nexus", [5.0], [0.0], [-45.0, 45.0], 2, earth=(0.0, -90.0, 400.0),
+                      earth_albedos=[0.05, 0.8], body="3u")
+    assert cfg.n_trials == 2 * 2 * 2
+    trials = sun_study_trials(cfg)
+    albedos = [t.scenario.scene.earth_albedo for t in trials]
+    assert albedos == [0.05] * 4 + [0.8] * 4  # the albedo outside the sun's directions
+    assert {t.scenario.scene.body for t in trials} == {"3u"}
+    # the row holds the body (a results store column), and a trial rebuilt from its row keeps it
+    from svgs_sim.sim.render_trial.scenario import RenderScenario
+
+    row = trials[0].scenario.to_row()
+    assert RenderScenario.from_row(row).scene.body == "3u"
+    m = cfg.manifest()
+    assert m["earth_albedos"] == [0.05, 0.8] and m["body"] == "3u"
+    # without the Earth no albedos; a mesh body is the single-scene commands'
+    with pytest.raises(InputError, match="--earth-albedos"):
+        make_config("galaxy-nexus", [5.0], [0.0], [45.0], 1, earth_albedos=[0.3])
+    with pytest.raises(InputError, match="--body"):
+        make_config("galaxy-nexus", [5.0], [0.0], [45.0], 1, body="plate.ply")
+    with pytest.raises(InputError, match="--earth-albedos"):
+        make_config("galaxy-nexus", [5.0], [0.0], [45.0], 1, earth=(0.0, -90.0, 400.0), earth_albedos=[0.3, 1.5])
+
+
+def test_the_cli_refuses_albedos_without_the_earth_before_any_work(tmp_path, capsys):
+    rc = main(["sun-study", "--camera", "galaxy-nexus", "--ranges", "5", "--sun-azimuths-deg", "0",
+               "--sun-elevations-deg", "45", "--trials", "1", "--earth-albedos", "0.05,0.8", "--out", str(tmp_path / "o")])
+    assert rc == 2 and "--earth-albedos" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()

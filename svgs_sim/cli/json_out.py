@@ -242,9 +242,11 @@ SCHEMAS = {
  "outputs": {{"results_csv", "merge_ranges_csv", "report", "summary_json": path}},
  {_RUN}}}""",
     "svgs sun-study": """\
-{"camera": str, "pattern": str, "trials_per_cell": int, "pose": str, "wrong_lock_px": str, "body": str,
- "earth": {"azimuth_deg", "elevation_deg", "altitude_km", "albedo": float} | null,
- "cells": [{"range_m": float, "sun_azimuth_deg": float, "sun_elevation_deg": float,
+{"camera": str, "pattern": str, "trials_per_cell": int, "pose": str, "wrong_lock_px": str,
+ "body": "plate" | "3u" | "none", "body_description": str,
+ "earth": {"azimuth_deg", "elevation_deg", "altitude_km": float, "albedos": [float]} | null,
+ "cells": [{"range_m": float, "earth_albedo": float,   # earth_albedo with the Earth only
+            "sun_azimuth_deg": float, "sun_elevation_deg": float,
             "phase_angle_deg": float,       # target->sun against target->camera (head-on)
             "trials": int, "solved": int, "wrong_lock": int, "wrong_lock_flagged": int,
             "wrong_lock_paper_gates": int,   # the same images with the paper's test-envelope gates

@@ -262,7 +262,8 @@ def _register_sun_study(sub) -> None:
         "target frame, TRIALS per cell, each pose drawn over the paper's test envelope (roll, pitch uniform in +/-25 "
         "deg, yaw in +/-45 deg, the target on the boresight). Each trial is solved, a wrong lock (a pose the paper's "
         "app would report with an identified blob that is not its target's spot) or a failure by its reason; the "
-        "mechanisms (sun in the field of view, a lit body, a glint, saturation) are counted per cell. Writes "
+        "mechanisms (sun in the field of view, a lit body, a glint, saturation, the Earth behind) are counted per "
+        "cell. With --earth-deg, --earth-albedos adds the Earth's albedo as an axis of the grid. Writes "
         "DIR/results.csv (resumable), DIR/summary.json (the cells) and DIR/sun_study.png. Negative values work as "
         "they are: --sun-elevations-deg -60,0,60. Exit 0 done, 2 bad input.",
     )
@@ -283,9 +284,15 @@ def _register_sun_study(sub) -> None:
     from svgs_sim.sim.scene import Scene
 
     q = Scene.quantities()
-    for dest, flag in (("altitude_km", "--altitude-km"), ("earth_albedo", "--earth-albedo")):
-        a = p.add_argument(flag, type=float, default=Scene.__dataclass_fields__[dest].default, help=q[dest].help)
-        a.bounds = (q[dest].lower, q[dest].upper, q[dest].unit)  # the scene quantity's domain
+    a = p.add_argument("--altitude-km", type=float, default=Scene.__dataclass_fields__["altitude_km"].default,
+                       help=q["altitude_km"].help)
+    a.bounds = (q["altitude_km"].lower, q["altitude_km"].upper, q["altitude_km"].unit)  # the scene quantity's domain
+    p.add_argument("--earth-albedos", default=None, metavar="A1,A2,...",
+                   help="with --earth-deg: the Earth's Lambertian albedos, an axis of the grid (default 0.3, its Bond "
+                   "albedo; 0.05 open ocean, 0.8 a bright cloud deck: --earth-albedos 0.05,0.3,0.8)")
+    p.add_argument("--body", default="plate", choices=("plate", "3u", "none"),
+                   help="the target's body in every trial: the lab's breadboard (plate, the default), the shipped 3U "
+                   "cubesat (3u: rails, MLI, body-mounted cells under cover glass) or none")
     add_executor_options(p, plan_only=True)
     allow_negative_lists(p)
     p.set_defaults(func=cmd_sun_study)
@@ -309,12 +316,13 @@ def cmd_sun_study(args) -> int:
         ae = _numbers(args.earth_deg, "--earth-deg")
         if len(ae) != 2:
             raise InputError(f"--earth-deg: expected AZ,EL (two numbers), got {args.earth_deg!r}")
-        earth = (*ae, args.altitude_km, args.earth_albedo)
-    elif (args.altitude_km, args.earth_albedo) != (400.0, 0.3):
-        raise InputError("--altitude-km, --earth-albedo: the Earth's; give them with --earth-deg AZ,EL")
+        earth = (*ae, args.altitude_km)
+    elif args.altitude_km != 400.0 or args.earth_albedos is not None:
+        raise InputError("--altitude-km, --earth-albedos: the Earth's; give them with --earth-deg AZ,EL")
+    albedos = None if args.earth_albedos is None else _numbers(args.earth_albedos, "--earth-albedos")
     config = make_config(args.camera, _numbers(args.ranges, "--ranges"), _numbers(args.sun_azimuths_deg, "--sun-azimuths-deg"),
                          _numbers(args.sun_elevations_deg, "--sun-elevations-deg"), args.trials, seed=args.seed,
-                         pattern=args.pattern, earth=earth)
+                         pattern=args.pattern, earth=earth, earth_albedos=albedos, body=args.body)
     out = Path(args.out)
     lists = {k: ",".join(f"{x:g}" for x in v) for k, v in (("--ranges", config.ranges_m),
                                                              ("--sun-azimuths-deg", config.azimuths_deg),
@@ -322,7 +330,8 @@ def cmd_sun_study(args) -> int:
     argv = ["svgs", "sun-study", "--camera", config.camera] + [w for k, v in lists.items() for w in (f"{k}={v}",)] + [
         "--trials", str(config.trials), "--out", str(out), "--seed", str(config.seed), "--pattern", config.pattern,
         *([f"--earth-deg={config.earth[0]:g},{config.earth[1]:g}", "--altitude-km", f"{config.earth[2]:g}",
-           "--earth-albedo", f"{config.earth[3]:g}"] if config.earth else []),
+           "--earth-albedos=" + ",".join(f"{b:g}" for b in config.earth_albedos)] if config.earth else []),
+        *(["--body", config.body] if config.body != "plate" else []),
         *executor_argv(args)]
     if announce_plan(args, "render", config.n_trials, config.n_trials, spec):
         return 0
@@ -339,8 +348,8 @@ def cmd_sun_study(args) -> int:
             n = sum(c["trials"] for c in cs)
             print(f"  {r:g} m: solved {sum(c['solved'] for c in cs)}/{n}, wrong locks {sum(c['wrong_lock'] for c in cs)}")
         print(f"results: {out}/results.csv  summary: {out}/summary.json  figure: {out}/sun_study.png")
-    obj = {k: s[k] for k in ("camera", "pattern", "trials_per_cell", "pose", "wrong_lock_px", "body", "earth", "cells",
-                             "outputs")}
+    obj = {k: s[k] for k in ("camera", "pattern", "trials_per_cell", "pose", "wrong_lock_px", "body", "body_description",
+                             "earth", "cells", "outputs")}
     obj["run"] = s["run"]
     emit(obj, args.json, out)
     return 0

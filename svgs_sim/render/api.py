@@ -49,7 +49,7 @@ from .scene import TILE_SIZE_PX as T
 from .scene import build_scene
 from .sensor import CameraModel
 from .spots import SPOT_SAMPLERS, SpotEstimator
-from .sun import sun_in_band, sun_in_image
+from .sun import photon_spectra, sun_in_band, sun_in_image
 from .earth import earth_half_angle_deg, earth_in_image, earth_map
 from .environment import EnvironmentGrid, environment_radiance
 from .truth import svgs_frame_truth
@@ -87,6 +87,10 @@ class RenderResult(RenderedFrame):
         The sun's part of ``flux`` and ``flux_diffuse`` (a scene with the sun,
         :mod:`svgs_sim.render.sun`), photons/s per pixel counted with the sun's mean photon
         energy in the band.
+    natural_spectra : tuple of ndarray, optional
+        With ``flux_sun``: ``(wavelength_nm (n,), photons_natural (n,), photons_flash (n,))``, the
+        sun's (and the grey Earth's) and the flash's photon spectra over the band (any scale
+        each; :func:`svgs_sim.render.sun.photon_spectra`), for the camera's colour filters.
     truth : dict
         Pose, projections, every physical parameter used (JSON-serialisable; keyword-only).
     timings_s : dict
@@ -98,6 +102,7 @@ class RenderResult(RenderedFrame):
     flux_diffuse: np.ndarray | None = None
     points: PointFlux | None = None
     flux_sun: np.ndarray | None = None
+    natural_spectra: tuple | None = None
 
     def film(self) -> tuple[np.ndarray, PointFlux | None]:
         """What the camera model takes: ``(flux already integrated over pixels (H, W), point
@@ -607,8 +612,9 @@ class Renderer:
                               "albedo": o.earth_albedo, "half_angle_deg": earth_half_angle_deg(o.altitude_m),
                               "in_view": earth_in_image(self.camera, R, o.earth_direction_target, o.altitude_m),
                               "shadow_model": "cylindrical, umbra only (svgs_sim.render.earth)"}
+        spectra = None if flux_sun is None else photon_spectra(self.optics.band_nm, self.flash.spectrum)
         return RenderResult(flux=flux, truth=truth, radiance=radiance, timings_s=timings,
-                            flux_diffuse=flux_diffuse, points=points, flux_sun=flux_sun)
+                            flux_diffuse=flux_diffuse, points=points, flux_sun=flux_sun, natural_spectra=spectra)
 
     def _sun_flux(self, R, t, spp: int, seed: int, factor, timings: dict):
         """The sun's flux (photons/s per pixel, float32 (H, W); the flash's radiance-to-photon

@@ -29,6 +29,7 @@ import numpy as np
 from svgs_sim.base.errors import InputError
 
 from .constants import PLANCK_J_S, SPEED_OF_LIGHT_M_S
+from .optics import spectrum
 
 #: Total solar irradiance at 1 AU, W/m^2. Kopp & Lean (2011), Geophys. Res. Lett. 38, L01706:
 #: 1360.8 +/- 0.5 W/m^2 at solar minimum; 1361 is the IAU 2015 nominal value (Resolution B3).
@@ -93,6 +94,38 @@ def sun_in_band(band_nm) -> dict:
     photons = float(np.trapezoid(eg * grid * 1e-9 / (PLANCK_J_S * SPEED_OF_LIGHT_M_S), grid))
     return {"irradiance_w_m2": p, "radiance_w_m2_sr": p / sun_solid_angle_sr(), "mean_photon_energy_j": p / photons,
             "band_fraction": p / SOLAR_CONSTANT_W_M2}
+
+
+def photon_spectra(band_nm, flash_spectrum: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The sun's and the flash's photon spectra over a band, for the camera's colour filters.
+
+    The Earth's light has the sun's spectrum: its albedo is grey (ASSUMPTION, docs/orbit.md), so
+    one spectrum serves all natural light.
+
+    Parameters
+    ----------
+    band_nm : (float, float)
+    flash_spectrum : str
+        The flash's spectrum (:data:`svgs_sim.render.optics.SPECTRA`).
+
+    Returns
+    -------
+    wavelength_nm : ndarray, shape (n,)
+        A 0.5 nm grid over the band.
+    photons_sun, photons_flash : ndarray, shape (n,)
+        Photons per nm (any scale each): spectral power times wavelength. Read-only.
+    """
+    return _photon_spectra(float(band_nm[0]), float(band_nm[1]), str(flash_spectrum))
+
+
+@lru_cache(maxsize=4)
+def _photon_spectra(lo: float, hi: float, flash_spectrum: str):
+    grid = np.arange(lo, hi + 1e-9, 0.5)
+    wl, e = solar_spectrum()
+    out = (grid, np.interp(grid, wl, e) * grid, spectrum(flash_spectrum, grid) * grid)
+    for a in out:
+        a.setflags(write=False)
+    return out
 
 
 def sun_direction_target(azimuth_deg: float, elevation_deg: float) -> np.ndarray:

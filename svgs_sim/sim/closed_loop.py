@@ -291,6 +291,11 @@ class Frame:
         ``(radiance_w_m2_sr, factor)`` with ``lab = radiance_w_m2_sr * factor``
         (:func:`lab_flux`, :func:`lab_photon_factor`): the camera model keeps the optical image
         of ``factor`` and scales it, instead of convolving the lab's light again every frame.
+    natural : (ndarray, tuple), optional
+        ``(flux_sun, spectra)``: the sun's and the Earth's part of ``target_diffuse`` (float32
+        (H, W), photons/s per pixel) and their photon spectra with the flash's
+        (:attr:`svgs_sim.render.api.RenderResult.natural_spectra`): through the colour filters each
+        channel takes that light with its own weight (:func:`svgs_sim.camera.phone.cfa.light_weights`).
     """
 
     scenario: Scenario
@@ -301,6 +306,7 @@ class Frame:
     target_diffuse: np.ndarray | None = None
     points: object = None
     lab_unit: tuple | None = None
+    natural: tuple | None = None
     _phone: object = field(default=None, repr=False)
 
     @property
@@ -352,17 +358,25 @@ class Frame:
         phone = self.phone(glare=glare, veiling_fraction=veiling_fraction, wing_exponent=wing_exponent)
         seed = render_seed(self.truth)
         lab = self.lab if self.lab is not None else np.float32(0.0)
+        natural = None
+        if self.natural is not None and phone.params.cfa.enabled:  # the sun's colour through the filters
+            from svgs_sim.camera.phone.cfa import light_weights
+
+            flux_nat, spectra = self.natural
+            flux_nat = flux_nat if target_scale == 1.0 else (flux_nat * np.float32(target_scale)).astype(np.float32)
+            natural = (flux_nat, light_weights(phone.params.cfa, *spectra))
         if self.points is not None and self.target_diffuse is not None:
             pts = self.points if target_scale == 1.0 else self.points.scaled(target_scale)
             if self.lab_unit is not None:  # the lab's optical image kept by the camera model
                 flux = (self.target_diffuse * np.float32(target_scale)).astype(np.float32)
-                return Exposer(phone, flux, points=pts, stages=stages, optics_seed=seed, background=self.lab_unit)
+                return Exposer(phone, flux, points=pts, stages=stages, optics_seed=seed, background=self.lab_unit,
+                               natural=natural)
             flux = (lab + self.target_diffuse * np.float32(target_scale)).astype(np.float32)
-            return Exposer(phone, flux, points=pts, stages=stages, optics_seed=seed)
+            return Exposer(phone, flux, points=pts, stages=stages, optics_seed=seed, natural=natural)
         flux = self.flux
         if target_scale != 1.0:
             flux = (lab + (self.flux - lab) * np.float32(target_scale)).astype(np.float32)
-        return Exposer(phone, flux, stages=stages, optics_seed=seed)
+        return Exposer(phone, flux, stages=stages, optics_seed=seed, natural=natural)
 
 
 def render_seed(truth: dict) -> int:
@@ -514,6 +528,11 @@ def render_scenario(scenario: Scenario, *, seed: int = 0, options: RenderOptions
     # the sun (a pass of its own, svgs_sim.render.sun) and the Earth (in the sun's pass, svgs_sim.render.earth);
     # the lab's are the defaults
     scene_options.update(scenario.scene.natural_light())
+    if scenario.scene.body != "plate":  # a trial's shipped body (svgs_sim.sim.scene.Scene.body)
+        if options.body is not None and options.body != scenario.scene.body:
+            raise InputError(f"body: the scene holds {scenario.scene.body!r} and the render options {options.body!r}; "
+                             "give one")
+        scene_options["body"] = scenario.scene.body
     res = render_flux(camera, pattern, R, t, seed=int(seed), scene_options=scene_options, method=options.method,
                       reflector=options.reflector, full_frame=options.full_frame,
                       spot_samples=DEFAULT_SPOT_SAMPLES if options.spot_samples is None else int(options.spot_samples),
@@ -526,7 +545,12 @@ def render_scenario(scenario: Scenario, *, seed: int = 0, options: RenderOptions
     truth["scenario"] = scenario.to_json()
     truth["focus_distance_m"] = focus
     return Frame(scenario, res.flux + lab, truth, dt, lab, target_diffuse=res.flux_diffuse, points=res.points,
-                 lab_unit=(info["radiance_w_m2_sr"], factor))
+                 lab_unit=(info["radiance_w_m2_sr"], factor), natural=natural_part(res))
+
+
+def natural_part(res) -> tuple | None:
+    """``(flux_sun, spectra)`` of a render (:attr:`Frame.natural`), or None without the sun."""
+    return None if res.flux_sun is None else (res.flux_sun, res.natural_spectra)
 
 
 def solver_camera(camera: Camera, image_shape) -> Camera:

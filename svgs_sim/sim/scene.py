@@ -80,6 +80,9 @@ class Quantity:
     component : int or None
         One component of a CLI option that several quantities share (the same ``flag``, given
         as ``A,B``): this quantity's place in it.
+    option : bool
+        Whether :func:`add_scene_options` makes its CLI option (False: the commands take it their
+        own way, as ``--body``, which also takes a mesh file where a command can render one).
     """
 
     unit: str
@@ -94,6 +97,7 @@ class Quantity:
     help: str | None = None
     choices: tuple = ()
     component: int | None = None
+    option: bool = True
 
 
 def quantity(default, **declaration) -> Any:
@@ -117,6 +121,9 @@ def _domain(q: Quantity) -> str:
 
 #: The environments a scene may be in (:attr:`Scene.environment`): the first is the default.
 ENVIRONMENTS = ("lab", "orbit")
+#: The shipped target bodies a trial may hold (:attr:`Scene.body`; :mod:`svgs_sim.render.cubesat`):
+#: the first is the default.
+BODIES = ("plate", "3u", "none")
 
 
 @dataclass(frozen=True)
@@ -140,6 +147,10 @@ class Scene:
         The target's altitude above the Earth, km (with the Earth).
     earth_albedo : float
         The Earth's Lambertian albedo (with the Earth).
+    body : {"plate", "3u", "none"}
+        The target's body: the lab's breadboard (the default), the shipped 3U cubesat or none
+        (:mod:`svgs_sim.render.cubesat`). A mesh file is a render option of the commands that
+        render single scenes and approaches (:class:`svgs_sim.sim.closed_loop.RenderOptions`).
     backdrop_distance_m : float or None
         A grey Lambertian backdrop this far behind the target origin, m (None: no backdrop).
     backdrop_reflectance : float
@@ -184,6 +195,10 @@ class Scene:
         lower=0.0, upper=1.0, flag="--earth-albedo",
         help="orbit only, with --earth-deg: the Earth's Lambertian albedo (default 0.3, its Bond albedo; 0.05 open "
         "ocean, 0.8 a bright cloud deck)")
+    body: str = quantity(
+        "plate", unit="1", choices=BODIES, option=False, flag="--body",
+        meaning="the target's body: 'plate' (the lab's breadboard behind the pattern), '3u' (the shipped 3U cubesat) "
+        "or 'none'")
     backdrop_distance_m: float | None = quantity(
         LAB.backdrop_distance_m, unit="m", meaning="grey backdrop behind the target",
         lower=0.0, upper=INPUT_BOUNDS["backdrop_m"][1], lower_open=True, none_means="none", row_none=0.0,
@@ -376,7 +391,7 @@ def add_scene_options(parser) -> None:
     :func:`svgs_sim.cli.validate.check_args` before any work)."""
     default = Scene()
     for name, q in Scene.quantities().items():
-        if not q.trial or (q.component or 0) > 0:  # a shared option is added with its first component
+        if not q.trial or not q.option or (q.component or 0) > 0:  # a shared option: added with its first component
             continue
         text = q.help
         if q.component is not None:
@@ -405,7 +420,7 @@ def scene_from_args(args, base: Scene | None = None) -> Scene:
     base = base or Scene()
     kw = {}
     for name, q in Scene.quantities().items():
-        if not q.trial:
+        if not q.trial or not q.option:
             continue
         v = getattr(args, _dest(_flag(name, q)), None)
         if v is not None and q.component is not None:
@@ -439,7 +454,7 @@ def scene_option_words(args) -> list[str]:
     ...), for a report's command that rebuilds the same study."""
     out = []
     for name, q in Scene.quantities().items():
-        if not q.trial or (q.component or 0) > 0:
+        if not q.trial or not q.option or (q.component or 0) > 0:
             continue
         v = getattr(args, _dest(_flag(name, q)), None)
         if v is None:

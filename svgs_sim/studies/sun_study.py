@@ -40,7 +40,7 @@ from svgs_sim.base.errors import InputError
 from svgs_sim.base.profiles import load_camera, load_pattern
 from svgs_sim.render.sun import sun_direction_target, sun_in_image
 from svgs_sim.render.earth import earth_in_image, in_eclipse
-from svgs_sim.sim.scene import Scene
+from svgs_sim.sim.scene import BODIES, Scene
 from svgs_sim.sim.render_trial import RENDER, render_trial_scenario
 from svgs_sim.sim.metrics import WRONG_LOCK_PX, wrong_lock_px
 from svgs_sim.studies.execution import Trial, library_versions, run_stored_study
@@ -67,8 +67,12 @@ class SunStudyConfig:
         Trials per cell.
     seed : int
     earth : tuple or None
-        ``(azimuth_deg, elevation_deg, altitude_km, albedo)`` of the Earth in every trial (the
-        target frame; :mod:`svgs_sim.render.earth`), or None: no Earth.
+        ``(azimuth_deg, elevation_deg, altitude_km)`` of the Earth in every trial (the target frame;
+        :mod:`svgs_sim.render.earth`), or None: no Earth.
+    earth_albedos : tuple of float
+        The Earth's albedos, an axis of the grid (with the Earth; ``(0.3,)`` without).
+    body : {"plate", "3u", "none"}
+        The target's body in every trial (:attr:`svgs_sim.sim.scene.Scene.body`).
     """
 
     camera: str
@@ -79,10 +83,13 @@ class SunStudyConfig:
     trials: int
     seed: int = 0
     earth: tuple | None = None
+    earth_albedos: tuple = (0.3,)
+    body: str = "plate"
 
-    def cells(self) -> list[tuple[float, float, float]]:
-        """``(range_m, azimuth_deg, elevation_deg)`` of every cell, in the trials' order."""
-        return [(r, a, e) for r in self.ranges_m for a in self.azimuths_deg for e in self.elevations_deg]
+    def cells(self) -> list[tuple[float, float, float, float]]:
+        """``(range_m, earth_albedo, azimuth_deg, elevation_deg)`` of every cell, in the trials' order."""
+        return [(r, b, a, e) for r in self.ranges_m for b in self.earth_albedos for a in self.azimuths_deg
+                for e in self.elevations_deg]
 
     @property
     def n_trials(self) -> int:
@@ -91,14 +98,14 @@ class SunStudyConfig:
     def manifest(self) -> dict:
         d = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
         if d["earth"] is None:  # no Earth: the manifest of a study made before the Earth
-            del d["earth"]
+            del d["earth"], d["earth_albedos"]
         return {"study": "sun-study", "trial_kind": "render", **d}
 
-    def earth_parameters(self) -> dict:
-        """The Earth's scene parameters of every trial (empty: no Earth)."""
+    def earth_parameters(self, albedo: float) -> dict:
+        """The Earth's scene parameters of a trial (empty: no Earth)."""
         if self.earth is None:
             return {}
-        az, el, alt, albedo = self.earth
+        az, el, alt = self.earth
         return {"earth_azimuth_deg": az, "earth_elevation_deg": el, "altitude_km": alt, "earth_albedo": albedo}
 
 
@@ -118,9 +125,10 @@ def _angles(values, what: str, lim: float) -> tuple:
 
 
 def make_config(camera: str, ranges_m, azimuths_deg, elevations_deg, trials: int, *, seed: int = 0,
-                pattern: str = "svgs-3u", earth=None) -> SunStudyConfig:
+                pattern: str = "svgs-3u", earth=None, earth_albedos=None, body: str = "plate") -> SunStudyConfig:
     """A checked configuration (InputError naming the input, before any work). ``earth``:
-    ``(azimuth_deg, elevation_deg, altitude_km, albedo)`` or None."""
+    ``(azimuth_deg, elevation_deg, altitude_km)`` or None; ``earth_albedos``: the albedos swept
+    (default 0.3; only with the Earth); ``body``: ``plate``, ``3u`` or ``none``."""
     cam, pat = load_camera(camera), load_pattern(pattern)
     for t in ("optics", "flash"):
         cam.table(t)
@@ -129,12 +137,35 @@ def make_config(camera: str, ranges_m, azimuths_deg, elevations_deg, trials: int
         raise InputError(f"--ranges: repeated range in {list(rs)}")
     if isinstance(trials, bool) or not isinstance(trials, (int, np.integer)) or trials < 1:
         raise InputError(f"--trials: expected a whole number >= 1, got {trials!r}")
+    albedos = (0.3,)
+    if earth_albedos is not None:
+        if earth is None:
+            raise InputError("--earth-albedos: the Earth's; give them with --earth-deg AZ,EL")
+        albedos = tuple(_albedo(x) for x in earth_albedos)
+        if not albedos or len(set(albedos)) != len(albedos):
+            raise InputError(f"--earth-albedos: expected distinct values, got {list(earth_albedos)!r}")
+    if body not in BODIES:
+        raise InputError(f"--body: a study takes one of {', '.join(BODIES)} (a mesh file renders with svgs render, "
+                         f"render-and-solve and approach), got {body!r}")
     if earth is not None:
-        az, el, alt, albedo = (float(x) for x in earth)
-        Scene(environment="orbit", earth_azimuth_deg=az, earth_elevation_deg=el, altitude_km=alt, earth_albedo=albedo)
-        earth = (az, el, alt, albedo)
+        az, el, alt = (float(x) for x in earth)
+        for albedo in albedos:
+            Scene(environment="orbit", earth_azimuth_deg=az, earth_elevation_deg=el, altitude_km=alt,
+                  earth_albedo=albedo)
+        earth = (az, el, alt)
     return SunStudyConfig(str(camera), str(pattern), rs, _angles(azimuths_deg, "--sun-azimuths-deg", 360.0),
-                          _angles(elevations_deg, "--sun-elevations-deg", 90.0), int(trials), check_seed(seed), earth)
+                          _angles(elevations_deg, "--sun-elevations-deg", 90.0), int(trials), check_seed(seed), earth,
+                          albedos, str(body))
+
+
+def _albedo(v) -> float:
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        raise InputError(f"--earth-albedos: expected numbers 0 to 1, got {v!r}") from None
+    if not (np.isfinite(x) and 0.0 <= x <= 1.0):
+        raise InputError(f"--earth-albedos: expected numbers 0 to 1, got {v!r}")
+    return x
 
 
 def _pose(rng) -> dict:
@@ -148,13 +179,13 @@ def _pose(rng) -> dict:
 def sun_study_trials(config: SunStudyConfig) -> list:
     """Every trial: cell by cell (range, then azimuth, then elevation), ``trials`` per cell."""
     out = []
-    for c, (r, az, el) in enumerate(config.cells()):
+    for c, (r, albedo, az, el) in enumerate(config.cells()):
         for k in range(config.trials):
             i = c * config.trials + k
             scen = render_trial_scenario(
                 camera=config.camera, pattern=config.pattern, range_m=r, **_pose(design_rng(config.seed, i)),
-                environment="orbit", sun_azimuth_deg=az, sun_elevation_deg=el, **config.earth_parameters(),
-                labels={"cell": c, "trial_in_cell": k})
+                environment="orbit", sun_azimuth_deg=az, sun_elevation_deg=el, **config.earth_parameters(albedo),
+                body=BODIES.index(config.body), labels={"cell": c, "trial_in_cell": k})
             out.append(Trial(i, scen, trial_seed(config.seed, i)))
     return out
 
@@ -207,13 +238,14 @@ def cells(config: SunStudyConfig, rows) -> list[dict]:
     for row, c in zip(rows, classify(rows, cam, pat)):
         by.setdefault(int(row["cell"]), []).append(c)
     out = []
-    for i, (r, az, el) in enumerate(config.cells()):
+    for i, (r, albedo, az, el) in enumerate(config.cells()):
         cs = by.get(i, [])
         reasons = {}
         for c in cs:
             if c["outcome"] not in ("solved", "wrong_lock"):
                 reasons[c["outcome"]] = reasons.get(c["outcome"], 0) + 1
-        out.append({"range_m": r, "sun_azimuth_deg": az, "sun_elevation_deg": el,
+        out.append({"range_m": r, **({"earth_albedo": albedo} if config.earth else {}),
+                    "sun_azimuth_deg": az, "sun_elevation_deg": el,
                     "phase_angle_deg": phase_angle_deg(az, el), "trials": len(cs),
                     "solved": sum(c["outcome"] == "solved" for c in cs),
                     "wrong_lock": sum(c["outcome"] == "wrong_lock" for c in cs),
@@ -224,9 +256,13 @@ def cells(config: SunStudyConfig, rows) -> list[dict]:
     return out
 
 
-#: The target's body in every trial (the render trial's default; the study does not take another yet).
-BODY = ("the lab's breadboard (`plate`: the pattern's mounts on a dark Lambertian plate 12 mm beyond them, "
-        "reflectance 0.05)")
+#: The target's body in every trial (:attr:`SunStudyConfig.body`), as the reports say it.
+BODY = {"plate": "the lab's breadboard (`plate`: the pattern's mounts on a dark Lambertian plate 12 mm beyond them, "
+                 "reflectance 0.05)",
+        "3u": "the shipped 3U cubesat (`3u`, svgs_sim/render/cubesat.py: 100 x 340.5 x 100 mm, anodised rails and "
+              "ends, an MLI face under the pattern, body-mounted cells under cover glass on the other three long "
+              "sides, target 3's boom)",
+        "none": "none (`none`: the cubes and their mounts alone)"}
 
 #: The beta angles (deg) of the sun paths drawn on the study's figure.
 PATH_BETAS_DEG = (0.0, 30.0, 60.0)
@@ -260,8 +296,9 @@ def sun_path_vbar(beta_deg: float, altitude_km: float = 400.0, n: int = 721):
 
 
 def figure(config: SunStudyConfig, table: list, path) -> Path:
-    """Availability (solved fraction) against the sun's direction, one row of panels per range: the
-    sun above the pattern plane (elevation >= 0) and below it; wrong locks marked with a red ring;
+    """Availability (solved fraction) against the sun's direction, one row of panels per range (and
+    Earth albedo, when several): the sun above the pattern plane (elevation >= 0) and below it;
+    wrong locks marked with a red ring;
     the sun's path over an orbit for the beta angles :data:`PATH_BETAS_DEG` (:func:`sun_path_vbar`:
     sunlit solid, in eclipse dotted)."""
     import matplotlib
@@ -269,11 +306,12 @@ def figure(config: SunStudyConfig, table: list, path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    n = len(config.ranges_m)
+    rows = _row_groups(config)
+    n = len(rows)
     fig, axes = plt.subplots(n, 2, figsize=(9, 3.6 * n), subplot_kw={"projection": "polar"}, squeeze=False)
-    for row_ax, r in zip(axes, config.ranges_m):
+    for row_ax, (r, albedo, label) in zip(axes, rows):
         for ax, above in zip(row_ax, (True, False)):
-            cs = [c for c in table if c["range_m"] == r and (c["sun_elevation_deg"] >= 0) == above]
+            cs = [c for c in _in_row(table, r, albedo) if (c["sun_elevation_deg"] >= 0) == above]
             if cs:
                 th = np.deg2rad([c["sun_azimuth_deg"] for c in cs])
                 rad = [90.0 - abs(c["sun_elevation_deg"]) for c in cs]  # the centre: the sun on the face normal
@@ -291,14 +329,14 @@ def figure(config: SunStudyConfig, table: list, path) -> Path:
                     m = side & (ecl != lit)
                     y = np.where(m, 90.0 - np.abs(el), np.nan)
                     ax.plot(np.deg2rad(az), y, style, color=colour, lw=1.2,
-                            label=f"beta {beta:g} deg" if (lit and above and r == config.ranges_m[0]) else None)
-            if above and r == config.ranges_m[0]:
+                            label=f"beta {beta:g} deg" if (lit and above and label == rows[0][2]) else None)
+            if above and label == rows[0][2]:
                 ax.legend(loc="lower left", bbox_to_anchor=(-0.35, -0.15), fontsize=7,
                           title="sun over an orbit (V-bar; dotted: eclipse)", title_fontsize=7)
             ax.set_ylim(0, 90)
             ax.set_yticks([0, 30, 60, 90])
             ax.set_yticklabels(["+z" if above else "-z", "60", "30", "0"], fontsize=7)
-            ax.set_title(f"{r:g} m, sun {'above' if above else 'below'} the pattern plane\n"
+            ax.set_title(f"{label}, sun {'above' if above else 'below'} the pattern plane\n"
                          "(centre: along the face normal; angle: azimuth)", fontsize=9)
     fig.suptitle(f"SVGS availability on orbit: {config.camera}, {config.trials} trials a cell (red ring: wrong lock)",
                  fontsize=10)
@@ -307,6 +345,18 @@ def figure(config: SunStudyConfig, table: list, path) -> Path:
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
+
+
+def _row_groups(config: SunStudyConfig) -> list:
+    """``(range_m, albedo or None, label)`` of the figure's and the README's rows: one per range, or
+    per range and Earth albedo when the study sweeps several."""
+    if config.earth is not None and len(config.earth_albedos) > 1:
+        return [(r, b, f"{r:g} m, albedo {b:g}") for r in config.ranges_m for b in config.earth_albedos]
+    return [(r, None, f"{r:g} m") for r in config.ranges_m]
+
+
+def _in_row(table, r, albedo) -> list:
+    return [c for c in table if c["range_m"] == r and (albedo is None or c.get("earth_albedo") == albedo)]
 
 
 def _frac(cs, key="solved") -> str:
@@ -325,14 +375,14 @@ def write_readme(config: SunStudyConfig, table: list, path, command: str = "") -
              f"{config.trials} trials a cell ({config.n_trials} in all). Poses: roll, pitch uniform in +/-25 deg, yaw in "
              "+/-45 deg, the target on the boresight. The sun's elevation is from the pattern plane toward the face "
              "normal (+z, toward a head-on camera): above 0 the sun lights the face, below 0 it is behind the target. "
-             f"Body: {BODY}. " + (f"Earth: toward azimuth {config.earth[0]:g}, elevation {config.earth[1]:g} deg, "
-                                  f"{config.earth[2]:g} km below, albedo {config.earth[3]:g}. " if config.earth else
-                                  "No Earth. ") + "See docs/orbit.md for the definitions.", "",
-             "| range, m | solved | wrong locks | " + " | ".join(f"solved, el {e:g}" for e in els) + " |",
+             f"Body: {BODY[config.body]}. " + (
+                 f"Earth: toward azimuth {config.earth[0]:g}, elevation {config.earth[1]:g} deg, {config.earth[2]:g} km "
+                 f"below, albedo {', '.join(f'{b:g}' for b in config.earth_albedos)}. " if config.earth else "No Earth. ") + "See docs/orbit.md for the definitions.", "",
+             "| cells | solved | wrong locks | " + " | ".join(f"solved, el {e:g}" for e in els) + " |",
              "|---|---|---|" + "---|" * len(els)]
-    for r in config.ranges_m:
-        cs = [c for c in table if c["range_m"] == r]
-        lines.append(f"| {r:g} | {_frac(cs)} | {sum(c['wrong_lock'] for c in cs)} | "
+    for r, albedo, label in _row_groups(config):
+        cs = _in_row(table, r, albedo)
+        lines.append(f"| {label} | {_frac(cs)} | {sum(c['wrong_lock'] for c in cs)} | "
                      + " | ".join(_frac([c for c in cs if c["sun_elevation_deg"] == e]) for e in els) + " |")
     reasons, mech = {}, {m: 0 for m in MECHANISMS}
     for c in table:
@@ -367,9 +417,11 @@ def run_sun_study(config: SunStudyConfig, out_dir, spec, *, chunk_size=None, pro
     readme = write_readme(config, table, out / "README.md", command)
     summary = {"camera": config.camera, "pattern": config.pattern, "trials_per_cell": config.trials,
                "pose": "roll, pitch uniform in +/-25 deg, yaw in +/-45 deg (the paper's test envelope), on the boresight",
-               "wrong_lock_px": f"max({WRONG_LOCK_PX:g} px, the spot's image radius)", "body": BODY,
-               "earth": None if config.earth is None else dict(zip(("azimuth_deg", "elevation_deg", "altitude_km",
-                                                                     "albedo"), config.earth)),
+               "wrong_lock_px": f"max({WRONG_LOCK_PX:g} px, the spot's image radius)", "body": config.body,
+               "body_description": BODY[config.body],
+               "earth": None if config.earth is None else {
+                   **dict(zip(("azimuth_deg", "elevation_deg", "altitude_km"), config.earth)),
+                   "albedos": list(config.earth_albedos)},
                "cells": table, "command": command, "versions": library_versions(),
                "outputs": {"results_csv": str(out / "results.csv"), "figure": str(fig), "readme": str(readme),
                            "summary_json": str(out / "summary.json")},

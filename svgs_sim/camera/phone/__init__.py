@@ -33,7 +33,8 @@ import numpy as np
 from svgs_sim.base.errors import InputError
 from svgs_sim.base.profiles import Camera, load_camera
 from svgs_sim.camera.backend import get_backend
-from svgs_sim.camera.phone.cfa import channel_map, linear_bgr, luminance, response_map, tone_bgr, tone_image
+from svgs_sim.camera.phone.cfa import (channel_map, linear_bgr, luminance, natural_response_map, response_map, tone_bgr,
+                                      tone_image)
 from svgs_sim.camera.phone.isp import (
     ExposureSolver,
     auto_exposure,
@@ -151,7 +152,7 @@ class PhoneCamera:
         return core_psf(p.f_number, p.band_nm, p.sensor.pixel_pitch_m, p.glare.aberration_sigma_px)
 
     def optics(self, flux_ph_s: np.ndarray, points=None, *, seed: int = 0, cfa: bool | None = None,
-               background=None) -> np.ndarray:
+               background=None, natural=None) -> np.ndarray:
         """The optical image: the lens PSF applied to a flux image (photons/s/px, already
         integrated over pixels) and to point samples at sub-pixel positions
         (:class:`svgs_sim.camera.rendered.PointFlux`), integrated over pixels. ``seed`` seeds the
@@ -164,7 +165,13 @@ class PhoneCamera:
         ``background = (scale, unit)``: light ``scale * unit`` (photons/s/px, ``unit`` an
         (H, W) array that stays the same from frame to frame, e.g. the lab's light per unit
         radiance) added to ``flux_ph_s``. The optics are linear: the optical image of ``unit``
-        is made once and kept (for that very array), then scaled."""
+        is made once and kept (for that very array), then scaled.
+
+        ``natural = (flux, weights)``: the part of ``flux_ph_s`` that is light of another colour
+        than the flash (the sun's and the Earth's; float32 (H, W)) and its channel weights
+        (shape (3,), :func:`svgs_sim.camera.phone.cfa.light_weights`): through the colour filter
+        array, each pixel of colour ``c`` takes that part times ``weights[c]``. Without the
+        array (a mono sensor) it changes nothing."""
         p = self.params
         pp = (self.camera.cx, self.camera.cy)
         use_cfa = p.cfa.enabled if cfa is None else (bool(cfa) and p.cfa.enabled)
@@ -180,12 +187,17 @@ class PhoneCamera:
             if bg is not None:
                 out += (scale * bg).astype(np.float32)
             return out
-        out = self.core_mosaic(flux_ph_s, points, seed=seed)
+        nat = _natural_excess(natural)
+        out = self.core_mosaic(flux_ph_s, points, seed=seed, natural=nat)
+        resp_nat = None if nat is None else natural_response_map(p.cfa, nat[1], self.shape)
         if not p.glare.ghosts:  # core, wings, background and response in one pass
             eta = p.glare.veiling_fraction
             wc, s = (wings_coarse(flux_ph_s, p.glare, points, self.backend) if eta > 0 else (np.zeros((1, 1)), 1))
+            extra = None
+            if nat is not None and eta > 0:  # the wings of the natural light's extra colour
+                extra = (wings_coarse(nat[0], p.glare, None, self.backend)[0], resp_nat)
             return compose(out, core_share(p.glare), wc, s, max(eta, 0.0), response_map(p.cfa, self.shape),
-                           None if bg is None else (scale, bg))
+                           None if bg is None else (scale, bg), extra=extra)
         out *= core_share(p.glare)
         g = glare_image(flux_ph_s, p.glare, pp, points, self.backend)
         if g is not None:
@@ -193,6 +205,10 @@ class PhoneCamera:
         if bg is not None:
             out += scale * bg
         out *= response_map(p.cfa, self.shape)
+        if nat is not None:
+            g = glare_image(nat[0], p.glare, pp, None, self.backend)
+            if g is not None:
+                out += g * resp_nat
         return out.astype(np.float32)
 
     def _background_optics(self, unit, use_cfa: bool) -> np.ndarray:
@@ -223,7 +239,7 @@ class PhoneCamera:
         return hit[1]
 
     def core_mosaic(self, flux_ph_s: np.ndarray, points=None, *, seed: int = 0, origin=(0, 0),
-                    min_draws: int | None = None, gradient: bool = False, value: bool = True):
+                    min_draws: int | None = None, gradient: bool = False, value: bool = True, natural=None):
         """The lens' core PSF through the colour filter array: each pixel gets its channel's
         image (the Airy pattern at the channel's wavelength (x) the aberration Gaussian) of the
         flux and the points, unit share, before the channel responses (float64, the flux's shape).
@@ -234,7 +250,9 @@ class PhoneCamera:
         Monte Carlo convolutions (``point_method="monte-carlo"``). ``gradient``: the points only
         (the flux must be zero), with the grid method: a tuple ``(image, d_du, d_dv)``, the
         derivatives with respect to a common shift of the points (for the Cramer-Rao bound);
-        with ``value=False`` as well, only ``(d_du, d_dv)``."""
+        with ``value=False`` as well, only ``(d_du, d_dv)``. ``natural = (flux, excess)``: channel
+        ``c``'s image is of ``flux_ph_s + excess[c] * flux`` (light of another colour,
+        :meth:`optics`)."""
         p = self.params
         H, W = np.shape(flux_ph_s)
         x0, y0 = int(origin[0]) % 2, int(origin[1]) % 2
@@ -246,7 +264,8 @@ class PhoneCamera:
             out = np.zeros((H, W))
             seeds = np.random.SeedSequence(int(seed)).spawn(3)
             for c, core in enumerate(cores):
-                img = core_image(flux_ph_s, core, points, np.random.default_rng(seeds[c]), min_draws=min_draws,
+                fc = flux_ph_s if natural is None else flux_ph_s + np.float32(natural[1][c]) * natural[0]
+                img = core_image(fc, core, points, np.random.default_rng(seeds[c]), min_draws=min_draws,
                                  method="monte-carlo", backend=self.backend)
                 np.copyto(out, img, where=chan == c)
             return out
@@ -261,7 +280,8 @@ class PhoneCamera:
             sub, sel = outs[0][y0:y1, x0:x1], chan[y0:y1, x0:x1]
             win = np.ascontiguousarray(f[y0:y1, x0:x1])
             for c, core in enumerate(cores):
-                np.copyto(sub, core.convolve(win, backend=self.backend), where=sel == c)
+                wc = win if natural is None else win + np.float32(natural[1][c]) * natural[0][y0:y1, x0:x1]
+                np.copyto(sub, core.convolve(wc, backend=self.backend), where=sel == c)
         if has_points:
             # each spot's three channel images at once, each pixel taking its channel's
             for ys, xs, patches in splat_patches(cores, points.u_px, points.v_px, points.rate_ph_s, (H, W),
@@ -308,6 +328,19 @@ class PhoneCamera:
             checked[id(unit)] = unit
         return scale, unit
 
+    def check_natural(self, natural):
+        """Validate ``(flux, weights)`` of light of another colour (None passes; :meth:`optics`)."""
+        if natural is None:
+            return None
+        try:
+            flux, weights = natural
+            weights = np.asarray(weights, np.float64)
+        except (TypeError, ValueError):
+            raise InputError("natural: expected (flux image, channel weights)") from None
+        if weights.shape != (3,) or not np.all(np.isfinite(weights)) or weights.min() < 0:
+            raise InputError(f"natural: expected three finite, non-negative channel weights, got {weights!r}")
+        return self.check_flux(flux), weights
+
     def check_flux(self, flux_ph_s) -> np.ndarray:
         f = np.asarray(flux_ph_s)
         if f.shape != self.shape:
@@ -317,14 +350,27 @@ class PhoneCamera:
         return f.astype(np.float32, copy=False)
 
     def exposer(self, flux_ph_s, *, points=None, stages=ALL_STAGES, optics_seed: int = 0,
-                background=None) -> "Exposer":
-        return Exposer(self, flux_ph_s, points=points, stages=stages, optics_seed=optics_seed, background=background)
+                background=None, natural=None) -> "Exposer":
+        return Exposer(self, flux_ph_s, points=points, stages=stages, optics_seed=optics_seed, background=background,
+                       natural=natural)
 
     def expose(self, flux_ph_s, *, points=None, seed: int = 0, exposure_s=None, iso=None, stages=ALL_STAGES,
                keep_electrons=False):
         """One exposure of a flux image (convenience for ``exposer(flux).expose(...)``)."""
         return self.exposer(flux_ph_s, points=points, stages=stages, optics_seed=seed).expose(
             seed=seed, exposure_s=exposure_s, iso=iso, keep_electrons=keep_electrons)
+
+
+def _natural_excess(natural):
+    """``(flux, weights - 1)`` of light of another colour, or None when there is none or its
+    weights are the flash's (the flash-only path keeps its bytes)."""
+    if natural is None:
+        return None
+    flux, weights = natural
+    excess = np.asarray(weights, np.float64) - 1.0
+    if not np.any(excess) or not np.any(flux):
+        return None
+    return np.ascontiguousarray(flux, np.float32), excess
 
 
 class Exposer:
@@ -348,21 +394,25 @@ class Exposer:
     """
 
     def __init__(self, phone: PhoneCamera, flux_ph_s, *, points=None, stages=ALL_STAGES, optics_seed: int = 0,
-                 background=None):
+                 background=None, natural=None):
         self.phone = phone
         self.stages = check_stages(stages)
         f = phone.check_flux(flux_ph_s)
         pts = phone.check_points(points)
         bg = phone.check_background(background)
+        nat = phone.check_natural(natural)
         self.cfa = phone.uses_cfa(self.stages)
         if "glare" in self.stages:
-            self.flux_optics = phone.optics(f, pts, seed=optics_seed, cfa=self.cfa, background=bg)
+            self.flux_optics = phone.optics(f, pts, seed=optics_seed, cfa=self.cfa, background=bg, natural=nat)
         else:  # a perfect lens: each point counts in its own pixel
             self.flux_optics = f.copy() if pts is None else (f + pts.binned(f.shape)).astype(np.float32)
             if bg is not None:
                 self.flux_optics += np.float32(bg[0]) * bg[1]
             if self.cfa:
                 self.flux_optics *= response_map(phone.params.cfa, f.shape)
+                ex = _natural_excess(nat)
+                if ex is not None:
+                    self.flux_optics += ex[0] * natural_response_map(phone.params.cfa, ex[1], f.shape)
         self._solver = None
         p = phone.params
         self._lut = tone_lut(p.sensor, p.isp.gamma, "tone" in self.stages)

@@ -34,6 +34,71 @@ _COLOURS = {"R": 0, "G": 1, "B": 2}
 LUMA = (0.299, 0.587, 0.114)
 
 
+#: Width of the colour filters' edges, nm: each edge is a logistic step of this scale (10-90 %
+#: over 4.4 times it, 40 nm). ASSUMPTION, as the edges' places (:func:`filter_transmission`):
+#: phone Bayer filters cross over within a few tens of nm (published transmission curves,
+#: recalled, not measured for these sensors). A light's channel weights (:func:`light_weights`)
+#: move by under 3 % for 5-15 nm (tested).
+FILTER_EDGE_NM = 9.0
+
+
+def filter_transmission(cfa: CfaParams, wavelength_nm, edge_nm: float = FILTER_EDGE_NM) -> np.ndarray:
+    """The colour filters' relative transmission, float64 (3, n) (R, G, B).
+
+    The filters share the band out (they sum to 1 at every wavelength, as the mono model counts
+    every in-band photon): blue below, green between and red above two edges, logistic steps of
+    scale ``edge_nm`` at the midpoints of the channels' mean wavelengths (``[cfa] wavelength_nm``;
+    497.5 and 567.5 nm for 600, 535, 460). ASSUMPTION (:data:`FILTER_EDGE_NM`); under the flash
+    (``render/optics.py WHITE_LED``) these filters' photon-weighted mean wavelengths are 604, 539 and
+    459 nm, the profile's 600, 535 and 460 within 4 nm.
+    """
+    wl = np.asarray(wavelength_nm, np.float64)
+    r, g, b = (float(x) for x in cfa.wavelength_nm)
+    step_bg = 1.0 / (1.0 + np.exp(-(wl - 0.5 * (b + g)) / float(edge_nm)))  # 0 -> 1 from blue to green
+    step_gr = 1.0 / (1.0 + np.exp(-(wl - 0.5 * (g + r)) / float(edge_nm)))  # 0 -> 1 from green to red
+    return np.stack([step_gr, step_bg - step_gr, 1.0 - step_bg])
+
+
+def light_weights(cfa: CfaParams, wavelength_nm, photons_light, photons_reference,
+                  edge_nm: float = FILTER_EDGE_NM) -> np.ndarray:
+    """Each channel's response to a light of another colour, relative to its response to the
+    reference light (the flash) for the same in-band photons.
+
+    ``[cfa] response`` is what each channel collects from the flash per mono photon; a light of
+    another spectrum (the sun, the Earth's light) gives channel ``c``
+
+    ``w_c = (int N_l T_c / int N_l) / (int N_r T_c / int N_r)``
+
+    times that (``N`` photons per nm over the band, ``T_c`` the filter,
+    :func:`filter_transmission`): the camera model multiplies that light's part of each pixel
+    of colour ``c`` by ``w_c``. The reference itself gives ``(1, 1, 1)``.
+
+    Parameters
+    ----------
+    cfa : CfaParams
+    wavelength_nm : array_like, shape (n,)
+        The grid over the band, nm.
+    photons_light, photons_reference : array_like, shape (n,)
+        Photon spectral densities (any scale each) on that grid.
+    edge_nm : float
+        The filters' edge scale (:data:`FILTER_EDGE_NM`).
+
+    Returns
+    -------
+    ndarray, float64, shape (3,)
+        ``w_R, w_G, w_B``.
+    """
+    wl = np.asarray(wavelength_nm, np.float64)
+    t = filter_transmission(cfa, wl, edge_nm)
+    shares = []
+    for n in (photons_light, photons_reference):
+        n = np.asarray(n, np.float64)
+        if n.shape != wl.shape or not np.all(np.isfinite(n)) or n.min() < 0 or not np.trapezoid(n, wl) > 0:
+            raise ValueError("light_weights: expected finite, non-negative photon spectra on the grid, not all zero")
+        shares.append(np.trapezoid(t * n, wl, axis=1) / np.trapezoid(n, wl))
+    return shares[0] / shares[1]
+
+
 def channel_map(pattern: str, shape) -> np.ndarray:
     """Colour index (0 R, 1 G, 2 B) of every pixel, uint8 (H, W); read-only (cached)."""
     return _channel_map(str(pattern), int(shape[0]), int(shape[1]))
@@ -59,6 +124,13 @@ def _response_map(response: tuple, pattern: str, H: int, W: int) -> np.ndarray:
     out = np.asarray(response, np.float32)[_channel_map(pattern, H, W)]
     out.setflags(write=False)
     return out
+
+
+def natural_response_map(cfa, excess, shape) -> np.ndarray:
+    """Each pixel's response to light of another colour beyond the flash's: ``response[c] *
+    excess[c]`` for a pixel of colour ``c``, float32 (H, W); read-only (cached)."""
+    resp = tuple(float(r) * float(e) for r, e in zip(cfa.response, excess))
+    return _response_map(resp, str(cfa.pattern), int(shape[0]), int(shape[1]))
 
 
 def demosaic_code(cfa: CfaParams, method: str | None = None) -> int:

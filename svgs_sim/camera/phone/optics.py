@@ -160,11 +160,12 @@ def _spread_index(i, s, n):
 
 
 @njit(parallel=True, cache=True)
-def _compose_kernel(core, share, wc, s, eta, bg, scale, use_bg, resp, out):
-    """``out = resp * (share * core + eta * up(wc) + scale * bg)`` (float32 out): the optical
-    image's parts summed in one pass; ``up`` is the linear spreading of the coarse wing image
-    back to full resolution (fine x reads coarse (x + 1/2) / s - 1/2, clamped at the ends, the
-    tent binning's transpose, as ``cv2.resize``'s INTER_LINEAR on an s-fold grid)."""
+def _compose_kernel(core, share, wc, s, eta, bg, scale, use_bg, resp, wc2, resp2, use2, out):
+    """``out = resp * (share * core + eta * up(wc) + scale * bg) + resp2 * eta * up(wc2)`` (float32
+    out): the optical image's parts summed in one pass; ``up`` is the linear spreading of a coarse
+    wing image back to full resolution (fine x reads coarse (x + 1/2) / s - 1/2, clamped at the
+    ends, the tent binning's transpose, as ``cv2.resize``'s INTER_LINEAR on an s-fold grid); the
+    second wing image (``use2``) is light of another colour, with its own per-pixel response."""
     H, W = core.shape
     Hc, Wc = wc.shape
     cx0 = np.empty(W, np.int64)
@@ -181,14 +182,20 @@ def _compose_kernel(core, share, wc, s, eta, bg, scale, use_bg, resp, out):
             v = core[r, c] * share + eta * w
             if use_bg:
                 v += scale * bg[r, c]
-            out[r, c] = v * resp[r, c]
+            v *= resp[r, c]
+            if use2:
+                w2 = ((1.0 - fy) * ((1.0 - fx) * wc2[y0, x0] + fx * wc2[y0, x1])
+                      + fy * ((1.0 - fx) * wc2[y1, x0] + fx * wc2[y1, x1]))
+                v += eta * w2 * resp2[r, c]
+            out[r, c] = v
 
 
-def compose(core, share: float, wc, s: int, eta: float, resp, background=None) -> np.ndarray:
+def compose(core, share: float, wc, s: int, eta: float, resp, background=None, extra=None) -> np.ndarray:
     """The optical image from its parts in one pass (:func:`_compose_kernel`): the core image
     (float64 (H, W)) times its share, the wings' coarse image ``wc`` of binning ``s``
     (:func:`wings_coarse`) times ``eta``, ``background = (scale, image)`` (float64 (H, W)) and
-    the per-pixel response ``resp`` (float32 (H, W)). Returns float32 (H, W)."""
+    the per-pixel response ``resp`` (float32 (H, W)); ``extra = (wc2, resp2)``: a second coarse
+    wing image (the same binning) with its own per-pixel response, added. Returns float32 (H, W)."""
     H, W = core.shape
     out = np.empty((H, W), np.float32)
     if s == 1:
@@ -197,8 +204,15 @@ def compose(core, share: float, wc, s: int, eta: float, resp, background=None) -
         scale, bg, use_bg = 0.0, np.zeros((1, 1)), False
     else:
         scale, bg, use_bg = float(background[0]), background[1], True
+    if extra is None:
+        wc2, resp2, use2 = np.zeros((1, 1)), np.zeros((1, 1), np.float32), False
+    else:
+        wc2, resp2, use2 = np.ascontiguousarray(extra[0], np.float64), np.ascontiguousarray(extra[1], np.float32), True
+        if wc2.shape != np.shape(wc) or resp2.shape != (H, W):
+            raise ValueError("compose: the extra wing image must match the first, its response the core")
     _compose_kernel(np.ascontiguousarray(core, np.float64), float(share), np.ascontiguousarray(wc, np.float64),
-                    int(s), float(eta), bg, scale, use_bg, np.ascontiguousarray(resp, np.float32), out)
+                    int(s), float(eta), bg, scale, use_bg, np.ascontiguousarray(resp, np.float32), wc2, resp2, use2,
+                    out)
     return out
 
 

@@ -12,7 +12,7 @@ import numpy as np
 from svgs_sim.base.errors import InputError, check_finite
 from svgs_sim.base.profiles import load_camera, load_pattern
 from svgs_sim.sim.closed_loop import (
-    Frame, RenderOptions, Scenario, lab_flux, lab_photon_factor, solve_exposure, solver_camera,
+    Frame, RenderOptions, Scenario, lab_flux, lab_photon_factor, natural_part, solve_exposure, solver_camera,
 )
 from svgs_sim.sim.crlb import frame_crlb
 from svgs_sim.sim.metrics import match_err_max_px, spot_positions_px, state_error, wrong_lock_px
@@ -399,7 +399,8 @@ class ApproachSensor:
         truth = dict(res.truth)
         truth.update({"lab": info, "scenario": sc.to_json(), "focus_distance_m": float(np.linalg.norm(t)), "t_s": float(t_s)})
         return Frame(sc, res.flux + lab, truth, 0.0, lab, target_diffuse=res.flux_diffuse, points=res.points,
-                     _phone={(True, None, None): self.phone}, lab_unit=(info["radiance_w_m2_sr"], self._lab_factor))
+                     _phone={(True, None, None): self.phone}, lab_unit=(info["radiance_w_m2_sr"], self._lab_factor),
+                     natural=natural_part(res))
 
     def _optics(self, frame: Frame, uv_true: np.ndarray, vel, motion_seed: int):
         """The frame's exposer and its settings ``(exposure_s, iso)``: the stream's, or on its
