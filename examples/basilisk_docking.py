@@ -24,7 +24,8 @@ sun at a fixed epoch (:data:`svgs_sim.sim.orbit_light.SUN_EPOCH_UTC`, astropy wi
 the eclipse from Basilisk's own ``eclipse`` module (the Earth's mean radius, the renderer's), the
 Earth as the central body; each frame's sun and Earth are set in the target frame by
 :class:`svgs_sim.sim.basilisk_svgs.SVGSModule`. The approach starts ``--eclipse-in-s`` before the
-eclipse's entry, so its frames cross a transition; ``--raan-deg`` sets the beta angle (printed).
+eclipse's entry (``--transition exit``: its exit), so its frames cross a transition; ``--raan-deg``
+sets the beta angle (printed).
 ``--case`` picks the corridor: ``vbar`` (behind, the Earth's limb in the frame), ``rbar-below`` (from
 below, deep space behind the target), ``rbar-above`` (from above, the Earth behind it). Each phone
 gets an orbit-phase figure (``basilisk_docking_orbit_<case>_phase_<phone>.png``: outcomes, wrong locks,
@@ -392,10 +393,12 @@ def _sensor(phone: str | None, *, preview: bool, seed: int, rate_hz: float, orbi
     return ApproachSensor(cam, seed=seed, keep_images=True, frame_rate_hz=rate_hz, base=base)
 
 
-def eclipse_entry_phase_deg(sun_N, raan_deg: float, inclination_deg: float, radius_m: float) -> float:
+def eclipse_entry_phase_deg(sun_N, raan_deg: float, inclination_deg: float, radius_m: float,
+                            transition: str = "entry") -> float:
     """The argument of latitude (deg) at which a circular orbit enters the Earth's shadow
-    (:func:`svgs_sim.sim.orbit_light.sun_and_earth_in_target`'s cylindrical shadow), by a 0.01 deg
-    scan; InputError for an orbit never in shadow (a high beta angle)."""
+    (:func:`svgs_sim.sim.orbit_light.sun_and_earth_in_target`'s cylindrical shadow), or with
+    ``transition="exit"`` leaves it, by a 0.01 deg scan; InputError for an orbit never in shadow
+    (a high beta angle)."""
     from svgs_sim.render.earth import EARTH_RADIUS_M, in_eclipse
 
     altitude_m = float(radius_m) - EARTH_RADIUS_M  # above the Earth's mean radius (the renderer's)
@@ -405,16 +408,17 @@ def eclipse_entry_phase_deg(sun_N, raan_deg: float, inclination_deg: float, radi
     up = np.array([-np.sin(W) * np.cos(i), np.cos(W) * np.cos(i), np.sin(i)])
     r_hat = np.cos(u)[:, None] * node + np.sin(u)[:, None] * up
     dark = np.array([in_eclipse(sun_N, -r, altitude_m) for r in r_hat])
-    enter = np.flatnonzero(dark & ~np.roll(dark, 1))
+    enter = np.flatnonzero(dark & ~np.roll(dark, 1) if transition == "entry" else ~dark & np.roll(dark, 1))
     if enter.size == 0:
         raise InputError(f"--raan-deg {raan_deg:g}: the orbit never enters the Earth's shadow (beta too high); "
                          "give another --raan-deg (nearer the sun's plane)")
     return float(np.degrees(u[enter[0]]))
 
 
-def _place_target(tgt, mu: float, sun_N, raan_deg: float, eclipse_in_s: float):
+def _place_target(tgt, mu: float, sun_N, raan_deg: float, eclipse_in_s: float, transition: str = "entry"):
     """Set the target's initial state: a circular orbit, its body the Hill frame, spinning at the
-    orbital rate; on orbit (``sun_N`` given) ``eclipse_in_s`` before the shadow's entry. Returns
+    orbital rate; on orbit (``sun_N`` given) ``eclipse_in_s`` before the shadow's entry (or exit,
+    ``transition``). Returns
     ``(r_N, v_N, [HN], n rad/s, the start's argument of latitude deg)``."""
     from Basilisk.utilities import orbitalMotion
 
@@ -423,7 +427,8 @@ def _place_target(tgt, mu: float, sun_N, raan_deg: float, eclipse_in_s: float):
     n = np.sqrt(mu / oe.a**3)
     u0_deg = 0.0
     if sun_N is not None:
-        u0_deg = eclipse_entry_phase_deg(sun_N, raan_deg, INCLINATION_DEG, oe.a) - np.degrees(n * eclipse_in_s)
+        u0_deg = (eclipse_entry_phase_deg(sun_N, raan_deg, INCLINATION_DEG, oe.a, transition)
+                  - np.degrees(n * eclipse_in_s))
     oe.Omega, oe.omega, oe.f = np.radians(raan_deg if sun_N is not None else 0.0), 0.0, np.radians(u0_deg)
     r_t, v_t = orbitalMotion.elem2rv(mu, oe)
     HN = hill_dcm(r_t, v_t)
@@ -477,11 +482,12 @@ def _orbit_light(sim, target, sun_N):
 
 def run(phone: str | None, *, start_state=START_STATE, sensor_rate_hz=0.25, preview=False, seed=0,
         max_time_s=1200.0, latency_s=None, case: str = "vbar", environment: str = "lab",
-        eclipse_in_s: float = ECLIPSE_IN_S, raan_deg: float = RAAN_DEG) -> dict:
+        eclipse_in_s: float = ECLIPSE_IN_S, raan_deg: float = RAAN_DEG, transition: str = "entry") -> dict:
     """One closed-loop approach. ``phone`` None: the ideal sensor (no latency). ``case``: the
     corridor (:data:`CASES`); ``environment="orbit"``: the sun from the orbit (astropy, at
     :data:`svgs_sim.sim.orbit_light.SUN_EPOCH_UTC`), the Earth, Basilisk's eclipse module, the
-    approach starting ``eclipse_in_s`` before the eclipse entry. Returns the logs and the summary
+    approach starting ``eclipse_in_s`` before the eclipse's entry (``transition="exit"``: its exit).
+    Returns the logs and the summary
     numbers."""
     from Basilisk.simulation import extForceTorque, spacecraft
     from Basilisk.utilities import SimulationBaseClass, macros, simIncludeGravBody
@@ -516,7 +522,7 @@ def run(phone: str | None, *, start_state=START_STATE, sensor_rate_hz=0.25, prev
     thr = extForceTorque.ExtForceTorque()
     thr.ModelTag = "thrusters"
     ch.addDynamicEffector(thr)
-    r_t, v_t, HN, n, u0_deg = _place_target(tgt, mu, sun_N, raan_deg, eclipse_in_s)
+    r_t, v_t, HN, n, u0_deg = _place_target(tgt, mu, sun_N, raan_deg, eclipse_in_s, transition)
     rho = _place_chaser(ch, start_state, r_t, v_t, HN, n, camera_mount, pattern_mount)
     for sc in (tgt, ch):
         sim.AddModelToTask("dyn", sc, 10)
@@ -759,7 +765,11 @@ def main(argv=None) -> dict:
                     help="lab (the default: the paper's dark lab around the target) or orbit (the sun from the "
                          "orbit at a fixed epoch, the Earth, Basilisk's eclipse module; an orbit-phase figure)")
     ap.add_argument("--eclipse-in-s", type=float, default=ECLIPSE_IN_S,
-                    help=f"orbit: start this long before the eclipse's entry, s (default {ECLIPSE_IN_S:g})")
+                    help=f"orbit: start this long before the eclipse's entry (or exit, --transition), s (default "
+                         f"{ECLIPSE_IN_S:g})")
+    ap.add_argument("--transition", choices=("entry", "exit"), default="entry",
+                    help="orbit: the eclipse transition the approach crosses: entry (the default; sunlit, then "
+                         "shadow) or exit (shadow, then sunlit)")
     ap.add_argument("--raan-deg", type=float, default=RAAN_DEG,
                     help=f"orbit: the right ascension of the ascending node, deg (default {RAAN_DEG:g}; it sets beta)")
     ap.add_argument("--start-z-m", type=float, default=None,
@@ -782,16 +792,19 @@ def main(argv=None) -> dict:
     results = {}
     for phone in [None] + phones:
         r = run(phone, start_state=start, sensor_rate_hz=rate, preview=preview, seed=args.seed, max_time_s=max_time,
-                case=args.case, environment=args.environment, eclipse_in_s=args.eclipse_in_s, raan_deg=args.raan_deg)
+                case=args.case, environment=args.environment, eclipse_in_s=args.eclipse_in_s, raan_deg=args.raan_deg,
+                transition=args.transition)
         results[phone or "ideal"] = r
         print(json.dumps(r["summary"]))
-    tag = (f"_orbit_{args.case.replace('-', '_')}" if args.environment == "orbit"
+    tag = (f"_orbit_{args.case.replace('-', '_')}{'_exit' if args.transition == 'exit' else ''}"
+           if args.environment == "orbit"
            else "" if args.case == "vbar" else f"_{args.case.replace('-', '_')}") + ("_quick" if args.quick else "")
     if args.environment == "orbit":
         for phone in phones:
             plot_orbit(results[phone], out / f"basilisk_docking{tag}_phase_{phone}.png",
                        f"{phone}, {args.case} on orbit (beta {results[phone]['summary']['orbit']['beta_deg']:.1f} deg), "
-                       f"{start[2]:g} m start {args.eclipse_in_s:g} s before the eclipse, {rate:g} frames/s"
+                       f"{start[2]:g} m start {args.eclipse_in_s:g} s before the eclipse's {args.transition}, "
+                       f"{rate:g} frames/s"
                        f"{', preview' if preview else ''}")
     for phone in phones:
         plot({"ideal": results["ideal"], phone: results[phone]}, out / f"basilisk_docking{tag}_{phone}.png",

@@ -76,3 +76,16 @@ def test_the_orbit_form_crosses_the_eclipse_entry_where_basilisk_puts_it(tmp_pat
     dip = np.degrees(np.arcsin(R / (R + h))) - 90.0
     at_entry = min(light, key=lambda x: abs(x["t_s"] - 7.0))
     assert at_entry["sun_elevation_deg"] == pytest.approx(dip, abs=0.3)
+
+
+def test_the_eclipse_exit_follows_the_entry_by_the_shadows_arc():
+    """The example's ``--transition exit`` starts before the shadow's exit: with the sun in the orbit
+    plane (beta 0) a circular orbit of radius r is in the cylindrical shadow for an arc of
+    2 asin(R / r) (R the Earth's mean radius, IUGG 6371.0088 km), 140.4 deg from 400 km."""
+    pytest.importorskip("astropy", reason="the orbit extra")
+    ex = _example()
+    R, r = 6371.0088e3, 6378.1363e3 + 400e3
+    sun_N = np.array([1.0, 0.0, 0.0])  # along the ascending node of RAAN 0: beta 0
+    entry = ex.eclipse_entry_phase_deg(sun_N, 0.0, 51.6, r, "entry")
+    exit_ = ex.eclipse_entry_phase_deg(sun_N, 0.0, 51.6, r, "exit")
+    assert (exit_ - entry) % 360.0 == pytest.approx(2 * np.degrees(np.arcsin(R / r)), abs=0.02)
