@@ -226,10 +226,14 @@ def bloom(e: np.ndarray, full_well_e: float, drain: float, direction: str = "iso
     excess = np.bincount(sub_labels.ravel(), weights=np.maximum(sub_e - full_well_e, 0).ravel(), minlength=n)
     np.minimum(sub_e, full_well_e, out=sub_e)
     order = np.argsort(-excess[1:]) + 1
+    frame_full = False  # no pixel below full well: every later region's spill leaves the frame
     for lab in order:
         q = float(excess[lab])
         stats["drained_e"] += q * drain
         q *= 1.0 - drain
+        if frame_full:  # what the rings would give: each adds nothing, all of q is lost off the frame
+            stats["lost_e"] += q
+            continue
         x, y, w, h, _ = box[lab]
         pad = int(np.sqrt(q / (np.pi * full_well_e) + w * h)) + 4
         while True:
@@ -248,13 +252,104 @@ def bloom(e: np.ndarray, full_well_e: float, drain: float, direction: str = "iso
             sub[...] = trial
             stats["lost_e"] += rem
             stats["bloomed_px"] += filled
+            if rem > 0:
+                frame_full = not bool((e < full_well_e).any())
             break
     return stats
 
 
+def _ring_distance(region, column: bool) -> np.ndarray:
+    """Ring index of each pixel around ``region``: the number of dilations by the 3 x 3 square
+    (chessboard distance) or, for ``column``, by the 3 x 1 column (the distance along the column)
+    that first reaches it; region pixels 0, pixels no dilation reaches (``column``: other
+    columns) a value above every ring.
+
+    Parameters
+    ----------
+    region : ndarray, uint8, shape (h, w)
+        Non-zero inside the region.
+
+    Returns
+    -------
+    ndarray, int32, shape (h, w)
+    """
+    h, w = region.shape
+    if not column:
+        d = cv2.distanceTransform((region == 0).astype(np.uint8), cv2.DIST_C, 3)
+        return d.astype(np.int32)
+    far = h + w + 1  # above any distance along a column
+    rows = np.arange(h, dtype=np.int32)[:, None]
+    inside = region > 0
+    above = np.maximum.accumulate(np.where(inside, rows, -far), axis=0)  # nearest region row at or above
+    below = np.minimum.accumulate(np.where(inside, rows, 2 * far)[::-1], axis=0)[::-1]  # at or below
+    return np.minimum(np.minimum(rows - above, below - rows), far).astype(np.int32)
+
+
+#: Windows up to this many pixels grow their rings by dilation, one per ring (cheaper for the small
+#: spots of most frames); larger ones take them from a distance transform. Both give the same bits.
+RING_DILATION_MAX_PX = 4096
+
+
 def _fill_rings(sub, region, q, fw, kernel):
     """Fill rings around ``region`` in ``sub`` with charge ``q``. Returns (left over, filled px,
-    (left, top, right, bottom) whether the growing region reached that side of the window)."""
+    (left, top, right, bottom) whether the growing region reached that side of the window).
+
+    Ring ``k`` is what the ``k``-th dilation of ``region`` by ``kernel`` (3 x 3: isotropic; 3 x 1:
+    along the column) adds. Each ring in turn is filled to full well while the charge lasts; the
+    last in proportion to its room. The rings come from one distance transform and one stable
+    sort, not one dilation each: a frame full to the brim (the sun at a long exposure) otherwise
+    costs a full-window dilation for each of thousands of rings, for each saturated region. The
+    arithmetic is the ring-by-ring one (the same pixels in the same order, float32), so the
+    result is the same to the bit (tests/test_phone_model.py holds the ring-by-ring reference).
+    """
+    h, w = sub.shape
+    if h * w <= RING_DILATION_MAX_PX:
+        return _fill_rings_by_dilation(sub, region, q, fw, kernel)
+    column = kernel.shape[1] == 1
+    if not sub.flags.c_contiguous:
+        raise ValueError("_fill_rings fills a C-contiguous window in place")
+    room_all = np.maximum(fw - sub, 0.0)
+    if q > 0 and not column and not (room_all > 0).any():  # no room: the rings grow over the whole window
+        return q, 0, (True, True, True, True)
+    d = _ring_distance(region, column)
+    reach = int(h + w + 1) if column else None
+    flat = sub.reshape(-1)  # a view
+    last = int(d[d < reach].max()) if column else int(d.max())
+
+    def edges(upto):
+        m = d <= upto
+        return (bool(m[:, 0].any()), bool(m[0, :].any()), bool(m[:, w - 1].any()), bool(m[h - 1, :].any()))
+
+    if q <= 0:
+        return max(q, 0.0), 0, edges(0)
+    if not (room_all > 0).any():  # nothing takes charge: every ring passes with cap 0, the window fills up
+        return q, 0, edges(last)
+    dflat = d.reshape(-1)
+    key = dflat.astype(np.uint16) if last < 65535 and (reach is None or reach < 65536) else dflat
+    order = np.argsort(key, kind="stable")  # raster order inside each ring, as a boolean mask takes it
+    counts = np.bincount(np.minimum(dflat, last + 1), minlength=last + 2)  # rings 0..last, then the unreached
+    bounds = np.concatenate([[0], np.cumsum(counts)])
+    room_sorted = room_all.reshape(-1)[order]
+    filled = 0
+    k = 0
+    for k in range(1, last + 1):
+        a, b = int(bounds[k]), int(bounds[k + 1])
+        idx = order[a:b]
+        room = room_sorted[a:b]
+        cap = float(room.sum())
+        if cap >= q and cap > 0:
+            flat[idx] += (room * (q / cap)).astype(sub.dtype)
+            filled += int(np.count_nonzero(room))
+            q = 0.0
+            break
+        flat[idx] = np.maximum(flat[idx], fw)
+        filled += int(np.count_nonzero(room))
+        q -= cap
+    return max(q, 0.0), filled, edges(k)
+
+
+def _fill_rings_by_dilation(sub, region, q, fw, kernel):
+    """:func:`_fill_rings`, one dilation of ``region`` by ``kernel`` per ring."""
     filled = 0
     h, w = sub.shape
     while q > 0:
