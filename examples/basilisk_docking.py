@@ -11,8 +11,9 @@ later. A linear Kalman filter on Hill's (Clohessy-Wiltshire) equations takes the
 (replaying the control history over the latency), and a glide-slope guidance flies the camera down
 the pattern's +z axis to 1 m. The same run with an ideal sensor (the true pose, every frame, no
 latency) gives the reference: the real sensor's cost is the difference in delta-v, time and final
-error. ``--phones htc-amaze-4g`` flies the HTC Amaze 4G, whose spots merge beyond ~6.5 m: it flies
-on the filter's prediction until the measurements start.
+error. ``--phones htc-amaze-4g`` flies the HTC Amaze 4G, whose spots merge beyond its merge range
+(7.16 m head-on, ``docs/reports/merge-range-htc-amaze-4g/summary.json``; in the committed run its
+first solution came at 8.0 m): it flies on the filter's prediction until the measurements start.
 
 Run (from the repository root, with ``pip install -e ".[basilisk]"``)::
 
