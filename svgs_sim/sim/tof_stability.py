@@ -26,7 +26,8 @@ Reference point and target frame (ASSUMPTION argued from the paper)
     catalog frame's origin, which it does not place. Its experiment (section 6.1) aligns "the
     center of the target" with the ToF and knows "the center distance from the camera". Its
     Table 2 (5712 mm) bounds where that origin lies: a point ``h`` in front of or behind the
-    rotation's centre along the line of sight moves across it by ``h x tan(angle)``; its y
+    rotation's centre (for an SVD fit of the marker points, their centroid) along the line of
+    sight moves across it by ``h x tan(angle)``; its y
     fluctuates 0.321 mm while its pitch (about x) fluctuates 0.518 deg, so
     ``h <= 0.321 / tan(0.518 deg) = 35.5 mm`` (its x, 0.185 mm, against its yaw, 0.294 deg, about
     y: 36.1 mm). The reported point lies within ~3.5 cm of the marker faces' centroid along the
