@@ -38,7 +38,7 @@ def _plane_basis_local(n):
 
 def _cast(camera, target, R, t, centres, normal, pw, ph, a_m, a_p, f_mod, gray_scale_dn, roi, s):
     """Supersampled ray casting of the box ``roi = (r0, r1, c0, c1)``: pixel amplitude and
-    amplitude-weighted AMCW phasor."""
+    amplitude-weighted AMCW phasor (``t``: the plate's front-face centre in the camera frame)."""
     r0, r1, c0, c1 = roi
     h, w = r1 - r0, c1 - c0
     off = (np.arange(s) + 0.5) / s - 0.5
@@ -226,8 +226,9 @@ def synth_frame(camera: Camera, target: MarkerTarget, R_cam_target, t_cam_target
     normal = R[:, 2]
     centres = target.points_m @ R.T + t
     pw, ph = float(target.plate.get("width_m", 0.0)), float(target.plate.get("height_m", 0.0))
+    pc = target.plate_centre_m  # the plate's front-face centre, target frame
     # ray-cast only the box that can hold the target (plate corners, marker rims)
-    corners = np.array([[x, y, 0.0] for x in (-pw / 2, pw / 2) for y in (-ph / 2, ph / 2)]) @ R.T + t
+    corners = (np.array([[x, y, 0.0] for x in (-pw / 2, pw / 2) for y in (-ph / 2, ph / 2)]) + pc) @ R.T + t
     u_, v_ = _plane_basis_local(normal)
     ang = np.linspace(0, 2 * np.pi, 16, endpoint=False)
     ring = np.cos(ang)[:, None] * u_ + np.sin(ang)[:, None] * v_  # (16, 3)
@@ -243,7 +244,7 @@ def synth_frame(camera: Camera, target: MarkerTarget, R_cam_target, t_cam_target
         r0 = int(np.clip(np.floor(uv[:, 1].min()) - 2, 0, H))
         r1 = int(np.clip(np.ceil(uv[:, 1].max()) + 3, 0, H))
         if c1 > c0 and r1 > r0:
-            a_roi, p_roi = _cast(camera, target, R, t, centres, normal, pw, ph, a_m, a_p, f_mod, gray_scale_dn,
+            a_roi, p_roi = _cast(camera, target, R, R @ pc + t, centres, normal, pw, ph, a_m, a_p, f_mod, gray_scale_dn,
                                  (r0, r1, c0, c1), s)
             A[r0:r1, c0:c1] = a_roi
             P[r0:r1, c0:c1] = p_roi

@@ -17,7 +17,9 @@ from svgs_sim.svgs.frames import pose_from_scenario  # noqa: E402
 
 pytestmark = pytest.mark.render
 
-PLATE = {"markers": False, "plate_size_m": (30.0, 30.0), "plate_albedo": 0.5}
+#: A bare plate whose front face is the target origin (tof-8's own plate lies 125 mm behind its
+#: origin, the marker faces' centroid): the pose's range is the plate's distance.
+PLATE = {"markers": False, "plate_size_m": (30.0, 30.0), "plate_albedo": 0.5, "plate_centre_m": (0.0, 0.0, 0.0)}
 CENTRE = (150, 110, 20, 20)
 CORNER = (0, 0, 12, 12)
 
@@ -120,7 +122,7 @@ def test_a_retroreflective_sheet_returns_its_coefficient_of_retroreflection(dist
     r_ring = distance_m * np.tan(np.radians(observation_deg))
     ren = TofRenderer(spp=64, pinhole=True, illumination={"ring_radius_m": r_ring, "emitter_diameter_m": 1e-5},
                       scene_options={"markers": False, "plate_size_m": (4.0, 4.0), "plate_material": "retroreflective",
-                                     "sheeting": "en12899-ra2-white"})
+                                     "sheeting": "en12899-ra2-white", "plate_centre_m": (0.0, 0.0, 0.0)})
     R, t = pose_from_scenario(distance_m, 0.0, 0.0, 0.0, entrance_deg, 0.0)  # the sheet turned about a vertical axis
     n_target = np.array([0.0, 0.0, 1.0])
     assert np.degrees(np.arccos(-(R @ n_target)[2])) == pytest.approx(entrance_deg, abs=1e-9)
@@ -136,7 +138,8 @@ def test_a_retroreflective_sheet_returns_its_coefficient_of_retroreflection(dist
     # the same sheet as white paint returns ~1000x less at the small observation angles
     if observation_deg < 0.5:
         lam = TofRenderer(spp=16, pinhole=True, illumination={"ring_radius_m": r_ring, "emitter_diameter_m": 1e-5},
-                          scene_options={"markers": False, "plate_size_m": (4.0, 4.0), "plate_albedo": 0.85})
+                          scene_options={"markers": False, "plate_size_m": (4.0, 4.0), "plate_albedo": 0.85,
+                                         "plate_centre_m": (0.0, 0.0, 0.0)})
         L_white = crop(lam.render(R, t, seed=3, window=win).active_radiance, win).mean()
         assert L_white == pytest.approx(0.85 / np.pi * e_perp * np.cos(b), rel=0.03)
         assert L / L_white > 300
@@ -144,12 +147,13 @@ def test_a_retroreflective_sheet_returns_its_coefficient_of_retroreflection(dist
 
 @pytest.fixture(scope="module")
 def edge_scene():
-    """tof-8 on a larger plate, emitters at the lens centre (no shadow fringe), head-on at 1 m;
+    """tof-8 on a larger plate, emitters at the lens centre (no shadow fringe), head-on, its
+    plate's centre on the boresight at 1.0 m (the faces at 0.85 and 0.9 m);
     white (Lambertian) markers so that rim pixels mix comparable returns (a retroreflective
     face outshines the plate ~100x and pulls the mixed depth onto itself)."""
     r = TofRenderer(spp=256, illumination={"ring_radius_m": 0.0},
                     scene_options={"plate_size_m": (1.0, 1.0), "marker_material": "lambertian"})
-    return r, pose_from_scenario(1.0)
+    return r, pose_from_scenario(0.875, 0.0225, -0.000625)  # the origin: the markers' centroid, 125 mm before the plate
 
 
 def _rim_pixels(rd, marker="7"):
@@ -189,7 +193,7 @@ def test_flying_pixels_are_phasor_sums(edge_scene):
     rd = r.render(R, t, seed=2, window=win)
     A, wrap = _rim_pixels(rd)
     assert len(A) > 60
-    # mixed depth between marker face (0.9 m) and plate (1.0 m), as the phasor sum predicts
+    # mixed depth between marker 7's face (0.9 m) and the plate (1.0 m), as the phasor sum predicts
     assert np.all(A[:, 1] > A[:, 4] - 2e-3) and np.all(A[:, 1] < A[:, 5] + 2e-3)
     assert np.mean((A[:, 1] > A[:, 4] + 5e-3) & (A[:, 1] < A[:, 5] - 5e-3)) > 0.2  # clearly between
     e = wrap(A[:, 1] - A[:, 2])
@@ -204,7 +208,8 @@ def test_flying_pixels_are_phasor_sums(edge_scene):
 
 def test_multipath_from_a_wall_lengthens_the_depth():
     wall = {"type": "box", "lo_m": [0.05, -0.3, 0.0], "hi_m": [0.06, 0.3, 0.3], "albedo": 0.9}
-    opts = {"markers": False, "plate_size_m": (1.0, 1.0), "plate_albedo": 0.5, "distractors": [wall]}
+    opts = {"markers": False, "plate_size_m": (1.0, 1.0), "plate_albedo": 0.5, "distractors": [wall],
+            "plate_centre_m": (0.0, 0.0, 0.0)}
     R, t = pose_from_scenario(1.0)
     win = (110, 112, 60, 16)  # plate pixels left of the wall (the wall stands at u ~ 176)
     rd = {b: TofRenderer(scene_options=opts, spp=128, max_bounces=b).render(R, t, seed=1, window=win) for b in (1, 2)}
@@ -238,7 +243,17 @@ def test_centroids_of_rendered_markers_within_the_paper_figure():
         err[cc] = np.linalg.norm(np.array([res.targets_px[k] for k in range(1, 9)]) - truth, axis=1)
     assert err[True].max() < 0.06  # the paper's 0.06 px
     big = r.target.diameter_m > 0.05
-    assert err[False][big].max() > 0.08 and err[False][big].mean() > 2 * err[True][big].mean()
+    # uncorrected, the 80 mm markers' centroids sit on their ellipses' centres: the projective offset
+    # of a tilted circle's image centre from its centre's image (the exact conic; ~0.05 px at the
+    # paper's pose, its faces 0.67-0.72 m away)
+    from svgs_sim.tof.ellipse import project_circle_conic
+
+    C = r.target.points_m @ R.T + t
+    con = np.array([project_circle_conic(r.camera.K, c, R[:, 2], rad) for c, rad in zip(C, r.target.radius_m)])
+    bias = np.linalg.norm(-np.linalg.solve(con[:, :2, :2], con[:, :2, 2:3])[:, :, 0] - r.camera.project(C), axis=1)
+    assert bias[big].min() > 0.04
+    np.testing.assert_allclose(err[False][big], bias[big], atol=0.02)
+    assert err[False][big].mean() > 2 * err[True][big].mean()
     # and the noisy frames solve to the pose
     noisy = TofSensor.from_camera(r.camera).frame(rd, rng=1)
     res = tof.solve_frame(noisy.gray, noisy.depth_m, r.camera, r.target)
@@ -375,7 +390,7 @@ def _marker_flux(rd, r, R, t):
         beta = np.degrees(np.arccos(w @ n))
         L = np.sum((tab.ra(alpha, beta) / (n @ to_cam) + tab.diffuse_albedo / np.pi * (w @ n)) * E)
         face_sr = np.pi * rad**2 * (n @ to_cam) / (p @ p)
-        p_plate = p - (geo.marker_centres_m[k][2]) * n  # the plate behind the face
+        p_plate = p - (geo.marker_centres_m[k][2] - geo.plate_centre_m[2]) * n  # the plate behind the face
         w, E = irradiance(p_plate)
         L_plate = geo.albedo["plate"] / np.pi * np.sum((w @ n) * E)
         want.append(float(L * face_sr + L_plate * (np.sum(omega[region]) - face_sr)))

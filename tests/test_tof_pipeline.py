@@ -71,7 +71,7 @@ def test_projected_centre_correction_on_rendered_markers(cam, tgt):
 
 
 def test_glint_glued_to_a_marker_is_repaired_by_ellipse_detection(cam, tgt):
-    fr = _frame(cam, tgt, 1.0, (0.0, 5.0, -5.0), seed=14)
+    fr = _frame(cam, tgt, 0.875, (0.0, 5.0, -5.0), seed=14)  # marker 6's face at ~0.85 m
     g, d = fr.gray.copy(), fr.depth_m.copy()
     u, v = np.round(fr.centres_px[5]).astype(int)  # marker 6 (80 mm)
     g[v - 2:v + 3, u:u + 30] = g[v, u]
@@ -142,9 +142,10 @@ def test_failures_carry_reasons(near, cam, tgt):
 def test_markers_cut_by_the_image_border_are_not_used(cam, tgt):
     """Markers 5 and 6 straddle the left border: their centroids would be biased, so they are
     dropped and the pose comes from the six others."""
-    R, t = pose_from_scenario(0.8, -0.15, 0.0, 0.0, 0.0, 0.0)
+    R, t = pose_from_scenario(0.675, -0.1275, 0.0, 0.0, 0.0, 0.0)  # the markers' centroid 0.675 m away
     fr = synth_frame(cam, tgt, R, t, seed=3, gray_scale_dn=1000.0)
-    u_left = fr.centres_px[[4, 5], 0] - cam.fx * tgt.radius_m[[4, 5]] / (t[2] - tgt.standoff_m[[4, 5]])
+    z_face = (tgt.points_m[[4, 5]] @ R.T + t)[:, 2]
+    u_left = fr.centres_px[[4, 5], 0] - cam.fx * tgt.radius_m[[4, 5]] / z_face
     assert np.all(u_left < -0.5)  # the two markers really are cut
     res = solve_frame(fr.gray, fr.depth_m, cam, tgt)
     assert sorted(res.targets_px) == [1, 2, 3, 4, 7, 8]

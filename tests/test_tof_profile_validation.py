@@ -78,6 +78,9 @@ BAD_PATTERN = [
     ("plate", "width_m", -0.40, ("[plate] width_m", "(0, 100]")),
     ("plate", "albedo", 1.2, ("[plate] albedo", "[0, 1]")),
     ("plate", "material", "steel", ("[plate]", "unknown key", "material")),
+    ("plate", "centre_m", [0.0, -0.125], ("[plate] centre_m", "[x, y, z]")),
+    # the plate 25 mm nearer the faces than the file's standoffs put it: the posts would not reach
+    ("plate", "centre_m", [-0.0225, 0.000625, -0.1], ("target 1: standoff_m = 0.1", "[plate] centre_m z = -0.1")),
     ("marker", "albedo", "white", ("[marker] albedo", "[0, 1]")),
     ("marker", "post_diameter_ratio", 1.0, ("[marker] post_diameter_ratio", "(0, 1)")),
     ("marker", "material", "mirror", ("[marker] material", "'retroreflective', 'lambertian'")),

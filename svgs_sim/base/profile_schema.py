@@ -389,6 +389,8 @@ TOF_PATTERN_TABLES = {
         "width_m": Num(0, 100, lo_open=True),
         "height_m": Num(0, 100, lo_open=True),
         "thickness_m": Num(0, 1, lo_open=True),
+        "centre_m": Vec(3, Num(-100, 100, why="the plate's front-face centre, m from the target origin; default 0"),
+                         labels="x, y, z"),
         "albedo": REFLECTANCE,
     },
     "marker": {

@@ -55,7 +55,7 @@ def register(group) -> None:
         "over the frames. Exit 0 solved, 1 no solution, 2 bad input.",
     )
     p.add_argument("--range", dest="range_m", type=float, required=True,
-                   help="range along the boresight to the target origin (plate centre), m")
+                   help="range along the boresight to the target frame's origin (tof-8: the marker faces' centroid), m")
     for flag, dest, text in POSE_ARGS:
         p.add_argument(flag, dest=dest, type=float, default=0.0, help=text)
     p.add_argument("--frames", type=int, default=1,

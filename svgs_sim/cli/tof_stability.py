@@ -67,7 +67,8 @@ def register(group) -> None:
                    help="cap of the active pixel set, dimmest discarded first (paper section 3.1, N_max; "
                         "default: the pipeline's 12000, which the target never reaches)")
     p.add_argument("--reference", choices=("markers", "plate"), default="markers",
-                   help="point reported as x, y, z: the marker faces' centroid (default) or the plate centre")
+                   help="point reported as x, y, z: the marker faces' centroid (default; tof-8's origin) or the centre of the "
+                        "plate's front face")
     p.add_argument("--bounces", type=int, default=1, help="1 = direct returns (default), 2-4 = with multipath")
     p.add_argument("--out", default=None, help="write frames.csv, summary.json and stability.png here (default: none, nothing written)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")

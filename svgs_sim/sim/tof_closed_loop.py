@@ -122,7 +122,8 @@ class TofScenario(TargetPose):
     pattern : str
         Marker target name or path (:func:`svgs_sim.tof.load_target`).
     range_m : float
-        Along the boresight to the target origin (the plate centre), m.
+        Along the boresight to the target frame's origin (``tof-8``: the centroid of the marker
+        faces, the plate 125 mm behind it), m.
     target_x_m, target_y_m, roll_deg, pitch_deg, yaw_deg : float
         The target's pose besides its range (keyword-only, declared once in
         :class:`svgs_sim.sim.target_pose.TargetPose`): lateral offsets, m, and the paper's attitude, deg.

@@ -30,6 +30,9 @@ DEFAULT_PATTERN = "tof-8"
 #: The ToF sensor's range envelope, m: the paper's design range 0.27-15 m (section 2.2), within
 #: the 15 m unambiguous range of its 10 MHz modulation (``--range``, range lists, sensitivity bounds).
 DESIGN_RANGE_M = (0.27, 15.0)
+#: How far a marker's ``standoff_m`` may differ from its face's height above the plate, m
+#: (``z_m`` less the plate's ``z``; rounding of the file's decimals).
+STANDOFF_TOLERANCE_M = 1e-6
 
 
 #: Tables that only a phone (SVGS) camera profile has.
@@ -136,7 +139,7 @@ class MarkerTarget:
         Marker ids and face centres in the target frame, metres.
     diameter_m : ndarray, shape (N,)
     standoff_m : ndarray, shape (N,)
-        Height of each marker face above the plate.
+        Height of each marker face above the plate's front face.
     normal_target : ndarray, shape (3,)
         Unit normal of the marker faces (and the plate) in the target frame.
     plate : dict
@@ -168,19 +171,34 @@ class MarkerTarget:
     def radius_m(self) -> np.ndarray:
         return self.diameter_m / 2.0
 
+    @property
+    def plate_centre_m(self) -> np.ndarray:
+        """The centre of the plate's front face in the target frame, shape (3,): the pattern's
+        ``[plate] centre_m``, else the origin (a pattern whose frame has its origin on the plate)."""
+        return plate_centre_m(self.plate)
+
+
+def plate_centre_m(plate) -> np.ndarray:
+    """``[plate] centre_m`` of a ``[plate]`` table (dict, may be empty) as an array (3,); (0, 0, 0) when absent."""
+    c = (plate or {}).get("centre_m")
+    return np.zeros(3) if c is None else np.asarray(c, float).reshape(3)
+
 
 def load_target(name_or_path=DEFAULT_PATTERN) -> MarkerTarget:
     """Load a marker target: a pattern TOML with ``diameter_m`` per ``[[target]]``.
 
-    ``standoff_m`` defaults to the marker's ``z_m``. A pattern without per-target diameters
-    may give one in a ``[marker]`` or ``[reflector]`` table (``diameter_m``).
+    ``standoff_m`` defaults to the marker's ``z_m`` less the plate's ``z`` (``[plate] centre_m``,
+    default the origin: the height of the face above the plate's front face). A pattern without
+    per-target diameters may give one in a ``[marker]`` or ``[reflector]`` table (``diameter_m``).
 
     Raises
     ------
     ProfileError
         A value of the pattern refused when it is loaded (:meth:`svgs_sim.base.profiles.Pattern.load`
         checks every ``[[target]]``, ``[plate]``, ``[marker]`` and ``[reflector]`` value); a
-        marker without a diameter, or a diameter out of range (a pattern built in code).
+        marker without a diameter, or a diameter out of range (a pattern built in code); a
+        marker face behind the plate's front face, or a ``standoff_m`` that is not the face's
+        height above it (the post joins the plate and the marker).
     """
     if isinstance(name_or_path, MarkerTarget):
         return name_or_path
@@ -188,6 +206,7 @@ def load_target(name_or_path=DEFAULT_PATTERN) -> MarkerTarget:
     default_d = pattern.marker.diameter_m
     if default_d is None:
         default_d = pattern.reflector.diameter_m
+    plate_z = float(plate_centre_m(pattern.plate.to_dict())[2])
     diam, stand = [], []
     for spec in pattern.targets:
         tid = spec.id
@@ -198,7 +217,15 @@ def load_target(name_or_path=DEFAULT_PATTERN) -> MarkerTarget:
             diam.append(TARGET_KEYS["diameter_m"].check(d, f"pattern {pattern.name!r}: target {tid} diameter_m"))
         except InputError as exc:
             raise ProfileError(str(exc)) from None
-        stand.append(float(spec.z_m if spec.standoff_m is None else spec.standoff_m))
+        height = float(spec.z_m) - plate_z
+        where = f"target pattern {pattern.source or pattern.name!r}: target {tid}"
+        if height < 0:
+            raise ProfileError(f"{where}: its face (z_m = {spec.z_m:g}) lies behind the plate's front face "
+                               f"(z = {plate_z:g} m, [plate] centre_m)")
+        if spec.standoff_m is not None and abs(float(spec.standoff_m) - height) > STANDOFF_TOLERANCE_M:
+            raise ProfileError(f"{where}: standoff_m = {spec.standoff_m:g} but its face stands {height:g} m above "
+                               f"the plate (z_m = {spec.z_m:g}, [plate] centre_m z = {plate_z:g})")
+        stand.append(height if spec.standoff_m is None else float(spec.standoff_m))
     return MarkerTarget(
         pattern=pattern,
         diameter_m=np.asarray(diam),

@@ -485,7 +485,7 @@ class TofRenderer:
         else:
             truth_m = marker_truth(self.camera, self.target, R, t)
         if t[2] <= 0:
-            raise InputError(f"pose: the plate lies behind the camera (t_cam_target_m = {t.tolist()})")
+            raise InputError(f"pose: the target origin lies behind the camera (t_cam_target_m = {t.tolist()})")
         W, H = self.camera.width, self.camera.height
         if window is None:
             win = self.window(R, t)

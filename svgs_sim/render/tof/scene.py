@@ -2,12 +2,14 @@
 black posts at their standoffs, optional distractors.
 
 Everything is built in the **target frame** (the world frame of the scene, as in
-:mod:`svgs_sim.render.scene`): the plate's front face is ``z = 0``, the markers' white faces are exact
-analytic disks (Mitsuba ``disk``: their images are exact ellipses, no tessellation) at
-``z = standoff``, facing ``+z``. Each marker is a puck of ``marker_thickness_m`` with a black
+:mod:`svgs_sim.render.scene`): the plate's front face is centred on the pattern's ``[plate] centre_m``
+(``tof-8``: 125 mm behind the origin, the marker faces' centroid; a pattern without the key: the
+origin, its front face ``z = 0``), parallel to the ``x-y`` plane; the markers' white faces are exact
+analytic disks (Mitsuba ``disk``: their images are exact ellipses, no tessellation) at their
+``(x_m, y_m, z_m)``, facing ``+z``. Each marker is a puck of ``marker_thickness_m`` with a black
 side wall and back (only the face is white: a white rim would add a sliver to the image of a
 tilted marker and move its centroid off the projected circle centre), carried by a black
-cylindrical post (``[marker] post_diameter_ratio`` of the pattern) from the plate to the puck.
+cylindrical post (``[marker] post_diameter_ratio`` of the pattern) from the plate's front face to the puck.
 All materials are Lambertian (Mitsuba ``diffuse``), reflectances at 850 nm from the pattern's
 ``[plate]`` / ``[marker]`` tables unless overridden.
 
@@ -23,6 +25,7 @@ import numpy as np
 
 from svgs_sim.base.errors import InputError, check_finite_positive
 from svgs_sim.base.profile_schema import REFLECTANCE, TOF_MATERIALS, TOF_PATTERN_TABLES, check_table
+from svgs_sim.tof.camera import plate_centre_m
 
 from ..geometry import OptionsMixin
 from .retro import bsdf_dict, load_sheeting, register_bsdf
@@ -85,6 +88,10 @@ class TofSceneOptions(OptionsMixin):
         Plate width and height; None: the pattern's ``[plate]`` table.
     plate_thickness_m : float or None
         None: the pattern's ``[plate] thickness_m`` (5 mm).
+    plate_centre_m : (float, float, float) or None
+        The centre of the plate's front face in the target frame, m; None: the pattern's
+        ``[plate] centre_m`` (the origin where the pattern gives none). ``(0, 0, 0)`` puts a bare
+        plate (``markers=False``) on the origin, at the pose's range.
     marker_thickness_m : float
         Thickness of each marker puck (ASSUMPTION: 3 mm; the paper gives none).
     post_diameter_ratio : float or None
@@ -107,6 +114,7 @@ class TofSceneOptions(OptionsMixin):
     dark_albedo: float | None = None
     plate_size_m: tuple | None = None
     plate_thickness_m: float | None = None
+    plate_centre_m: tuple | None = None
     marker_thickness_m: float = 0.003
     post_diameter_ratio: float | None = None
     distractors: tuple = field(default_factory=tuple)
@@ -135,6 +143,10 @@ class TofSceneOptions(OptionsMixin):
                                                       _PLATE["height_m"].check(h, "scene_options.plate_size_m[1]")))
         if self.plate_thickness_m is not None:
             _PLATE["thickness_m"].check(self.plate_thickness_m, "scene_options.plate_thickness_m")
+        if self.plate_centre_m is not None:
+            object.__setattr__(self, "plate_centre_m", tuple(float(x) for x in _PLATE["centre_m"].check(
+                list(self.plate_centre_m) if isinstance(self.plate_centre_m, (list, tuple, np.ndarray)) else self.plate_centre_m,
+                "scene_options.plate_centre_m")))
         check_finite_positive(self.marker_thickness_m, "scene_options.marker_thickness_m")
         if self.post_diameter_ratio is not None:
             _MARKER["post_diameter_ratio"].check(self.post_diameter_ratio, "scene_options.post_diameter_ratio")
@@ -144,6 +156,7 @@ class TofSceneOptions(OptionsMixin):
         d = asdict(self)
         d["distractors"] = [dict(x) for x in self.distractors]
         d["plate_size_m"] = list(self.plate_size_m) if self.plate_size_m else None
+        d["plate_centre_m"] = list(self.plate_centre_m) if self.plate_centre_m is not None else None
         return d
 
 
@@ -164,6 +177,9 @@ class TofGeometry:
     marker_thickness_m : float
     materials : dict
         ``marker`` and ``plate``: one of :data:`MATERIALS`; ``sheeting``: the table name (or None).
+    plate_centre_m : (float, float, float)
+        The centre of the plate's front face, target frame (the plate lies behind it, the posts
+        run from it to the pucks).
     """
 
     plate_size_m: tuple
@@ -174,6 +190,7 @@ class TofGeometry:
     post_radius_m: np.ndarray
     marker_thickness_m: float
     materials: dict = field(default_factory=lambda: {"marker": "lambertian", "plate": "lambertian", "sheeting": None})
+    plate_centre_m: tuple = (0.0, 0.0, 0.0)
 
     def to_json(self) -> dict:
         sheet = None
@@ -182,6 +199,7 @@ class TofGeometry:
             sheet = load_sheeting(self.materials["sheeting"]).to_json()
         return {
             "plate_size_m": list(self.plate_size_m), "plate_thickness_m": self.plate_thickness_m,
+            "plate_centre_m": list(self.plate_centre_m),
             "albedo": dict(self.albedo), "marker_thickness_m": self.marker_thickness_m,
             "marker_radius_m": self.marker_radius_m.tolist(), "post_radius_m": self.post_radius_m.tolist(),
             "materials": dict(self.materials),
@@ -195,8 +213,9 @@ class TofGeometry:
         w, h = self.plate_size_m
         r = self.marker_radius_m.max() if self.marker_radius_m.size else 0.0
         c = self.marker_centres_m
-        lo = np.array([-w / 2, -h / 2, -self.plate_thickness_m])
-        hi = np.array([w / 2, h / 2, 0.0])
+        pc = np.asarray(self.plate_centre_m, float)
+        lo = pc + [-w / 2, -h / 2, -self.plate_thickness_m]
+        hi = pc + [w / 2, h / 2, 0.0]
         if c.size:
             lo = np.minimum(lo, c.min(0) - [r, r, 0.0])
             hi = np.maximum(hi, c.max(0) + [r, r, 0.0])
@@ -214,7 +233,7 @@ def resolve_geometry(target, opts: TofSceneOptions) -> TofGeometry:
     Raises
     ------
     InputError
-        No plate size anywhere, or a marker face below its puck thickness.
+        No plate size anywhere, or a marker face nearer the plate's front face than its puck thickness.
     """
     # the pattern's tables, by its own entries (a loaded pattern passed them; a target built in code may not have)
     try:
@@ -228,6 +247,7 @@ def resolve_geometry(target, opts: TofSceneOptions) -> TofGeometry:
     else:
         raise InputError(f"pattern {target.pattern.name!r}: [plate] width_m/height_m missing and no plate_size_m given")
     thick = float(opts.plate_thickness_m if opts.plate_thickness_m is not None else plate.get("thickness_m", 0.005))
+    centre = tuple(float(x) for x in (opts.plate_centre_m if opts.plate_centre_m is not None else plate_centre_m(plate)))
     a_plate = opts.plate_albedo if opts.plate_albedo is not None else plate.get("albedo", 0.04)
     a_marker = opts.marker_albedo if opts.marker_albedo is not None else marker.get("albedo", 0.85)
     a_dark = opts.dark_albedo if opts.dark_albedo is not None else a_plate
@@ -246,16 +266,17 @@ def resolve_geometry(target, opts: TofSceneOptions) -> TofGeometry:
         centres = np.asarray(target.points_m, float)
         radius = np.asarray(target.radius_m, float)
         low = centres[:, 2] - opts.marker_thickness_m
-        if np.any(low < 0):
-            raise InputError(f"marker_thickness_m {opts.marker_thickness_m} exceeds a marker's standoff "
-                             f"({centres[:, 2].min():.4f} m)")
+        if np.any(low < centre[2]):
+            raise InputError(f"marker_thickness_m {opts.marker_thickness_m} exceeds a marker's height above the plate "
+                             f"({centres[:, 2].min() - centre[2]:.4f} m)")
     else:
         centres, radius = np.zeros((0, 3)), np.zeros(0)
     return TofGeometry(plate_size_m=tuple(size), plate_thickness_m=thick,
                        albedo={"plate": a_plate, "marker": a_marker, "dark": a_dark},
                        marker_centres_m=centres, marker_radius_m=radius, post_radius_m=radius * ratio,
                        marker_thickness_m=float(opts.marker_thickness_m),
-                       materials={"marker": m_mat, "plate": opts.plate_material, "sheeting": sheeting})
+                       materials={"marker": m_mat, "plate": opts.plate_material, "sheeting": sheeting},
+                       plate_centre_m=centre)
 
 
 def scene_dict(geom: TofGeometry, opts: TofSceneOptions) -> dict:
@@ -281,8 +302,9 @@ def scene_dict(geom: TofGeometry, opts: TofSceneOptions) -> dict:
 
     w, h = geom.plate_size_m
     th = geom.plate_thickness_m
+    px, py, pz = (float(x) for x in geom.plate_centre_m)
     d = {"type": "scene",
-         "plate": {"type": "cube", "to_world": T().translate([0.0, 0.0, -th / 2]).scale([w / 2, h / 2, th / 2]),
+         "plate": {"type": "cube", "to_world": T().translate([px, py, pz - th / 2]).scale([w / 2, h / 2, th / 2]),
                    "bsdf": material(geom.materials["plate"], geom.albedo["plate"])}}
     t_m = geom.marker_thickness_m
     for i, (c, r, rp) in enumerate(zip(geom.marker_centres_m, geom.marker_radius_m, geom.post_radius_m)):
@@ -295,8 +317,8 @@ def scene_dict(geom: TofGeometry, opts: TofSceneOptions) -> dict:
         d[f"marker{i}_back"] = {"type": "disk",
                                 "to_world": T().translate(back).rotate([1.0, 0.0, 0.0], 180.0).scale([float(r), float(r), 1.0]),
                                 "bsdf": diffuse(geom.albedo["dark"])}
-        if opts.posts and back[2] > 0 and rp > 0:
-            d[f"post{i}"] = {"type": "cylinder", "p0": [c[0], c[1], 0.0], "p1": back, "radius": float(rp),
+        if opts.posts and back[2] > pz and rp > 0:
+            d[f"post{i}"] = {"type": "cylinder", "p0": [c[0], c[1], pz], "p1": back, "radius": float(rp),
                              "bsdf": diffuse(geom.albedo["dark"])}
     for i, dd in enumerate(opts.distractors):
         if dd["type"] == "sphere":

@@ -62,7 +62,7 @@ def _variants(frames_auto_T_far: float, frames_auto_T_near: float):
         ("converged optimum (Gauss-Newton)", both, {}, {}, GN, "markers",
          "the literal iteration's fixed point (the former default): range from the pattern's apparent size"),
         ("reference point: plate centre", both, {}, {}, {}, "plate",
-         "the position columns at the target frame's origin, 125 mm behind the marker faces"),
+         "the position columns at the plate's front-face centre, 125 mm behind the marker faces' centroid"),
         ("ML depth blending (depth_weight None)", both, {}, {}, {**GN, "depth_weight": None}, "markers",
          "the pipeline's maximum-likelihood blend of the depths with an assumed 0.05 px centroid sigma"),
         ("no recursive median of depth", both, {}, {}, {"temporal_median": False}, "markers",

@@ -144,10 +144,12 @@ def _header_lines(camera, target, sensor, renderer, seed, argv, timing) -> list[
          "changes the pose by < 1e-6 m / 1e-6 rad or after 500 iterations (below: its sensitivity).", "",
          "Columns: the paper's Tables 1-3 in its order. target_x_cam_mm, target_y_cam_mm, target_z_cam_mm: the "
          "centroid of the eight marker faces in the camera frame (OpenCV axes; not the state's x_m, y_m, z_m, the "
-         "camera in the target frame; the paper gives no target frame; its Table 2 - its pitch fluctuating 0.52 deg, "
-         "x only 0.19 mm - puts its reference point within ~2 cm of that centroid along the boresight; the "
-         "plate-centre variant below shows the difference); roll_deg, pitch_deg, yaw_deg: the paper state's angles, "
-         "which the paper calls pitch, yaw, roll (our roll is the rotation about the line of sight). Fluctuation = "
+         "camera in the target frame; the paper reports its target frame's origin but does not place it; its Table 2 - "
+         "its pitch, about x, fluctuating 0.518 deg, its y only 0.321 mm - puts that origin within ~3.5 cm of the "
+         "marker centroid along the line of sight (0.321 mm / tan 0.518 deg), so the target frame's origin is that "
+         "centroid and the truth is the paper's average pose; the plate-centre variant below shows the difference); "
+         "roll_deg, pitch_deg, yaw_deg: the paper state's angles, which the paper calls pitch, yaw, roll (its roll is "
+         "our yaw, the rotation about the line of sight, its smallest Table 2 scatter). Fluctuation = "
          "maximum - minimum over the run, as the paper's tables.", ""]
     return L
 
@@ -326,7 +328,7 @@ def findings(sums, var_rows) -> list[str]:
                      f"{cells(sums[near], '3')}); Table 2 ratios at {far * 1e3:.0f} mm {cells(b, '2')}.")
     ref = [v for v in var_rows if v["label"].startswith("reference point") and v["range_m"] == far]
     if ref:
-        L.append(f"- **Reference point**: at the plate centre x and y fluctuate {_fmt(ref[0]['summary']['ratio_to_paper']['2']['target_x_cam_mm'], 1)}x "
+        L.append(f"- **Reference point**: at the plate's front-face centre x and y fluctuate {_fmt(ref[0]['summary']['ratio_to_paper']['2']['target_x_cam_mm'], 1)}x "
                  f"and {_fmt(ref[0]['summary']['ratio_to_paper']['2']['target_y_cam_mm'], 1)}x the paper's at 5.7 m - the tilt noise "
                  "times the 125 mm lever - which is why the marker centroid is reported.")
     lam = [v for v in var_rows if v["label"].startswith("Lambertian") and v["range_m"] == far]
