@@ -6,9 +6,8 @@ spill's rings used to come from one dilation each, over the whole frame, for eac
 region: one trial of the committed 3U sun study spent 4390 s there. They now come from a distance
 transform and a stable sort (and a frame already full is recognised), with the same bits.
 
-Peer, measured in the same run: the ring-by-ring definition (``tests/test_phone_model.py``'s
-``_bloom_by_dilation``, the code before the change), on the same frames; the outputs are checked
-equal to the bit. Frames (synthetic, seeded; sizes scaled down so the peer finishes):
+Peer, measured in the same run: the ring-by-ring definition (``bloom(..., rings="dilation")``,
+the code before the change), on the same frames; the outputs are checked equal to the bit. Frames (synthetic, seeded; sizes scaled down so the peer finishes):
 
 - ``sun``: a disk holding 18 frames' worth of excess charge plus ``--glints`` saturated glints;
 - ``spots``: four flash spots and a few glints, no sun (an ordinary frame: what must not slow).
@@ -27,7 +26,6 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
 
 FULL_WELL_E = 4500.0  # the Amaze profile's
 DRAIN = 0.99
@@ -58,8 +56,6 @@ def main(argv=None):
     ap.add_argument("--width", type=int, default=1632, help="frame columns (default 1632: half its 3264)")
     ap.add_argument("--glints", type=int, default=10, help="saturated single-pixel glints (default 10)")
     args = ap.parse_args(argv)
-    from test_phone_model import _bloom_by_dilation
-
     from svgs_sim.camera.phone.sensor import bloom
 
     print(f"bloom, {args.height} x {args.width} px, full well {FULL_WELL_E:g} e-, drain {DRAIN}")
@@ -71,7 +67,7 @@ def main(argv=None):
         st = bloom(ours, FULL_WELL_E, DRAIN)
         t_ours = time.perf_counter() - t0
         t0 = time.perf_counter()
-        st_peer = _bloom_by_dilation(peer, FULL_WELL_E, DRAIN)
+        st_peer = bloom(peer, FULL_WELL_E, DRAIN, rings="dilation")
         t_peer = time.perf_counter() - t0
         same = bool(np.array_equal(ours, peer)) and st == st_peer
         print(f"  {kind:5s}: {st['regions']} regions; ours {t_ours * 1e3:.1f} ms, ring-by-ring peer "

@@ -1,6 +1,5 @@
 """Phone camera model: EMVA 1288 photon transfer, charge conservation, optics, ISP, AE."""
 
-import cv2
 import numpy as np
 import pytest
 
@@ -296,91 +295,13 @@ def test_the_float_output_is_the_8_bit_image_before_rounding(cfa):
         ex.expose(seed=2, stages=tuple(s for s in ex.stages if s != "glare"))
 
 
-def _fill_rings_by_dilation(sub, region, q, fw, kernel):
-    """The definition of the spill, one dilation per ring (the shipped code's rings come from a
-    distance transform and a sort; it must give the same bits)."""
-    filled = 0
-    h, w = sub.shape
-    while q > 0:
-        grown = cv2.dilate(region, kernel)
-        ring = (grown > 0) & (region == 0)
-        if not ring.any():
-            break
-        room = np.maximum(fw - sub[ring], 0.0)
-        cap = float(room.sum())
-        if cap >= q and cap > 0:
-            sub[ring] += (room * (q / cap)).astype(sub.dtype)
-            filled += int(np.count_nonzero(room))
-            q = 0.0
-        else:
-            sub[ring] = np.maximum(sub[ring], fw)
-            filled += int(np.count_nonzero(room))
-            q -= cap
-        region = grown
-    edge = (bool(region[:, 0].any()), bool(region[0, :].any()), bool(region[:, w - 1].any()), bool(region[h - 1, :].any()))
-    return max(q, 0.0), filled, edge
-
-
-def _bloom_by_dilation(e, full_well_e, drain, direction="isotropic"):
-    """The definition of blooming, region by region and ring by ring (one dilation each): the
-    code as it was before the rings came from a distance transform. The shipped
-    :func:`bloom` must give the same bits."""
-    stats = {"drained_e": 0.0, "lost_e": 0.0, "regions": 0, "bloomed_px": 0}
-    H, W = e.shape
-    # rows and columns holding saturated pixels (cheap reductions), then work in that box
-    rows = np.flatnonzero(e.max(axis=1) > full_well_e)
-    if rows.size == 0:
-        return stats
-    cols = np.flatnonzero(e[rows[0] : rows[-1] + 1].max(axis=0) > full_well_e)
-    ry0, ry1, rx0, rx1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
-    over = np.zeros((H, W), np.uint8)
-    over[ry0:ry1, rx0:rx1] = e[ry0:ry1, rx0:rx1] > full_well_e
-    sub_over = over[ry0:ry1, rx0:rx1]
-    n, sub_labels, box, _ = cv2.connectedComponentsWithStats(sub_over, connectivity=8)
-    labels = np.zeros((H, W), np.int32)
-    labels[ry0:ry1, rx0:rx1] = sub_labels
-    box = box.copy()
-    box[:, 0] += rx0
-    box[:, 1] += ry0
-    stats["regions"] = n - 1
-    kernel = np.ones((3, 3), np.uint8) if direction == "isotropic" else np.ones((3, 1), np.uint8)
-    # excess per region, then clip everything at full well
-    sub_e = e[ry0:ry1, rx0:rx1]
-    excess = np.bincount(sub_labels.ravel(), weights=np.maximum(sub_e - full_well_e, 0).ravel(), minlength=n)
-    np.minimum(sub_e, full_well_e, out=sub_e)
-    order = np.argsort(-excess[1:]) + 1
-    for lab in order:
-        q = float(excess[lab])
-        stats["drained_e"] += q * drain
-        q *= 1.0 - drain
-        x, y, w, h, _ = box[lab]
-        pad = int(np.sqrt(q / (np.pi * full_well_e) + w * h)) + 4
-        while True:
-            x0, y0 = max(0, x - pad), max(0, y - pad)
-            x1, y1 = min(W, x + w + pad), min(H, y + h + pad)
-            sub = e[y0:y1, x0:x1]
-            region = (labels[y0:y1, x0:x1] == lab).astype(np.uint8)
-            trial = sub.copy()
-            rem, filled, touched_edge = _fill_rings_by_dilation(trial, region, q, full_well_e, kernel)
-            at_frame_edge = (x0 == 0 and touched_edge[0]) or (y0 == 0 and touched_edge[1]) or (
-                x1 == W and touched_edge[2]) or (y1 == H and touched_edge[3])
-            window_edge = any(touched_edge) and not at_frame_edge
-            if rem > 0 and window_edge and (x0 > 0 or y0 > 0 or x1 < W or y1 < H):
-                pad *= 2
-                continue
-            sub[...] = trial
-            stats["lost_e"] += rem
-            stats["bloomed_px"] += filled
-            break
-    return stats
-
-
 @pytest.mark.parametrize("rings_from", ["distance", "shipped"])
 @pytest.mark.parametrize("direction", ["isotropic", "column"])
 @pytest.mark.parametrize("case", range(8))
 def test_blooming_rings_match_dilation(direction, case, rings_from, monkeypatch):
-    """The spill equals its ring-by-ring definition to the bit: small and huge excess (a frame
-    filled to the brim, as the sun at 66.7 ms does), regions at the frame's edge, several
+    """The spill equals its ring-by-ring definition (``rings="dilation"``: one dilation per ring
+    and region, the code before the distance transform) to the bit: small and huge excess (a
+    frame filled to the brim, as the sun at 66.7 ms does), regions at the frame's edge, several
     regions, a frame already full."""
     import svgs_sim.camera.phone.sensor as sensor
 
@@ -400,6 +321,6 @@ def test_blooming_rings_match_dilation(direction, case, rings_from, monkeypatch)
     ref = e.copy()
     got = e.copy()
     stats = bloom(got, fw, drain=0.5 if case % 3 else 0.0, direction=direction)
-    stats_ref = _bloom_by_dilation(ref, fw, drain=0.5 if case % 3 else 0.0, direction=direction)
+    stats_ref = bloom(ref, fw, drain=0.5 if case % 3 else 0.0, direction=direction, rings="dilation")
     assert np.array_equal(got, ref)
     assert stats == stats_ref

@@ -178,7 +178,7 @@ def _readout_kernel(e, read_sigma, gain, black, white, key, read, quantise, lut,
             out[r, c] = y
 
 
-def bloom(e: np.ndarray, full_well_e: float, drain: float, direction: str = "isotropic"):
+def bloom(e: np.ndarray, full_well_e: float, drain: float, direction: str = "isotropic", *, rings: str = "fast"):
     """Clip at full well and spill the excess charge into neighbouring pixels, in place.
 
     Each connected region above full well keeps ``full_well_e`` per pixel; a fraction
@@ -195,6 +195,10 @@ def bloom(e: np.ndarray, full_well_e: float, drain: float, direction: str = "iso
     drain : float
         Anti-blooming drain fraction in [0, 1].
     direction : {"isotropic", "column"}
+    rings : {"fast", "dilation"}
+        ``fast``: rings from a distance transform in large windows, and a frame with no pixel
+        below full well recognised; ``dilation``: the definition, one dilation per ring and
+        region (slow on a frame the sun fills; the same bits).
 
     Returns
     -------
@@ -226,6 +230,9 @@ def bloom(e: np.ndarray, full_well_e: float, drain: float, direction: str = "iso
     excess = np.bincount(sub_labels.ravel(), weights=np.maximum(sub_e - full_well_e, 0).ravel(), minlength=n)
     np.minimum(sub_e, full_well_e, out=sub_e)
     order = np.argsort(-excess[1:]) + 1
+    if rings not in ("fast", "dilation"):
+        raise ValueError(f"rings: expected 'fast' or 'dilation', got {rings!r}")
+    fill = _fill_rings if rings == "fast" else _fill_rings_by_dilation
     frame_full = False  # no pixel below full well: every later region's spill leaves the frame
     for lab in order:
         q = float(excess[lab])
@@ -242,7 +249,7 @@ def bloom(e: np.ndarray, full_well_e: float, drain: float, direction: str = "iso
             sub = e[y0:y1, x0:x1]
             region = (labels[y0:y1, x0:x1] == lab).astype(np.uint8)
             trial = sub.copy()
-            rem, filled, touched_edge = _fill_rings(trial, region, q, full_well_e, kernel)
+            rem, filled, touched_edge = fill(trial, region, q, full_well_e, kernel)
             at_frame_edge = (x0 == 0 and touched_edge[0]) or (y0 == 0 and touched_edge[1]) or (
                 x1 == W and touched_edge[2]) or (y1 == H and touched_edge[3])
             window_edge = any(touched_edge) and not at_frame_edge
@@ -252,7 +259,7 @@ def bloom(e: np.ndarray, full_well_e: float, drain: float, direction: str = "iso
             sub[...] = trial
             stats["lost_e"] += rem
             stats["bloomed_px"] += filled
-            if rem > 0:
+            if rem > 0 and rings == "fast":
                 frame_full = not bool((e < full_well_e).any())
             break
     return stats
