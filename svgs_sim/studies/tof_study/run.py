@@ -24,6 +24,7 @@ from .design import (
     SWEEP_RANGES_M,
     SWEEP_SCHEMES,
     TofStudyConfig,
+    active_pixels_near,
     auto_integration_times,
     runs_from_rows,
     study_runs,
@@ -65,7 +66,7 @@ def run_study(cfg: TofStudyConfig, out: Path, spec=None, *, store_dir=None, chun
 
     log("automatic integration times at the paper's ranges (the baseline renders)")
     auto_T = auto_integration_times(cfg)
-    runs = study_runs(cfg, auto_T)
+    runs = study_runs(cfg, auto_T, active_pixels_near(cfg))
     trials = study_trials(runs)
     plan = plan_trials(get_trial_kind("tof"), trials, spec or ExecutorSpec("inline", 1))
     log(plan.describe() + "; frames already in the store are skipped")
