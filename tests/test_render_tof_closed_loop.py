@@ -155,3 +155,20 @@ def test_the_study_engine_stores_a_run_as_the_stability_run_computes_it(tmp_path
     assert got["noise_free"] == ref["noise_free"] and got["tables"] == ["2"]
     _, again = run_stored_study(kind, trials, tmp_path, {"test": 1}, ExecutorSpec("inline", 1), progress=False)
     assert again is None  # every trial was stored
+
+
+def test_a_tof_study_store_of_another_design_is_refused(tmp_path):
+    """The study's manifest carries a digest of its runs: the same configuration with other runs
+    (here the active-set caps of another near-frame pixel count) gives another digest, so a store
+    made by the other design is refused (before any work) instead of read back under the wrong runs."""
+    from svgs_sim.studies.store import check_resumable
+    from svgs_sim.studies.tof_study.design import TofStudyConfig, design_digest, study_runs
+
+    cfg = TofStudyConfig()
+    T = {0.697: 3e-6, 5.712: 9e-6}
+    a, b = design_digest(study_runs(cfg, T, 5448)), design_digest(study_runs(cfg, T, 8000))
+    assert a == design_digest(study_runs(cfg, T, 5448)) and a != b
+    (tmp_path / "manifest.json").write_text(json.dumps({"format_version": 2, "parameters": {**cfg.manifest(),
+                                                                                          "design_sha256": b}}))
+    with pytest.raises(InputError, match="design_sha256"):
+        check_resumable(tmp_path, {**cfg.manifest(), "design_sha256": a})

@@ -6,6 +6,8 @@ Part of :mod:`svgs_sim.studies.tof_study`.
 
 from __future__ import annotations
 
+import hashlib
+import json
 from dataclasses import asdict, dataclass, replace
 
 from svgs_sim.sim.tof_closed_loop import TofScene, noise_free_frame
@@ -203,6 +205,15 @@ def study_runs(cfg: TofStudyConfig, auto_T: dict, active_near_px: int) -> list:
         r = PAPER_RANGES_M[0]
         out.append(("long", "long run", run(r, cfg.long_frames, f"long run @ {r}"), None))
     return out
+
+
+def design_digest(runs) -> str:
+    """A digest of the study's runs (section, label, range, frames, pipeline overrides, reference),
+    kept in the store's manifest: a store made by another design (the code's runs changed, the
+    configuration not) is refused instead of read back under the wrong runs."""
+    spec = [[sec, lab, float(f.nominal_range_m), int(f.frames), [list(kv) for kv in f.pipeline], f.reference]
+            for sec, lab, f, _ in runs]
+    return hashlib.sha256(json.dumps(spec, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
 def study_trials(runs) -> list:

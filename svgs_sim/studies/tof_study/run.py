@@ -26,6 +26,7 @@ from .design import (
     TofStudyConfig,
     active_pixels_near,
     auto_integration_times,
+    design_digest,
     runs_from_rows,
     study_runs,
     study_trials,
@@ -73,8 +74,9 @@ def run_study(cfg: TofStudyConfig, out: Path, spec=None, *, store_dir=None, chun
     for line in plan.warnings():
         if "--processes" not in line and "--workers" not in line:  # the command said that one already
             log(line)
+    manifest = {**cfg.manifest(), "design_sha256": design_digest(runs)}
     store, stats = run_stored_study(get_trial_kind("tof"), trials, Path(store_dir) if store_dir else out / "tof-study",
-                                cfg.manifest(), spec or ExecutorSpec("inline", 1),
+                                manifest, spec or ExecutorSpec("inline", 1),
                                 chunk_size=chunk_frames(max(r[2].frames for r in runs), chunk_size),
                                 progress=not quiet, description="ToF study frames")
     rows = store.read_rows()
