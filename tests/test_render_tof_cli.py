@@ -71,7 +71,9 @@ def test_render_and_solve_text_and_no_solution(capsys):
     rc = main(["tof", "render-and-solve", "--range", "1.5", "--spp", "4", "--seed", "1"])
     out = capsys.readouterr().out
     assert rc == 0 and "SOLVED" in out and "truth:" in out
-    # markers only partly in view (three at the border): no consistent solution, exit 1
-    rc = main(["tof", "render-and-solve", "--range", "0.7", "--x", "0.3", "--spp", "4", "--json"])
+    # markers only partly in view (at the border): no solution, exit 1. The target frame's origin is
+    # the marker faces' centroid, 125 mm in front of the plate and 22.5 mm to its side: this is the
+    # scene that was --range 0.7 --x 0.3 when the origin was the plate's centre
+    rc = main(["tof", "render-and-solve", "--range", "0.575", "--x", "0.3225", "--spp", "4", "--json"])
     js = json.loads(capsys.readouterr().out)
     assert rc == 1 and js["ok"] is False and js["reason"]

@@ -11,8 +11,6 @@ import json
 from dataclasses import asdict, dataclass, replace
 
 from svgs_sim.sim.tof_closed_loop import TofScene, noise_free_frame
-from svgs_sim.tof import PipelineParams
-from svgs_sim.tof.active import active_pixel_set
 from svgs_sim.sim.tof_stability import COLUMNS, RUN_INFO_KEYS, assemble_run, stability_scenario
 
 from ..execution import Trial
@@ -167,6 +165,8 @@ def active_pixels_near(cfg: TofStudyConfig) -> int:
     """Pixels above the active-set threshold in the near baseline's noise-free frame (the
     pipeline's defaults, no cap binding): what the active-set caps are fractions of."""
     from svgs_sim.sim.tof_trial import cached_render
+    from svgs_sim.tof import PipelineParams
+    from svgs_sim.tof.active import active_pixel_set
 
     P = PipelineParams()
     frame = noise_free_frame(cached_render(cfg.scenario(PAPER_RANGES_M[0])))
