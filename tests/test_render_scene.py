@@ -358,3 +358,19 @@ def test_stratified_spot_samples_same_expectation_less_noise():
     # less centroid noise (measured: about half)
     scatter = {s: np.sqrt(np.mean(np.var(a[:, :, :2], axis=0, ddof=1))) for s, a in res.items()}
     assert scatter["kronecker"] < 0.8 * scatter["independent"], scatter
+
+
+def test_cli_version_and_doctor_versions(capsys):
+    """``svgs --version`` prints the installed distribution's version (importlib.metadata's, not
+    the code's own string); ``svgs doctor`` lists it, numba's and the OpenCV distribution that is
+    installed (the contrib headless one, which the doctor used to report missing)."""
+    import importlib.metadata as md
+
+    from svgs_sim.cli.main import main
+
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out == f"svgs-sim {md.version('svgs-sim')}\n"
+    assert main(["doctor", "--json"]) == 0
+    v = json.loads(capsys.readouterr().out)["versions"]
+    assert v["svgs-sim"] == md.version("svgs-sim") and v["numba"] == md.version("numba")
+    assert v["opencv-contrib-python-headless"] == md.version("opencv-contrib-python-headless")

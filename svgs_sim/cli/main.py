@@ -70,7 +70,7 @@ def _selected(argv) -> set[str] | None:
     ``svgs --help`` and anything unrecognised build every command."""
     words = [a for a in (argv or []) if not a.startswith("-")]
     if not words:
-        return None
+        return set() if "--version" in (argv or []) else None  # svgs --version needs no command
     first = words[0]
     mods = {m for g, m, names in COMMANDS if (g is None and first in names) or g == first}
     return mods or None
@@ -92,12 +92,21 @@ class Parser(argparse.ArgumentParser):
         raise UsageError(self, message)
 
 
+def _version() -> str:
+    """The installed distribution's version (``svgs_sim.__version__``)."""
+    from svgs_sim import __version__
+
+    return __version__
+
+
 def build_parser(argv=None) -> argparse.ArgumentParser:
     """The ``svgs`` parser: every registered command, or only those that ``argv`` invokes."""
     parser = Parser(
         prog="svgs",
         description="Smartphone Video Guidance Sensor simulator: render, expose, detect, solve.",
     )
+    parser.add_argument("--version", action="version", version=f"svgs-sim {_version()}",
+                        help="print the installed svgs-sim version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     groups: dict[str, argparse._SubParsersAction] = {}

@@ -203,11 +203,21 @@ def doctor_report(variant=None) -> dict:
 
     rep = {"python": platform.python_version(), "platform": platform.platform()}
     versions = {}
-    for pkg in ("mitsuba", "drjit", "karellen-llvm-core", "numpy", "scipy", "opencv-python-headless", "scikit-image"):
+
+    def dist_version(pkg):
         try:
-            versions[pkg] = md.version(pkg)
+            return md.version(pkg)
         except md.PackageNotFoundError:
-            versions[pkg] = None
+            return None
+
+    for pkg in ("svgs-sim", "mitsuba", "drjit", "karellen-llvm-core", "numpy", "numba", "scipy"):
+        versions[pkg] = dist_version(pkg)
+    # OpenCV ships as one of four distributions (the project installs the contrib headless one)
+    opencv = ("opencv-contrib-python-headless", "opencv-python-headless", "opencv-contrib-python", "opencv-python")
+    found = [p for p in opencv if dist_version(p) is not None]
+    for pkg in found or opencv[:1]:
+        versions[pkg] = dist_version(pkg)
+    versions["scikit-image"] = dist_version("scikit-image")
     rep["versions"] = versions
     cands = llvm_candidates()
     chosen, note = pick_llvm(cands)
@@ -238,9 +248,9 @@ def cmd_doctor(args) -> int:
     if args.json:
         print(json.dumps(rep, default=str))
         return 0 if rep["ok"] else 1
-    print(f"python      {rep['python']} on {rep['platform']}")
+    print(f"{'python':31s} {rep['python']} on {rep['platform']}")
     for k, v in rep["versions"].items():
-        print(f"{k:22s} {v or 'not installed'}")
+        print(f"{k:31s} {v or 'not installed'}")
     print(f"LLVM libraries (Dr.Jit needs LLVM >= {rep['llvm_min_major']}; 15 aborts Dr.Jit 1.5):")
     for c in rep["llvm_candidates"]:
         print(f"  {'usable    ' if c['usable'] else 'NOT usable'} LLVM {c['major']}  {c['path']}  ({c['origin']})")
