@@ -103,3 +103,14 @@ def test_phone_profiles_are_refused_by_every_tof_command(capsys, tmp_path):
         err = capsys.readouterr().err
         assert rc == 2 and "phone" in err, argv
     assert not (tmp_path / "s").exists()
+
+
+def test_the_text_table_keeps_its_columns_apart(capsys):
+    """The text table's header has every column's name as its own word, and each row as many
+    numbers as there are columns (the names ran together at 11 characters a column)."""
+    from svgs_sim.sim.tof_stability import COLUMNS
+
+    assert main(["tof", "stability", "--range", "3.0", "--frames", "3", "--spp", "8"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[1].split() == list(COLUMNS)
+    assert all(len(ln[24:].split()) == len(COLUMNS) for ln in lines[2:8])

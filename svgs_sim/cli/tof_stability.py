@@ -145,11 +145,14 @@ def pipeline_overrides(args) -> dict:
     return overrides(args.persistence, args.max_active_pixels)
 
 
-def print_summary(s: dict, file=sys.stdout) -> None:
-    """The statistics table beside the paper's (text)."""
+def print_summary(s: dict, file=None) -> None:
+    """The statistics table beside the paper's (text), on ``file`` (None: the current ``sys.stdout``,
+    looked up at the call: a default bound at import kept a stream that may since have closed)."""
     from svgs_sim.sim.tof_stability import COLUMNS
 
-    w = 11
+    file = sys.stdout if file is None else file
+
+    w = max(11, max(len(c) for c in COLUMNS) + 2)  # every name with room to spare: the columns stay apart
     print(f"range {s['range_m']:g} m: solved {s['solved']}/{s['frames']} frames; integration time "
           f"{s['integration_time_s'] * 1e6:.2f} us per DCS, brightest amplitude {s['max_amplitude_lsb']:.0f} LSB, "
           f"reference point: {s['reference']}", file=file)
