@@ -102,3 +102,47 @@ def interrupt_in(exc: BaseException) -> KeyboardInterrupt | None:
         seen.add(id(exc))
         exc = exc.__cause__ or exc.__context__
     return None
+
+
+def number_items(text, flag: str, *, count: int | None = None) -> list[float]:
+    """The numbers of a comma-separated option value, each item checked as written.
+
+    ``"5,10,20"`` -> ``[5.0, 10.0, 20.0]``. Refused with :class:`InputError` naming ``flag`` and the
+    item: an empty item (``"5,,10"``, a trailing comma), an item with an underscore (Python's
+    ``float`` reads ``"5_0"`` as 50, which a user did not mean), any other item that is not a
+    number, and, with ``count``, a list of another length. Finiteness and bounds are the caller's.
+
+    Parameters
+    ----------
+    text : str
+    flag : str
+        The option, as the user typed it (``--ranges``), for the message.
+    count : int, optional
+        The number of items required.
+
+    Returns
+    -------
+    list of float
+    """
+    items = [s.strip() for s in str(text).split(",")]
+    for s in items:
+        if not s:
+            raise InputError(f"{flag}: an empty item in {text!r} (write the numbers separated by single commas)")
+        if "_" in s:
+            raise InputError(f"{flag}: {s!r} is not a number as written (no underscores), in {text!r}")
+    try:
+        vals = [float(s) for s in items]
+    except ValueError:
+        bad = next(s for s in items if not _is_float(s))
+        raise InputError(f"{flag}: {bad!r} is not a number, in {text!r}") from None
+    if count is not None and len(vals) != count:
+        raise InputError(f"{flag}: expected {count} comma-separated numbers, got {len(vals)} in {text!r}")
+    return vals
+
+
+def _is_float(s: str) -> bool:
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True

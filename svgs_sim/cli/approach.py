@@ -15,17 +15,11 @@ from __future__ import annotations
 import sys
 
 from svgs_sim.cli.exit_codes import EXIT_NO_SOLUTION, EXIT_OK
-from svgs_sim.base.errors import InputError
+from svgs_sim.base.errors import InputError, number_items
 
 
 def _floats(text: str, n: int, flag: str) -> tuple:
-    try:
-        v = tuple(float(x) for x in str(text).split(","))
-    except ValueError:
-        raise InputError(f"{flag}: expected {n} comma-separated numbers, got {text!r}") from None
-    if len(v) != n:
-        raise InputError(f"{flag}: expected {n} comma-separated numbers, got {text!r}")
-    return v
+    return tuple(number_items(text, flag, count=n))
 
 
 def register(sub) -> None:

@@ -12,7 +12,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from svgs_sim.base.errors import InputError
+from svgs_sim.base.errors import InputError, number_items
 
 
 def print_run_stats(stats, rebuilt: str = "outputs", label: str = "") -> None:
@@ -299,10 +299,7 @@ def _register_sun_study(sub) -> None:
 
 
 def _numbers(text, flag) -> list[float]:
-    try:
-        return [float(x) for x in str(text).split(",") if x.strip() != ""]
-    except ValueError:
-        raise InputError(f"{flag}: expected comma-separated numbers, got {text!r}") from None
+    return number_items(text, flag)
 
 
 def cmd_sun_study(args) -> int:
@@ -362,20 +359,11 @@ def _ranges(text):
 
 
 def _triple(text, flag):
-    try:
-        vals = tuple(float(x) for x in text.split(","))
-    except ValueError:
-        raise InputError(f"{flag}: expected three comma-separated numbers in deg, got {text!r}") from None
-    if len(vals) != 3:
-        raise InputError(f"{flag}: expected three comma-separated numbers in deg (roll, pitch, yaw), got {text!r}")
-    return vals
+    return tuple(number_items(text, f"{flag} (roll, pitch, yaw in deg)", count=3))
 
 
 def _pp(text):
-    try:
-        du, dv = (float(x) for x in text.split(","))
-    except ValueError:
-        raise InputError(f"--pp-error-px: expected DU,DV in px, got {text!r}") from None
+    du, dv = number_items(text, "--pp-error-px (DU,DV in px)", count=2)
     return du, dv
 
 

@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from svgs_sim.base.errors import InputError
+from svgs_sim.base.errors import InputError, number_items
 from svgs_sim.svgs.envelope import MIN_SPAN_PX  # noqa: F401 - re-exported (the module notes name it)
 from svgs_sim.svgs.envelope import check_attitude_deg, check_range_m, range_envelope_m
 from svgs_sim.base.limits import INPUT_BOUNDS, INT_BOUNDS
@@ -95,12 +95,9 @@ def check_out_file(path, flag: str = "--out") -> Path:
 
 def parse_range_list(text, flag: str) -> list[float]:
     """Comma-separated ranges (m): finite, positive and distinct."""
-    try:
-        vals = [float(x) for x in str(text).split(",") if x.strip()]
-    except ValueError:
-        raise InputError(f"{flag}: expected comma-separated numbers of metres, got {text!r}") from None
-    if not vals:
+    if not str(text).strip():
         raise InputError(f"{flag}: no range given")
+    vals = number_items(text, flag)
     bad = [v for v in vals if not (math.isfinite(v) and v > 0)]
     if bad:
         raise InputError(f"{flag}: ranges must be positive, finite metres, got {bad}")

@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from svgs_sim.base.errors import InputError
+from svgs_sim.base.errors import InputError, number_items
 from svgs_sim.base.limits import INPUT_BOUNDS
 from svgs_sim.render.sun import sun_direction_target
 from svgs_sim.render.earth import in_eclipse
@@ -440,8 +440,8 @@ def _component(text, q: Quantity) -> float:
     """Component ``q.component`` of a shared option's ``A,B`` text (InputError naming the option)."""
     parts = [n for n, x in Scene.quantities().items() if x.flag == q.flag]
     try:
-        vals = [float(x) for x in str(text).split(",")]
-    except ValueError:
+        vals = number_items(text, q.flag)
+    except InputError:
         vals = []
     if len(vals) != len(parts) or not all(np.isfinite(vals)):
         raise InputError(f"{q.flag}: expected {len(parts)} numbers separated by a comma "

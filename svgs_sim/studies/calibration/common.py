@@ -14,7 +14,7 @@ import json
 
 import numpy as np
 
-from svgs_sim.base.errors import InputError
+from svgs_sim.base.errors import InputError, number_items
 from svgs_sim.base.profiles import DISTORTION_KEYS, Camera
 from svgs_sim.svgs.frames import STATE_KEYS
 
@@ -68,7 +68,7 @@ def parse_number_list(text, name: str, *, integer: bool = False, minimum=None) -
     if isinstance(text, (list, tuple)):
         items = list(text)
     else:
-        items = [s.strip() for s in str(text).split(",") if s.strip()]
+        items = number_items(text, name) if str(text).strip() else []
     if not items:
         raise InputError(f"{name}: expected a comma-separated list of numbers, got {text!r}")
     out = []
