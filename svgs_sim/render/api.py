@@ -41,7 +41,7 @@ from .constants import (
     DEFAULT_SPP,
 )
 from .geometry import Reflector, SceneOptions
-from .optics import Flash, Optics, pixel_normalized_grid, radiance_to_photon_rate
+from .optics import Flash, Optics, check_focus_beyond_focal_length, pixel_normalized_grid, radiance_to_photon_rate
 from .predict import predicted_centroids_px, predicted_spots_px, virtual_sources
 from .sampling import check_spp, render_film, to_numpy
 from .scene import TILE_COUNTS
@@ -193,6 +193,9 @@ class Renderer:
         if self.options.focus_distance_m is not None:
 
             self.optics = replace(self.optics, focus_distance_m=float(self.options.focus_distance_m))
+        check_focus_beyond_focal_length(self.optics.focus_distance_m, self.optics.focal_length_m,
+                                        "focus_distance_m" if self.options.focus_distance_m is not None
+                                        else f"{self.camera.name}'s [optics] focus_distance_m")
         roi = int(roi_size_px)
         if roi < 4:
             raise InputError(f"roi_size_px: expected >= 4, got {roi_size_px!r}")
@@ -311,6 +314,7 @@ class Renderer:
         f = float(check_finite(focus_distance_m, "focus_distance_m"))
         if f <= 0:
             raise InputError(f"focus_distance_m: expected a positive distance, got {focus_distance_m!r}")
+        check_focus_beyond_focal_length(f, self.optics.focal_length_m, "focus_distance_m")
         if f == self.optics.focus_distance_m:
             return
         self.optics = replace(self.optics, focus_distance_m=f)

@@ -1,6 +1,9 @@
-"""Comma-separated numbers are read item by item at every option that takes them: an empty item
+"""Input read as written, and physically impossible input refused, before any work (issue 41).
+
+Comma-separated numbers are read item by item at every option that takes them: an empty item
 (``5,,10``) or an underscore (``5_0``, which Python's ``float`` reads as 50) is refused, exit 2,
-one line naming the option, before any work (issue 41: both ran)."""
+one line naming the option (both ran). A focus inside the lens's focal length is refused the
+same way (it rendered and then found no blob)."""
 
 import pytest
 
@@ -44,3 +47,13 @@ def test_every_number_list_option_refuses_empty_items_and_underscores(k, capsys,
     argv, flag = list(_cases(tmp_path))[k]
     line = refused(argv, capsys, watch=[tmp_path])
     assert flag in line, line
+
+
+@pytest.mark.parametrize("command", ["render", "render-and-solve"])
+def test_a_focus_inside_the_focal_length_is_refused_before_the_render(command, capsys, tmp_path):
+    """A thin lens focused at s <= f forms no real image (1/v = 1/f - 1/s <= 0): refused at once,
+    naming --focus-m (it rendered for ~12 s and then found no blob). The Galaxy Nexus' f is 3.43 mm."""
+    argv = [command, "--camera", "galaxy-nexus", "--range", "5", "--focus-m", "0.003"]
+    argv += ["--out", str(tmp_path / "out")] if command == "render" else []
+    line = refused(argv, capsys, watch=[tmp_path])
+    assert "--focus-m" in line and "focal length" in line
