@@ -57,3 +57,25 @@ def test_a_focus_inside_the_focal_length_is_refused_before_the_render(command, c
     argv += ["--out", str(tmp_path / "out")] if command == "render" else []
     line = refused(argv, capsys, watch=[tmp_path])
     assert "--focus-m" in line and "focal length" in line
+
+
+def test_a_float_image_scaled_0_to_1_is_told_its_scale(capsys, tmp_path):
+    """A float image whose values lie in 0-1 has nothing above a threshold in counts: the no-blob
+    message says the image's brightest value and what to do (it said only "nothing above the
+    threshold"); an 8-bit image as dark gets no such hint."""
+    import numpy as np
+
+    from svgs_sim.cli.main import main
+
+    img = np.zeros((1944, 2592), np.float32)
+    for u, v in ((1200, 900), (1400, 900), (1200, 1000), (1300, 1050)):
+        img[v - 3:v + 4, u - 3:u + 4] = 0.95
+    np.save(tmp_path / "f.npy", img)
+    assert main(["solve", str(tmp_path / "f.npy"), "--camera", "galaxy-nexus"]) == 1
+    cap = capsys.readouterr()
+    said = cap.out + cap.err
+    assert "brightest value is 0.95" in said and "--threshold" in said
+    np.save(tmp_path / "u8.npy", np.zeros((1944, 2592), np.uint8))
+    assert main(["solve", str(tmp_path / "u8.npy"), "--camera", "galaxy-nexus"]) == 1
+    cap = capsys.readouterr()
+    assert "no bright blob" in cap.out + cap.err and "brightest value" not in cap.out + cap.err

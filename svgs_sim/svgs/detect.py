@@ -128,6 +128,9 @@ class Blobs:
         Connected components above the threshold before gating.
     image_shape : tuple
         ``(H, W)`` of the image.
+    image_max : float
+        The brightest grey value of a floating-point image (NaN for an integer one): says what
+        scale an image without a blob was given in.
     """
 
     centroid_px: np.ndarray
@@ -146,6 +149,7 @@ class Blobs:
     rejected: dict = field(default_factory=lambda: {g: 0 for g in GATES})
     n_components: int = 0
     image_shape: tuple = (0, 0)
+    image_max: float = float("nan")
 
     _ARRAYS = ("centroid_px", "area_px", "bbox", "peak", "saturated_fraction", "eccentricity", "roundness", "flux",
                "background")
@@ -158,7 +162,8 @@ class Blobs:
         kw = {k: getattr(self, k)[index] for k in self._ARRAYS}
         return Blobs(**kw, threshold_used=self.threshold_used, background_level=self.background_level,
                      noise_sigma=self.noise_sigma, saturation_level=self.saturation_level,
-                     rejected=dict(self.rejected), n_components=self.n_components, image_shape=self.image_shape)
+                     rejected=dict(self.rejected), n_components=self.n_components, image_shape=self.image_shape,
+                     image_max=self.image_max)
 
     @classmethod
     def empty(cls, **meta) -> "Blobs":
@@ -584,7 +589,9 @@ def detect_blobs(
     level, bg, sigma = _resolve_threshold(gray, threshold, k_sigma, peak_fraction)
     _check_level_below_full_scale(level, np.asarray(image).dtype)
     meta = dict(threshold_used=level, background_level=bg, noise_sigma=sigma, saturation_level=sat,
-                image_shape=tuple(gray.shape))
+                image_shape=tuple(gray.shape),
+                image_max=float(np.max(gray)) if gray.size and np.issubdtype(np.asarray(image).dtype, np.floating)
+                else float("nan"))
     binary = _binarise(gray, level)
     if binary is None:
         return Blobs.empty(**meta)

@@ -565,12 +565,22 @@ def _threshold_phrase(blobs) -> str:
     return f" above the threshold {float(t):g}" if t is not None and np.isfinite(t) else " above the threshold"
 
 
+def _scale_hint(blobs) -> str:
+    """A hint when the image's brightest value lies below a threshold above 1: a float image scaled
+    0-1 against a threshold in 8-bit counts (empty otherwise)."""
+    top, t = float(getattr(blobs, "image_max", float("nan"))), getattr(blobs, "threshold_used", None)
+    if t is None or not (np.isfinite(top) and np.isfinite(t)) or not (top <= 1.0 < float(t)):
+        return ""
+    return (f"; the image's brightest value is {top:g}: an image scaled 0-1 against a threshold in counts? "
+            "Give it in the camera's counts (0-255 for 8 bits) or a threshold on its scale (--threshold)")
+
+
 def _count_failure(n_all: int, blobs, n_t: int, single_spot_area_px):
     """The Failure of a frame with no blob or fewer blobs than targets, else None."""
     base = {"n_blobs": n_all}
     if n_all == 0:
         return Failure("no_blobs", f"no bright blob was found (nothing{_threshold_phrase(blobs)} passed the size "
-                       "and shape gates)", base)
+                       f"and shape gates){_scale_hint(blobs)}", base)
     if n_all < n_t:
         merged = _merged_failure(blobs, n_t, single_spot_area_px)
         if merged is not None:
