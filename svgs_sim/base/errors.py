@@ -124,25 +124,17 @@ def number_items(text, flag: str, *, count: int | None = None) -> list[float]:
     -------
     list of float
     """
-    items = [s.strip() for s in str(text).split(",")]
-    for s in items:
+    vals = []
+    for s in (s.strip() for s in str(text).split(",")):
         if not s:
             raise InputError(f"{flag}: an empty item in {text!r} (write the numbers separated by single commas)")
         if "_" in s:
             raise InputError(f"{flag}: {s!r} is not a number as written (no underscores), in {text!r}")
-    try:
-        vals = [float(s) for s in items]
-    except ValueError:
-        bad = next(s for s in items if not _is_float(s))
-        raise InputError(f"{flag}: {bad!r} is not a number, in {text!r}") from None
+        try:
+            vals.append(float(s))
+        except ValueError:
+            raise InputError(f"{flag}: {s!r} is not a number, in {text!r}") from None
     if count is not None and len(vals) != count:
         raise InputError(f"{flag}: expected {count} comma-separated numbers, got {len(vals)} in {text!r}")
     return vals
 
-
-def _is_float(s: str) -> bool:
-    try:
-        float(s)
-    except ValueError:
-        return False
-    return True

@@ -16,6 +16,8 @@ sensor's envelope instead (:func:`svgs_sim.svgs.envelope.range_envelope_m`,
 
 from __future__ import annotations
 
+from svgs_sim.base.errors import InputError
+
 #: Largest range along the boresight any scenario takes, m. The envelope of the bundled phones
 #: ends below 200 m (:func:`svgs_sim.svgs.envelope.range_envelope_m`: the 3U pattern then spans
 #: ``MIN_SPAN_PX`` pixels); this leaves room for a profile with a 5x longer lens or a 5x wider
@@ -67,3 +69,12 @@ def bounds(name: str) -> dict:
     keyword arguments of :class:`svgs_sim.sim.trials.Parameter`)."""
     low, high, _ = INPUT_BOUNDS[name]
     return {"lower": low, "upper": high}
+
+
+def check_focus_beyond_focal_length(focus_distance_m: float, focal_length_m: float, name: str) -> None:
+    """:class:`InputError` naming ``name`` unless the lens is focused beyond its focal length: a
+    thin lens focused at ``s <= f`` forms no real image (1/v = 1/f - 1/s <= 0), so nothing could be
+    rendered in focus (it rendered for seconds and then found no blob)."""
+    if not float(focus_distance_m) > float(focal_length_m):
+        raise InputError(f"{name}: {focus_distance_m:g} m is not beyond the lens's focal length "
+                         f"({focal_length_m:g} m): a thin lens focused there forms no real image")

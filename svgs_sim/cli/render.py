@@ -214,9 +214,8 @@ def doctor_report(variant=None) -> dict:
         versions[pkg] = dist_version(pkg)
     # OpenCV ships as one of four distributions (the project installs the contrib headless one)
     opencv = ("opencv-contrib-python-headless", "opencv-python-headless", "opencv-contrib-python", "opencv-python")
-    found = [p for p in opencv if dist_version(p) is not None]
-    for pkg in found or opencv[:1]:
-        versions[pkg] = dist_version(pkg)
+    found = {p: v for p in opencv if (v := dist_version(p)) is not None}
+    versions.update(found or {opencv[0]: None})
     versions["scikit-image"] = dist_version("scikit-image")
     rep["versions"] = versions
     cands = llvm_candidates()

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from svgs_sim.base.errors import InputError
+from svgs_sim.base.limits import check_focus_beyond_focal_length
 from svgs_sim.cli.json_out import failures_from_text, run_info
 from svgs_sim.cli.solve import json_default
 
@@ -73,10 +73,7 @@ def scenario_from_args(args, range_m=None):
     if focus is not None:  # a thin lens focused inside its focal length forms no real image: refuse before the render
         from svgs_sim.base.profiles import load_camera
 
-        f_m = float(load_camera(args.camera).table("optics").focal_length_m)
-        if not focus > f_m:
-            raise InputError(f"--focus-m: {focus:g} m is not beyond the lens's focal length ({f_m:g} m): a thin lens "
-                             "focused there forms no real image")
+        check_focus_beyond_focal_length(focus, load_camera(args.camera).table("optics").focal_length_m, "--focus-m")
     distance = args.range_m if range_m is None else range_m
     # on the test stand (--mount stand) --range is the gimbal's rail position
     where = {"rail_m": distance} if getattr(args, "mount", "target") == "stand" else {"range_m": distance}

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from svgs_sim.base.errors import InputError, check_finite
+from svgs_sim.base.limits import check_focus_beyond_focal_length
 from svgs_sim.base.profiles import load_camera, load_pattern
 from svgs_sim.camera.rendered import PointFlux, RenderedFrame
 from svgs_sim.camera.tonemap import encode_u8, log_stretch
@@ -41,7 +42,7 @@ from .constants import (
     DEFAULT_SPP,
 )
 from .geometry import Reflector, SceneOptions
-from .optics import Flash, Optics, check_focus_beyond_focal_length, pixel_normalized_grid, radiance_to_photon_rate
+from .optics import Flash, Optics, pixel_normalized_grid, radiance_to_photon_rate
 from .predict import predicted_centroids_px, predicted_spots_px, virtual_sources
 from .sampling import check_spp, render_film, to_numpy
 from .scene import TILE_COUNTS

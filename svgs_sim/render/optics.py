@@ -289,12 +289,3 @@ def radiance_to_photon_rate(camera, optics: Optics, mean_photon_energy_j: float,
     xy = np.asarray(xy, float)
     cos_t = 1.0 / np.sqrt(1.0 + xy[..., 0] ** 2 + xy[..., 1] ** 2)
     return optics.aperture_area_m2 * cos_t * pixel_solid_angle_sr(camera, xy) / mean_photon_energy_j
-
-
-def check_focus_beyond_focal_length(focus_distance_m: float, focal_length_m: float, name: str) -> None:
-    """:class:`InputError` naming ``name`` unless the lens is focused beyond its focal length: a
-    thin lens focused at ``s <= f`` forms no real image (1/v = 1/f - 1/s <= 0), so nothing could be
-    rendered in focus (it rendered for seconds and then found no blob)."""
-    if not float(focus_distance_m) > float(focal_length_m):
-        raise InputError(f"{name}: {focus_distance_m:g} m is not beyond the lens's focal length "
-                         f"({focal_length_m:g} m): a thin lens focused there forms no real image")

@@ -316,7 +316,8 @@ def _fill_rings(sub, region, q, fw, kernel):
     if not sub.flags.c_contiguous:
         raise ValueError("_fill_rings fills a C-contiguous window in place")
     room_all = np.maximum(fw - sub, 0.0)
-    if q > 0 and not column and not (room_all > 0).any():  # no room: the rings grow over the whole window
+    has_room = bool((room_all > 0).any())
+    if q > 0 and not column and not has_room:  # no room: the rings grow over the whole window
         return q, 0, (True, True, True, True)
     d = _ring_distance(region, column)
     reach = int(h + w + 1) if column else None
@@ -329,7 +330,7 @@ def _fill_rings(sub, region, q, fw, kernel):
 
     if q <= 0:
         return max(q, 0.0), 0, edges(0)
-    if not (room_all > 0).any():  # nothing takes charge: every ring passes with cap 0, the window fills up
+    if not has_room:  # nothing takes charge: every ring passes with cap 0, the window fills up
         return q, 0, edges(last)
     dflat = d.reshape(-1)
     key = dflat.astype(np.uint16) if last < 65535 and (reach is None or reach < 65536) else dflat
