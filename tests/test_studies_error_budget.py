@@ -67,8 +67,9 @@ def test_every_paper_cell_gets_a_verdict_with_the_size_of_the_difference():
     out = cell_verdicts(summary, budget, vs)
     assert len(out) == 12  # 6 components x (mean error, std)
     low = next(v for v in out if v["statistic"] == "mean_error")
-    assert low["verdict"] == "below" and low["ratio"] == pytest.approx(1 / 3)
-    assert f"{np.sqrt(0.3**2 - 0.1**2):.3g}" in low["text"]  # the missing error, in quadrature
+    # not scored (issue 39); the ratio kept, the floor mean |e| = sqrt(2/pi) std of a normal error beside it
+    assert low["verdict"] == "not_predictable" and low["ratio"] == pytest.approx(1 / 3)
+    assert f"{np.sqrt(2 / np.pi) * 0.9:.3g}" in low["text"] and low["floor_from_std"] == pytest.approx(np.sqrt(2 / np.pi) * 0.9)
     high = next(v for v in out if v["statistic"] == "std")
     assert high["verdict"] == "above" and "glare" in high["text"] and high["ratio"] == pytest.approx(3.0)
 

@@ -44,10 +44,20 @@ def _render() -> str:
     parser.prog = "svgs"
     out = ["# Command reference", "",
            "Generated from the commands' own help by `tools/make_cli_doc.py`; do not edit by hand.", "",
-           ("Exit codes everywhere: 0 done/solved, 1 no solution or a simulated physical failure (the simulated "
-            "sensor measured nothing, e.g. every pixel saturated; the reason is printed), 2 bad input or usage. An "
-            "error is one line on stderr that names the command: `svgs calibrate focal: error: ...` (exit 2), "
-            "`svgs tof stability: no solution (saturated): ...` (exit 1)."), "",
+           "Exit codes everywhere (`svgs_sim/cli/exit_codes.py`):", "",
+           "| code | meaning | `--json` |", "|---|---|---|",
+           "| 0 | done / solved | the command's object |",
+           "| 1 | no solution, or a simulated physical failure (the simulated sensor measured nothing, e.g. every "
+           "pixel saturated; the reason is printed) | `{\"ok\": false, \"reason\": REASON, \"error\": ...}` |",
+           "| 2 | bad input or usage: one line naming the input, before any work | `{\"ok\": false, \"error\": ...}` |",
+           "| 3 | output that could not be written: a full disk, a path the system refuses, a closed stdout, a broken "
+           "pipe (a command piped into `head`); the files written before are kept, and a command whose stdout was lost still "
+           "writes its files | `{\"ok\": false, \"reason\": \"io_error\", \"error\": ...}` |",
+           "| 130 / 143 | interrupted (SIGINT / SIGTERM); a study resumes when rerun | `{\"ok\": false, \"signal\": ...}` |",
+           "",
+           ("An error is one line on stderr that names the command: `svgs calibrate focal: error: ...` (exit 2), "
+            "`svgs tof stability: no solution (saturated): ...` (exit 1), `svgs solve: error (io_error): ...` "
+            "(exit 3)."), "",
            ("Every argument is checked before any work starts (`svgs_sim/cli/validate.py`): output locations (a writable "
             "folder, or a file where the metavar says `.toml`), seeds (0 to 2^32 - 1), counts (>= 1; samples per "
             "pixel at most 2^24), finite numbers, physical quantities within physical bounds (`svgs_sim/base/limits.py`, "

@@ -67,7 +67,7 @@ def emit(obj: dict, enabled: bool, out_dir=None) -> dict:
     print it on stdout as one line of JSON. Returns the cleaned object."""
     obj = clean(obj)
     if out_dir is not None:
-        Path(out_dir, "summary.json").write_text(json.dumps(obj, indent=1, allow_nan=False) + "\n")
+        Path(out_dir, "summary.json").write_text(json.dumps(obj, indent=1, allow_nan=False) + "\n", encoding="utf-8")
     if enabled:
         print(json.dumps(obj, allow_nan=False), file=sys.stdout)
         sys.stdout.flush()
@@ -211,16 +211,18 @@ SCHEMAS = {
  "focal_calibration": {{"f_px", "f_sigma_px", "f_true_px", "focal_error_frac": float,
                        "ranges_used_m", "ranges_measured_m": [float], "frames": [...]}} | null,
  "misalignment_deg": [roll, pitch, yaw], "budget": bool,
- "ranges": [{{"range_m": float, "trials": int, "solved": int, "success_rate": float,
+ "ranges": [{{"range_m": float, "trials": int,
+             "solved": int, "success_rate": float,   # the paper's app: every solution reported
+             "refused_by_consistency_test": int,     # of those, refused by the (optional) consistency test
              "failures": {{reason: int}},
-             "mean_abs_error": {_STATE},   # three readings of the paper's "mean error": mean |e|,
-             "abs_bias": {{...}}, "rms": {{...}},   # |mean e| (the verdicts' headline), RMS
+             "mean_abs_error": {_STATE},   # three readings of the paper's "mean error" (not predictable,
+             "abs_bias": {{...}}, "rms": {{...}},   # not scored): mean |e|, |mean e|, RMS
              "bias": {{...}}, "std": {{...}},
              "crlb_std": {{...}},                      # median Cramer-Rao bound of the solved trials
              "paper": {{"mean_error": {{...}} | null, "std": {{...}} | null}},   # Tables 2-5; null: no row
              "ratio": {{"mean_abs_error": {{...}}, "std": {{...}},                # simulated / paper
                        "abs_bias": {{...}}, "rms": {{...}}}}}}],
- "honest_count": {{...}} | null,    # DIR/honest_count.json: fitted cells and the counts under each reading
+ "honest_count": {{...}} | null,    # DIR/honest_count.json: fitted cells, the std cells' counts
  "outputs": {{"results_csv", "summary_csv", "report", "summary_json": path}},
  {_RUN}}}""",
     "svgs sensitivity": f"""\

@@ -9,7 +9,8 @@ studies or calibration code when they run, so ``svgs solve`` on a photo loads on
 
 Exit codes (:mod:`svgs_sim.cli.exit_codes`): 0 solved / done, 1 no solution or a simulated physical
 failure (:class:`svgs_sim.base.errors.SimulationFailure`; the reason is printed), 2 bad input or usage,
-130 interrupted.
+3 output that could not be written (``io_error``: a full disk, a path the system refuses, a closed
+stdout or a broken pipe; :mod:`svgs_sim.cli.stdout_guard`), 130 interrupted.
 
 Errors: one line on stderr, ``svgs <command> [<subcommand>]: error: <message>`` - the prefix
 names the command that was run (``svgs calibrate focal``), for argparse's usage errors as for
@@ -25,10 +26,12 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import os
 import sys
 
-from svgs_sim.cli.exit_codes import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_NO_SOLUTION
+from svgs_sim.cli.exit_codes import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_IO_ERROR, EXIT_NO_SOLUTION
 from svgs_sim.cli.signals import interruptible
+from svgs_sim.cli.stdout_guard import GuardedStdout
 from svgs_sim.base.errors import InputError, SimulationFailure
 
 #: Command groups: name -> (help, description, dest, metavar).
@@ -156,7 +159,7 @@ def report_error(prog: str, message: str, as_json: bool, reason: str | None = No
     MESSAGE`` (a simulated failure); with ``as_json`` also one JSON object on stdout,
     ``{"ok": false, "error": MESSAGE}`` (plus ``"reason"`` for a simulated failure)."""
     line = " ".join(str(message).split())  # one line, whatever the message held
-    head = "error" if reason is None else f"no solution ({reason})"
+    head = "error" if reason is None else "error (io_error)" if reason == "io_error" else f"no solution ({reason})"
     print(f"{prog}: {head}: {line}", file=sys.stderr, flush=True)
     if as_json:
         obj = {"ok": False, **({"reason": reason} if reason is not None else {}), "error": line}
@@ -183,6 +186,10 @@ def main(argv=None) -> int:
     """
     as_program = argv is None
     argv = sys.argv[1:] if argv is None else list(argv)
+    if as_program:  # a path or text the locale cannot encode is escaped, never a UnicodeEncodeError
+        for stream in (sys.stdout, sys.stderr):
+            if stream is not None and hasattr(stream, "reconfigure"):
+                stream.reconfigure(errors="backslashreplace")
     parser = build_parser(argv)
     try:
         args = _parse(parser, argv)
@@ -194,6 +201,44 @@ def main(argv=None) -> int:
         return int(exc.code or 0)
     prog = leaf_parser(parser, args).prog  # "svgs calibrate focal"
     as_json = bool(getattr(args, "json", False))
+    real_stdout, guard = sys.stdout, GuardedStdout(sys.stdout)
+    sys.stdout = guard  # a reader that went away does not stop the command half-way (exit 3 at the end)
+    try:
+        code = _run(args, parser, prog, as_json, as_program)
+    finally:
+        sys.stdout = real_stdout
+    if guard.broken:
+        _stdout_lost(prog, as_program, guard.error)
+        return EXIT_IO_ERROR
+    return code
+
+
+def _stdout_lost(prog: str, as_program: bool, error: OSError | None) -> None:
+    """One line on stderr: the output that was to be printed is lost (the files are written)."""
+    why = ("stdout is closed" if error is None else
+           f"stdout could not be written ({error.strerror or error}; a reader that went away, a full disk)")
+    print(f"{prog}: error (io_error): {why}, so what was to be printed is lost; the files the command writes "
+          "are complete", file=sys.stderr, flush=True)
+    if as_program and sys.stdout is not None:
+        try:  # the interpreter's last flush must not fail on the dead pipe
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (OSError, ValueError):
+            pass
+
+
+def io_error_message(exc: OSError) -> str:
+    """One line for an output that could not be written: the path, the system's reason, what is kept."""
+    path = exc.filename if exc.filename is not None else None
+    what = exc.strerror or str(exc)
+    shown = os.fsdecode(path) if path is not None else ""
+    if len(shown) > 120:  # one readable line, whatever the path's length
+        shown = f"{shown[:40]}...{shown[-60:]} ({len(shown)} characters)"
+    where = f" {shown!r}" if path is not None else ""
+    return (f"the file system refused{where}: {what} [errno {exc.errno}]; what was written before is kept (a "
+            "study resumes from its stored trials when rerun with the same command)")
+
+
+def _run(args, parser, prog: str, as_json: bool, as_program: bool) -> int:
     try:
         from svgs_sim.cli.validate import check_args
 
@@ -219,9 +264,9 @@ def main(argv=None) -> int:
 
         report_interrupt(prog.removeprefix("svgs "), exc, as_json)
         return EXIT_INTERRUPTED
-    except BrokenPipeError:  # output piped into a program that stopped reading (e.g. head)
-        sys.stderr.close()
-        return 0
+    except OSError as exc:  # the output could not be written: disk full, a path the system refuses, ...
+        report_error(prog, io_error_message(exc), as_json, reason="io_error")
+        return EXIT_IO_ERROR
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -13,6 +13,7 @@ import sys
 import numpy as np
 
 from svgs_sim.base.errors import InputError
+from svgs_sim.base.image_files import write_image
 
 
 def register(sub) -> None:
@@ -166,17 +167,16 @@ def _render(args, scen, options) -> int:
         frame.points.save(out / "points.npz")
         paths.update({"flux_diffuse": str(out / "flux_diffuse.npy"), "points": str(out / "points.npz")})
     if not args.no_expose:
-        import cv2
 
         ex = frame.exposer().expose(seed=args.seed, exposure_s=args.exposure_s, iso=args.iso)
         truth["exposure"] = {"exposure_s": ex.exposure_s, "iso": ex.iso, "gain_dn_per_e": ex.gain_dn_per_e,
                              **{k: v for k, v in ex.info.items()}}
         np.save(out / "raw.npy", ex.raw_dn.astype(np.float32))
-        cv2.imwrite(str(out / "image.png"), ex.image)
+        write_image(out / "image.png", ex.image)
         paths.update({"raw": str(out / "raw.npy"), "image": str(out / "image.png")})
     from svgs_sim.cli.solve import json_default
 
-    (out / "truth.json").write_text(json.dumps(truth, indent=2, default=json_default))
+    (out / "truth.json").write_text(json.dumps(truth, indent=2, default=json_default), encoding="utf-8")
     write_preview(out / "preview.png", frame.flux)
     summary = {
         "out": paths,

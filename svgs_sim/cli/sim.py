@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from svgs_sim.base.image_files import write_image
 from svgs_sim.base.limits import check_focus_beyond_focal_length
 from svgs_sim.cli.json_out import failures_from_text, run_info
 from svgs_sim.cli.solve import json_default
@@ -105,22 +106,20 @@ def check_camera_renderable(name):
 
 def write_outputs(out: Path, frame, row, crlb=None, threshold=None) -> dict:
     """flux.npy, raw.npy, image.png, preview.png, overlay.png, truth.json, solution.json."""
-    import cv2
-
     from svgs_sim.render.api import write_preview
 
     out.mkdir(parents=True, exist_ok=True)
     ex = row["_exposure"]
     np.save(out / "flux.npy", frame.flux.astype(np.float32))
     np.save(out / "raw.npy", ex.raw_dn.astype(np.float32))
-    cv2.imwrite(str(out / "image.png"), ex.image)
+    write_image(out / "image.png", ex.image)
     write_preview(out / "preview.png", frame.flux)
     truth = dict(frame.truth)
     truth["exposure"] = {"exposure_s": ex.exposure_s, "iso": ex.iso, "gain_dn_per_e": ex.gain_dn_per_e,
                          **{k: v for k, v in ex.info.items() if k != "stages"}, "stages": ex.info.get("stages")}
-    (out / "truth.json").write_text(json.dumps(truth, indent=1, default=json_default))
+    (out / "truth.json").write_text(json.dumps(truth, indent=1, default=json_default), encoding="utf-8")
     sol = {k: v for k, v in row.items() if not k.startswith("_")}
-    (out / "solution.json").write_text(json.dumps(sol, indent=1, default=json_default))
+    (out / "solution.json").write_text(json.dumps(sol, indent=1, default=json_default), encoding="utf-8")
     from svgs_sim.cli.solve import write_solution_overlay
 
     spots = (crlb or {}).get("per_spot_sigma_px")

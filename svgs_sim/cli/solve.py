@@ -172,7 +172,7 @@ def _solve(args, image, camera, pattern, thr) -> int:
         d["outputs"] = {"overlay": write_solution_overlay(out / "overlay.png", image, camera, pattern, result, thr,
                                                           blobs=blobs),
                         "solution": str(out / "solution.json")}
-        (out / "solution.json").write_text(json.dumps(d, indent=1))
+        (out / "solution.json").write_text(json.dumps(d, indent=1), encoding="utf-8")
     if args.json:
         print(json.dumps(d))
     else:

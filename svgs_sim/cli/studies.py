@@ -531,6 +531,7 @@ def campaign_json(config, summary, stats, out, report) -> dict:
     ranges = []
     for s in summary:
         ranges.append({"range_m": s["range_m"], "trials": s["n"], "solved": s["n_ok"], "success_rate": s["success_rate"],
+                       "refused_by_consistency_test": s["n_rejected_consistency"],
                        "failures": dict(sorted(s["reasons"].items())), "mean_abs_error": _state(s, "mean_abs_") or {},
                        "abs_bias": _state(s, "abs_mean_") or {}, "rms": _state(s, "rms_") or {},
                        "bias": _state(s, "bias_") or {}, "std": _state(s, "std_") or {},

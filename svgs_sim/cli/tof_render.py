@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from svgs_sim.base.errors import InputError, check_finite, check_finite_positive
+from svgs_sim.base.image_files import write_image
 from svgs_sim.svgs.frames import STATE_KEYS
 
 from svgs_sim.cli.exit_codes import EXIT_NO_SOLUTION, EXIT_OK
@@ -150,11 +151,9 @@ def frame_rows(results) -> list:
 
 def write_preview(path, gray, depth_m) -> None:
     """Gray (square-root scaled) beside depth (near = bright), 8-bit PNG."""
-    import cv2
-
     from svgs_sim.camera.tonemap import depth_stretch, encode_u8, sqrt_stretch
 
-    cv2.imwrite(str(path), encode_u8(np.hstack([sqrt_stretch(gray), depth_stretch(depth_m)])))
+    write_image(path, encode_u8(np.hstack([sqrt_stretch(gray), depth_stretch(depth_m)])))
 
 
 def scenario_from_args(args):
@@ -256,9 +255,9 @@ def write_outputs(out: Path, rendered, kept, rows, summary) -> dict:
         write_preview(out / "preview.png", kept[-1].gray, kept[-1].depth_m)
         paths.update(gray=str(out / "gray.npy"), depth=str(out / "depth.npy"), preview=str(out / "preview.png"))
     rendered.save(out / "rendered.npz")
-    (out / "truth.json").write_text(json.dumps(rendered.truth, indent=1, default=json_default))
-    (out / "solution.json").write_text(json.dumps(summary, indent=1, default=json_default))
-    with open(out / "frames.csv", "w", newline="") as fh:
+    (out / "truth.json").write_text(json.dumps(rendered.truth, indent=1, default=json_default), encoding="utf-8")
+    (out / "solution.json").write_text(json.dumps(summary, indent=1, default=json_default), encoding="utf-8")
+    with open(out / "frames.csv", "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow(["frame", "ok", "reason", "n_blobs", *STATE_KEYS, "residual_rms_px", "rot_err_deg"])
         for r in rows:

@@ -180,12 +180,12 @@ def write_stability_outputs(out: Path, run: dict, s: dict) -> dict:
     from svgs_sim.sim.tof_stability import COLUMNS
 
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / "frames.csv", "w", newline="") as fh:
+    with open(out / "frames.csv", "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(["frame", "ok", "reason", *COLUMNS])
         for r in run["frame_rows"]:
             w.writerow([r["frame"], int(r["ok"]), r["reason"] or "", *["" if r[c] is None else f"{r[c]:.6f}" for c in COLUMNS]])
-    (out / "summary.json").write_text(json.dumps(s, indent=1, default=json_default))
+    (out / "summary.json").write_text(json.dumps(s, indent=1, default=json_default), encoding="utf-8")
     plot_stability(out / "stability.png", run, s)
     return {"frames": str(out / "frames.csv"), "summary": str(out / "summary.json"), "plot": str(out / "stability.png")}
 

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from svgs_sim.base.errors import InputError, check_finite
+from svgs_sim.base.image_files import write_image
 from svgs_sim.base.limits import check_focus_beyond_focal_length
 from svgs_sim.base.profiles import load_camera, load_pattern
 from svgs_sim.camera.rendered import PointFlux, RenderedFrame
@@ -122,7 +123,7 @@ class RenderResult(RenderedFrame):
         if self.points is not None and self.flux_diffuse is not None:
             np.save(out / "flux_diffuse.npy", self.flux_diffuse.astype(np.float32))
             self.points.save(out / "points.npz")
-        with open(out / "truth.json", "w") as fh:
+        with open(out / "truth.json", "w", encoding="utf-8") as fh:
             json.dump(self.truth, fh, indent=2)
         write_preview(out / "preview.png", self.flux)
         paths = {"flux": str(out / "flux.npy"), "truth": str(out / "truth.json"), "preview": str(out / "preview.png")}
@@ -134,10 +135,8 @@ class RenderResult(RenderedFrame):
 def write_preview(path, flux: np.ndarray) -> None:
     """Tone-mapped 8-bit preview for people: log scale between the 1st percentile of
     the lit pixels and the maximum (the spots are ~1e7 x the background)."""
-    import cv2
 
-
-    cv2.imwrite(str(path), encode_u8(log_stretch(flux)))
+    write_image(path, encode_u8(log_stretch(flux)))
 
 
 class Renderer:

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from svgs_sim.base.errors import InputError, SimulationFailure
+from svgs_sim.base.image_files import write_image
 from svgs_sim.base.profiles import Camera, load_camera
 from svgs_sim.calibration.boards import Board
 from svgs_sim.calibration.synthetic import sample_board_poses
@@ -106,8 +107,6 @@ class BoardSet:
 
     def save(self, out_dir) -> dict:
         """Write the images (PNG), ``truth.json`` and ``camera_true.toml`` into ``out_dir``."""
-        import cv2
-
         out = Path(out_dir)
         if out.exists() and not out.is_dir():
             raise InputError(f"--out {str(out)!r} exists and is not a folder")
@@ -115,10 +114,9 @@ class BoardSet:
         files = []
         for img, n in zip(self.images, self.names):
             p = out / n
-            if not cv2.imwrite(str(p), img):
-                raise InputError(f"cannot write {str(p)!r}")
+            write_image(p, img)
             files.append(str(p))
-        with open(out / "truth.json", "w") as fh:
+        with open(out / "truth.json", "w", encoding="utf-8") as fh:
             json.dump(self.truth, fh, indent=1)
         self.camera.save(out / "camera_true.toml")
         return {"images": files, "truth": str(out / "truth.json"), "camera": str(out / "camera_true.toml")}

@@ -28,6 +28,7 @@ import numpy as np
 
 from svgs_sim.base.errors import InputError
 from svgs_sim.base.profiles import load_camera, load_pattern
+from svgs_sim.base.image_files import VideoFile, read_image, write_image
 from svgs_sim.sim import hard_stop
 from svgs_sim.sim.approach import MEASUREMENT_COLUMNS, TIMING_KEYS, ApproachSensor, Trajectory, check_visible
 from svgs_sim.sim.closed_loop import RenderOptions, Scenario
@@ -198,7 +199,7 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
                              + f"  exposure {m.exposure_s * 1e3:.2f} ms ISO {m.iso:.0f}")
                     picture = _overlay(m, cam, pattern, title)
                     with hard_stop.protected():  # Ctrl-C inside a render stops the process, never mid-write
-                        cv2.imwrite(str(frames_dir / f"{k:05d}.jpg"), picture, [cv2.IMWRITE_JPEG_QUALITY, 90])
+                        write_image(frames_dir / f"{k:05d}.jpg", picture, [cv2.IMWRITE_JPEG_QUALITY, 90])
                         store.append([{"trial_id": k, **m.row()}])
                     n_new += 1
                     if on_frame is not None:
@@ -210,7 +211,7 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
     summary["run"] = {"frames_run": n_new, "frames_reused": len(rows) - n_new, "wall_s": wall}
     summary["outputs"] = write_outputs(rows, cfg, out, glint_frames=summary["far_above_bound"]["glint_frames"])
     summary["outputs"]["report"] = str(write_report(summary, out / "report.md", command))
-    (out / "summary.json").write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n")
+    (out / "summary.json").write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n", encoding="utf-8")
     return summary
 
 
@@ -342,7 +343,7 @@ def write_outputs(rows: list[dict], cfg: dict, out: Path, *, glint_frames=None) 
 
     paths = {}
     p = out / "measurements.csv"
-    with open(p, "w", newline="") as fh:
+    with open(p, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(MEASUREMENT_COLUMNS)
         for r in sorted(rows, key=lambda r: r["frame"]):
@@ -362,18 +363,20 @@ def write_video(out: Path, fps: float, n: int) -> dict:
     for name, fourcc, codec in (("approach.mp4", "mp4v", "mp4v (MPEG-4 Part 2)"),
                                 ("approach.avi", "MJPG", "MJPG (Motion-JPEG)")):
         path = out / name
-        vw = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), rate, VIDEO_SIZE_PX)
+        vw = VideoFile(path, fourcc, rate, VIDEO_SIZE_PX)  # any path: OpenCV never sees it
         if not vw.isOpened():
-            vw.release()
+            vw.release(keep=False)
             continue
+        done = False
         try:
             for f in frames:
-                img = cv2.imread(str(f))
+                img = read_image(f, cv2.IMREAD_COLOR)
                 if img is None:
                     raise InputError(f"video: frame picture {str(f)!r} is missing or unreadable; rerun the approach")
                 vw.write(img)
+            done = True
         finally:
-            vw.release()
+            vw.release(keep=done)
         if path.exists() and path.stat().st_size > 0:
             return {"video": str(path), "video_codec": codec, "video_fps": rate}
     return {"video": None, "video_codec": "none: this OpenCV build writes neither mp4v nor MJPG", "video_fps": rate}
@@ -413,7 +416,7 @@ def write_report(s: dict, path: Path, command: str | None) -> Path:
         lines += [f"Video of the delivered frames with overlays: [{Path(o['video']).name}]({Path(o['video']).name}) "
                   f"({o['video_codec']}, {o['video_fps']:g} frames/s).", ""]
     lines += ["Each frame's row (truth, estimate, error, CRLB, settings, timings): [measurements.csv](measurements.csv).", ""]
-    path.write_text("\n".join(lines))
+    path.write_text("\n".join(lines), encoding="utf-8")
     return path
 
 

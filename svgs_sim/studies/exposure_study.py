@@ -223,7 +223,7 @@ def write_outputs(out_dir, cfg: ExposureStudyConfig, rows: list[dict]) -> tuple[
     fig.tight_layout()
     fig.savefig(out_dir / "remedies.png", dpi=110)
     lines = markdown_table(table, ranges)
-    (out_dir / "summary.md").write_text("\n".join(lines) + "\n")
+    (out_dir / "summary.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     return table, lines
 
 

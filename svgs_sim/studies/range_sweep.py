@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from svgs_sim.base.errors import InputError
+from svgs_sim.base.image_files import write_image
 from svgs_sim.sim.metrics import ATT_ERR_VEC_DEG, POS_ERR_NORM_M, POS_ERR_VEC_M, ROT_ERR_DEG
 from svgs_sim.sim.render_trial import (
     RenderScenario,
@@ -326,7 +327,7 @@ def write_outputs(out_dir, cfg: RangeSweepConfig, rows: list[dict]) -> tuple[lis
     records = trial_records(rows)
     table = summarise(records)
     write_dict_csv(out_dir / "summary.csv", table)
-    with open(out_dir / "trials.jsonl", "w") as fh:
+    with open(out_dir / "trials.jsonl", "w", encoding="utf-8") as fh:
         fh.writelines(json.dumps(rec) + "\n" for rec in records)
     plot_sweep(table, out_dir / "range_sweep.png",
                f"{cfg.camera}: range sweep ({cfg.trials} trials x {cfg.poses} pose(s) per range)")
@@ -371,7 +372,7 @@ def sample_overlays(path, cfg: RangeSweepConfig, panel_px: int = 420) -> str:
         row = panels[i:i + ncols]
         row += [np.zeros_like(panels[0])] * (ncols - len(row))
         rows.append(np.hstack(row))
-    cv2.imwrite(str(path), np.vstack(rows))
+    write_image(path, np.vstack(rows))
     return str(path)
 
 

@@ -23,7 +23,7 @@ table{border-collapse:collapse;margin:.6em 0 1.2em 0;font-size:.86em}caption{tex
 padding:.3em 0}th,td{border:1px solid #bbb;padding:.2em .45em;text-align:right}th{background:#eef}
 td.t,th.t{text-align:left}tr:nth-child(even) td{background:#fafafa}figure{margin:1em 0}figcaption{font-size:.9em;
 color:#444}img{max-width:100%}code,pre{background:#f4f4f4;padding:.1em .3em}pre{padding:.6em;overflow-x:auto;
-white-space:pre-wrap}.note{color:#555;font-size:.92em}.scroll{overflow-x:auto;max-width:100%}
+white-space:pre-wrap}.note{color:#555;font-size:.92em}.result{font-size:1.08em;font-weight:600;border-left:4px solid #2a6;padding-left:.6em}.scroll{overflow-x:auto;max-width:100%}
 """
 
 
@@ -145,7 +145,7 @@ def write_csv(path, columns, rows) -> Path:
     """A plain CSV table (floats with full precision)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as fh:
+    with open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow(columns)
         for r in rows:

@@ -626,7 +626,7 @@ class ResultStore:
                 raise InputError(f"--out: {str(self.dir)!r} holds {stray[0]} but no {MANIFEST}; "
                                  "choose another --out directory")
             tmp = self.manifest_path.with_suffix(".json.tmp")
-            with open(tmp, "w") as fh:
+            with open(tmp, "w", encoding="utf-8") as fh:
                 json.dump(want, fh, indent=2, sort_keys=True)
                 fh.write("\n")
                 fh.flush()

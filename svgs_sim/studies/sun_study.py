@@ -399,7 +399,7 @@ def write_readme(config: SunStudyConfig, table: list, path, command: str = "") -
               "", "Mechanisms (trials showing each): " + ", ".join(f"{k} {v}" for k, v in mech.items()) + ".",
               "", "![availability](sun_study.png)", ""]
     path = Path(path)
-    path.write_text("\n".join(lines))
+    path.write_text("\n".join(lines), encoding="utf-8")
     return path
 
 
@@ -426,5 +426,5 @@ def run_sun_study(config: SunStudyConfig, out_dir, spec, *, chunk_size=None, pro
                "outputs": {"results_csv": str(out / "results.csv"), "figure": str(fig), "readme": str(readme),
                            "summary_json": str(out / "summary.json")},
                "run": {"trials_run": stats.n_run if stats else 0, "trials": config.n_trials}}
-    (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+    (out / "summary.json").write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
     return summary

@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+from svgs_sim.base.image_files import write_image
+
 #: Colours (BGR).
 BLOB_BGR = (255, 200, 0)
 LABEL_BGR = (0, 255, 255)
@@ -306,9 +308,7 @@ def solution_marks(result, camera, pattern) -> tuple[dict, dict]:
 
 def write_overlay(path, image, **kw) -> str:
     """:func:`render_overlay` written as a PNG; returns the path."""
-    import cv2
-
-    cv2.imwrite(str(path), render_overlay(image, **kw))
+    write_image(path, render_overlay(image, **kw))
     return str(path)
 
 

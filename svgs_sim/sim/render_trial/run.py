@@ -21,7 +21,7 @@ from svgs_sim.sim.closed_loop import render_scenario, solve_exposure, solver_cam
 from svgs_sim.sim.crlb import centroid_crlb_px, pose_crlb
 from svgs_sim.sim.metrics import (
     ATT_ERR_VEC_DEG, ERR_KEYS, POS_ERR_NORM_M, POS_ERR_VEC_M, ROT_ERR_DEG, match_err_max_px, spot_positions_px,
-    spot_radius_px, state_m_deg,
+    pose_errors, spot_radius_px, state_m_deg,
 )
 from svgs_sim.sim.render_trial.scenario import (
     RENDER_OUTPUTS,
@@ -219,6 +219,24 @@ def _is_baseline(scenario: RenderScenario) -> bool:
     return all(getattr(scenario, k) for k in SOURCE_SWITCHES)
 
 
+def _centroid_columns(out: dict, found_px, cam, row: dict, pat, R, t) -> None:
+    """The centroids' error: identified centroids ``found_px`` (shape (N, 2), the pattern's order)
+    against the targets' true projections (the true lens, the actual pose), in the delivered
+    image's pixels: ``centroid_err_rms_px`` and ``cen_du_px_k``, ``cen_dv_px_k`` of the first four."""
+    uv_img = solver_camera(cam, row["_exposure"].image.shape).project_target(pat.points_m, R, t)
+    d = np.asarray(found_px, float) - uv_img
+    out["centroid_err_rms_px"] = float(np.sqrt(np.mean(d ** 2)))
+    for k, (du, dv) in enumerate(d[:4]):
+        out[f"cen_du_px_{k}"], out[f"cen_dv_px_{k}"] = float(du), float(dv)
+
+
+def _state_array(state: dict) -> np.ndarray:
+    """A state keyed by :data:`svgs_sim.svgs.frames.STATE_KEYS` (m, deg) as the paper state (m, rad), shape (6,)."""
+    v = np.array([float(state[k]) for k in STATE_KEYS])
+    v[3:] = np.radians(v[3:])
+    return v
+
+
 def _solve_one(scenario: RenderScenario, seed: int, frame, exposers: dict) -> dict:
 
     cam = frame.camera  # the true lens
@@ -253,13 +271,7 @@ def _solve_one(scenario: RenderScenario, seed: int, frame, exposers: dict) -> di
         # Cramer-Rao 1-sigma for the solver's default centroid noise (0.1 px)
         crlb = state_m_deg(np.sqrt(np.diag(sol.covariance)))
         out.update({f"crlb_{k}": float(v) for k, v in zip(STATE_KEYS, crlb)})
-        # the centroids' error: identified centroids against the targets' true projections
-        # (the true lens, the actual pose), in the delivered image's pixels
-        uv_img = solver_camera(cam, row["_exposure"].image.shape).project_target(pat.points_m, R, t)
-        found = np.array([sol.targets_px[i] for i in pat.ids], float)
-        out["centroid_err_rms_px"] = float(np.sqrt(np.mean((found - uv_img) ** 2)))
-        for k, (du, dv) in enumerate((found - uv_img)[:4]):
-            out[f"cen_du_px_{k}"], out[f"cen_dv_px_{k}"] = float(du), float(dv)
+        _centroid_columns(out, np.array([sol.targets_px[i] for i in pat.ids], float), cam, row, pat, R, t)
         # the bound from the simulated sensor at this exposure (svgs_sim.sim.crlb)
         rms = (_sensor_centroid_sigma(frame, exposer, row, exposers, gkey, uv) if _is_baseline(scenario) and
                frame.points is not None else None)
@@ -271,6 +283,15 @@ def _solve_one(scenario: RenderScenario, seed: int, frame, exposers: dict) -> di
 
             out["p_value_crlb"] = consistency(sol.residual_rms_px, len(pat.ids), sigma_px=rms).p_value
             out.update({f"crlb_sensor_{k}": float(v) for k, v in pose_crlb(sol, rms).items()})
+    elif row["reason"] == "inconsistent" and "state" in sol.details:
+        # the pose the paper's app would have reported (it had no consistency test): kept beside
+        # ok 0 / reason inconsistent, so that a study can score the app as published
+        out.update({f"est_{k}": float(v) for k, v in sol.details["state"].items()})
+        e = pose_errors(_state_array(sol.details["state"]), _state_array(row["truth_state"]))
+        out.update(dict(zip(ERR_KEYS, [*e[POS_ERR_VEC_M], *e[ATT_ERR_VEC_DEG]])))
+        targets = sol.details.get("targets_px") or {}
+        if all(str(i) in targets for i in pat.ids):
+            _centroid_columns(out, np.array([targets[str(i)] for i in pat.ids], float), cam, row, pat, R, t)
     _clutter(out, row, sol, cam, pat, R, t, level, frame.truth.get("spots_px_predicted"))
     if scenario.scene.environment == "orbit":
         _paper_gates(out, row, scenario, cam, pat, R, t, frame.truth.get("spots_px_predicted"))

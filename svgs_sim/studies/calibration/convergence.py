@@ -193,7 +193,7 @@ def upgrade_stored_columns(folder) -> bool:
         tmp.write_bytes(",".join(RENAMED_COLUMNS.get(c, c) for c in names).encode("utf-8") + sep + rest)
         os.replace(tmp, results)
     tmp = manifest.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(stored, indent=2, sort_keys=True) + "\n")
+    tmp.write_text(json.dumps(stored, indent=2, sort_keys=True) + "\n", encoding="utf-8")
     os.replace(tmp, manifest)
     return True
 

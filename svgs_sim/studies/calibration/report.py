@@ -75,7 +75,7 @@ def write_tables(result, out: Path) -> dict:
     files["cameras"] = write_csv(out / "cameras.csv", CAMERA_CSV_COLUMNS,
                                  [{"camera": k, **v} for k, v in result.believed.items()])
     files["summary"] = out / "summary.json"
-    with open(files["summary"], "w") as fh:
+    with open(files["summary"], "w", encoding="utf-8") as fh:
         json.dump(study_summary(result), fh, indent=1, default=float)
     return files
 

@@ -7,12 +7,14 @@ import math
 
 import numpy as np
 
+from svgs_sim.assets.papers import svgs_2014_results
 from svgs_sim.base.profiles import load_pattern
 from svgs_sim.sim.closed_loop import solve_exposure, solver_camera
 from svgs_sim.sim.render_trial import rendered_frame
 from svgs_sim.sim.trials import camera_with_calibration_errors
 from svgs_sim.svgs.frames import STATE_KEYS
 
+from ..error_budget import reported_mask
 from .design import COMPONENT_LABELS, SHORT, CampaignConfig
 
 
@@ -32,7 +34,7 @@ def histogram_figures(table: dict, config: CampaignConfig):
     """
     from matplotlib.figure import Figure
 
-    ok = table["ok"] == 1
+    ok = reported_mask(table)
     for grp in _range_groups(config.ranges_m):
         label = f"{grp[0]:g}-{grp[-1]:g} m" if len(grp) > 1 else f"{grp[0]:g} m"
         for title, comps in (("Position error", STATE_KEYS[:3]), ("Attitude error", STATE_KEYS[3:])):
@@ -123,3 +125,94 @@ def sample_image_figure(config: CampaignConfig, trials: list, table: dict):
     fig.suptitle(f"{config.camera}: delivered images (8-bit), the first stand setting of each range", fontsize=9)
     fig.tight_layout()
     return fig
+
+
+#: The weak mode's pairs (issue 39): a turn about the target's y axis (pitch) moves x, about x (roll) moves y.
+WEAK_MODE_PAIRS = (("x_m", "pitch_deg"), ("y_m", "roll_deg"))
+
+
+def weak_mode_statistics(table: dict, camera_key: str, paper: dict | None = None) -> dict:
+    """How closely the position errors follow the weak mode of a narrow-field four-point solve
+    (slide sideways by d, turn by d/R): x against R tan(pitch error), y against R tan(roll error).
+
+    Parameters
+    ----------
+    table : dict of column -> ndarray
+        A campaign's rows; the baseline's reported trials are used
+        (:func:`svgs_sim.studies.error_budget.reported_mask`). R is the true range, m (the norm of
+        ``true_x_m``, ``true_y_m``, ``true_z_m``).
+    camera_key : str
+        The phone (the paper's Tables 2 and 4 rows, by range).
+    paper : dict, optional
+        :func:`svgs_sim.assets.papers.svgs_2014_results`.
+
+    Returns
+    -------
+    dict
+        Per pair ``"x_m"`` / ``"y_m"``: ``corr`` (Pearson, simulated trials), ``slope`` (least
+        squares through the origin of the position error on R tan(angle error)), ``n``, and
+        ``paper_ratio`` (list of (range_m, the paper's mean position error / (R tan(its mean angle
+        error))), one per range it has).
+    """
+    paper = svgs_2014_results() if paper is None else paper
+    keep = reported_mask(table)
+    if "variant" in table:
+        keep &= np.array([str(v) == "baseline" for v in table["variant"]])
+    R = np.linalg.norm(np.stack([np.asarray(table[f"true_{k}"], float) for k in ("x_m", "y_m", "z_m")], 1), axis=1)
+    out = {}
+    for pos, ang in WEAK_MODE_PAIRS:
+        e = np.asarray(table[f"err_{pos}"], float)[keep]
+        w = (R * np.tan(np.radians(np.asarray(table[f"err_{ang}"], float))))[keep]
+        good = np.isfinite(e) & np.isfinite(w)
+        e, w = e[good], w[good]
+        corr = float(np.corrcoef(e, w)[0, 1]) if e.size > 2 else float("nan")
+        slope = float(np.dot(e, w) / np.dot(w, w)) if e.size and np.dot(w, w) > 0 else float("nan")
+        pr = []
+        for (ph, st, r), vals in sorted(paper.items()):
+            if ph == camera_key and st == "mean_error":
+                d = r * np.tan(np.radians(vals[ang]))
+                pr.append((float(r), float(vals[pos] / d) if d > 0 else float("nan")))
+        out[pos] = {"angle": ang, "corr": corr, "slope": slope, "n": int(e.size), "paper_ratio": pr}
+    return out
+
+
+def weak_mode_figure(table: dict, config: CampaignConfig, camera_key: str, paper: dict | None = None):
+    """The weak mode (issue 39): per simulated trial the x error against R tan(pitch error) and
+    the y error against R tan(roll error), coloured by range, with the paper's Table 2/4 means
+    (magnitudes) as red squares; the line of slope 1 (dashed) and -1 (dotted) for reference.
+
+    Returns
+    -------
+    (Figure, dict)
+        The figure and :func:`weak_mode_statistics`.
+    """
+    from matplotlib.figure import Figure
+    paper = svgs_2014_results() if paper is None else paper
+    st = weak_mode_statistics(table, camera_key, paper)
+    keep = reported_mask(table)
+    if "variant" in table:
+        keep &= np.array([str(v) == "baseline" for v in table["variant"]])
+    R = np.linalg.norm(np.stack([np.asarray(table[f"true_{k}"], float) for k in ("x_m", "y_m", "z_m")], 1), axis=1)
+    fig = Figure(figsize=(10, 4.2))
+    axes = fig.subplots(1, 2)
+    for ax, (pos, ang) in zip(axes, WEAK_MODE_PAIRS):
+        for r in config.ranges_m:
+            m = keep & (np.asarray(table["nominal_range_m"], float) == r)
+            w = R[m] * np.tan(np.radians(np.asarray(table[f"err_{ang}"], float)[m]))
+            ax.plot(w, np.asarray(table[f"err_{pos}"], float)[m], ".", ms=3, alpha=0.6, label=f"{r:g} m (sim.)")
+        pw = [(r * np.tan(np.radians(v[ang])), v[pos]) for (ph, s_, r), v in paper.items()
+              if ph == camera_key and s_ == "mean_error"]
+        if pw:
+            ax.plot(*np.array(pw).T, "s", color="red", ms=6, label="paper, Tables 2/4 (means)")
+        lim = max(np.nanmax(np.abs(ax.get_xlim())), np.nanmax(np.abs(ax.get_ylim())))
+        ax.plot([-lim, lim], [-lim, lim], "k--", lw=0.8)
+        ax.plot([-lim, lim], [lim, -lim], "k:", lw=0.8)
+        ax.set_xlabel(f"R tan({SHORT[ang]} error) (m)")
+        ax.set_ylabel(f"{SHORT[pos]} error (m)")
+        ax.set_title(f"{SHORT[pos]} vs R tan({SHORT[ang]}): corr {st[pos]['corr']:+.2f}, slope {st[pos]['slope']:+.2f}",
+                     fontsize=10)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"{config.camera}: the weak mode of the four-point solve (slide by d, turn by d/R)")
+    fig.tight_layout()
+    return fig, st

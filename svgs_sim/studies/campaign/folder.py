@@ -30,7 +30,7 @@ def log_run(out_dir, part: str, stats) -> None:
     log = run_log(out_dir)
     log.append({"part": part, "trials_run": stats.n_run, "elapsed_s": round(stats.elapsed_s, 2),
                 "executor": stats.executor})
-    (Path(out_dir) / "runs.json").write_text(json.dumps(log, indent=1))
+    (Path(out_dir) / "runs.json").write_text(json.dumps(log, indent=1), encoding="utf-8")
 
 
 def read_honest_count(out_dir) -> dict | None:

@@ -253,8 +253,9 @@ def consumes_text(cells: list) -> str:
 def honest_counts(verdicts: list[dict]) -> dict:
     """Counts of the paper's cells under each reading of the mean error.
 
-    Every cell of Tables 2-5 (verdicts other than ``no_paper_value``); ``fitted`` cells are
-    left out of ``predicted``; ``within_2x``, ``below``, ``above``, ``no_solution`` count the
+    Every cell of Tables 2-5 (verdicts other than ``no_paper_value``); ``fitted`` and
+    ``not_predictable`` cells (the mean errors of Tables 2 and 4,
+    :data:`svgs_sim.studies.error_budget.NOT_PREDICTABLE_REASON`) are left out of ``predicted``; ``within_2x``, ``below``, ``above``, ``no_solution`` count the
     predicted cells, ``measured`` and ``unexplained`` the explanations of those outside 2x. The
     std cells have one reading and count alike under all three.
 
@@ -262,16 +263,16 @@ def honest_counts(verdicts: list[dict]) -> dict:
     -------
     dict
         reading (:data:`svgs_sim.studies.error_budget.MEAN_READINGS`) -> ``{"cells", "fitted",
-        "predicted", "within_2x", "below", "above", "no_solution", "measured", "unexplained",
+        "not_predictable", "predicted", "within_2x", "below", "above", "no_solution", "measured", "unexplained",
         "by_statistic": {"mean_error" | "std": {same keys}}}``.
     """
     def count(vs, reading):
-        out = {"cells": len(vs), "fitted": 0, "predicted": 0, "within_2x": 0, "below": 0, "above": 0,
-               "no_solution": 0, "measured": 0, "unexplained": 0}
+        out = {"cells": len(vs), "fitted": 0, "not_predictable": 0, "predicted": 0, "within_2x": 0, "below": 0,
+               "above": 0, "no_solution": 0, "measured": 0, "unexplained": 0}
         for v in vs:
             verdict, expl = v[f"verdict_{reading}"], v[f"explanation_{reading}"]
             out[verdict] = out.get(verdict, 0) + 1
-            if verdict != "fitted":
+            if verdict not in ("fitted", "not_predictable"):
                 out["predicted"] += 1
             if expl:
                 out["measured" if expl.startswith("measured") else "unexplained"] += 1

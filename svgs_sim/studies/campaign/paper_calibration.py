@@ -126,7 +126,7 @@ def save_paper_calibration(config: CampaignConfig, out_dir) -> bool:
     except (OSError, UnicodeDecodeError):
         pass
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text)
+    path.write_text(text, encoding="utf-8")
     return True
 
 

@@ -18,7 +18,6 @@ from svgs_sim.svgs.frames import STATE_KEYS
 from ..error_budget import (
     HEADLINE_READING,
     MEAN_READINGS,
-    READING_LABELS,
     attribute,
     centroid_statistics,
     geometric_trials,
@@ -173,6 +172,14 @@ def rebuild_report(out_dir, *, command: str | None = None) -> Path:
                 r.pop(old, None)
                 r.get("ratio", {}).pop(old, None)
             r.get("ratio", {}).pop("mean_error", None)  # the ratio of mean |e|: now mean_abs_error
+            # the paper's app: every solution reported; the consistency test's refusals beside it
+            r.update({"solved": s["n_ok"], "success_rate": s["success_rate"],
+                      "refused_by_consistency_test": s["n_rejected_consistency"],
+                      "failures": dict(sorted(s["reasons"].items())),
+                      "mean_abs_error": {c: s[f"mean_abs_{c}"] for c in STATE_KEYS},
+                      "bias": {c: s[f"bias_{c}"] for c in STATE_KEYS}, "std": {c: s[f"std_{c}"] for c in STATE_KEYS},
+                      "crlb_std": {c: s[f"crlb_{c}"] for c in STATE_KEYS}})
+            r.setdefault("ratio", {})["std"] = {c: s[f"ratio_std_{c}"] for c in STATE_KEYS}
             for x in MEAN_READINGS:
                 r[READING_OUTPUT_NAMES[x]] = {c: s[f"{x}_{c}"] for c in STATE_KEYS}
             r.setdefault("ratio", {}).update({READING_OUTPUT_NAMES[x]: {c: s[f"ratio_{x}_{c}"] for c in STATE_KEYS}
@@ -181,7 +188,7 @@ def rebuild_report(out_dir, *, command: str | None = None) -> Path:
         obj["honest_count"] = read_honest_count(out_dir)
         obj.setdefault("outputs", {}).update({"verdicts_csv": str(out_dir / "verdicts.csv"),
                                               "honest_count_json": str(out_dir / "honest_count.json")})
-        sj.write_text(json.dumps(finite_json(obj), indent=1, allow_nan=False) + "\n")
+        sj.write_text(json.dumps(finite_json(obj), indent=1, allow_nan=False) + "\n", encoding="utf-8")
     return path
 
 
@@ -197,7 +204,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     for d in args.dirs:
         path = rebuild_report(d)
-        counts = read_honest_count(d)["counts"]
-        print(f"{path}: " + "; ".join(f"{READING_LABELS[x]} {counts[x]['within_2x']} of {counts[x]['predicted']} "
-                                      f"within 2x" for x in MEAN_READINGS) + f" ({counts[HEADLINE_READING]['fitted']} fitted)")
+        c = read_honest_count(d)["counts"][HEADLINE_READING]["by_statistic"]
+        print(f"{path}: std cells {c['std']['within_2x']} of {c['std']['predicted']} within 2x "
+              f"({c['std']['fitted']} fitted); {c['mean_error']['not_predictable']} mean-error cells not predictable")
     return 0

@@ -9,7 +9,7 @@ from svgs_sim.assets.papers import svgs_2014_results
 from svgs_sim.base.profiles import load_camera
 from svgs_sim.svgs.frames import STATE_KEYS
 
-from ..error_budget import MEAN_READINGS
+from ..error_budget import MEAN_ABS_PER_STD, MEAN_READINGS, consistency_rejected_mask, reported_mask
 from .design import CampaignConfig
 
 
@@ -20,18 +20,24 @@ def summarize(table: dict, config: CampaignConfig, paper: dict | None = None) ->
     ----------
     table : dict of column -> ndarray
         The campaign's rows (:meth:`ResultStore.read_table`); only the baseline's are used
-        (``variant`` ``baseline``, or no ``variant`` column).
+        (``variant`` ``baseline``, or no ``variant`` column), and of those the ones the paper's app
+        would have reported (:func:`svgs_sim.studies.error_budget.reported_mask`: every solution; the
+        consistency test is an option the paper did not have).
 
     Returns
     -------
     list of dict, one per range
-        ``range_m``, ``n``, ``n_ok``, ``success_rate``, ``reasons`` (dict), and per component
+        ``range_m``, ``n``, ``n_ok`` (reported), ``success_rate`` (reported / n), ``reasons``
+        (dict, of the unreported), ``n_rejected_consistency`` (reported solutions the consistency
+        test would refuse), ``success_rate_with_consistency_test``, and per component
         ``c``: the three readings of the paper's "mean error" (:data:`svgs_sim.studies.error_budget.MEAN_READINGS`)
         ``abs_mean_<c>`` (|mean e|, the headline), ``mean_abs_<c>`` (mean |e|) and ``rms_<c>``
         (sqrt(mean e^2)), each with its ratio to the paper's mean error ``ratio_abs_mean_<c>``,
         ``ratio_mean_abs_<c>``, ``ratio_rms_<c>``;
         ``bias_<c>`` (signed mean), ``std_<c>`` (ddof = 1), ``crlb_<c>``, ``paper_mean_<c>``,
-        ``paper_std_<c>``, ``ratio_std_<c>``. ``crlb_<c>`` is the median over the solved trials
+        ``paper_std_<c>``, ``ratio_std_<c>``, ``mean_floor_<c>`` (0.80 ``std_<c>``: mean |e| of a
+        zero-mean normal error, the floor the scatter puts under the paper's mean error),
+        ``std_with_test_<c>`` (the std of the solutions the consistency test keeps). ``crlb_<c>`` is the median over the solved trials
         of the bound from the simulated sensor (``crlb_sensor_<c>``, rendered trials) or, for
         geometric trials, of the solver's bound at ``sigma_px``. Units: those of the component
         (m or deg); ratios dimensionless.
@@ -44,15 +50,20 @@ def summarize(table: dict, config: CampaignConfig, paper: dict | None = None) ->
         base = np.array([str(v) == "baseline" for v in table["variant"]])
     else:
         base = np.ones(len(table["ok"]), bool)
+    reported = reported_mask(table)
+    rejected = consistency_rejected_mask(table)
     for r in config.ranges_m:
         sel = base & (table["nominal_range_m"] == r)
-        ok = sel & (table["ok"] == 1)
+        ok = sel & reported
         reasons = {}
-        for x in table["reason"][sel & ~(table["ok"] == 1)]:
+        for x in table["reason"][sel & ~reported]:
             key = str(x) if x is not None and x == x else "unknown"
             reasons[key] = reasons.get(key, 0) + 1
+        n_rej = int((sel & rejected).sum())
         row = {"range_m": float(r), "n": int(sel.sum()), "n_ok": int(ok.sum()),
-               "success_rate": float(ok.sum() / sel.sum()) if sel.any() else float("nan"), "reasons": reasons}
+               "success_rate": float(ok.sum() / sel.sum()) if sel.any() else float("nan"), "reasons": reasons,
+               "n_rejected_consistency": n_rej,
+               "success_rate_with_consistency_test": float((ok.sum() - n_rej) / sel.sum()) if sel.any() else float("nan")}
         pm = paper.get((phone, "mean_error", float(r)))
         ps = paper.get((phone, "std", float(r)))
         for c in STATE_KEYS:
@@ -62,6 +73,11 @@ def summarize(table: dict, config: CampaignConfig, paper: dict | None = None) ->
             row[f"abs_mean_{c}"] = abs(row[f"bias_{c}"])
             row[f"rms_{c}"] = float(np.sqrt(np.mean(e**2))) if e.size else float("nan")
             row[f"std_{c}"] = float(np.std(e, ddof=1)) if e.size > 1 else float("nan")
+            # the floor the scatter alone puts under the paper's mean |e| (a zero-mean normal error)
+            row[f"mean_floor_{c}"] = MEAN_ABS_PER_STD * row[f"std_{c}"]
+            # the same statistics with the consistency test applied (what the option would cost)
+            ek = table[f"err_{c}"][ok & ~rejected]
+            row[f"std_with_test_{c}"] = float(np.std(ek, ddof=1)) if ek.size > 1 else float("nan")
             cr = table[f"crlb_sensor_{c}"][ok] if f"crlb_sensor_{c}" in table else table[f"crlb_{c}"][ok]
             cr = cr[np.isfinite(cr)]
             row[f"crlb_{c}"] = float(np.median(cr)) if cr.size else float("nan")

@@ -22,7 +22,7 @@ def _fmt(v, d=3):
 
 
 def write_csv(path, sums, var_rows, sweep) -> Path:
-    with open(path, "w", newline="") as fh:
+    with open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(["run", "range_m", "statistic", *COLUMNS])
         for r, s in sums.items():
@@ -119,7 +119,7 @@ def write_markdown(path, camera, target, sensor, renderer, sums, runs, var_rows,
     L += long_section(long, PAPER_RANGES_M[0])
     L += _sweep_lines(sweep, sweep_frames)
     L += _failure_lines(fm)
-    Path(path).write_text("\n".join(L))
+    Path(path).write_text("\n".join(L), encoding="utf-8")
     return Path(path)
 
 

@@ -1,0 +1,241 @@
+"""The result numbers of the README's and the docs' prose, written from the committed reports' data.
+
+A page marks each generated passage::
+
+    <!-- generated: NAME -->
+    ... text this module writes from the data ...
+    <!-- /generated: NAME -->
+
+and :data:`BLOCKS` holds, per ``NAME``, the function that writes it from the files under
+``docs/reports/`` (CSV and JSON the report commands made). ``python -m svgs_sim.studies.report_text``
+rewrites every passage in place; ``--check`` writes nothing and exits 1 listing the passages whose
+text differs from what the data give (a number typed by hand, or a report regenerated without its
+prose). The test suite runs the check (``tests/test_report_text.py``), so a stale number fails it.
+Hand-written commentary around the passages quotes no result number.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import difflib
+import json
+import re
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from svgs_sim.assets.papers import svgs_2014_results
+
+from .campaign.design import SHORT
+from .campaign.figures import weak_mode_statistics
+from .mechanisms import cell_mechanisms, mechanisms_markdown
+from .store import read_table
+
+#: The pages that carry generated passages, relative to the repository root.
+PAGES = ("README.md", "docs/studies.md")
+#: The command that writes them (quoted in each passage's page).
+COMMAND = "python -m svgs_sim.studies.report_text"
+BLOCK_RE = re.compile(r"(<!-- generated: (?P<name>[\w.-]+) -->\n)(?P<body>.*?)(<!-- /generated: (?P=name) -->)", re.S)
+PHONES = ("galaxy-nexus", "htc-amaze-4g")
+PHONE_NAMES = {"galaxy-nexus": "Galaxy Nexus", "htc-amaze-4g": "HTC Amaze 4G"}
+
+
+def _campaign(root: Path, phone: str) -> Path:
+    return root / "docs" / "reports" / f"campaign-{phone}"
+
+
+def _json(path: Path) -> dict:
+    return json.loads(path.read_text(encoding="utf-8"))
+
+
+def _number(text: str):
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def _verdicts(root: Path, phone: str) -> list[dict]:
+    """``verdicts.csv`` of a campaign, numbers as floats (empty fields as ``""``)."""
+    with open(_campaign(root, phone) / "verdicts.csv", newline="", encoding="utf-8") as fh:
+        return [{k: _number(v) for k, v in row.items()} for row in csv.DictReader(fh)]
+
+
+def _summary(root: Path, phone: str) -> list[dict]:
+    return _json(_campaign(root, phone) / "summary.json")["ranges"]
+
+
+# --------------------------------------------------------------------------- the passages
+def merge_range(root: Path) -> str:
+    """The Amaze 4G's merging range, its margin at 6.5 m and its sensitivity to the lab's light."""
+    d = _json(root / "docs" / "reports" / "merge-range-htc-amaze-4g" / "summary.json")
+    nom = d["cases"][0]
+    i65 = d["ranges_m"].index(6.5)
+    light = {c["value"]: c for c in d["cases"] if c["parameter"] == "ambient_radiance_w_m2_sr"}
+    lo, hi = light[min(light)], light[max(light)]
+
+    def where(c):
+        return {"inside": f"{c['merge_range_m']:.3g} m", "above": f"beyond {c['merge_range_m']:g} m",
+                "below": f"below {c['merge_range_m']:g} m"}[c["bound"]]
+
+    return (f"With the fitted light the Amaze's spots merge at {nom['merge_range_m']:.3g} m; the margin is thin ({nom['margin_dn'][i65]:.2g} DN of "
+            f"the app's threshold at 6.5 m), and {lo['value']:g} or {hi['value']:g} W m^-2 sr^-1 of light (the sweep's "
+            f"low and high ends around the fitted value) moves the merge to {where(lo)} or {where(hi)} "
+            f"(`docs/reports/merge-range-htc-amaze-4g/summary.json`).\n")
+
+
+def campaign_counts(root: Path) -> str:
+    """Per phone: the std cells within 2x, below, above, their explanations; the mean cells not scored."""
+    lines = []
+    for ph in PHONES:
+        c = _json(_campaign(root, ph) / "honest_count.json")["counts"]
+        h = next(iter(c.values()))["by_statistic"]
+        s, m = h["std"], h["mean_error"]
+        lines.append(f"- {PHONE_NAMES[ph]}: {s['within_2x']} of {s['predicted']} standard-deviation cells within 2x "
+                     f"of the paper ({s['below']} below, {s['above']} above; of those outside, {s['measured']} with "
+                     f"a measured mechanism, {s['unexplained']} unexplained); its {m['not_predictable']} mean-error "
+                     "cells are not predictable and are in no count.")
+    return "\n".join(lines) + "\n"
+
+
+def campaign_std_cells(root: Path) -> str:
+    """Every std cell outside 2x, per phone, with its verdict."""
+    lines = ["| phone | range (m) | component | simulated / paper | verdict | explanation |", "|---|---|---|---|---|---|"]
+    for ph in PHONES:
+        for v in _verdicts(root, ph):
+            if v["statistic"] == "std" and v["verdict"] not in ("within_2x", "no_paper_value"):
+                lines.append(f"| {PHONE_NAMES[ph]} | {v['range_m']:g} | {SHORT[v['component']]} | {v['ratio']:.2f} | "
+                             f"{v['verdict']} | {v['explanation'] or ''} |")
+    return "\n".join(lines) + "\n"
+
+
+def campaign_consistency(root: Path) -> str:
+    """Per phone and range: the solutions the paper's app reports and those the consistency test refuses."""
+    lines = ["| phone | range (m) | trials | reported (the paper's app) | refused by the consistency test |",
+             "|---|---|---|---|---|"]
+    for ph in PHONES:
+        for r in _summary(root, ph):
+            lines.append(f"| {PHONE_NAMES[ph]} | {r['range_m']:g} | {r['trials']} | {r['solved']} | "
+                         f"{r.get('refused_by_consistency_test', 0)} |")
+    return "\n".join(lines) + "\n"
+
+
+def campaign_mean_cells(root: Path) -> str:
+    """The mean-error cells beside the floor the simulated scatter implies and the simulated bias."""
+    lines = []
+    for ph in PHONES:
+        vs = [v for v in _verdicts(root, ph) if v["statistic"] == "mean_error" and v["verdict"] == "not_predictable"]
+        over = np.array([v["paper"] / v["floor_from_std"] for v in vs if v["floor_from_std"] > 0])
+        bias = np.array([abs(v["bias"]) / v["paper"] for v in vs])
+        lines.append(f"- {PHONE_NAMES[ph]}: the paper's mean errors are {np.min(over):.2g}-{np.max(over):.2g} times "
+                     f"the floor 0.80 std of the simulated scatter (median {np.median(over):.2g}); the simulated "
+                     f"signed biases are {np.min(bias):.2g}-{np.max(bias):.2g} of the paper's values "
+                     f"(median {np.median(bias):.2g}).")
+    return "\n".join(lines) + "\n"
+
+
+def weak_mode(root: Path) -> str:
+    """The correlation and slope of x on R tan(pitch) and y on R tan(roll), simulated and the paper's."""
+    paper = svgs_2014_results()
+    lines = []
+    for ph in PHONES:
+        st = weak_mode_statistics(read_table(_campaign(root, ph) / "results.csv"), ph, paper)
+        parts = []
+        for pos, v in st.items():
+            pr = [x for _, x in v["paper_ratio"]]
+            parts.append(f"{SHORT[pos]} against R tan({SHORT[v['angle']]}): correlation {v['corr']:+.2f}, slope "
+                         f"{v['slope']:+.2f} over {v['n']} trials; the paper's {SHORT[pos]} / (R tan "
+                         f"{SHORT[v['angle']]}) {min(pr):.2f}-{max(pr):.2f}")
+        lines.append(f"- {PHONE_NAMES[ph]}: " + "; ".join(parts) + ".")
+    return "\n".join(lines) + "\n"
+
+
+def _mechanisms(phone: str) -> Callable[[Path], str]:
+    def block(root: Path) -> str:
+        rows = cell_mechanisms(read_table(_campaign(root, phone) / "results.csv"), phone)
+        return mechanisms_markdown(rows, phone)
+    block.__doc__ = f"The mechanisms of the {PHONE_NAMES[phone]}'s std cells outside 2x (svgs_sim.studies.mechanisms)."
+    return block
+
+
+#: Passage name -> the function that writes it from the data under ``root``.
+BLOCKS: dict[str, Callable[[Path], str]] = {
+    "merge-range": merge_range,
+    "campaign-counts": campaign_counts,
+    "campaign-std-cells": campaign_std_cells,
+    "campaign-consistency": campaign_consistency,
+    "campaign-mean-cells": campaign_mean_cells,
+    "weak-mode": weak_mode,
+    **{f"mechanisms-{ph}": _mechanisms(ph) for ph in PHONES},
+}
+
+
+# --------------------------------------------------------------------------- filling and checking
+def fill(text: str, root: Path, cache: dict | None = None) -> str:
+    """``text`` with every generated passage rewritten from the data.
+
+    Raises
+    ------
+    KeyError
+        A passage names no function of :data:`BLOCKS`.
+    """
+    cache = {} if cache is None else cache
+
+    def sub(m):
+        name = m.group("name")
+        if name not in BLOCKS:
+            raise KeyError(f"generated passage {name!r}: no such passage (svgs_sim.studies.report_text.BLOCKS)")
+        if name not in cache:
+            cache[name] = BLOCKS[name](root)
+        return m.group(1) + cache[name] + m.group(4)
+
+    return BLOCK_RE.sub(sub, text)
+
+
+def stale(root: Path, pages=PAGES) -> list[str]:
+    """The unified diffs of the pages whose generated passages differ from the data (empty: none)."""
+    out, cache = [], {}
+    for p in pages:
+        path = Path(root) / p
+        old = path.read_text(encoding="utf-8")
+        new = fill(old, Path(root), cache)
+        if new != old:
+            out.append("".join(difflib.unified_diff(old.splitlines(True), new.splitlines(True), p, p + " (from the data)")))
+    return out
+
+
+def main(argv=None) -> int:
+    """``python -m svgs_sim.studies.report_text [--check] [--root DIR]``."""
+    ap = argparse.ArgumentParser(prog=COMMAND, description="Rewrite the generated passages of the README and the "
+                                 "docs from the committed reports' data (--check: only compare).")
+    ap.add_argument("--check", action="store_true", help="write nothing; exit 1 and print the differences if any")
+    ap.add_argument("--root", default=".", help="the repository root (default: the current folder)")
+    a = ap.parse_args(argv)
+    root = Path(a.root)
+    missing = [p for p in PAGES if not (root / p).is_file()]
+    if missing:
+        print(f"--root: {root} has no {', '.join(missing)} (not the repository root)", file=sys.stderr)
+        return 2
+    if a.check:
+        diffs = stale(root)
+        print("".join(diffs) if diffs else "every generated passage matches its data", end="" if diffs else "\n")
+        return 1 if diffs else 0
+    cache = {}
+    for p in PAGES:
+        path = root / p
+        old = path.read_text(encoding="utf-8")
+        new = fill(old, root, cache)
+        if new != old:
+            path.write_text(new, encoding="utf-8")
+            print(f"{p}: rewritten")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
+
+
+__all__ = ["BLOCKS", "BLOCK_RE", "COMMAND", "PAGES", "fill", "main", "stale"]
