@@ -62,6 +62,7 @@ import numpy as np
 
 from svgs_sim.base.profiles import load_camera
 from svgs_sim.sim.trials import GEOMETRIC, build_scenario, get_trial_kind
+from svgs_sim.svgs.app import settings
 from svgs_sim.svgs.frames import STATE_KEYS
 
 from .execution import Trial
@@ -97,8 +98,6 @@ THRESHOLD_FACTORS = (0.85, 1.15)
 
 def threshold_level(camera, factor: float) -> float:
     """The app's threshold for ``camera`` times ``factor``, DN (rounded; within 1-254)."""
-    from svgs_sim.svgs.app import settings
-
     level = settings().threshold_for(load_camera(camera).key) * float(factor)
     return float(min(max(round(level), 1.0), 254.0))
 

@@ -33,9 +33,10 @@ from .campaign.design import SHORT
 from .campaign.figures import weak_mode_statistics
 from .mechanisms import cell_mechanisms, mechanisms_markdown
 from .store import read_table
+from .tof_study.design import PAPER_FIG14_Z_MM
 
 #: The pages that carry generated passages, relative to the repository root.
-PAGES = ("README.md", "docs/studies.md")
+PAGES = ("README.md", "docs/studies.md", "docs/tof.md")
 #: The command that writes them (quoted in each passage's page).
 COMMAND = "python -m svgs_sim.studies.report_text"
 BLOCK_RE = re.compile(r"(<!-- generated: (?P<name>[\w.-]+) -->\n)(?P<body>.*?)(<!-- /generated: (?P=name) -->)", re.S)
@@ -153,6 +154,39 @@ def weak_mode(root: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _tof_rows(root: Path) -> dict:
+    """``docs/reports/tof_stability.csv``: ``(run, range_m, statistic) -> [6 values]`` in its column order."""
+    with open(root / "docs" / "reports" / "tof_stability.csv", newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    cols = [c for c in rows[0] if c not in ("run", "range_m", "statistic")]
+    return {(r["run"], float(r["range_m"]), r["statistic"]): np.array([float(r[c]) for c in cols]) for r in rows}
+
+
+def tof_tables(root: Path) -> str:
+    """The ToF study's Tables 1-3 ratios and its Fig. 14 range error, from ``tof_stability.csv``."""
+    t = _tof_rows(root)
+    fl = "fluctuation"
+    r2 = t[("baseline", 5.712, fl)] / t[("paper table 2", 5.712, fl)]
+    gn = t[("converged optimum (Gauss-Newton)", 5.712, fl)] / t[("paper table 2", 5.712, fl)]
+    r3 = t[("baseline", 0.697, fl)] / t[("paper table 3", 0.697, fl)]
+    r1 = t[("baseline", 0.697, fl)] / t[("paper table 1", 0.697, fl)]
+    z = sorted((r, v[2]) for (run, r, st), v in t.items()
+               if run == "fig14 sweep, paper (fixed point, default)" and st == "rms" and r >= 5.0)
+    within = sum(0.5 <= x / PAPER_FIG14_Z_MM <= 2.0 for _, x in z)
+    std2 = t[("baseline", 5.712, "std")]
+
+    def f(v):
+        return ", ".join(f"{x:.2f}" for x in v)
+
+    return (f"- **One configuration for Tables 2, 3 and Fig. 14** (`svgs_sim.tof.PipelineParams()` defaults): Table 2 "
+            f"(5712 mm) ratios {f(r2)} (x, y, z, roll, pitch, yaw): {sum(0.5 <= x <= 2 for x in r2)} of 6 within 2x; "
+            f"z (std {std2[2]:.1f} mm) is {r2[2]:.1f}x the paper's. The converged optimum (Gauss-Newton) gives "
+            f"{f(gn)}. Table 3 (697 mm) {r3.min():.2f}-{r3.max():.2f}x; Table 1 {r1.min():.2f}-{r1.max():.2f}x. Fig. 14 "
+            f"range error beyond 5 m {', '.join(f'{x:.1f}' for _, x in z)} mm RMS at {z[0][0]:g}-{z[-1][0]:g} m = "
+            f"{', '.join(f'{x / PAPER_FIG14_Z_MM:.2f}' for _, x in z)}x the paper's {PAPER_FIG14_Z_MM:g} mm: {within} of "
+            f"{len(z)} ranges within 2x.\n")
+
+
 def _mechanisms(phone: str) -> Callable[[Path], str]:
     def block(root: Path) -> str:
         rows = cell_mechanisms(read_table(_campaign(root, phone) / "results.csv"), phone)
@@ -169,6 +203,7 @@ BLOCKS: dict[str, Callable[[Path], str]] = {
     "campaign-consistency": campaign_consistency,
     "campaign-mean-cells": campaign_mean_cells,
     "weak-mode": weak_mode,
+    "tof-tables": tof_tables,
     **{f"mechanisms-{ph}": _mechanisms(ph) for ph in PHONES},
 }
 
