@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import sys
 from pathlib import Path
 
@@ -44,7 +45,7 @@ exclude_patterns = [
     "gallery",  # the gallery's sources; sphinx-gallery writes the pages into auto_gallery/
     "reports/**/frames",
 ]
-# the parts left out, and their entries in index.rst's tables of contents
+# the parts left out, and their entries in index.md's tables of contents
 LEFT_OUT = [part for part, on in (("auto_gallery", GALLERY), ("api", API)) if not on]
 exclude_patterns += LEFT_OUT
 if not GALLERY:
@@ -74,8 +75,13 @@ numpydoc_validation_checks: set[str] = set()
 
 nitpicky = False
 
-html_theme = "alabaster"
+html_theme = "pydata_sphinx_theme"
 html_title = "svgs-sim"
+html_theme_options = {"navigation_with_keys": False, "show_toc_level": 2, "secondary_sidebar_items": ["page-toc"]}
+
+#: The reports that are HTML pages of their own (self-contained), copied into the site beside the
+#: pages that link them (docs/reports.md).
+HTML_REPORTS = sorted((ROOT / "docs" / "reports").glob("*/report.html"))
 
 if GALLERY:
     sphinx_gallery_conf = {
@@ -141,6 +147,17 @@ def _process_docstring(app, what, name, obj, options, lines):
     _escape_bars(lines)
 
 
+def _copy_html_reports(app, exception):
+    """The self-contained HTML reports into the site (``reports/<name>/report.html``)."""
+    if exception is not None or app.builder.format != "html":
+        return
+    for src in HTML_REPORTS:
+        dst = Path(app.outdir) / "reports" / src.parent.name / "report.html"
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(src, dst)
+
+
 def setup(app):
+    app.connect("build-finished", _copy_html_reports)
     app.connect("source-read", _source_read)
     app.connect("autodoc-process-docstring", _process_docstring)

@@ -27,8 +27,10 @@ import argparse
 import importlib
 import json
 import os
+import re
 import sys
 
+from svgs_sim.cli.examples import add_examples
 from svgs_sim.cli.exit_codes import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_IO_ERROR, EXIT_NO_SOLUTION
 from svgs_sim.cli.signals import interruptible
 from svgs_sim.cli.stdout_guard import GuardedStdout
@@ -126,6 +128,7 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
                 groups[group].required = True
             target = groups[group]
         importlib.import_module(module).register(target)
+    add_examples(parser, iter_commands)  # every command's help ends with examples that work as written
     return parser
 
 
@@ -138,6 +141,37 @@ def iter_commands(parser: argparse.ArgumentParser, prefix: tuple = ()):
             for name, sub in action.choices.items():
                 yield prefix + (name,), sub
                 yield from iter_commands(sub, prefix + (name,))
+
+
+#: A value that starts with a minus and a digit: a negative number or a list that starts with one
+#: (``-20``, ``-30,10``, ``-0.5:2``).
+_NEGATIVE_VALUE = re.compile(r"^-\.?\d[\w.,:+-]*$")
+
+
+def join_negative_values(parser: argparse.ArgumentParser, argv: list) -> list:
+    """``argv`` with ``--opt -30,10`` written ``--opt=-30,10`` where ``--opt`` takes a value.
+
+    argparse reads a token that starts with ``-`` after a space as an option unless it is a single
+    number, so a list option given a negative first item (``--sun-deg -30,10``, ``--attitude
+    -5,0,0``) was refused with "expected one argument" (issue 41). Joining the pair with ``=`` is
+    what the user meant, for every command and option alike.
+    """
+    takes_value = set()
+    for p in [parser, *(q for _, q in iter_commands(parser))]:
+        for a in p._actions:
+            if a.option_strings and a.nargs != 0:
+                takes_value.update(a.option_strings)
+    out, i = [], 0
+    while i < len(argv):
+        tok = argv[i]
+        if (tok in takes_value and tok.startswith("--") and i + 1 < len(argv)
+                and _NEGATIVE_VALUE.match(str(argv[i + 1]))):
+            out.append(f"{tok}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(tok)
+        i += 1
+    return out
 
 
 def leaf_parser(parser: argparse.ArgumentParser, args) -> argparse.ArgumentParser:
@@ -191,6 +225,7 @@ def main(argv=None) -> int:
             if stream is not None and hasattr(stream, "reconfigure"):
                 stream.reconfigure(errors="backslashreplace")
     parser = build_parser(argv)
+    argv = join_negative_values(parser, argv)
     try:
         args = _parse(parser, argv)
     except UsageError as exc:  # usage errors: exit 2, named by the sub-command's parser

@@ -273,9 +273,6 @@ def _std_bias_sections(rep, summary: list[dict], crlb_note: str) -> None:
 def _figure_sections(rep, config: CampaignConfig, table: dict, summary: list[dict], trials: list | None,
                      sample_figure_html: str | None) -> None:
     rendered = config.trial_kind == "render"
-    rep.heading("Errors versus range")
-    rep.figure(crlb_figure(summary, config), "Simulated standard deviation and mean |error| (blue), the paper's "
-               "(red) and the Cramer-Rao bound (black), per component, versus range.")
     if rendered and trials is not None:
         rep.heading("What the phone saw")
         rep.figure(sample_image_figure(config, trials, table), "The delivered 8-bit image of the first stand setting "
@@ -333,6 +330,8 @@ def write_campaign_report(out_dir, config: CampaignConfig, table: dict, summary:
     crlb_note = ("the Cramer-Rao bound from the simulated sensor (shot, read and quantisation noise at the exposure used; "
                  "svgs_sim.sim.crlb), median over the solved trials" if rendered else
                  f"the solver's Cramer-Rao bound for {config.sigma_px:g} px centroid noise, median over the solved trials")
+    rep.figure(crlb_figure(summary, config), "Simulated standard deviation and mean |error| (blue), the paper's "
+               "(red) and the Cramer-Rao bound (black), per component, versus range.")
     _std_bias_sections(rep, summary, crlb_note)
     _consistency_section(rep, summary)
     _mean_error_section(rep, summary, crlb_note, table, config)

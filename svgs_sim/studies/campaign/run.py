@@ -156,7 +156,9 @@ def rebuild_report(out_dir, *, command: str | None = None) -> Path:
     old = (out_dir / "report.html").read_text(encoding="utf-8") if (out_dir / "report.html").is_file() else ""
     if command is None:
         m = re.search(r"Command:</p><pre>(.*?)</pre>", old, re.S)
-        command = ((_html.unescape(m.group(1)) + "\n") if m else "") + (
+        earlier = "\n".join(x for x in _html.unescape(m.group(1)).splitlines()
+                            if not x.startswith("# report rebuilt")) if m else ""  # one note, however many rebuilds
+        command = ((earlier + "\n") if earlier else "") + (
             f"# report rebuilt from the stored results: python -m svgs_sim.studies.campaign rebuild {out_dir}")
     path = write_campaign_report(out_dir, config, table, summary, command=command, versions=library_versions(),
                                  budget=budget, sample_figure_html=carried_figure(old, "What the phone saw"))
