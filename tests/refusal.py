@@ -18,6 +18,9 @@ from svgs_sim.cli.main import main
 #: refusal saves is a render (3-7 s), a board set or a study; parsing and checking take ~0.2 s,
 #: a cold process with its imports 0.2-0.8 s on two cores.
 REFUSED_WITHIN_S = 1.0
+#: The longest one-line message (issue 41 found 460-1144 characters): a sentence a reader takes in,
+#: the paths it names included (those of pytest's temporary folders run to ~80 characters).
+MAX_MESSAGE_CHARS = 450
 #: Lines a first run may print before its error, once per installation (not part of a message).
 _NOTICES = ("compiling the solver",)
 
@@ -77,6 +80,7 @@ def refused(argv, capsys, *, watch=(), code: int = 2, within_s: float | None = R
     if after_work:
         lines = lines[-1:] if lines and sum(": error:" in ln for ln in lines) == 1 else lines
     assert len(lines) == 1 and (not after_work or ": error:" in lines[0]), cap.err
+    assert len(lines[0]) <= MAX_MESSAGE_CHARS, f"{len(lines[0])} characters: {lines[0]}"
     if within_s is not None:
         assert took_s < within_s, f"{took_s:.2f} s before the exit: refused after some work ({argv})"
     if json_out:

@@ -232,6 +232,24 @@ def test_views_without_board_are_listed_and_skipped(chess_views):
     assert len(cal.views) == 5
 
 
+def test_an_unreadable_view_is_listed_and_skipped_not_the_end_of_the_run(chess_views, tmp_path):
+    """Issue 41: one corrupt file among good views aborted `calibrate board`; now it is skipped with
+    the reason ``unreadable``, and the calibration is made from the rest."""
+    import cv2
+
+    board, R, t, imgs = chess_views
+    files = []
+    for k in range(5):
+        cv2.imwrite(str(tmp_path / f"v{k}.png"), imgs[k])
+        files.append(tmp_path / f"v{k}.png")
+    (tmp_path / "junk.png").write_bytes(b"not an image")
+    cal = calibrate_images([tmp_path / "junk.png", *files], board)
+    assert [v for v, _ in cal.skipped] == ["junk.png"] and cal.skipped[0][1].reason == "unreadable"
+    assert len(cal.views) == 5
+    with pytest.raises(InputError, match="no image could be read"):
+        calibrate_images([tmp_path / "junk.png"], board)
+
+
 def test_too_few_views_and_wrong_dimensions_are_input_errors(chess_views):
     board, R, t, imgs = chess_views
     blank = np.full((480, 640), 128, np.uint8)

@@ -72,7 +72,13 @@ def _render() -> str:
            "`{\"ok\": false, \"error\": \"...\"}` instead, a simulated physical failure (exit 1) "
            "`{\"ok\": false, \"reason\": \"...\", \"error\": \"...\"}`, an interrupted one (Ctrl-C: exit 130, "
            "SIGTERM: exit 143) `{\"ok\": false, \"signal\": \"SIGINT\", \"error\": \"...\"}` with, for a study, "
-           "`\"stored\"`, `\"trials\"` and `\"out\"` (what its store holds); the message is also on stderr."), ""]
+           "`\"stored\"`, `\"trials\"` and `\"out\"` (what its store holds); the message is also on stderr."), "",
+           ("`--plan-only` (the studies): the run's checks (the arguments, the executor, an output folder that holds "
+            "files no study made) and the plan on stderr, nothing run; with `--json` the plan on stdout as "
+            "`{\"ok\": true, \"plan_only\": true, \"plan\": {\"kind\", \"trials\", \"renders\", \"core_s\", "
+            "\"wall_s\", \"parallel\", \"executor\", \"note\", \"warnings\"}}`. A study never writes over files "
+            "it did not make: an `--out` folder holding a report, a summary or results but no study's "
+            "`manifest.json` is refused (exit 2)."), ""]
     for name, p in _walk(parser, "svgs"):
         out += [f"## `{name}`", "", "```", p.format_help().rstrip(), "```", ""]
         if name in SCHEMAS:

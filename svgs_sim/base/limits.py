@@ -58,9 +58,18 @@ INPUT_BOUNDS = {
 
 #: Whole-number inputs with an upper bound (the CLI's argument names): name -> ``(low, high,
 #: unit)``, inclusive.
+#: The most features per row or column of a calibration board (a printed board has tens).
+MAX_BOARD_FEATURES = 200
+#: The longest side of a rendered image, px.
+MAX_IMAGE_SIDE_PX = 16384
 INT_BOUNDS = {
     "spp": (1, MAX_SPP, "samples per pixel"), "roi_spp": (1, MAX_SPP, "samples per pixel"),
     "seed": (0, MAX_SEED, ""),
+    # a calibration board's features per row and column: OpenCV's detectors and a printed board
+    # (a 100000 x 100000 board asked for 149 GiB before anything was checked)
+    "cols": (1, MAX_BOARD_FEATURES, "features"), "rows": (1, MAX_BOARD_FEATURES, "features"),
+    # a rendered image's size, px: beyond the largest phone sensor (200 MP, 16384 px a side)
+    "width": (16, MAX_IMAGE_SIDE_PX, "px"), "height": (16, MAX_IMAGE_SIDE_PX, "px"),
 }
 
 

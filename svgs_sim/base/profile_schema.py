@@ -282,7 +282,9 @@ PHONE_TABLES = {
         "demosaic": Choice(DEMOSAIC_METHODS),
     },
     "isp": {
-        "gamma": Num(0, 10, why="0: linear"),
+        # the tone curve out = in^(1/gamma): 1 is linear, phones ~2.2; 0 was once "linear" and rendered noise
+        # through the stages that take 1/gamma, so it is refused (issue 41)
+        "gamma": Num(0.5, 5, why="the tone curve out = in^(1/gamma); 1 is linear, a phone's is about 2.2"),
         "output_width": Num(0, 65535, integer=True, why="0: full resolution"),
         "output_height": Num(0, 65535, integer=True, why="0: full resolution"),
         "jpeg_quality": Num(0, 100, integer=True, why="0: no JPEG"),

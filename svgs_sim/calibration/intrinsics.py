@@ -21,6 +21,7 @@ import numpy as np
 from svgs_sim.base.errors import InputError, check_finite_positive
 from svgs_sim.base.profiles import DISTORTION_KEYS, Camera
 from svgs_sim.svgs.pipeline import load_image
+from svgs_sim.svgs.result import Failure
 
 from .boards import Board
 from .detection import DistinctViews, detect_views, to_gray8
@@ -484,9 +485,10 @@ def calibrate_images(images, board: Board, *, names=None, min_views: int = MIN_V
     Raises
     ------
     InputError
-        No images, an unreadable file, images of different sizes (the message names the
-        files of each size), or fewer than ``min_views`` views with the board (the message
-        lists the skipped views).
+        No images, no readable image, images of different sizes (the message names the files
+        of each size), or fewer than ``min_views`` views with the board (the message lists the
+        skipped views). An unreadable file is skipped (reason ``unreadable``), as a view without
+        the board is.
     """
 
     images = list(images)
@@ -497,13 +499,17 @@ def calibrate_images(images, board: Board, *, names=None, min_views: int = MIN_V
     names = [str(n) for n in names]
     if len(names) != len(images):
         raise InputError(f"calibrate: {len(names)} names for {len(images)} images")
-    grays = []
+    grays, kept, unreadable = [], [], []
     for im, n in zip(images, names):
-        arr = load_image(im) if isinstance(im, (str, Path)) else np.asarray(im)
-        try:
+        try:  # one unreadable view is listed and skipped like a view without the board (issue 41)
+            arr = load_image(im) if isinstance(im, (str, Path)) else np.asarray(im)
             grays.append(to_gray8(arr))
+            kept.append(n)
         except InputError as exc:
-            raise InputError(f"{n}: {exc}") from None
+            unreadable.append((n, Failure("unreadable", str(exc))))
+    names = kept
+    if not grays:
+        raise InputError("calibrate: no image could be read: " + "; ".join(f"{n} ({f.message})" for n, f in unreadable[:5]))
     sizes = {}
     for g, n in zip(grays, names):
         sizes.setdefault((g.shape[1], g.shape[0]), []).append(n)
@@ -514,6 +520,7 @@ def calibrate_images(images, board: Board, *, names=None, min_views: int = MIN_V
         raise InputError(f"calibration images differ in size ({groups}); all views must come from one camera mode")
     (w, h), = sizes.keys()
     obj, img, used, skipped = detect_views(grays, names, board)
+    skipped = unreadable + skipped
     distinct, used_set = DistinctViews("images"), set(used)  # a used view given twice would count twice
     for g, n in zip(grays, names):
         if n in used_set:

@@ -268,9 +268,15 @@ def cmd_study(args) -> int:
     kept = dict(board_set_dir=None if cache is None else cache / "board-set",
                 focal_cache=None if cache is None else cache / "focal_frames.npz")
     # the checks and the plan (counts, estimate, warnings) before any work
-    for line in plan_calibration_study(cam, out, spec=spec, **kept, **study).lines():
+    plan = plan_calibration_study(cam, out, spec=spec, **kept, **study)
+    for line in plan.lines():
         say(line)
     if args.plan_only:
+        from svgs_sim.cli.studies import plan_only_checks, print_plan_json
+
+        plan_only_checks(args, spec)
+        if args.json:
+            print_plan_json(plan.to_json())
         return 0
     # both made and probed before any work; removed again if refused (the study removes its trials then)
     with output_folder(out), output_folder_if(cache, "--cache"):

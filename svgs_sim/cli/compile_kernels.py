@@ -18,21 +18,39 @@ import time
 KERNEL_MODULES = ("svgs_sim.svgs._lm_kernel", "svgs_sim.base.distortion", "svgs_sim.camera.phone.sensor")
 
 
-def kernels_cached() -> bool:
-    """True when every kernel module has a numba cache index (``*.nbi``) where numba keeps it:
-    ``NUMBA_CACHE_DIR`` if set, else the module's ``__pycache__``. Imports nothing (``svgs solve``
-    must not load the camera package)."""
+def numba_cache_folders(src) -> list:
+    """The folders where numba may keep the cache of the kernels of the module file ``src``, in
+    its order: ``NUMBA_CACHE_DIR`` if set; else the module's ``__pycache__`` and, where that is
+    not writable (an install in a read-only site-packages), the user-wide cache
+    (``$XDG_CACHE_HOME/numba`` or ``~/.cache/numba``, under ``<folder>_<sha1 of the folder's path>``,
+    as ``numba.core.caching.UserWideCacheLocator`` names it)."""
+    import hashlib
     import os
     from pathlib import Path
 
+    src = Path(src).resolve()
     root = os.environ.get("NUMBA_CACHE_DIR")
+    if root:
+        return [Path(root)]
+    folder = str(src.parent)
+    user = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "numba"
+    return [src.parent / "__pycache__",
+            user / f"{os.path.split(folder)[-1]}_{hashlib.sha1(folder.encode()).hexdigest()}"]
+
+
+def kernels_cached() -> bool:
+    """True when every kernel module has a numba cache index (``*.nbi``) in one of the places numba
+    keeps it (:func:`numba_cache_folders`; the notice of a first compile printed on every run when
+    the cache was in the user-wide folder, issue 41). Imports nothing heavy (``svgs solve`` must
+    not load the camera package)."""
+    from pathlib import Path
+
     project = Path(__file__).resolve().parents[2]  # the folder that holds svgs_sim/
     for mod in KERNEL_MODULES:
         src = project.joinpath(*mod.split(".")).with_suffix(".py")
         if not src.is_file():
             return False
-        hits = (list(Path(root).rglob(f"{src.stem}*.nbi")) if root
-                else list((src.parent / "__pycache__").glob(f"{src.stem}*.nbi")))
+        hits = [h for d in numba_cache_folders(src) if d.is_dir() for h in d.rglob(f"{src.stem}*.nbi")]
         if not hits:
             return False
     return True

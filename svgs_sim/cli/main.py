@@ -261,6 +261,19 @@ def _stdout_lost(prog: str, as_program: bool, error: OSError | None) -> None:
             pass
 
 
+def named_by_option(parser: argparse.ArgumentParser, message: str) -> str:
+    """``message`` with a leading API name (``misalignment_deg: ...``, the Python API's word for an
+    argument) replaced by the command's option that sets it (``--misalignment-deg: ...``): a user
+    of the CLI is told the option they typed, not an internal key (issue 41)."""
+    head, sep, rest = message.partition(": ")
+    if not sep or not head.isidentifier():
+        return message
+    for a in parser._actions:
+        if a.dest == head and a.option_strings:
+            return f"{max(a.option_strings, key=len)}: {rest}"
+    return message
+
+
 def io_error_message(exc: OSError) -> str:
     """One line for an output that could not be written: the path, the system's reason, what is kept."""
     path = exc.filename if exc.filename is not None else None
@@ -289,7 +302,7 @@ def _run(args, parser, prog: str, as_json: bool, as_program: bool) -> int:
         args.func = interruptible(args, hard_stop=as_program)
         return int(args.func(args))
     except InputError as exc:
-        report_error(prog, str(exc), as_json)
+        report_error(prog, named_by_option(leaf_parser(parser, args), str(exc)), as_json)
         return EXIT_BAD_INPUT
     except SimulationFailure as exc:  # valid input, the simulated physics measured nothing: no solution
         report_error(prog, str(exc), as_json, reason=exc.reason)

@@ -144,7 +144,7 @@ def cmd_solve(args) -> int:
         check_finite_positive(args.consistency_sigma_px, "--consistency-sigma-px")
     from svgs_sim.svgs.pipeline import check_image_matches_camera, load_image
 
-    image = load_image(args.image)
+    image = load_image(args.image, camera=camera)  # its size read from the header first
     check_image_matches_camera(image, camera)
     from svgs_sim.svgs.pipeline import camera_threshold
 

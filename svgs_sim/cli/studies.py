@@ -80,9 +80,34 @@ def announce_plan(args, kind: str, n_trials: int, n_renders: int, spec, *, note:
     """
     from svgs_sim.studies.execution import plan_study
 
-    for line in plan_study(kind, n_trials, n_renders, spec, note=note).lines():
+    plan = plan_study(kind, n_trials, n_renders, spec, note=note)
+    for line in plan.lines():
         print(line, file=sys.stderr, flush=True)
-    return bool(getattr(args, "plan_only", False))
+    if not getattr(args, "plan_only", False):
+        return False
+    plan_only_checks(args, spec)
+    if getattr(args, "json", False):
+        print_plan_json(plan.to_json())
+    return True
+
+
+def plan_only_checks(args, spec) -> None:
+    """What a run checks before its work and ``--plan-only`` would otherwise skip: the executor
+    (Dask importable, the scheduler reachable) and the output folder (not someone else's files a
+    study would overwrite). The arguments themselves were checked before (svgs_sim.cli.validate)."""
+    from svgs_sim.studies.execution import check_executor
+    from svgs_sim.studies.store import refuse_foreign_outputs
+
+    check_executor(spec)
+    if getattr(args, "out", None):
+        refuse_foreign_outputs(args.out)
+
+
+def print_plan_json(plan: dict) -> None:
+    """``--plan-only --json``: ``{"ok": true, "plan_only": true, "plan": {...}}`` on stdout."""
+    from svgs_sim.cli.json_out import dumps
+
+    print(dumps({"ok": True, "plan_only": True, "plan": plan}), file=sys.stdout, flush=True)
 
 
 def warn_processes(spec) -> None:
@@ -488,9 +513,12 @@ def cmd_sensitivity(args) -> int:
     for v in args.fixed:
         argv += ["--fixed", v]
     argv += ["--method", args.method, "--n", str(args.n), "--out", out, "--seed", str(args.seed),
-             "--trial-kind", args.trial_kind, "--pattern", args.pattern] + executor_argv(args)
-    renders = config.n_trials if config.trial_kind == "render" and any(v.needs_render for v in config.varied) else (
-        1 if config.trial_kind == "render" else 0)
+             "--trial-kind", args.trial_kind, "--pattern", config.pattern] + executor_argv(args)
+    if config.trial_kind == "tof":  # every trial is a run of its own: one render each
+        renders = config.n_trials
+    else:
+        renders = config.n_trials if config.trial_kind == "render" and any(v.needs_render for v in config.varied) else (
+            1 if config.trial_kind == "render" else 0)
     if announce_plan(args, config.trial_kind, config.n_trials, renders, spec,
                      note=f"{args.method} over {len(config.varied)} parameter(s)"
                      + ("; renders at most" if renders > 1 else "")):

@@ -219,6 +219,11 @@ def _check_profile_and_envelope(args, cmd: str, ranges: dict) -> None:
     from svgs_sim.base.profiles import load_camera, load_pattern
 
     cam = load_camera(cam_name)
+    if cmd == "sensitivity" and getattr(args, "trial_kind", None) == "tof":
+        if not cam.is_tof:  # the ToF kind renders the ToF camera: a phone profile is the wrong sensor
+            raise InputError(f"--camera: {cam.name!r} is a phone (SVGS) profile; --trial-kind tof needs a "
+                             "time-of-flight camera profile such as 'tof-epc660'")
+        return
     if cam.is_tof:
         raise InputError(f"--camera: {cam.name!r} is a time-of-flight camera profile; this command needs a phone "
                          "(SVGS) profile such as 'galaxy-nexus' (the ToF sensor's commands are 'svgs tof ...')")

@@ -46,6 +46,9 @@ TOF_PARAMETERS = {
     "range_m": Parameter("range_m", "m", "along the boresight to the target origin", 1.0, True, *DESIGN_RANGE_M),
     "nominal_range_m": Parameter("nominal_range_m", "m", "the stability run's range (selects the paper's tables)",
                                  1.0, False, *DESIGN_RANGE_M),
+    # the ambient light on the target (the profile's 1000 lux, the paper's "normal light"; its high light
+    # 10000 lux): acts on the sensor's frames, not the render
+    "ambient_lux": Parameter("ambient_lux", "lux", "ambient illuminance on the target", 1000.0, False, 0.0, 200000.0),
     "frames": Parameter("frames", "", "frames of the run", 1, False, 1, 20000),
     "frame": Parameter("frame", "", "index of the frame in the run's noise stream", 0, False, 0, 19999),
 }
@@ -107,8 +110,16 @@ class TofTrialScenario(RowView):
 
     @classmethod
     def from_values(cls, values, labels=None) -> "TofTrialScenario":
-        """The scenario of row values (:meth:`from_row`; ``labels``: more of its columns, e.g. ``run``)."""
-        return cls.from_row({**values, **(labels or {})})
+        """The scenario of parameter values (:data:`TOF_PARAMETERS`; ``labels``: more of its columns,
+        e.g. ``run``): what a study that sets only some of them gives (a sensitivity analysis's
+        ``range_m`` and ``ambient_lux``) is one frame of its own run, rendered with seed 0, its
+        ``nominal_range_m`` its ``range_m``."""
+        row = {**values, **(labels or {})}
+        row.setdefault("render_seed", 0)
+        row.setdefault("frames", 1)
+        row.setdefault("frame", 0)
+        row.setdefault("nominal_range_m", row.get("range_m", TOF_PARAMETERS["range_m"].default))
+        return cls.from_row(row)
 
     def run_key(self) -> tuple:
         """What decides the run's frames (everything but the frame and the label)."""

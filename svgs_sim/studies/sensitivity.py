@@ -187,7 +187,13 @@ def make_config(camera: str, vary, *, fixed=None, method: str = "sobol", n: int 
     kind = get_trial_kind(trial_kind)
     if method not in ("sobol", "morris"):
         raise InputError(f"--method: expected 'sobol' or 'morris', got {method!r}")
-    _camera(camera)
+    cam = _camera(camera)
+    if kind.name == "tof":
+        if not cam.is_tof:
+            raise InputError(f"--camera: {cam.name!r} is a phone (SVGS) profile; --trial-kind tof needs a "
+                             "time-of-flight camera profile such as 'tof-epc660'")
+        if pattern == "svgs-3u":  # the default target is the phone's: the ToF sensor's is tof-8
+            pattern = "tof-8"
     _pattern(pattern)
     envelope = range_envelope_check(kind, camera, pattern)
     varied = parse_vary(vary, kind, envelope)
@@ -293,9 +299,13 @@ def sensitivity_trials(config: SensitivityConfig) -> tuple[list, dict]:
 
     def add(tid, x_unit, seed_index, block):
         vals = _scale(x_unit, config.varied)
-        scen = build_scenario(kind, {**base, **{k: float(v) for k, v in zip(names, vals)}},
-                              labels={"block": block})
-        trials.append(Trial(tid, scen, trial_seed(config.seed, seed_index)))
+        values = {**base, **{k: float(v) for k, v in zip(names, vals)}}
+        seed = trial_seed(config.seed, seed_index)
+        if kind.name == "tof":  # a ToF trial's seed is its run's render seed (Mitsuba's: 32 bits)
+            seed = int(seed) % 2**32
+            values["render_seed"] = seed
+        scen = build_scenario(kind, values, labels={"block": block})
+        trials.append(Trial(tid, scen, seed))
 
     if config.method == "sobol":
         A, B = sobol_design(config)

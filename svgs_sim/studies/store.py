@@ -478,6 +478,31 @@ def _refuse_other_study(out_dir: Path, want: dict, ignore=(), added=None) -> Non
         )
 
 
+#: Files a study writes into its folder beside its store: in a folder without a study's manifest
+#: they are someone else's (a user's own report), and a study would overwrite them (issue 41).
+STUDY_OUTPUT_NAMES = frozenset({RESULTS, "report.html", "report.md", "summary.csv", "summary.json", "summary.md",
+                                "verdicts.csv", "budget.csv", "honest_count.json", "indices.csv", "merge_ranges.csv",
+                                "trials.csv", "measurements.csv"})
+
+
+def refuse_foreign_outputs(out_dir) -> None:
+    """:class:`InputError` when ``out_dir`` holds files a study would write (:data:`STUDY_OUTPUT_NAMES`)
+    but no study's manifest: they are not a study's, and nothing may overwrite them.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        A study's folder (it may not exist yet).
+    """
+    out_dir = Path(out_dir)
+    if not out_dir.is_dir() or (out_dir / MANIFEST).exists():
+        return
+    theirs = sorted(p.name for p in out_dir.iterdir() if p.name in STUDY_OUTPUT_NAMES)
+    if theirs:
+        raise InputError(f"--out: {str(out_dir)!r} holds {', '.join(theirs)} but no {MANIFEST}: files no study made, "
+                         "which a study would overwrite; choose another --out directory or move them")
+
+
 def check_resumable(out_dir, manifest: dict, columns=None, *, ignore=(), added_columns=None) -> bool:
     """Whether ``out_dir`` holds this study's store, refusing one with other parameters - as
     :class:`ResultStore` would, but without making, changing or locking anything (a study checks
@@ -508,9 +533,7 @@ def check_resumable(out_dir, manifest: dict, columns=None, *, ignore=(), added_c
     """
     out_dir = Path(out_dir)
     if not (out_dir / MANIFEST).exists():
-        if (out_dir / RESULTS).exists():
-            raise InputError(f"--out: {str(out_dir)!r} holds {RESULTS} but no {MANIFEST}; "
-                             "choose another --out directory")
+        refuse_foreign_outputs(out_dir)
         return False
     want = {"format_version": FORMAT_VERSION, "parameters": _jsonable(dict(manifest)),
             "columns": None if columns is None else list(columns)}
@@ -621,10 +644,7 @@ class ResultStore:
             _refuse_other_study(self.dir, want, added=self.added_columns)  # in the current layout, then upgraded
             self._upgrade()
         else:
-            stray = [p.name for p in self.dir.iterdir() if p.name in (RESULTS,)]
-            if stray:
-                raise InputError(f"--out: {str(self.dir)!r} holds {stray[0]} but no {MANIFEST}; "
-                                 "choose another --out directory")
+            refuse_foreign_outputs(self.dir)
             tmp = self.manifest_path.with_suffix(".json.tmp")
             with open(tmp, "w", encoding="utf-8") as fh:
                 json.dump(want, fh, indent=2, sort_keys=True)

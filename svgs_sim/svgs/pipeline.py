@@ -113,7 +113,56 @@ def apply_exif_orientation(image: np.ndarray, orientation: int) -> np.ndarray:
     return np.ascontiguousarray(ops[orientation](image))
 
 
-def load_image(path, *, say=None) -> np.ndarray:
+#: The most pixels an image may have: above the largest phone sensors (200 MP). A larger file is
+#: refused from its header, before it is decoded (a 40000 x 40000 PNG of 1.6 MB made OpenCV assert;
+#: a 20000 x 20000 one took 2.4 GB and 6 s before its size was refused).
+MAX_IMAGE_PIXELS = 250_000_000
+
+
+def image_header_size(path):
+    """``(width, height)`` in pixels from an image file's header, without decoding it (Pillow);
+    None where Pillow cannot read the header (OpenCV may still decode the file).
+
+    Parameters
+    ----------
+    path : str or Path
+    """
+    from PIL import Image  # heavy: loaded when a photo is read
+
+    old = Image.MAX_IMAGE_PIXELS
+    Image.MAX_IMAGE_PIXELS = None  # the size is judged here, not by Pillow's bomb warning
+    try:
+        with Image.open(path) as im:
+            return tuple(int(x) for x in im.size)
+    except Exception:  # noqa: BLE001 - any header Pillow cannot read: leave the decision to the decoder
+        return None
+    finally:
+        Image.MAX_IMAGE_PIXELS = old
+
+
+def check_image_header(path, camera: Camera | None = None, name: str = "image") -> None:
+    """Refuse an image file from its header, before decoding: more than :data:`MAX_IMAGE_PIXELS`
+    pixels, or (with ``camera``) a size that is not the camera's in either orientation.
+
+    Raises
+    ------
+    InputError
+        Naming ``name`` and the sizes.
+    """
+    size = image_header_size(path)
+    if size is None:
+        return
+    w, h = size
+    if w * h > MAX_IMAGE_PIXELS:
+        raise InputError(f"{name} {str(path)!r} is {w} x {h} px ({w * h / 1e6:.0f} MP): larger than any phone camera "
+                         f"(at most {MAX_IMAGE_PIXELS / 1e6:.0f} MP); not decoded")
+    if camera is not None and (w, h) not in ((camera.width, camera.height), (camera.height, camera.width)):
+        raise InputError(f"{name} {str(path)!r}: size {w} x {h} px does not match camera {camera.name!r} "
+                         f"({camera.width} x {camera.height} px); use the profile of the resolution the image was "
+                         "taken at")
+
+
+def load_image(path, *, say=None, camera: Camera | None = None) -> np.ndarray:
     """Read an image file (8- or 16-bit, grey or colour) upright: an EXIF orientation other
     than 1 (a phone held on its side) is applied, as a viewer shows the picture, and said.
 
@@ -123,6 +172,9 @@ def load_image(path, *, say=None) -> np.ndarray:
     say : callable, optional
         Called with the one line that names an applied EXIF orientation; default: printed
         on stderr.
+    camera : Camera, optional
+        Refuse a file whose header gives another size than the camera's before decoding it
+        (:func:`check_image_header`; every file is refused above :data:`MAX_IMAGE_PIXELS`).
 
     Returns
     -------
@@ -142,6 +194,8 @@ def load_image(path, *, say=None) -> np.ndarray:
         raise InputError(f"image {str(p)!r} is not a regular file (a device, FIFO or socket); give an image file")
     if p.stat().st_size == 0:
         raise InputError(f"image {str(p)!r} is empty (0 bytes)")
+    if p.suffix.lower() != ".npy":
+        check_image_header(p, camera)  # the size from the header, before any decoding
     if p.suffix.lower() == ".npy":
         try:
             img = np.load(p, allow_pickle=False)
@@ -359,7 +413,7 @@ def solve_image(
     camera = load_camera(camera)
     pattern = load_pattern(pattern)
     if isinstance(image, (str, Path)):
-        image = load_image(image)
+        image = load_image(image, camera=camera)
     image = np.asarray(image)
     check_image_matches_camera(image, camera)
     threshold = camera_threshold(image, camera, threshold)
@@ -412,4 +466,4 @@ def inconsistent_failure(sol) -> Failure:
                     **c.to_json()})
 
 
-__all__ = ["load_image", "exif_orientation", "apply_exif_orientation", "EXIF_ORIENTATIONS", "solve_image", "camera_threshold", "camera_key", "detector_settings", "describe_detector", "check_image_matches_camera", "inconsistent_failure", "Failure"]
+__all__ = ["MAX_IMAGE_PIXELS", "check_image_header", "image_header_size", "load_image", "exif_orientation", "apply_exif_orientation", "EXIF_ORIENTATIONS", "solve_image", "camera_threshold", "camera_key", "detector_settings", "describe_detector", "check_image_matches_camera", "inconsistent_failure", "Failure"]

@@ -19,6 +19,7 @@ REASONS = {
     "degenerate": "the measurements do not constrain the pose",
     "no_board": "no calibration board was found in the image",
     "too_few_corners": "too few board corners or circles were found in the image",
+    "unreadable": "the image file could not be read (missing, empty, corrupt, or not an image)",
 }
 
 

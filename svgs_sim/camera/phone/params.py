@@ -45,7 +45,7 @@ Tables (all optional; a missing key takes the documented default, marked ASSUMPT
     demosaic = "bilinear"         # OpenCV: "bilinear", "edge_aware" or "vng"
 
     [isp]
-    gamma = 2.2                   # tone curve: out = in^(1/gamma) (0 = linear)
+    gamma = 2.2                   # tone curve: out = in^(1/gamma) (1 = linear; 0.5-5)
     output_width = 0              # 0 = full resolution; else downscale (INTER_AREA) to this size
     output_height = 0
     jpeg_quality = 0              # 0 = no JPEG round trip; else 1-100

@@ -127,6 +127,14 @@ class StudyPlan:
         """:meth:`describe` and :meth:`warnings`."""
         return [self.describe(), *self.warnings()]
 
+    def to_json(self) -> dict:
+        """The plan as ``--plan-only --json`` prints it: ``kind``, ``trials``, ``renders``,
+        ``core_s`` and ``wall_s`` (estimates, None without one), ``parallel``, ``executor``,
+        ``note``, ``warnings`` (lines)."""
+        return {"kind": self.kind, "trials": int(self.n_trials), "renders": int(self.n_renders), "core_s": self.core_s,
+                "wall_s": self.wall_s, "parallel": self.parallel, "executor": self.spec.describe(), "note": self.note,
+                "warnings": self.warnings()}
+
 
 def plan_study(kind: str, n_trials: int, n_renders: int, spec: ExecutorSpec, *, note: str = "") -> StudyPlan:
     """The :class:`StudyPlan` of a study, from its counts alone (nothing is built: a plan of
