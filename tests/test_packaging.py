@@ -61,4 +61,4 @@ def test_no_module_finds_data_by_its_own_file_path():
     numba's cache files beside the modules, which are not data)."""
     uses = [f"{p.relative_to(ROOT)}:{i}" for p in sorted((ROOT / "svgs_sim").rglob("*.py"))
             for i, line in enumerate(p.read_text().splitlines(), 1) if "__file__" in line]
-    assert uses == ["svgs_sim/cli/compile_kernels.py:29"]
+    assert len(uses) == 1 and uses[0].startswith("svgs_sim/cli/compile_kernels.py:"), uses

@@ -239,7 +239,7 @@ def main(argv=None) -> int:
     real_stdout, guard = sys.stdout, GuardedStdout(sys.stdout)
     sys.stdout = guard  # a reader that went away does not stop the command half-way (exit 3 at the end)
     try:
-        code = _run(args, parser, prog, as_json, as_program)
+        code = _run(args, parser, prog, as_json, as_program, argv)
     finally:
         sys.stdout = real_stdout
     if guard.broken:
@@ -261,16 +261,19 @@ def _stdout_lost(prog: str, as_program: bool, error: OSError | None) -> None:
             pass
 
 
-def named_by_option(parser: argparse.ArgumentParser, message: str) -> str:
+def named_by_option(parser: argparse.ArgumentParser, message: str, argv=None) -> str:
     """``message`` with a leading API name (``misalignment_deg: ...``, the Python API's word for an
-    argument) replaced by the command's option that sets it (``--misalignment-deg: ...``): a user
-    of the CLI is told the option they typed, not an internal key (issue 41)."""
+    argument) replaced by the command's option that sets it (``--misalignment-deg: ...``) when the
+    user gave that option (``argv``; None: any): a user of the CLI is told the option they typed,
+    not an internal key (issue 41). A value the command derived itself (a focal error from the
+    rendered calibration) keeps its own name."""
     head, sep, rest = message.partition(": ")
     if not sep or not head.isidentifier():
         return message
     for a in parser._actions:
         if a.dest == head and a.option_strings:
-            return f"{max(a.option_strings, key=len)}: {rest}"
+            typed = argv is None or any(t == f or t.startswith(f + "=") for t in argv for f in a.option_strings)
+            return f"{max(a.option_strings, key=len)}: {rest}" if typed else message
     return message
 
 
@@ -286,7 +289,7 @@ def io_error_message(exc: OSError) -> str:
             "study resumes from its stored trials when rerun with the same command)")
 
 
-def _run(args, parser, prog: str, as_json: bool, as_program: bool) -> int:
+def _run(args, parser, prog: str, as_json: bool, as_program: bool, argv: list) -> int:
     try:
         from svgs_sim.cli.validate import check_args
 
@@ -302,7 +305,7 @@ def _run(args, parser, prog: str, as_json: bool, as_program: bool) -> int:
         args.func = interruptible(args, hard_stop=as_program)
         return int(args.func(args))
     except InputError as exc:
-        report_error(prog, named_by_option(leaf_parser(parser, args), str(exc)), as_json)
+        report_error(prog, named_by_option(leaf_parser(parser, args), str(exc), argv), as_json)
         return EXIT_BAD_INPUT
     except SimulationFailure as exc:  # valid input, the simulated physics measured nothing: no solution
         report_error(prog, str(exc), as_json, reason=exc.reason)
