@@ -34,9 +34,20 @@ the sun's elevation and the exposure against time)::
 
     python examples/basilisk_docking.py --environment orbit --case rbar-above --start-z-m 10 --max-time-s 300
 
-Every random draw is seeded (``--seed``). Rendering costs 0.4-3 s a frame on a 2-core machine, so
-the sensor runs at ``--sensor-rate-hz`` (default 0.25 frames/s, one frame per 4 s) rather than the
-phone's frame rate; docs/basilisk.md gives the time a run takes.
+Every random draw is seeded (``--seed``). The sensor runs at the phone's own frame rate,
+``--sensor-rate-hz`` (default :data:`svgs_sim.sim.basilisk_svgs.PHONE_FRAME_RATE_HZ`, 2 frames/s);
+rendering costs 0.4-3 s a frame on a 2-core machine, and the committed single runs of
+docs/figures were made at 0.25 frames/s (their JSON records the rate); docs/basilisk.md gives the
+time a run takes.
+
+Monte Carlo (``--monte-carlo N``): N runs per sensor with dispersed true initial states, hand-over
+(navigation) errors, sensor seeds and thruster magnitude and direction errors and a minimum impulse
+(:func:`mc_dispersions`), the ideal sensor on the same seeds; the runs on the project's executors
+(``--processes``, ``--workers``, ``--scheduler``); ``OUT/montecarlo.json`` (per run the seed, the
+arrival error and time, the delta-v, the dropouts by reason, the wrong locks and the dispersions
+drawn; percentiles with order-statistic intervals) and ``OUT/montecarlo.png``::
+
+    python examples/basilisk_docking.py --quick --monte-carlo 3 --phones galaxy-nexus --out out/mc
 """
 
 from __future__ import annotations
@@ -52,6 +63,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from svgs_sim.base.errors import InputError  # noqa: E402
+from svgs_sim.sim.basilisk_svgs import PHONE_FRAME_RATE_HZ  # noqa: E402
 from svgs_sim.svgs.frames import pose_to_state, state_to_pose  # noqa: E402
 
 from svgs_sim.sim.basilisk_frames import (  # noqa: E402
@@ -177,6 +189,33 @@ def measurement_floor(range_m: float, pixel_scale: float) -> tuple[np.ndarray, n
     return np.array([across, across, along]), np.full(3, ang)
 
 
+class ThrustErrors:
+    """The thrusters' errors: the force they give is ``scale`` times the commanded one, turned by
+    ``R_error`` (a misalignment), and nothing when the command's impulse over a control period is
+    below ``min_impulse_n_s`` (the minimum impulse bit). The default is the ideal thruster.
+
+    Parameters
+    ----------
+    scale : float
+        Magnitude factor (1: exact).
+    R_error : array_like, shape (3, 3)
+        Rotation of the applied force from the commanded one.
+    min_impulse_n_s : float
+        Minimum impulse bit, N s.
+    """
+
+    def __init__(self, scale: float = 1.0, R_error=None, min_impulse_n_s: float = 0.0):
+        self.scale = float(scale)
+        self.R_error = np.eye(3) if R_error is None else np.asarray(R_error, float)
+        self.min_impulse_n_s = float(min_impulse_n_s)
+
+    def apply(self, a_cmd: np.ndarray) -> np.ndarray:
+        """The acceleration applied for the commanded ``a_cmd`` (m/s^2, shape (3,))."""
+        if np.linalg.norm(a_cmd) * CHASER_MASS_KG * CONTROL_PERIOD_S < self.min_impulse_n_s:
+            return np.zeros(3)
+        return self.scale * (self.R_error @ np.asarray(a_cmd, float))
+
+
 def _make_gnc_class():
     """The GNC flight-software module, a ``SysModel`` subclass: navigation (a Clohessy-Wiltshire
     Kalman filter replaying late measurements), glide-slope guidance and ideal-force control.
@@ -191,8 +230,9 @@ def _make_gnc_class():
         """Navigation (CW Kalman filter with latency replay), glide-slope guidance, ideal-force control."""
 
         def __init__(self, svgs_output, n_rad_s, x0_hat, P0, ideal: bool, pixel_scale: float, camera=CAMERA,
-                     pattern=PATTERN):
+                     pattern=PATTERN, thrust: ThrustErrors | None = None):
             super().__init__()
+            self.thrust = thrust or ThrustErrors()
             self.camera, self.pattern = camera, pattern
             self.targetStateInMsg = messaging.SCStatesMsgReader()
             self.chaserStateInMsg = messaging.SCStatesMsgReader()
@@ -212,7 +252,8 @@ def _make_gnc_class():
             self.att = None  # (x (3,), P (3,3)) relative attitude, rad
             self.last_ok_s = -np.inf
             self.arrived_s = None
-            self.log = {k: [] for k in ("t_s", "x_hat", "P", "a_H", "true_rho", "true_rho_dot", "hold", "cam_true",
+            self.log = {k: [] for k in ("t_s", "x_hat", "P", "a_H", "a_applied", "true_rho", "true_rho_dot", "hold",
+                                        "cam_true",
                                         "cam_hat", "cam_sigma", "att_hat", "att_sigma", "att_true")}
             self.meas_log = []  # per released frame: t_image, ok, reason, accepted, state, sigma, truth
 
@@ -326,7 +367,8 @@ def _make_gnc_class():
             self.controls.append((t, a_H.copy()))
             self.controls = self.controls[-400:]
             payload = messaging.CmdForceInertialMsgPayload()
-            payload.forceRequestInertial = (HN.T @ a_H * CHASER_MASS_KG).tolist()
+            a_app = self.thrust.apply(a_H)  # what the thrusters give: the filter knows only the command
+            payload.forceRequestInertial = (HN.T @ a_app * CHASER_MASS_KG).tolist()
             self.forceOutMsg.write(payload, CurrentSimNanos, self.moduleID)
             # the log: truth from the states (for the plots only; nothing above uses it but the
             # Hill frame and the chaser's attitude, which the chaser knows from its own navigation)
@@ -338,6 +380,7 @@ def _make_gnc_class():
             L["x_hat"].append(x.copy())
             L["P"].append(np.diag(P).copy())
             L["a_H"].append(a_H.copy())
+            L["a_applied"].append(a_app.copy())
             L["true_rho"].append(rho)
             L["true_rho_dot"].append(rho_dot)
             L["hold"].append(hold)
@@ -481,15 +524,17 @@ def _orbit_light(sim, target, sun_N):
     return sun_msg, earth_msg, ecl
 
 
-def run(phone: str | None, *, start_state=START_STATE, sensor_rate_hz=0.25, preview=False, seed=0,
+def run(phone: str | None, *, start_state=START_STATE, sensor_rate_hz=PHONE_FRAME_RATE_HZ, preview=False, seed=0,
         max_time_s=1200.0, latency_s=None, case: str = "vbar", environment: str = "lab",
-        eclipse_in_s: float = ECLIPSE_IN_S, raan_deg: float = RAAN_DEG, transition: str = "entry") -> dict:
+        eclipse_in_s: float = ECLIPSE_IN_S, raan_deg: float = RAAN_DEG, transition: str = "entry",
+        thrust: ThrustErrors | None = None, prior_scale: float = 1.0) -> dict:
     """One closed-loop approach. ``phone`` None: the ideal sensor (no latency). ``case``: the
     corridor (:data:`CASES`); ``environment="orbit"``: the sun from the orbit (astropy, at
     :data:`svgs_sim.sim.orbit_light.SUN_EPOCH_UTC`), the Earth, Basilisk's eclipse module, the
     approach starting ``eclipse_in_s`` before the eclipse's entry (``transition="exit"``: its exit).
-    Returns the logs and the summary
-    numbers."""
+    ``thrust``: the thrusters' errors (:class:`ThrustErrors`; default ideal); ``prior_scale``: the
+    hand-over's 1-sigma as a multiple of :data:`PRIOR_SIGMA_M` and :data:`PRIOR_SIGMA_M_S`.
+    Returns the logs and the summary numbers."""
     from Basilisk.simulation import extForceTorque, spacecraft
     from Basilisk.utilities import SimulationBaseClass, macros, simIncludeGravBody
 
@@ -542,11 +587,12 @@ def run(phone: str | None, *, start_state=START_STATE, sensor_rate_hz=0.25, prev
     sim.AddModelToTask("sensor", svgs_mod)
     # navigation, guidance, control; the filter starts from a seeded draw around the truth
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 27]))
-    P0 = np.diag([PRIOR_SIGMA_M**2] * 3 + [PRIOR_SIGMA_M_S**2] * 3)
+    P0 = np.diag([PRIOR_SIGMA_M**2] * 3 + [PRIOR_SIGMA_M_S**2] * 3) * float(prior_scale) ** 2
     x0 = np.concatenate([rho, np.zeros(3)]) + rng.multivariate_normal(np.zeros(6), P0)
     fx_full = Camera.load(phone).fx if phone else 1.0
     pixel_scale = fx_full / sensor.camera.fx if phone else 1.0
-    gnc = _make_gnc_class()(svgs_mod.measurementOutMsg, n, x0, P0, ideal, pixel_scale, camera_mount, pattern_mount)
+    gnc = _make_gnc_class()(svgs_mod.measurementOutMsg, n, x0, P0, ideal, pixel_scale, camera_mount, pattern_mount,
+                            thrust)
     gnc.ModelTag = "gnc"
     gnc.targetStateInMsg.subscribeTo(tgt.scStateOutMsg)
     gnc.chaserStateInMsg.subscribeTo(ch.scStateOutMsg)
@@ -610,7 +656,7 @@ def _run_summary(gnc, phone, preview, sensor_rate_hz, latency_s, wall_s) -> dict
     final errors, frames solved and accepted, dropouts by reason)."""
     lat, wall = latency_s, wall_s
     log = {k: np.asarray(v) for k, v in gnc.log.items()}
-    a = np.linalg.norm(log["a_H"], axis=1)
+    a = np.linalg.norm(log["a_applied"], axis=1)  # what the thrusters gave (= the command when ideal)
     arrived = gnc.arrived_s is not None
     i_end = int(np.argmin(np.abs(log["t_s"] - gnc.arrived_s))) if arrived else len(a) - 1
     final_true = log["cam_true"][i_end]
@@ -638,6 +684,214 @@ def _run_summary(gnc, phone, preview, sensor_rate_hz, latency_s, wall_s) -> dict
         "wall_s": round(wall, 1),
     }
     return {"summary": summary, "log": log, "meas": ml}
+
+
+# ----------------------------------------------------------------------------- Monte Carlo
+#: The dispersions of ``--monte-carlo`` (1-sigma; each an ASSUMPTION, none sourced to a mission):
+#: the true start's lateral offset and range (m, at the 30 m start; scaled by the start's range over
+#: 30 m), its attitude (deg per axis), the hand-over's navigation error (the filter's initial
+#: estimate drawn from its prior, :data:`PRIOR_SIGMA_M`, :data:`PRIOR_SIGMA_M_S`, per run), the
+#: thrusters' magnitude error (a fraction: cold-gas thrusters hold 2-5 %) and misalignment (deg),
+#: and the minimum impulse bit (N s; tens of mN thrusters open for ~10 ms at least).
+MC_START_SIGMA_M = (0.15, 0.15, 0.6)
+MC_START_ATTITUDE_SIGMA_DEG = 1.0
+MC_THRUST_SCALE_SIGMA = 0.03
+MC_THRUST_ANGLE_SIGMA_DEG = 1.0
+MC_MIN_IMPULSE_N_S = 5e-4
+#: The quantities ``montecarlo.json`` gives percentiles of.
+MC_KEYS = ("arrival_error_m", "arrival_time_s", "delta_v_m_s", "dropouts", "wrong_locks")
+
+
+def mc_seeds(base_seed: int, n: int) -> list[int]:
+    """``n`` distinct run seeds from ``base_seed`` (``numpy.random.SeedSequence.spawn``), 32 bits each."""
+    return [int(c.generate_state(1)[0]) for c in np.random.SeedSequence(int(base_seed)).spawn(int(n))]
+
+
+def mc_dispersions(seed: int, start_state) -> tuple[list[dict], dict]:
+    """One run's dispersed values, drawn from its seed, and recorded as Basilisk's
+    ``Basilisk.utilities.MonteCarlo`` records its dispersions (the class that made each one, the
+    variable, its parameters, the value drawn).
+
+    Returns
+    -------
+    records : list of dict
+        ``dispersion``, ``variable``, ``mean``, ``stdDeviation``, ``value``.
+    kwargs : dict
+        ``start_state``, ``thrust`` (:class:`ThrustErrors`) for :func:`run`.
+    """
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 40]))
+    s0 = np.asarray(start_state, float)
+    k = s0[2] / 30.0
+    dpos = rng.normal(0.0, np.asarray(MC_START_SIGMA_M) * k)
+    datt = rng.normal(0.0, MC_START_ATTITUDE_SIGMA_DEG, 3)
+    start = s0 + np.concatenate([dpos, datt])
+    scale = 1.0 + rng.normal(0.0, MC_THRUST_SCALE_SIGMA)
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    ang = np.radians(rng.normal(0.0, MC_THRUST_ANGLE_SIGMA_DEG))
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    R = np.eye(3) + np.sin(ang) * K + (1 - np.cos(ang)) * K @ K  # Rodrigues
+    records = [
+        {"dispersion": "NormalVectorCartDispersion", "variable": "start_position_m", "mean": s0[:3].tolist(),
+         "stdDeviation": (np.asarray(MC_START_SIGMA_M) * k).tolist(), "value": start[:3].tolist()},
+        {"dispersion": "NormalVectorCartDispersion", "variable": "start_attitude_deg", "mean": s0[3:].tolist(),
+         "stdDeviation": [MC_START_ATTITUDE_SIGMA_DEG] * 3, "value": start[3:].tolist()},
+        {"dispersion": "NormalDispersion", "variable": "thrust_scale", "mean": 1.0,
+         "stdDeviation": MC_THRUST_SCALE_SIGMA, "value": scale},
+        {"dispersion": "NormalDispersion", "variable": "thrust_misalignment_deg", "mean": 0.0,
+         "stdDeviation": MC_THRUST_ANGLE_SIGMA_DEG, "value": float(np.degrees(ang)), "axis": axis.tolist()},
+        {"dispersion": "fixed", "variable": "min_impulse_n_s", "value": MC_MIN_IMPULSE_N_S},
+        {"dispersion": "NormalVectorCartDispersion", "variable": "handover_navigation_error",
+         "mean": [0.0] * 6, "stdDeviation": [PRIOR_SIGMA_M] * 3 + [PRIOR_SIGMA_M_S] * 3,
+         "value": "drawn in run() from the run's seed"},
+    ]
+    return records, {"start_state": tuple(start), "thrust": ThrustErrors(scale, R, MC_MIN_IMPULSE_N_S)}
+
+
+def mc_run(task: dict) -> dict:
+    """One Monte Carlo run (a task of the executor): :func:`run` with the run's dispersions; its
+    outcome as ``montecarlo.json`` records it and a thinned trajectory for the figure."""
+    records, kw = mc_dispersions(task["seed"], task["start_state"])
+    r = run(task["phone"], seed=task["seed"], sensor_rate_hz=task["rate"], preview=task["preview"],
+            max_time_s=task["max_time_s"], case=task["case"], environment=task["environment"], **kw)
+    s = r["summary"]
+    dropouts = sum(s["dropouts_by_reason"].values())
+    traj = r["log"]["cam_true"][:: max(1, len(r["log"]["cam_true"]) // 200)]
+    return {"phone": task["phone"] or "ideal", "seed": task["seed"],
+            "arrival_error_m": s["final_position_error_norm_m"] if s["arrived"] else None,
+            "arrival_time_s": s["time_s"], "delta_v_m_s": s["delta_v_m_s"], "dropouts": dropouts,
+            "dropouts_by_reason": s["dropouts_by_reason"], "wrong_locks": s["wrong_locks"], "frames": s["frames"],
+            "dispersions": records, "trajectory_cam_m": np.asarray(traj).tolist(), "wall_s": s["wall_s"]}
+
+
+def order_statistic_interval(values, q: float, level: float = 0.90):
+    """A distribution-free interval for the ``q`` quantile: the order statistics ``[x_(l), x_(u)]``
+    with ``P(x_(l) <= xi_q <= x_(u)) >= level`` by the binomial law of how many samples fall below
+    ``xi_q``; a bound the sample is too small for is None.
+
+    Parameters
+    ----------
+    values : array_like, shape (n,)
+    q : float
+        The quantile, 0-1.
+    level : float
+        The interval's coverage.
+
+    Returns
+    -------
+    [lo, hi] : list of float or None
+    """
+    from scipy.stats import binom
+
+    x = np.sort(np.asarray(values, float))
+    n = x.size
+    if n == 0:
+        return [None, None]
+    tail = (1.0 - level) / 2
+    cdf = binom.cdf(np.arange(n + 1), n, q)  # cdf[j] = P(fewer than j + 1 samples below xi_q)
+    lows = [j for j in range(1, n + 1) if cdf[j - 1] <= tail]  # P(B < l) <= tail
+    highs = [j for j in range(1, n + 1) if cdf[j - 1] >= 1 - tail]  # P(B < u) >= 1 - tail
+    return [float(x[max(lows) - 1]) if lows else None, float(x[min(highs) - 1]) if highs else None]
+
+
+def mc_percentiles(runs: list[dict]) -> dict:
+    """``{key: {"p50", "p90", "p99", "ci90": {"p50": [lo, hi], ...}, "n", "missing"}}`` over the runs
+    (a run that never arrived has no arrival error or time: counted in ``missing``)."""
+    out = {}
+    for key in MC_KEYS:
+        v = np.array([r[key] for r in runs if r[key] is not None], float)
+        out[key] = {"n": int(v.size), "missing": len(runs) - int(v.size)}
+        for q, name in ((0.5, "p50"), (0.9, "p90"), (0.99, "p99")):
+            out[key][name] = float(np.quantile(v, q)) if v.size else None
+        out[key]["ci90"] = {name: order_statistic_interval(v, q) for q, name in ((0.5, "p50"), (0.9, "p90"), (0.99, "p99"))}
+    return out
+
+
+def monte_carlo(phones, n: int, *, base_seed: int, start_state, rate: float, preview: bool, max_time_s: float,
+                case: str, environment: str, spec, out: Path) -> dict:
+    """``--monte-carlo N``: per phone N runs with dispersed true initial states, hand-over errors,
+    sensor seeds and thruster errors (:func:`mc_dispersions`), the ideal sensor on the same seeds and
+    dispersions; the runs on the project's executors (:func:`svgs_sim.studies.execution.open_executor`:
+    a process pool or Dask; each run is one task, so a cluster takes them unchanged). Writes
+    ``out/montecarlo.json`` and ``out/montecarlo.png``."""
+    from concurrent.futures import as_completed
+
+    from svgs_sim.studies.execution import open_executor
+
+    # the runs go to other processes by reference: this file as the importable module basilisk_docking
+    # (run as a script it is __main__; a spawned worker imports it by name from the folder added here)
+    import importlib
+
+    here = str(Path(__file__).resolve().parent)
+    if here not in sys.path:
+        sys.path.insert(0, here)
+    task_fn = importlib.import_module("basilisk_docking").mc_run
+    seeds = mc_seeds(base_seed, n)
+    tasks = [{"phone": ph, "seed": sd, "start_state": tuple(start_state), "rate": rate, "preview": preview,
+              "max_time_s": max_time_s, "case": case, "environment": environment}
+             for ph in [None, *phones] for sd in seeds]
+    results = []
+    with open_executor(spec) as ex:
+        futs = [ex.submit(task_fn, t) for t in tasks]
+        for k, f in enumerate(as_completed(futs), 1):
+            r = f.result()
+            results.append(r)
+            print(f"monte carlo: {k}/{len(tasks)} runs ({r['phone']}, seed {r['seed']}: "
+                  f"delta-v {r['delta_v_m_s'] * 100:.2f} cm/s)", file=sys.stderr, flush=True)
+    order = {sd: i for i, sd in enumerate(seeds)}
+    by = {ph: sorted([r for r in results if r["phone"] == ph], key=lambda r: order[r["seed"]])
+          for ph in ["ideal", *phones]}
+    obj = {"sensor_rate_hz": rate, "runs_per_sensor": n, "base_seed": base_seed, "case": case,
+           "environment": environment, "preview": preview, "start_state": list(start_state),
+           "dispersion_sigmas": {"start_position_m_at_30m": list(MC_START_SIGMA_M),
+                                 "start_attitude_deg": MC_START_ATTITUDE_SIGMA_DEG,
+                                 "thrust_scale": MC_THRUST_SCALE_SIGMA, "thrust_misalignment_deg": MC_THRUST_ANGLE_SIGMA_DEG,
+                                 "min_impulse_n_s": MC_MIN_IMPULSE_N_S,
+                                 "handover_position_m": PRIOR_SIGMA_M, "handover_velocity_m_s": PRIOR_SIGMA_M_S},
+           "sensors": {ph: {"runs": by[ph], "percentiles": mc_percentiles(by[ph])} for ph in phones},
+           "ideal_runs": by["ideal"], "ideal_percentiles": mc_percentiles(by["ideal"])}
+    if len(phones) == 1:  # the issue's layout for one phone: its runs and percentiles at the top
+        obj["runs"], obj["percentiles"] = by[phones[0]], obj["sensors"][phones[0]]["percentiles"]
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "montecarlo.json").write_text(json.dumps(obj, indent=1) + "\n", encoding="utf-8")
+    plot_monte_carlo(by, out / "montecarlo.png", f"Monte Carlo, {n} runs per sensor, {rate:g} frames/s, "
+                                                 f"{start_state[2]:g} m -> {GOAL_Z_M:g} m")
+    return obj
+
+
+def plot_monte_carlo(by: dict, path: Path, title: str) -> None:
+    """The dispersion figure: each run's true camera path (lateral offset against range), the
+    arrival errors and the delta-v per sensor."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(13, 4), constrained_layout=True)
+    FigureCanvasAgg(fig)
+    ax = fig.subplots(1, 3)
+    colors = dict(zip(by, ("k", "tab:blue", "tab:orange", "tab:green")))
+    for ph, runs in by.items():
+        for i, r in enumerate(runs):
+            tr = np.asarray(r["trajectory_cam_m"])
+            if tr.size:
+                ax[0].plot(tr[:, 2], np.hypot(tr[:, 0], tr[:, 1]) * 100, color=colors[ph], lw=0.7, alpha=0.6,
+                           label=ph if i == 0 else None)
+        arr = [r["arrival_error_m"] * 100 for r in runs if r["arrival_error_m"] is not None]
+        ax[1].hist(arr, bins=20, histtype="step", color=colors[ph], label=f"{ph} ({len(arr)} arrived)")
+        ax[2].hist([r["delta_v_m_s"] * 100 for r in runs], bins=20, histtype="step", color=colors[ph], label=ph)
+    if not any(r["arrival_error_m"] is not None for runs in by.values() for r in runs):
+        ax[1].text(0.5, 0.5, "no run arrived within the time limit", ha="center", va="center",
+                   transform=ax[1].transAxes)
+    ax[0].invert_xaxis()
+    ax[0].set_xlabel("range along the pattern's axis, m")
+    ax[0].set_ylabel("lateral offset, cm")
+    ax[0].set_title("true camera paths", fontsize=9)
+    ax[1].set_xlabel("arrival error (final position against the goal), cm")
+    ax[2].set_xlabel("delta-v, cm/s")
+    for a in ax:
+        a.legend(fontsize=7)
+    fig.suptitle(title, fontsize=10)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=80)
 
 
 # ----------------------------------------------------------------------------- figures
@@ -752,10 +1006,17 @@ def main(argv=None) -> dict:
     ap.add_argument("--phones", default="galaxy-nexus,htc-amaze-4g",
                     help="comma-separated phone profiles flown after the ideal sensor")
     ap.add_argument("--sensor-rate-hz", type=float, default=None,
-                    help="frames/s of the sensor in this run (default 0.25; --quick 0.5)")
+                    help=f"frames/s of the sensor (default the phone's own, {PHONE_FRAME_RATE_HZ:g}; the committed "
+                         "single runs of docs/figures were made at 0.25)")
+    ap.add_argument("--monte-carlo", type=int, default=None, metavar="N",
+                    help="N runs per sensor with dispersed initial states, hand-over errors, sensor seeds and "
+                         "thruster errors, and the ideal sensor on the same seeds: OUT/montecarlo.json and .png")
+    ap.add_argument("--processes", type=int, default=None, help="Monte Carlo: a local pool of N processes (0: here)")
+    ap.add_argument("--workers", type=int, default=None, help="Monte Carlo: a Dask LocalCluster of N workers")
+    ap.add_argument("--scheduler", default=None, help="Monte Carlo: a running Dask scheduler (tcp://HOST:PORT)")
     ap.add_argument("--preview", action="store_true", help="the phones' 640 x 480 preview stream")
     ap.add_argument("--quick", action="store_true",
-                    help="a bounded form for the test suite: from 5 m, the preview stream, 40 s at most")
+                    help="a bounded form for the test suite: from 5 m, the preview stream, 40 s at most (the rate kept)")
     ap.add_argument("--max-time-s", type=float, default=None, help="simulated time limit, s (default 1200)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default="docs/figures", help="folder for basilisk_docking*.png and .json")
@@ -777,7 +1038,7 @@ def main(argv=None) -> dict:
                     help="start this far out along the pattern's axis, m (default 30; --quick 5)")
     args = ap.parse_args(argv)
     phones = [p.strip() for p in args.phones.split(",") if p.strip()]
-    rate = args.sensor_rate_hz or (0.5 if args.quick else 0.25)
+    rate = args.sensor_rate_hz or PHONE_FRAME_RATE_HZ
     if not (np.isfinite(rate) and rate > 0):
         raise InputError(f"--sensor-rate-hz: expected a positive rate, got {rate!r}")
     start = (0.1, -0.05, 5.0, 2.0, -1.0, 3.0) if args.quick else START_STATE
@@ -790,6 +1051,21 @@ def main(argv=None) -> dict:
     max_time = args.max_time_s or (40.0 if args.quick else 1200.0)
     preview = args.preview or args.quick
     out = Path(args.out)
+    if args.monte_carlo is not None:
+        from svgs_sim.studies.execution import executor_spec
+
+        if args.monte_carlo < 1:
+            raise InputError(f"--monte-carlo: expected a positive number of runs, got {args.monte_carlo}")
+        spec = executor_spec(args.processes, args.workers, args.scheduler)
+        mc = monte_carlo(phones, args.monte_carlo, base_seed=args.seed, start_state=start, rate=rate, preview=preview,
+                         max_time_s=max_time, case=args.case, environment=args.environment, spec=spec, out=out)
+        print(f"wrote {out}/montecarlo.json and montecarlo.png")
+        return mc
+    return single_runs(args, phones, start, rate, preview, max_time, out)
+
+
+def single_runs(args, phones, start, rate: float, preview: bool, max_time: float, out: Path) -> dict:
+    """The ideal sensor, then each phone, once each: their figures and ``basilisk_docking*.json``."""
     results = {}
     for phone in [None] + phones:
         r = run(phone, start_state=start, sensor_rate_hz=rate, preview=preview, seed=args.seed, max_time_s=max_time,

@@ -42,7 +42,8 @@ def test_cw_transition_matches_the_closed_form():
 def test_quick_form_runs_and_writes_its_figures(tmp_path):
     pytest.importorskip("Basilisk", reason="the basilisk extra is not installed (pip install -e \".[basilisk]\")")
     ex = _example()
-    summary = ex.main(["--quick", "--phones", "galaxy-nexus", "--max-time-s", "16", "--out", str(tmp_path)])
+    summary = ex.main(["--quick", "--phones", "galaxy-nexus", "--max-time-s", "16", "--sensor-rate-hz", "0.5",
+                       "--out", str(tmp_path)])
     assert (tmp_path / "basilisk_docking_quick_galaxy-nexus.png").is_file()
     assert json.loads((tmp_path / "basilisk_docking_quick.json").read_text()) == json.loads(json.dumps(summary))
     ideal, nexus = summary["ideal"], summary["galaxy-nexus"]
@@ -62,7 +63,8 @@ def test_the_orbit_form_crosses_the_eclipse_entry_where_basilisk_puts_it(tmp_pat
     Earth's horizon dip at the shadow's edge, asin(R / (R + h)) - 90 = -19.8 deg from 407 km."""
     pytest.importorskip("Basilisk", reason="the basilisk extra is not installed (pip install -e \".[basilisk]\")")
     ex = _example()
-    summary = ex.main(["--quick", "--phones", "galaxy-nexus", "--max-time-s", "16", "--environment", "orbit",
+    summary = ex.main(["--quick", "--phones", "galaxy-nexus", "--max-time-s", "16", "--sensor-rate-hz", "0.5",
+                       "--environment", "orbit",
                        "--case", "rbar-above", "--eclipse-in-s", "7", "--out", str(tmp_path)])
     assert (tmp_path / "basilisk_docking_orbit_rbar_above_quick_phase_galaxy-nexus.png").is_file()
     nexus = summary["galaxy-nexus"]
@@ -89,3 +91,56 @@ def test_the_eclipse_exit_follows_the_entry_by_the_shadows_arc():
     entry = ex.eclipse_entry_phase_deg(sun_N, 0.0, 51.6, r, "entry")
     exit_ = ex.eclipse_entry_phase_deg(sun_N, 0.0, 51.6, r, "exit")
     assert (exit_ - entry) % 360.0 == pytest.approx(2 * np.degrees(np.arcsin(R / r)), abs=0.02)
+
+
+def test_the_order_statistic_interval_covers_the_quantile_at_its_level():
+    """The percentiles' intervals of --monte-carlo: over 3000 normal samples of 50, the interval of the
+    0.9 quantile holds the true one (scipy's normal quantile, not the code's) at least 90 % of the time,
+    within the binomial noise of the check; a sample too small for a bound gives None."""
+    from scipy.stats import norm
+
+    ex = _example()
+    rng = np.random.default_rng(0)
+    hits, n = 0, 3000
+    for _ in range(n):
+        lo, hi = ex.order_statistic_interval(rng.normal(size=50), 0.9)
+        hits += lo is not None and hi is not None and lo <= norm.ppf(0.9) <= hi
+    assert hits / n >= 0.90 - 3 * np.sqrt(0.09 / n)
+    assert ex.order_statistic_interval([1.0, 2.0, 3.0], 0.5) == [None, None]
+    assert ex.order_statistic_interval(np.arange(1, 101), 0.99)[1] is None
+
+
+def test_monte_carlo_dispersions_are_seeded_and_distinct():
+    ex = _example()
+    seeds = ex.mc_seeds(0, 3)
+    assert len(set(seeds)) == 3 and seeds == ex.mc_seeds(0, 3)
+    a, ka = ex.mc_dispersions(seeds[0], ex.START_STATE)
+    b, _ = ex.mc_dispersions(seeds[0], ex.START_STATE)
+    c, _ = ex.mc_dispersions(seeds[1], ex.START_STATE)
+    assert a == b and a != c
+    R = ka["thrust"].R_error
+    np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)  # a rotation
+    ang = np.degrees(np.arccos((np.trace(R) - 1) / 2))
+    assert ang == pytest.approx(abs(next(r for r in a if r["variable"] == "thrust_misalignment_deg")["value"]), abs=1e-9)
+    thr = ex.ThrustErrors(1.0, np.eye(3), 5e-4)
+    weak = np.array([1e-5, 0.0, 0.0])  # 1e-4 N s over the 1 s period: below the bit
+    assert np.all(thr.apply(weak) == 0) and np.allclose(thr.apply(100 * weak), 100 * weak)
+
+
+@pytest.mark.render
+@pytest.mark.slow
+def test_the_monte_carlo_writes_its_runs_and_percentiles(tmp_path):
+    """The issue's acceptance form, shortened to 6 s of flight: distinct seeds, the phone's 2 frames/s,
+    the ideal sensor on the same seeds, percentiles of every quantity."""
+    pytest.importorskip("Basilisk", reason="the basilisk extra is not installed (pip install -e \".[basilisk]\")")
+    ex = _example()
+    ex.main(["--quick", "--monte-carlo", "2", "--phones", "galaxy-nexus", "--max-time-s", "6", "--processes", "2",
+             "--out", str(tmp_path)])
+    mc = json.loads((tmp_path / "montecarlo.json").read_text())
+    assert (tmp_path / "montecarlo.png").is_file() and mc["sensor_rate_hz"] == 2.0
+    assert len({r["seed"] for r in mc["runs"]}) == 2 and [r["seed"] for r in mc["ideal_runs"]] == [r["seed"] for r in mc["runs"]]
+    for r in mc["runs"]:
+        assert r["frames"] >= 10 and r["delta_v_m_s"] > 0 and set(r) >= {"arrival_error_m", "arrival_time_s",
+                                                                        "dropouts", "dropouts_by_reason", "wrong_locks"}
+    assert set(mc["percentiles"]) == {"arrival_error_m", "arrival_time_s", "delta_v_m_s", "dropouts", "wrong_locks"}
+    assert set(mc["percentiles"]["delta_v_m_s"]) >= {"p50", "p90", "p99", "ci90"}

@@ -214,12 +214,15 @@ def test_rebuild_report_from_the_stored_results(tmp_path):
     assert rebuild_report(out) == path
     assert (out / "results.csv").stat().st_mtime_ns == mtime  # no trial ran
     again = json.loads((out / "honest_count.json").read_text())
-    assert again["counts"] == first["counts"] and again["headline_reading"] == "abs_mean"
-    assert again["counts"]["abs_mean"]["fitted"] == 2  # the yaw mean error at 5 and 10 m
+    assert again["counts"] == first["counts"] and again["headline_reading"] == "mean_abs"
+    assert again["counts"]["mean_abs"]["not_predictable"] == 12 and again["counts"]["mean_abs"]["fitted"] == 0
     with open(out / "verdicts.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
-    assert len(rows) == 24 and {r["verdict"] for r in rows} <= {"within_2x", "below", "above", "fitted", "no_solution"}
-    assert sum(r["verdict"] == "fitted" for r in rows) == 2
+    assert len(rows) == 24 and {r["verdict"] for r in rows} <= {"within_2x", "below", "above", "no_solution",
+                                                                 "not_predictable"}
+    assert {r["verdict"] for r in rows if r["statistic"] == "mean_error"} == {"not_predictable"}
+    # the yaw mean error at 5 and 10 m: the holder's fitted yaw was fitted to them, said beside them
+    assert sum(bool(r["fitted_by"]) for r in rows) == 2
     with open(out / "summary.csv", newline="") as fh:
         stats = {r["statistic"] for r in csv.DictReader(fh)}
     assert {"abs_bias", "mean_abs_error", "rms", "std"} <= stats
@@ -234,17 +237,20 @@ def test_rebuild_report_from_the_stored_results(tmp_path):
 @pytest.mark.skipif(not (REPO / "docs/reports/campaign-galaxy-nexus/results.csv").is_file(),
                     reason="the committed Galaxy Nexus campaign is not in this checkout")
 @pytest.mark.slow
-def test_the_committed_nexus_campaign_counts_its_five_fitted_cells(tmp_path):
+def test_the_committed_nexus_campaign_scores_only_its_std_cells(tmp_path):
+    """Rebuilt from its stored results: the 30 mean-error cells not predictable (the five yaw ones
+    naming the fit that consumed them), the 30 std cells counted."""
     out = tmp_path / "campaign-galaxy-nexus"
     shutil.copytree(REPO / "docs/reports/campaign-galaxy-nexus", out)
     rebuild_report(out)
     counts = json.loads((out / "honest_count.json").read_text())["counts"]
     with open(out / "verdicts.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
-    fitted = {(float(r["range_m"]), r["component"], r["statistic"]) for r in rows if r["verdict"] == "fitted"}
-    assert fitted == {(r, "yaw_deg", "mean_error") for r in (5.0, 10.0, 15.0, 20.0, 30.0)}
+    fitted_by = {(float(r["range_m"]), r["component"], r["statistic"]) for r in rows if r["fitted_by"]}
+    assert fitted_by == {(r, "yaw_deg", "mean_error") for r in (5.0, 10.0, 15.0, 20.0, 30.0)}
+    assert {r["verdict"] for r in rows if r["statistic"] == "mean_error"} == {"not_predictable"}
     for x in MEAN_READINGS:
         c = counts[x]
-        assert c["cells"] == 60 and c["predicted"] == 55
-        assert c["within_2x"] + c["below"] + c["above"] + c["no_solution"] == 55
-        assert c["by_statistic"]["mean_error"]["predicted"] == 25
+        assert c["cells"] == 60 and c["predicted"] == 30 and c["not_predictable"] == 30
+        assert c["within_2x"] + c["below"] + c["above"] + c["no_solution"] == 30
+        assert c["by_statistic"]["mean_error"]["predicted"] == 0

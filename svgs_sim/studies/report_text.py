@@ -36,7 +36,7 @@ from .store import read_table
 from .tof_study.design import PAPER_FIG14_Z_MM
 
 #: The pages that carry generated passages, relative to the repository root.
-PAGES = ("README.md", "docs/index.md", "docs/studies.md", "docs/tof.md")
+PAGES = ("README.md", "docs/index.md", "docs/studies.md", "docs/tof.md", "docs/orbit.md")
 #: The command that writes them (quoted in each passage's page).
 COMMAND = "python -m svgs_sim.studies.report_text"
 BLOCK_RE = re.compile(r"(<!-- generated: (?P<name>[\w.-]+) -->\n)(?P<body>.*?)(<!-- /generated: (?P=name) -->)", re.S)
@@ -204,6 +204,32 @@ def tof_headline(root: Path) -> str:
             f"far quieter there than the one measured, a gap measured but not closed ([ToF](tof.md)).\n")
 
 
+def sun_studies(root: Path) -> str:
+    """The committed on-orbit availability studies, per study and phone: trials solved (with the sun
+    above and below the pattern plane), wrong locks (those the consistency test flags) and the wrong
+    locks the paper's gates would have made, from each study's ``summary.json``."""
+    rows = ["| study | phone | solved | sun on the face (el > 0) | sun behind (el < 0) | wrong locks (flagged) "
+            "| with the paper's gates |", "|---|---|---|---|---|---|---|"]
+    for study, what in (("sun-study", "grid, the lab's breadboard"), ("sun-study-3u", "grid, the shipped 3U body"),
+                        ("sun-study-albedo", "the Earth behind, three albedos")):
+        for ph in PHONES:
+            path = root / "docs" / "reports" / f"{study}-{ph}" / "summary.json"
+            if not path.is_file():
+                continue
+            cells = _json(path)["cells"]
+
+            def tally(sel, key):
+                return sum(c[key] for c in cells if sel(c))
+
+            n, ok = tally(lambda c: True, "trials"), tally(lambda c: True, "solved")
+            up_n, up = tally(lambda c: c["sun_elevation_deg"] > 0, "trials"), tally(lambda c: c["sun_elevation_deg"] > 0, "solved")
+            dn_n, dn = tally(lambda c: c["sun_elevation_deg"] < 0, "trials"), tally(lambda c: c["sun_elevation_deg"] < 0, "solved")
+            rows.append(f"| {what} | {PHONE_NAMES[ph]} | {ok}/{n} | {up}/{up_n} | {dn}/{dn_n} | "
+                        f"{tally(lambda c: True, 'wrong_lock')} ({tally(lambda c: True, 'wrong_lock_flagged')}) | "
+                        f"{tally(lambda c: True, 'wrong_lock_paper_gates')} |")
+    return "\n".join(rows) + "\n"
+
+
 def _mechanisms(phone: str) -> Callable[[Path], str]:
     def block(root: Path) -> str:
         rows = cell_mechanisms(read_table(_campaign(root, phone) / "results.csv"), phone)
@@ -222,6 +248,7 @@ BLOCKS: dict[str, Callable[[Path], str]] = {
     "weak-mode": weak_mode,
     "tof-tables": tof_tables,
     "tof-headline": tof_headline,
+    "sun-studies": sun_studies,
     **{f"mechanisms-{ph}": _mechanisms(ph) for ph in PHONES},
 }
 
