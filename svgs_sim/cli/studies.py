@@ -166,8 +166,10 @@ def _register_campaign(sub) -> None:
         "paper's calibration practice (a focal length estimated from rendered frames at range-finder ranges, the "
         "principal point assumed at the image centre, no distortion). Writes DIR/results.csv (one row per trial, "
         "resumable: rerun the same command to finish an interrupted run), DIR/summary.csv, DIR/summary.json and a "
-        "self-contained DIR/report.html with Tables 2-5 beside the paper's, the Cramer-Rao bound, histograms, sample "
-        "images and, with --budget, the error budget.",
+        "self-contained DIR/report.html with Tables 2-5 beside the paper's (the app as published: every solution "
+        "reported, the consistency test's refusals beside it; the standard deviations scored, the mean errors shown "
+        "with the floor their scatter implies but not scored), the Cramer-Rao bound, histograms, sample images and, "
+        "with --budget, the error budget.",
     )
     p.add_argument("--camera", required=True, help="camera profile (htc-amaze-4g, galaxy-nexus, or a .toml path)")
     p.add_argument("--trials", type=int, default=200, metavar="N", help="trials per range (default 200); a rendered trial costs ~1-2 s of one core (docs/performance.md), "
