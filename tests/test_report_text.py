@@ -35,7 +35,8 @@ def _copy_root(tmp_path: Path) -> Path:
     for p in PAGES:
         (tmp_path / p).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(ROOT / p, tmp_path / p)
-    (tmp_path / "docs" / "reports").symlink_to(ROOT / "docs" / "reports", target_is_directory=True)
+    for data in ("reports", "figures"):  # read only: the test never writes the figure (--check, fill)
+        (tmp_path / "docs" / data).symlink_to(ROOT / "docs" / data, target_is_directory=True)
     return tmp_path
 
 

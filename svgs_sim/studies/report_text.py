@@ -36,7 +36,7 @@ from .store import read_table
 from .tof_study.design import PAPER_FIG14_Z_MM
 
 #: The pages that carry generated passages, relative to the repository root.
-PAGES = ("README.md", "docs/index.md", "docs/studies.md", "docs/tof.md", "docs/orbit.md")
+PAGES = ("README.md", "docs/index.md", "docs/studies.md", "docs/tof.md", "docs/orbit.md", "docs/basilisk.md")
 #: The command that writes them (quoted in each passage's page).
 COMMAND = "python -m svgs_sim.studies.report_text"
 BLOCK_RE = re.compile(r"(<!-- generated: (?P<name>[\w.-]+) -->\n)(?P<body>.*?)(<!-- /generated: (?P=name) -->)", re.S)
@@ -230,6 +230,33 @@ def sun_studies(root: Path) -> str:
     return "\n".join(rows) + "\n"
 
 
+def basilisk_results(root: Path) -> str:
+    """The committed docking run (``docs/figures/basilisk_docking.json``): per sensor the arrival, the
+    delta-v, the frames solved and accepted with the dropouts, the final and navigation errors."""
+    d = _json(root / "docs" / "figures" / "basilisk_docking.json")
+    rows = ["| sensor | arrived | delta-v | frames solved / accepted | final error against the goal (x, y, z) | "
+            "navigation error at arrival (x, y, z) |", "|---|---|---|---|---|---|"]
+    for key, name in (("ideal", "ideal"), *((ph, PHONE_NAMES[ph]) for ph in PHONES if ph in d)):
+        r = d[key]
+        drop = ", ".join(f"{n} `{k}`" for k, n in r["dropouts_by_reason"].items())
+        mm = lambda v: "(" + ", ".join(f"{round(1000 * x, 1) or 0.0:.1f}" for x in v) + ") mm"  # noqa: E731
+        rows.append(f"| {name} | {'%g s' % r['time_s'] if r['arrived'] else 'no'} | {100 * r['delta_v_m_s']:.2f} cm/s | "
+                    f"{r['frames_solved']} / {r['frames_accepted']}{f' ({drop})' if drop else ''} | "
+                    f"{mm(r['final_position_error_m'])} | {mm(r['final_navigation_error_m'])} |")
+    for ph in PHONES:
+        c = d.get(ph, {}).get("cost_vs_ideal")
+        if c:
+            rows.append("")
+            rows.append(f"- {PHONE_NAMES[ph]} against the ideal sensor: delta-v {100 * c['delta_v_m_s']:+.2f} cm/s "
+                        f"({100 * c['delta_v_m_s'] / d['ideal']['delta_v_m_s']:+.1f} %), time "
+                        f"{'n/a' if c['time_s'] is None else '%+g s' % c['time_s']}, final error "
+                        f"{1000 * c['final_position_error_norm_m']:+.1f} mm; first solution at "
+                        f"{d[ph]['first_solved_range_m']:.1f} m.")
+    walls = ", ".join(f"{d[k]['wall_s']:g} s for {'the ideal run' if k == 'ideal' else PHONE_NAMES[k]}" for k in d)
+    return ("\n".join(rows) + f"\n\nRun at {d['galaxy-nexus']['sensor_rate_hz']:g} frames/s with a "
+            f"{d['galaxy-nexus']['latency_s']:g} s latency; wall time (a timing, of this machine): {walls}.\n")
+
+
 def _mechanisms(phone: str) -> Callable[[Path], str]:
     def block(root: Path) -> str:
         rows = cell_mechanisms(read_table(_campaign(root, phone) / "results.csv"), phone)
@@ -249,6 +276,7 @@ BLOCKS: dict[str, Callable[[Path], str]] = {
     "tof-tables": tof_tables,
     "tof-headline": tof_headline,
     "sun-studies": sun_studies,
+    "basilisk-results": basilisk_results,
     **{f"mechanisms-{ph}": _mechanisms(ph) for ph in PHONES},
 }
 
