@@ -156,3 +156,16 @@ def test_a_message_names_the_option_not_the_api_argument(tmp_path, capsys):
             if a.option_strings and a.dest != "help":
                 assert named_by_option(p, f"{a.dest}: expected x").startswith(max(a.option_strings, key=len))
     assert named_by_option(build_parser(), "no key here: x") == "no key here: x"
+
+
+def test_plan_only_refuses_a_folder_holding_another_studys_store(tmp_path, capsys):
+    """The run refuses a folder whose store has other parameters; --plan-only now says so too."""
+    out = tmp_path / "c"
+    base = ["campaign", "--camera", "galaxy-nexus", "--trial-kind", "geometric", "--trials", "4", "--out", str(out),
+            "--processes", "0", "--no-progress"]
+    assert main([*base, "--ranges", "5"]) == 0
+    capsys.readouterr()
+    rc = main([*base, "--ranges", "10", "--plan-only"])
+    line = _one_error_line(capsys.readouterr().err)
+    assert rc == 2 and "different parameters" in line
+    assert main([*base, "--ranges", "5", "--plan-only"]) == 0  # its own store: the plan

@@ -62,7 +62,8 @@ def cmd_exposure_study(args) -> int:
     from svgs_sim.cli.outdir import output_folder
 
     out = Path(args.out or f"exposure-study-{Path(str(args.camera)).stem}")
-    if announce_plan(args, "render", cfg.n_trials, len(cfg.ranges_m) * len(cfg.remedies), spec):
+    if announce_plan(args, "render", cfg.n_trials, len(cfg.ranges_m) * len(cfg.remedies), spec,
+                     manifest=cfg.manifest(), out=out):
         return 0
     with output_folder(out), text_to_stderr(args.json):  # --out made and probed before any work
         lines, stats = run_exposure_study(cfg, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress)

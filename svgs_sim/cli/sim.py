@@ -274,7 +274,8 @@ def cmd_range_sweep(args) -> int:
     from svgs_sim.cli.outdir import output_folder
 
     out = Path(args.out or f"range-sweep-{Path(str(args.camera)).stem}")
-    if announce_plan(args, "render", cfg.n_trials, len(cfg.ranges_m) * cfg.poses, spec):
+    if announce_plan(args, "render", cfg.n_trials, len(cfg.ranges_m) * cfg.poses, spec, manifest=cfg.manifest(),
+                     out=out):
         return 0
     with output_folder(out), text_to_stderr(args.json):
         table, stats = run_range_sweep(cfg, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress)

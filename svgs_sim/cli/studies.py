@@ -56,7 +56,8 @@ def add_executor_options(p, *, plan_only: bool = False) -> None:
                        "runs and nothing is written")
 
 
-def announce_plan(args, kind: str, n_trials: int, n_renders: int, spec, *, note: str = "") -> bool:
+def announce_plan(args, kind: str, n_trials: int, n_renders: int, spec, *, note: str = "", manifest=None,
+                  out=None, ignore=()) -> bool:
     """Print a study's plan on stderr before any work (:func:`svgs_sim.studies.execution.plan_study`:
     trials, renders, the estimate from the cost table, a warning above an hour and when
     ``--processes``/``--workers`` exceeds the cores).
@@ -72,6 +73,10 @@ def announce_plan(args, kind: str, n_trials: int, n_renders: int, spec, *, note:
     spec : svgs_sim.studies.execution.ExecutorSpec
     note : str
         Said after the counts.
+    manifest, out, ignore
+        The study's store parameters (``config.manifest()``), its folder (default ``args.out``) and
+        the parameters decided by work still to come: ``--plan-only`` refuses a folder holding
+        another study's store, as the run would (:func:`svgs_sim.studies.store.check_resumable`).
 
     Returns
     -------
@@ -85,22 +90,25 @@ def announce_plan(args, kind: str, n_trials: int, n_renders: int, spec, *, note:
         print(line, file=sys.stderr, flush=True)
     if not getattr(args, "plan_only", False):
         return False
-    plan_only_checks(args, spec)
+    plan_only_checks(args, spec, manifest=manifest, out=out, ignore=ignore)
     if getattr(args, "json", False):
         print_plan_json(plan.to_json())
     return True
 
 
-def plan_only_checks(args, spec) -> None:
+def plan_only_checks(args, spec, *, manifest=None, out=None, ignore=()) -> None:
     """What a run checks before its work and ``--plan-only`` would otherwise skip: the executor
     (Dask importable, the scheduler reachable) and the output folder (not someone else's files a
     study would overwrite). The arguments themselves were checked before (svgs_sim.cli.validate)."""
     from svgs_sim.studies.execution import check_executor
-    from svgs_sim.studies.store import refuse_foreign_outputs
+    from svgs_sim.studies.store import check_resumable, refuse_foreign_outputs
 
     check_executor(spec)
-    if getattr(args, "out", None):
-        refuse_foreign_outputs(args.out)
+    out = out or getattr(args, "out", None)
+    if out:
+        refuse_foreign_outputs(out)
+        if manifest is not None:  # a folder holding another study's store: refused, as the run refuses it
+            check_resumable(out, manifest, ignore=ignore)
 
 
 def print_plan_json(plan: dict) -> None:
@@ -357,7 +365,7 @@ def cmd_sun_study(args) -> int:
            "--earth-albedos=" + ",".join(f"{b:g}" for b in config.earth_albedos)] if config.earth else []),
         *(["--body", config.body] if config.body != "plate" else []),
         *executor_argv(args)]
-    if announce_plan(args, "render", config.n_trials, config.n_trials, spec):
+    if announce_plan(args, "render", config.n_trials, config.n_trials, spec, manifest=config.manifest()):
         return 0
     with output_folder(out), text_to_stderr(args.json):  # --out made and probed before any work
         s = run_sun_study(config, out, spec, chunk_size=args.chunk_size, progress=not args.no_progress,
@@ -442,7 +450,8 @@ def cmd_campaign(args) -> int:
                      note="; ".join(n for n, on in (
                          ("without the error budget's variants", config.budget),
                          ("the rendered focal calibration first",
-                          config.trial_kind == "render" and config.calibration == "paper")) if on)):
+                          config.trial_kind == "render" and config.calibration == "paper")) if on),
+                     manifest=config.manifest(), out=out, ignore=("calibration_error",)):
         return 0
     from svgs_sim.cli.outdir import output_folder
 
@@ -472,7 +481,7 @@ def cmd_merge_range(args) -> int:
              "--pattern", config.pattern] + executor_argv(args)
     n_cases = len(config.cases())
     if announce_plan(args, "render", n_cases * len(config.ranges_m) * config.exposures,
-                     n_cases * len(config.ranges_m), spec):
+                     n_cases * len(config.ranges_m), spec, manifest=config.manifest(), out=out):
         return 0
     from svgs_sim.cli.outdir import output_folder
 
@@ -523,7 +532,7 @@ def cmd_sensitivity(args) -> int:
             1 if config.trial_kind == "render" else 0)
     if announce_plan(args, config.trial_kind, config.n_trials, renders, spec,
                      note=f"{args.method} over {len(config.varied)} parameter(s)"
-                     + ("; renders at most" if renders > 1 else "")):
+                     + ("; renders at most" if renders > 1 else ""), manifest=config.manifest(), out=out):
         return 0
     from svgs_sim.cli.outdir import output_folder
 
