@@ -36,7 +36,8 @@ from .store import read_table
 from .tof_study.design import PAPER_FIG14_Z_MM
 
 #: The pages that carry generated passages, relative to the repository root.
-PAGES = ("README.md", "docs/index.md", "docs/studies.md", "docs/tof.md", "docs/orbit.md", "docs/basilisk.md")
+PAGES = ("README.md", "docs/index.md", "docs/studies.md", "docs/tof.md", "docs/orbit.md", "docs/basilisk.md",
+         "docs/approach.md")
 #: The command that writes them (quoted in each passage's page).
 COMMAND = "python -m svgs_sim.studies.report_text"
 BLOCK_RE = re.compile(r"(<!-- generated: (?P<name>[\w.-]+) -->\n)(?P<body>.*?)(<!-- /generated: (?P=name) -->)", re.S)
@@ -257,6 +258,28 @@ def basilisk_results(root: Path) -> str:
             f"{d['galaxy-nexus']['latency_s']:g} s latency; wall time (a timing, of this machine): {walls}.\n")
 
 
+def approach_results(root: Path) -> str:
+    """The committed approaches (``docs/reports/approach-<phone>/summary.json``): frames solved, the
+    ranges they span, the failures, and per range bin the RMS x and pitch errors beside the CRLB."""
+    lines = []
+    for ph in PHONES:
+        d = _json(root / "docs" / "reports" / f"approach-{ph}" / "summary.json")
+        fails = ", ".join(f"{n} `{k}`" for k, n in d["failures"].items()) or "none"
+        lo, hi = d["solved_range_m"]
+        lines += [f"**{PHONE_NAMES[ph]}**: {d['solved']} of {d['frames']} frames solved, from {hi:g} m down to {lo:g} m; "
+                  f"failures: {fails}.", "",
+                  "| range bin (m) | frames solved | RMS x error (m) | x CRLB (m) | RMS pitch error (deg) | pitch CRLB (deg) |",
+                  "|---|---|---|---|---|---|"]
+        for b in d["rms_by_range"]:
+            if not b["solved"]:
+                continue
+            a, z = b["range_m"]
+            lines.append(f"| [{a:g}, {z:g}) | {b['solved']} / {b['frames']} | {b['rms_err_x_m']:.3g} | {b['rms_crlb_x_m']:.2g} | "
+                         f"{b['rms_err_pitch_deg']:.3g} | {b['rms_crlb_pitch_deg']:.2g} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
 def _mechanisms(phone: str) -> Callable[[Path], str]:
     def block(root: Path) -> str:
         rows = cell_mechanisms(read_table(_campaign(root, phone) / "results.csv"), phone)
@@ -277,6 +300,7 @@ BLOCKS: dict[str, Callable[[Path], str]] = {
     "tof-headline": tof_headline,
     "sun-studies": sun_studies,
     "basilisk-results": basilisk_results,
+    "approach-results": approach_results,
     **{f"mechanisms-{ph}": _mechanisms(ph) for ph in PHONES},
 }
 
