@@ -280,6 +280,34 @@ def approach_results(root: Path) -> str:
     return "\n".join(lines)
 
 
+#: The ToF study's runs that are not mechanisms switched on or off (the paper's rows, the sweeps).
+_TOF_NOT_VARIANTS = ("baseline", "paper table", "fig14 sweep", "long run")
+
+
+def tof_mechanisms(root: Path) -> str:
+    """Each mechanism the ToF study switched alone (``tof_stability.csv``): its fluctuation over the
+    paper's (Table 3 at 697 mm, Table 2 at 5712 mm), the range of the six ratios and how many are
+    within 2x, beside the baseline's."""
+    t = _tof_rows(root)
+    paper = {0.697: t[("paper table 3", 0.697, "fluctuation")], 5.712: t[("paper table 2", 5.712, "fluctuation")]}
+    runs = []
+    for (run, r, st) in t:
+        if st == "fluctuation" and r in paper and run not in runs and not run.startswith(_TOF_NOT_VARIANTS[1:]):
+            runs.append(run)
+    lines = ["| run | 697 mm: ratios (within 2x) | 5712 mm: ratios (within 2x) |", "|---|---|---|"]
+    for run in ["baseline", *[x for x in runs if x != "baseline"]]:
+        cells = []
+        for r in (0.697, 5.712):
+            v = t.get((run, r, "fluctuation"))
+            if v is None:
+                cells.append("-")
+                continue
+            q = v / paper[r]
+            cells.append(f"{q.min():.2f}-{q.max():.2f}x ({int(np.sum((q >= 0.5) & (q <= 2)))} of 6)")
+        lines.append(f"| {run} | {cells[0]} | {cells[1]} |")
+    return "\n".join(lines) + "\n"
+
+
 def _mechanisms(phone: str) -> Callable[[Path], str]:
     def block(root: Path) -> str:
         rows = cell_mechanisms(read_table(_campaign(root, phone) / "results.csv"), phone)
@@ -301,6 +329,7 @@ BLOCKS: dict[str, Callable[[Path], str]] = {
     "sun-studies": sun_studies,
     "basilisk-results": basilisk_results,
     "approach-results": approach_results,
+    "tof-mechanisms": tof_mechanisms,
     **{f"mechanisms-{ph}": _mechanisms(ph) for ph in PHONES},
 }
 
