@@ -308,6 +308,27 @@ def tof_mechanisms(root: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
+def sun_albedo(root: Path) -> str:
+    """The Earth behind the target at three albedos (``sun-study-albedo-<phone>/summary.json``): per
+    phone and albedo the trials solved and the wrong locks, and with the sun on the face (el > 0)
+    and 15 deg below the pattern plane."""
+    lines = ["| phone | albedo | solved | wrong locks | solved, sun on the face | wrong locks, sun 15 deg below |",
+             "|---|---|---|---|---|---|"]
+    for ph in PHONES:
+        path = root / "docs" / "reports" / f"sun-study-albedo-{ph}" / "summary.json"
+        if not path.is_file():
+            continue
+        cells = _json(path)["cells"]
+        for a in sorted({c["earth_albedo"] for c in cells}):
+            cs = [c for c in cells if c["earth_albedo"] == a]
+            up = [c for c in cs if c["sun_elevation_deg"] > 0]
+            low = [c for c in cs if c["sun_elevation_deg"] == -15.0]
+            lines.append(f"| {PHONE_NAMES[ph]} | {a:g} | {sum(c['solved'] for c in cs)}/{sum(c['trials'] for c in cs)} | "
+                         f"{sum(c['wrong_lock'] for c in cs)} | {sum(c['solved'] for c in up)}/{sum(c['trials'] for c in up)} | "
+                         f"{sum(c['wrong_lock'] for c in low)} |")
+    return "\n".join(lines) + "\n"
+
+
 def _mechanisms(phone: str) -> Callable[[Path], str]:
     def block(root: Path) -> str:
         rows = cell_mechanisms(read_table(_campaign(root, phone) / "results.csv"), phone)
@@ -330,6 +351,7 @@ BLOCKS: dict[str, Callable[[Path], str]] = {
     "basilisk-results": basilisk_results,
     "approach-results": approach_results,
     "tof-mechanisms": tof_mechanisms,
+    "sun-albedo": sun_albedo,
     **{f"mechanisms-{ph}": _mechanisms(ph) for ph in PHONES},
 }
 
