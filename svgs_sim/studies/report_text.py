@@ -329,6 +329,34 @@ def sun_albedo(root: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
+def sun_3u_detail(root: Path) -> str:
+    """The shipped 3U body's study (``sun-study-3u-<phone>/summary.json``): per phone, by the sun's
+    elevation, the trials solved and the wrong locks; the failures by reason and what the trials saw
+    (the mechanisms' counts)."""
+    lines = []
+    for ph in PHONES:
+        path = root / "docs" / "reports" / f"sun-study-3u-{ph}" / "summary.json"
+        if not path.is_file():
+            continue
+        cells = _json(path)["cells"]
+        by_el = []
+        for el in sorted({c["sun_elevation_deg"] for c in cells}):
+            cs = [c for c in cells if c["sun_elevation_deg"] == el]
+            by_el.append(f"{el:+g} deg: {sum(c['solved'] for c in cs)}/{sum(c['trials'] for c in cs)} solved, "
+                         f"{sum(c['wrong_lock'] for c in cs)} wrong locks")
+        reasons, mech = {}, {}
+        for c in cells:
+            for k, n in c["reasons"].items():
+                reasons[k] = reasons.get(k, 0) + n
+            for k, n in c["mechanisms"].items():
+                mech[k] = mech.get(k, 0) + n
+        lines.append(f"- {PHONE_NAMES[ph]}, by the sun's elevation over the pattern plane: " + "; ".join(by_el) + ". "
+                     "Failures: " + (", ".join(f"{n} `{k}`" for k, n in sorted(reasons.items(), key=lambda x: -x[1]))
+                                     or "none") + ". Trials with " + ", ".join(f"`{k}` {n}" for k, n in mech.items() if n)
+                     + f" (of {sum(c['trials'] for c in cells)}).")
+    return "\n".join(lines) + "\n"
+
+
 def _mechanisms(phone: str) -> Callable[[Path], str]:
     def block(root: Path) -> str:
         rows = cell_mechanisms(read_table(_campaign(root, phone) / "results.csv"), phone)
@@ -352,6 +380,7 @@ BLOCKS: dict[str, Callable[[Path], str]] = {
     "approach-results": approach_results,
     "tof-mechanisms": tof_mechanisms,
     "sun-albedo": sun_albedo,
+    "sun-3u-detail": sun_3u_detail,
     **{f"mechanisms-{ph}": _mechanisms(ph) for ph in PHONES},
 }
 
