@@ -105,10 +105,10 @@ def plan_only_checks(args, spec, *, manifest=None, out=None, ignore=()) -> None:
 
     check_executor(spec)
     out = out or getattr(args, "out", None)
-    if out:
+    if out and manifest is not None:  # another study's store or someone's files: refused, as the run does
+        check_resumable(out, manifest, ignore=ignore)  # (refuse_foreign_outputs where it holds no store)
+    elif out:
         refuse_foreign_outputs(out)
-        if manifest is not None:  # a folder holding another study's store: refused, as the run refuses it
-            check_resumable(out, manifest, ignore=ignore)
 
 
 def print_plan_json(plan: dict) -> None:

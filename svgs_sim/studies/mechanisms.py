@@ -30,13 +30,17 @@ RESAMPLES = 200
 SEED = 0
 
 
-def _errors_by_key(table: dict, variant: str, range_m: float) -> dict:
-    """``(pose_index, exposure_index) -> errors (6,)`` of a variant's reported trials at a range."""
-    sel = (np.array([str(v) == variant for v in table["variant"]]) & reported_mask(table)
-           & (np.asarray(table["nominal_range_m"], float) == float(range_m)))
+def _reported_errors(table: dict) -> dict:
+    """``(variant, range_m) -> {(pose_index, exposure_index): errors (6,)}`` of the reported trials
+    (:func:`svgs_sim.studies.error_budget.reported_mask`), in one pass over the table."""
+    keep = np.flatnonzero(reported_mask(table))
     E = np.stack([np.asarray(table[f"err_{c}"], float) for c in STATE_KEYS], 1)
-    return {(int(p), int(x)): E[i] for i, p, x in zip(np.flatnonzero(sel), np.asarray(table["pose_index"])[sel],
-                                                     np.asarray(table["exposure_index"])[sel])}
+    var, rng = np.asarray(table["variant"]), np.asarray(table["nominal_range_m"], float)
+    pose, expo = np.asarray(table["pose_index"]), np.asarray(table["exposure_index"])
+    out: dict = {}
+    for i in keep:
+        out.setdefault((str(var[i]), float(rng[i])), {})[(int(pose[i]), int(expo[i]))] = E[i]
+    return out
 
 
 def _std(e: np.ndarray) -> np.ndarray:
@@ -71,6 +75,7 @@ def cell_mechanisms(table: dict, camera_key: str, *, cells=None, resamples: int 
         the paper's value; for a sensitivity ``without`` is the cell with it).
     """
     paper = svgs_2014_results() if paper is None else paper
+    by = _reported_errors(table)
     present = {str(v) for v in table["variant"]}
     names = [n for n in (*REMOVAL_NAMES, "all_removed", *SENSITIVITY_NAMES) if n in present]
     ranges = sorted({float(r) for r in np.asarray(table["nominal_range_m"], float)})
@@ -80,7 +85,7 @@ def cell_mechanisms(table: dict, camera_key: str, *, cells=None, resamples: int 
             p = paper.get((camera_key, "std", r))
             if p is None:
                 continue
-            b = _errors_by_key(table, "baseline", r)
+            b = by.get(("baseline", r), {})
             s = _std(np.array(list(b.values()))) if b else np.full(len(STATE_KEYS), np.nan)
             cells += [(r, c) for i, c in enumerate(STATE_KEYS) if not 0.5 <= s[i] / p[c] <= 2.0]
     rng = np.random.default_rng(seed)
@@ -88,7 +93,7 @@ def cell_mechanisms(table: dict, camera_key: str, *, cells=None, resamples: int 
     for r, c in cells:
         ci = STATE_KEYS.index(c)
         p = paper[(camera_key, "std", float(r))][c]
-        base = _errors_by_key(table, "baseline", r)
+        base = by.get(("baseline", float(r)), {})
         B_all = np.array(list(base.values()))
         P_all = np.array([k[0] for k in base])
         poses = np.unique(P_all)
@@ -99,7 +104,7 @@ def cell_mechanisms(table: dict, camera_key: str, *, cells=None, resamples: int 
         row = {"range_m": float(r), "component": c, "paper": p, "simulated": float(sb), "ratio": float(sb / p),
                "ratio_ci": [float(np.percentile(bs, 5) / p), float(np.percentile(bs, 95) / p)], "mechanisms": []}
         for n in names:
-            var = _errors_by_key(table, n, r)
+            var = by.get((n, float(r)), {})
             keys = [k for k in base if k in var]
             if len(keys) < 3:
                 continue

@@ -163,16 +163,23 @@ def _tof_rows(root: Path) -> dict:
     return {(r["run"], float(r["range_m"]), r["statistic"]): np.array([float(r[c]) for c in cols]) for r in rows}
 
 
+def _tof_ratios(t: dict):
+    """The baseline's fluctuation over the paper's Table 2 (5712 mm) and Table 3 (697 mm), shape (6,)
+    each, and the Fig. 14 sweep's z RMS beyond 5 m as sorted ``(range_m, mm)`` pairs."""
+    fl = "fluctuation"
+    r2 = t[("baseline", 5.712, fl)] / t[("paper table 2", 5.712, fl)]
+    r3 = t[("baseline", 0.697, fl)] / t[("paper table 3", 0.697, fl)]
+    z = sorted((r, v[2]) for (run, r, st), v in t.items()
+               if run == "fig14 sweep, paper (fixed point, default)" and st == "rms" and r >= 5.0)
+    return r2, r3, z
+
+
 def tof_tables(root: Path) -> str:
     """The ToF study's Tables 1-3 ratios and its Fig. 14 range error, from ``tof_stability.csv``."""
     t = _tof_rows(root)
-    fl = "fluctuation"
-    r2 = t[("baseline", 5.712, fl)] / t[("paper table 2", 5.712, fl)]
-    gn = t[("converged optimum (Gauss-Newton)", 5.712, fl)] / t[("paper table 2", 5.712, fl)]
-    r3 = t[("baseline", 0.697, fl)] / t[("paper table 3", 0.697, fl)]
-    r1 = t[("baseline", 0.697, fl)] / t[("paper table 1", 0.697, fl)]
-    z = sorted((r, v[2]) for (run, r, st), v in t.items()
-               if run == "fig14 sweep, paper (fixed point, default)" and st == "rms" and r >= 5.0)
+    r2, r3, z = _tof_ratios(t)
+    gn = t[("converged optimum (Gauss-Newton)", 5.712, "fluctuation")] / t[("paper table 2", 5.712, "fluctuation")]
+    r1 = t[("baseline", 0.697, "fluctuation")] / t[("paper table 1", 0.697, "fluctuation")]
     within = sum(0.5 <= x / PAPER_FIG14_Z_MM <= 2.0 for _, x in z)
     std2 = t[("baseline", 5.712, "std")]
 
@@ -190,13 +197,8 @@ def tof_tables(root: Path) -> str:
 
 def tof_headline(root: Path) -> str:
     """The ToF sensor's headline against the paper's Tables 1-3 and Fig. 14 (the front page)."""
-    t = _tof_rows(root)
-    fl = "fluctuation"
-    r2 = t[("baseline", 5.712, fl)] / t[("paper table 2", 5.712, fl)]
-    r3 = t[("baseline", 0.697, fl)] / t[("paper table 3", 0.697, fl)]
-    z = [v[2] for (run, r, st), v in t.items()
-         if run == "fig14 sweep, paper (fixed point, default)" and st == "rms" and r >= 5.0]
-    within = sum(0.5 <= x / PAPER_FIG14_Z_MM <= 2.0 for x in z)
+    r2, r3, z = _tof_ratios(_tof_rows(root))
+    within = sum(0.5 <= x / PAPER_FIG14_Z_MM <= 2.0 for _, x in z)
     return (f"- Range error beyond 5 m (Fig. 14): {within} of {len(z)} ranges within 2x of the paper's "
             f"{PAPER_FIG14_Z_MM:g} mm.\n"
             f"- Fluctuations at 5712 mm (Table 2): {sum(0.5 <= x <= 2 for x in r2)} of 6 within 2x "

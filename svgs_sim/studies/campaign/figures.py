@@ -131,6 +131,16 @@ def sample_image_figure(config: CampaignConfig, trials: list, table: dict):
 WEAK_MODE_PAIRS = (("x_m", "pitch_deg"), ("y_m", "roll_deg"))
 
 
+def _baseline_reported_and_range(table: dict):
+    """The baseline's reported trials (mask, shape (rows,)) and every row's true range, m (the norm of
+    ``true_x_m``, ``true_y_m``, ``true_z_m``)."""
+    keep = reported_mask(table)
+    if "variant" in table:
+        keep &= np.array([str(v) == "baseline" for v in table["variant"]])
+    R = np.linalg.norm(np.stack([np.asarray(table[f"true_{k}"], float) for k in ("x_m", "y_m", "z_m")], 1), axis=1)
+    return keep, R
+
+
 def weak_mode_statistics(table: dict, camera_key: str, paper: dict | None = None) -> dict:
     """How closely the position errors follow the weak mode of a narrow-field four-point solve
     (slide sideways by d, turn by d/R): x against R tan(pitch error), y against R tan(roll error).
@@ -155,10 +165,7 @@ def weak_mode_statistics(table: dict, camera_key: str, paper: dict | None = None
         error))), one per range it has).
     """
     paper = svgs_2014_results() if paper is None else paper
-    keep = reported_mask(table)
-    if "variant" in table:
-        keep &= np.array([str(v) == "baseline" for v in table["variant"]])
-    R = np.linalg.norm(np.stack([np.asarray(table[f"true_{k}"], float) for k in ("x_m", "y_m", "z_m")], 1), axis=1)
+    keep, R = _baseline_reported_and_range(table)
     out = {}
     for pos, ang in WEAK_MODE_PAIRS:
         e = np.asarray(table[f"err_{pos}"], float)[keep]
@@ -189,10 +196,7 @@ def weak_mode_figure(table: dict, config: CampaignConfig, camera_key: str, paper
     from matplotlib.figure import Figure
     paper = svgs_2014_results() if paper is None else paper
     st = weak_mode_statistics(table, camera_key, paper)
-    keep = reported_mask(table)
-    if "variant" in table:
-        keep &= np.array([str(v) == "baseline" for v in table["variant"]])
-    R = np.linalg.norm(np.stack([np.asarray(table[f"true_{k}"], float) for k in ("x_m", "y_m", "z_m")], 1), axis=1)
+    keep, R = _baseline_reported_and_range(table)
     fig = Figure(figsize=(10, 4.2))
     axes = fig.subplots(1, 2)
     for ax, (pos, ang) in zip(axes, WEAK_MODE_PAIRS):
