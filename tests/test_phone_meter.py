@@ -44,3 +44,48 @@ def test_no_signal_meters_zero():
     sensor = SensorParams(dark_current_e_s=0.0)
     m = ExposureSolver.from_flux(np.zeros((20, 30), np.float32), sensor, "mean")
     assert m.edges is None and m.level(1.0) == 0.0 and m.w_zero == pytest.approx(1.0)
+
+
+def _frame_like(shape, seed=1):
+    """A smooth background of a few electrons' flux with bright spots over many octaves."""
+    rng = np.random.default_rng(seed)
+    H, W = shape
+    y, x = np.mgrid[0:H, 0:W]
+    f = 5e3 * (1.0 + 0.8 * np.sin(x / 37.0) * np.cos(y / 23.0)) + rng.normal(0.0, 50.0, shape)
+    for _ in range(6):
+        u, v, s = rng.uniform(0, W), rng.uniform(0, H), rng.uniform(0.7, 3.0)
+        f += 10 ** rng.uniform(6, 9) * np.exp(-((x - u) ** 2 + (y - v) ** 2) / (2 * s * s))
+    return np.maximum(f, 0.0).astype(np.float32)
+
+
+@pytest.mark.parametrize("metering", ["mean", "center_weighted", "spot"])
+@pytest.mark.parametrize("make", [_frame_like, lambda s: _flux(s, 3)])
+def test_float32_path_without_logarithms_gives_the_old_histogram_to_the_bit(metering, make, monkeypatch):
+    """The float32 path (bins from tables of bit patterns, :func:`_meter_bins_f32`) against the
+    per-pixel logarithms of :func:`_meter_bins` (the path it replaces), compared to the bit."""
+    sensor = SensorParams()
+    f = make((203, 311))
+    new = ExposureSolver.from_flux(f, sensor, metering)
+    monkeypatch.setattr(ExposureSolver, "_build_f32", lambda self, *a: False)
+    old = ExposureSolver.from_flux(f, sensor, metering)
+    for k in ("w_bin", "wr_bin", "edges", "w_above", "wr_below"):
+        assert np.array_equal(getattr(new, k), getattr(old, k)), k
+    assert new.w_zero == old.w_zero
+    for S in np.geomspace(1e-6, 1e3, 19):
+        assert new.level(S) == old.level(S)
+
+
+def test_float32_path_declines_what_it_cannot_bin():
+    """Negative values, no dark current at a zero flux (r = 0) and small images take the general path."""
+    m = ExposureSolver.__new__(ExposureSolver)
+    f = _frame_like((100, 100)).ravel()
+    w = np.zeros(0)
+    assert m._build_f32(f, 0.5, 10.0, 5000.0, w, 1e-4, 4096)
+    neg = f.copy()
+    neg[5] = -1.0
+    assert not m._build_f32(neg, 0.5, 10.0, 5000.0, w, 1e-4, 4096)
+    zero = f.copy()
+    zero[7] = 0.0
+    assert not m._build_f32(zero, 0.5, 0.0, 5000.0, w, 1e-4, 4096)
+    assert not m._build_f32(f[:100], 0.5, 10.0, 5000.0, w, 1e-2, 4096)
+    assert not m._build_f32(f.astype(np.float64), 0.5, 10.0, 5000.0, w, 1e-4, 4096)

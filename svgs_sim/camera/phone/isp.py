@@ -100,6 +100,75 @@ def _meter_bins(x, a, b, c, w, w_const, lo, hi, n_bins, n_chunks, w_bin, wr_bin,
             wr_bin[j, k] += wi * r
 
 
+@njit(cache=True)
+def _bin_of(x, a, b, c, lo, scale, n_bins):
+    """The log bin of ``r = (a x + b) / c`` (``r > 0``), as :func:`_meter_bins` computes it."""
+    r = (a * x + b) / c
+    k = int((math.log(r) - lo) * scale)
+    if k < 0:
+        k = 0
+    elif k > n_bins - 1:
+        k = n_bins - 1
+    return k
+
+
+@njit(cache=True)
+def _bin_tables(b_lo, b_hi, shift, a, b, c, lo, scale, n_bins):
+    """The tables of :func:`_meter_bins_f32`: the bin of the first float32 of each cell of
+    ``2^shift`` bit patterns over ``[b_lo, b_hi]`` (non-negative float32 bit patterns, whose order
+    is their values'), and the first bit pattern of each bin (bisection; the bin is a
+    non-decreasing function of the pattern)."""
+    buf = np.zeros(1, np.int32)
+    val = buf.view(np.float32)
+    c0 = b_lo >> shift
+    n_cells = (b_hi >> shift) - c0 + 1
+    cell_bin = np.empty(n_cells, np.int32)
+    for i in range(n_cells):
+        buf[0] = max((c0 + i) << shift, b_lo)
+        cell_bin[i] = _bin_of(np.float64(val[0]), a, b, c, lo, scale, n_bins)
+    first = np.full(n_bins + 1, b_hi + 1, np.int64)  # bins above the last pixel's: never reached
+    buf[0] = b_lo
+    k_lo = _bin_of(np.float64(val[0]), a, b, c, lo, scale, n_bins)
+    buf[0] = b_hi
+    k_hi = _bin_of(np.float64(val[0]), a, b, c, lo, scale, n_bins)
+    for k in range(k_lo + 1, k_hi + 1):  # the smallest pattern in [b_lo, b_hi] whose bin is >= k
+        lo_b, hi_b = b_lo, b_hi
+        while lo_b < hi_b:
+            mid = (lo_b + hi_b) // 2
+            buf[0] = mid
+            if _bin_of(np.float64(val[0]), a, b, c, lo, scale, n_bins) >= k:
+                hi_b = mid
+            else:
+                lo_b = mid + 1
+        first[k] = lo_b
+    return cell_bin, first
+
+
+@njit(parallel=True, cache=True)
+def _meter_bins_f32(x, bits, a, b, c, w, w_const, shift, c0, cell_bin, first, n_bins, n_chunks, w_bin, wr_bin):
+    """:func:`_meter_bins` for a float32 image whose every ``r`` is positive, without a
+    logarithm per pixel: the bin from the tables of :func:`_bin_tables` (a cell's first bin,
+    then up while the pattern reaches the next bin's first). The same bins, the same sums in
+    the same order (``tests/test_phone_meter.py``)."""
+    n = x.size
+    const = w.size == 0
+    for j in prange(n_chunks):
+        for i in range(j * n // n_chunks, (j + 1) * n // n_chunks):
+            bi = np.int64(bits[i])
+            k = cell_bin[(bi >> shift) - c0]
+            while bi >= first[k + 1]:
+                k += 1
+            r = (a * x[i] + b) / c
+            wi = w_const if const else w[i]
+            w_bin[j, k] += wi
+            wr_bin[j, k] += wi * r
+
+
+#: Float32 bit patterns per cell of the meter's bin table (:func:`_bin_tables`): 2^15, 256 cells
+#: an octave.
+METER_CELL_SHIFT = 15
+
+
 class ExposureSolver:
     """Metered level as a function of the exposure product, from one noise-free signal map.
 
@@ -151,6 +220,8 @@ class ExposureSolver:
     def _build(self, x, a, b, c, w, w_const, n_bins):
         """The histogram of ``r = (a x + b) / c`` in ``n_bins`` log bins, weighted by ``w`` (or
         ``w_const`` each when ``w`` is empty)."""
+        if self._build_f32(x, a, b, c, w, w_const, n_bins):
+            return
         rmin, rmax = _meter_range(x, a, b, c, METER_CHUNKS)
         if not np.isfinite(rmin):  # no positive signal
             self.edges = None
@@ -164,6 +235,43 @@ class ExposureSolver:
         wr_bin = np.zeros((METER_CHUNKS, n_bins))
         w_zero = np.zeros(METER_CHUNKS)
         _meter_bins(x, a, b, c, w, w_const, float(lo), float(hi), int(n_bins), METER_CHUNKS, w_bin, wr_bin, w_zero)
+        self._finish(edges, w_bin, wr_bin, w_zero)
+
+    def _build_f32(self, x, a, b, c, w, w_const, n_bins) -> bool:
+        """:meth:`_build` for a float32 image of non-negative values whose every ``r`` is positive
+        (a flux with dark current), without a logarithm per pixel (:func:`_meter_bins_f32`): the
+        same histogram to the bit. False (nothing done) for any other input.
+
+        ``r`` is a non-decreasing function of ``x``, and ``x`` of its bit pattern: the range is the
+        smallest and largest pattern's ``r`` (what :func:`_meter_range` finds), and each bin a
+        run of patterns."""
+        if x.dtype != np.float32 or not (a > 0 and c > 0) or x.size < 4096:
+            return False
+        bits = x.view(np.int32)
+        b_lo, b_hi = int(bits.min()), int(bits.max())
+        if b_lo < 0:  # a negative value (or -0.0): the general path
+            return False
+        xs = np.array([b_lo, b_hi], np.int32).view(np.float32).astype(np.float64)
+        rmin, rmax = (a * xs + b) / c
+        if not rmin > 0:
+            return False
+        lo, hi = np.log(rmin), np.log(rmax)
+        if hi - lo < 1e-9:
+            hi = lo + 1e-9
+        edges = np.linspace(lo, hi, n_bins + 1)
+        scale = n_bins / (hi - lo)
+        shift = METER_CELL_SHIFT
+        cell_bin, first = _bin_tables(b_lo, b_hi, shift, float(a), float(b), float(c), float(lo), float(scale),
+                                      int(n_bins))
+        w_bin = np.zeros((METER_CHUNKS, n_bins))
+        wr_bin = np.zeros((METER_CHUNKS, n_bins))
+        _meter_bins_f32(x, bits, float(a), float(b), float(c), w, w_const, shift, b_lo >> shift, cell_bin, first,
+                        int(n_bins), METER_CHUNKS, w_bin, wr_bin)
+        self._finish(edges, w_bin, wr_bin, np.zeros(METER_CHUNKS))
+        return True
+
+    def _finish(self, edges, w_bin, wr_bin, w_zero):
+        """The histogram's chunks summed, the edges and the running sums :meth:`level` reads."""
         self.w_bin = w_bin.sum(axis=0)
         self.wr_bin = wr_bin.sum(axis=0)
         self.w_zero = float(w_zero.sum())
