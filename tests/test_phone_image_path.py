@@ -134,6 +134,31 @@ def test_block_phase_moves_a_spot_centroid_as_pillows_jpeg_does():
     assert c == pytest.approx(ours[k], abs=1e-9)
 
 
+@pytest.mark.parametrize("sub", ["gray", "4:4:4", "4:2:0"])
+@pytest.mark.parametrize("rows, offset", [(1944, (0, 0)), (1001, (0, 0)), (777, (5, 11))])
+def test_a_tall_image_coded_in_bands_is_the_whole_image_coded_at_once(sub, rows, offset):
+    """Issue 40: an image of :data:`JPEG_BAND_MIN_ROWS` rows or more is coded in two bands on two
+    threads; the result is OpenCV's libjpeg round trip of the whole (padded) picture, to the byte."""
+    from svgs_sim.camera.phone.isp import JPEG_BAND_MIN_ROWS, _jpeg_strips
+
+    assert rows >= JPEG_BAND_MIN_ROWS
+    img = smooth_scene((rows, 600), 7, colour=sub != "gray")
+    img[300:320, 200:230] = 255  # a spot across the cut of the bands' neighbourhood
+    img[rows // 2 - 20:rows // 2 + 20, 100:140] = 250
+    ox, oy = offset
+    padded = cv2.copyMakeBorder(img, oy, 0, ox, 0, cv2.BORDER_REPLICATE)
+    params = [cv2.IMWRITE_JPEG_QUALITY, 90]
+    if sub == "4:4:4":
+        params += [cv2.IMWRITE_JPEG_SAMPLING_FACTOR, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444]
+    elif sub == "4:2:0":
+        params += [cv2.IMWRITE_JPEG_SAMPLING_FACTOR, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420]
+    ok, buf = cv2.imencode(".jpg", padded, params)
+    ref = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED if sub == "gray" else cv2.IMREAD_COLOR)[oy:, ox:]
+    ours = jpeg_roundtrip(img, 90, sub, grid_offset_px=offset)
+    assert _jpeg_strips(padded.shape[0]) == 2 and ours.shape == img.shape
+    assert np.array_equal(ours, ref)
+
+
 def test_jpeg_inputs_are_checked_before_work():
     img = np.zeros((16, 16), np.uint8)
     with pytest.raises(InputError, match="quality"):

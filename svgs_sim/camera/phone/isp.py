@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import math
+from concurrent.futures import ThreadPoolExecutor
 
 import cv2
 import numpy as np
@@ -460,11 +461,52 @@ def jpeg_roundtrip(image: np.ndarray, quality: int, subsampling: str = "gray", g
     params = [cv2.IMWRITE_JPEG_QUALITY, int(q)]
     if sub != "gray":
         params += [cv2.IMWRITE_JPEG_SAMPLING_FACTOR, _JPEG_SAMPLING[sub]]
+    n = _jpeg_strips(img.shape[0])
+    if n == 1:
+        out = _jpeg_code(img, params, sub)
+    else:  # bands of MCU rows, each coded with one MCU row of its neighbours', on two threads
+        H = img.shape[0]
+        cuts = [0] + [(H * i // n) // JPEG_MCU_PX * JPEG_MCU_PX for i in range(1, n)] + [H]
+
+        def band(i):
+            a, b = cuts[i], cuts[i + 1]
+            a0 = max(0, a - JPEG_MCU_PX)
+            return _jpeg_code(img[a0:min(H, b + JPEG_MCU_PX)], params, sub)[a - a0:a - a0 + b - a]
+
+        out = np.concatenate(list(_jpeg_pool().map(band, range(n))), axis=0)
+    return np.ascontiguousarray(out[oy:, ox:])
+
+
+#: Rows of a JPEG's largest minimum coded unit (4:2:0): the bands of :func:`jpeg_roundtrip` start and
+#: end on multiples of it, and each is coded with one more of them on either side.
+JPEG_MCU_PX = 16
+#: Images of at least this many rows are coded in two bands on two threads (:func:`jpeg_roundtrip`).
+JPEG_BAND_MIN_ROWS = 512
+_JPEG_POOL = []
+
+
+def _jpeg_strips(rows: int) -> int:
+    """How many bands :func:`jpeg_roundtrip` codes an image of ``rows`` rows in."""
+    return 2 if rows >= JPEG_BAND_MIN_ROWS else 1
+
+
+def _jpeg_pool() -> ThreadPoolExecutor:
+    if not _JPEG_POOL:
+        _JPEG_POOL.append(ThreadPoolExecutor(max_workers=2, thread_name_prefix="svgs-jpeg"))
+    return _JPEG_POOL[0]
+
+
+def _jpeg_code(img: np.ndarray, params: list, sub: str) -> np.ndarray:
+    """One encode and decode through OpenCV's libjpeg.
+
+    A band of whole MCU rows decodes to the same bytes as those rows of the whole image, except
+    within one MCU row of its cut edges (the decoder's smooth chroma upsampling reads the chroma
+    row beyond; everything else of baseline JPEG is per block, and the DC prediction is
+    lossless): ``tests/test_phone_image_path.py`` checks the bands against the whole image."""
     ok, buf = cv2.imencode(".jpg", np.ascontiguousarray(img), params)
     if not ok:  # pragma: no cover - OpenCV always encodes uint8 images
         raise RuntimeError("JPEG encoding failed")
-    out = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED if sub == "gray" else cv2.IMREAD_COLOR)
-    return np.ascontiguousarray(out[oy:, ox:])
+    return cv2.imdecode(buf, cv2.IMREAD_UNCHANGED if sub == "gray" else cv2.IMREAD_COLOR)
 
 
 #: Luminance weights of OpenCV's BGR channel order (ITU-R BT.601).
