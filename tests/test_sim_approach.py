@@ -387,3 +387,30 @@ def test_a_pattern_file_is_solved_with_its_own_geometry(small_camera, tmp_path):
     path = _write(tmp_path / "my-3u.toml", text)
     m = ApproachSensor(small_camera, pattern=path, crlb=False).measure(0.0, *pose_from_scenario(6.0, pitch_deg=2.0))
     assert m.ok, m.reason
+
+
+@pytest.mark.render
+@pytest.mark.parametrize("cam", ["small_camera", "small_auto_camera"])
+def test_issue40_camera_path_changes_no_number(cam, request, monkeypatch):
+    """Issue 40's camera path (the meter without per-pixel logarithms, the JPEG in bands on two
+    threads, the meter and the bound's derivatives in a background thread) gives every number
+    and image of the path before it (the reference, run with those switched off)."""
+    from svgs_sim.camera.phone import isp
+
+    camera = request.getfixturevalue(cam)
+    traj = Trajectory.straight(6.0, 4.0, 2.0, attitude_deg=(0.0, 3.0, -5.0))
+    times = [0.0, 0.7, 1.4]
+    monkeypatch.setattr(isp, "JPEG_BAND_MIN_ROWS", 64)  # the small frame coded in bands too
+    new = ApproachSensor(camera, seed=9, motion=True, keep_images=True)
+    a = [new.measure_on(traj, t) for t in times]
+    new.close()
+    monkeypatch.setattr(isp, "JPEG_BAND_MIN_ROWS", 1 << 30)
+    monkeypatch.setattr(isp.ExposureSolver, "_build_f32", lambda self, *args: False)
+    old = ApproachSensor(camera, seed=9, motion=True, keep_images=True, overlap_camera=False)
+    b = [old.measure_on(traj, t) for t in times]
+    assert cam != "small_camera" or any(m.crlb_std is not None for m in a)  # a solved frame with its bound
+    for ma, mb in zip(a, b):
+        np.testing.assert_array_equal(ma.image, mb.image)
+        ra, rb = ma.row(), mb.row()
+        assert {k: v for k, v in ra.items() if not k.endswith("_s") or k in ("t_s", "exposure_s", "next_exposure_s")} \
+            == {k: v for k, v in rb.items() if not k.endswith("_s") or k in ("t_s", "exposure_s", "next_exposure_s")}

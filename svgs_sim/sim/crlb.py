@@ -175,23 +175,13 @@ def centroid_crlb_px(frame, exposer, exposure, spots_px, *, window_half_px: int 
         return out
     seed = render_seed(frame.truth)
     k = sp.qe * t  # photons/s -> electrons
-    w = int(window_half_px)
-    for j, (u, v) in enumerate(np.asarray(spots_px, float)):
-        if not (np.isfinite(u) and np.isfinite(v)):
+    for j, box in enumerate(_windows(spots_px, window_half_px, (H, W))):
+        if box is None:
             continue
-        x0, x1 = max(0, int(round(u)) - w), min(W, int(round(u)) + w + 1)
-        y0, y1 = max(0, int(round(v)) - w), min(H, int(round(v)) + w + 1)
-        if x1 <= x0 or y1 <= y0:
-            continue
+        y0, y1, x0, x1 = box
         sl = (slice(y0, y1), slice(x0, x1))
         if method == "analytic":
-            # the derivatives depend on the render and the window only: kept on the exposer
-            # for the other exposures of the same render (a campaign's several per stand setting)
-            cache = exposer.__dict__.setdefault("_crlb_gradients", {})
-            key = (id(pts), y0, y1, x0, x1)
-            if key not in cache:
-                cache[key] = (pts, _window_core_gradient(phone, exposer.cfa, pts, (y0, y1, x0, x1)))
-            gu, gv = cache[key][1]
+            gu, gv = _cached_gradient(exposer, pts, (y0, y1, x0, x1))
             dmu_dx, dmu_dy = k * gu, k * gv
         else:
             d = [_window_core_image(phone, exposer.cfa, pts, dx, dy, (y0, y1, x0, x1), seed, draws)
@@ -203,6 +193,45 @@ def centroid_crlb_px(frame, exposer, exposure, spots_px, *, window_half_px: int 
         iy = float(np.sum((dmu_dy**2 / var_w)[ok]))
         out[j] = (1.0 / np.sqrt(ix) if ix > 0 else np.inf, 1.0 / np.sqrt(iy) if iy > 0 else np.inf)
     return out
+
+
+def _windows(spots_px, window_half_px: int, shape) -> list:
+    """Each spot's window ``(y0, y1, x0, x1)`` in the frame (None: not finite, or outside)."""
+    H, W = shape
+    w = int(window_half_px)
+    out = []
+    for u, v in np.asarray(spots_px, float).reshape(-1, 2):
+        box = None
+        if np.isfinite(u) and np.isfinite(v):
+            x0, x1 = max(0, int(round(u)) - w), min(W, int(round(u)) + w + 1)
+            y0, y1 = max(0, int(round(v)) - w), min(H, int(round(v)) + w + 1)
+            box = (y0, y1, x0, x1) if x1 > x0 and y1 > y0 else None
+        out.append(box)
+    return out
+
+
+def _cached_gradient(exposer, pts, box) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_window_core_gradient` of a window, kept on the exposer: the derivatives depend on
+    the render and the window only (a campaign's several exposures per stand setting, and
+    :func:`prefetch_gradients`)."""
+    cache = exposer.__dict__.setdefault("_crlb_gradients", {})
+    key = (id(pts),) + tuple(int(b) for b in box)
+    if key not in cache:
+        cache[key] = (pts, _window_core_gradient(exposer.phone, exposer.cfa, pts, box))
+    return cache[key][1]
+
+
+def prefetch_gradients(frame, exposer, spots_px, *, window_half_px: int = WINDOW_HALF_PX) -> None:
+    """Compute the bound's image derivatives (:func:`centroid_crlb_px`, ``method="analytic"``)
+    for windows around where the spots are expected (e.g. their true places), ahead of the
+    solution: the bound later takes them from the exposer's cache where its windows (around the
+    solved spots) are the same, and computes the others. The numbers do not change."""
+    pts = frame.points
+    if pts is None or len(pts) == 0:
+        return
+    for box in _windows(spots_px, window_half_px, exposer.phone.shape):
+        if box is not None:
+            _cached_gradient(exposer, pts, box)
 
 
 def pose_crlb(solution, centroid_sigma_px: float) -> dict:

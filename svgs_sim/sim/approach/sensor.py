@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -14,7 +15,7 @@ from svgs_sim.base.profiles import load_camera, load_pattern
 from svgs_sim.sim.closed_loop import (
     Frame, RenderOptions, Scenario, lab_flux, lab_photon_factor, natural_part, solve_exposure, solver_camera,
 )
-from svgs_sim.sim.crlb import frame_crlb
+from svgs_sim.sim.crlb import frame_crlb, prefetch_gradients
 from svgs_sim.sim.metrics import match_err_max_px, spot_positions_px, state_error, wrong_lock_px
 from svgs_sim.svgs.frames import D_CAM_PHOTO, STATE_KEYS, angles_from_rotation, check_pose, pose_to_state, state_dict
 from svgs_sim.svgs.pipeline import camera_threshold
@@ -174,6 +175,11 @@ class ApproachSensor:
         thread while the phone model works on this one. Off by default: on the two-core machine
         it bought nothing (Mitsuba's threads and the camera model's then share the two cores;
         ``benchmarks/bench_approach.py``); with more cores it may. The numbers do not change.
+    overlap_camera : bool
+        Meter the frame and compute the bound's image derivatives around the spots' expected
+        places in a background thread while the exposure is made, detected and solved (the
+        single-threaded JPEG and solution leave a core free). On by default; the numbers do not
+        change (``tests/test_sim_approach.py``).
     threshold : None, float or str
         The detector's threshold (None: the app's for the camera, :func:`svgs_sim.svgs.pipeline.camera_threshold`).
     base : Scenario, optional
@@ -194,7 +200,8 @@ class ApproachSensor:
 
     def __init__(self, camera="galaxy-nexus", pattern="svgs-3u", *, seed: int = 0, motion: bool = True,
                  crlb: bool = True, keep_images: bool = False, threshold=None, base: Scenario | None = None,
-                 frame_rate_hz: float | None = None, overlap_render: bool = False, body=None):
+                 frame_rate_hz: float | None = None, overlap_render: bool = False, body=None,
+                 overlap_camera: bool = True):
         from svgs_sim.camera.phone import PhoneCamera, PhoneParams
 
         self.camera = load_camera(camera)
@@ -214,6 +221,8 @@ class ApproachSensor:
         self.crlb = bool(crlb)
         self.keep_images = bool(keep_images)
         self.overlap_render = bool(overlap_render)
+        self.overlap_camera = bool(overlap_camera)
+        self._camera_pool = None
         self.threshold = threshold
         self.phone = PhoneCamera(self.camera, params=params)
         self.exposure = ExposureStream(self.phone, self.frame_rate_hz)
@@ -354,7 +363,10 @@ class ApproachSensor:
             vel = self._velocity_since_last(t_s, R, t)
         exposer, settings = self._optics(frame, uv_true, vel, motion_seed)
         timings["optics"] = time.perf_counter() - t0
+        ahead = self._ahead(frame, exposer, uv_true)
         ex, blobs, row = self._expose_and_solve(frame, exposer, settings, noise_seed, timings)
+        if ahead is not None:
+            ahead.result()
         level = exposer.metered_level(*settings)
         self.exposure.after_frame(t_s, settings, exposer.meter)
         crlb = self._crlb(frame, exposer, row, timings)
@@ -423,6 +435,22 @@ class ApproachSensor:
             exposer = frame.exposer()
         return exposer, settings
 
+    def _ahead(self, frame: Frame, exposer, uv_true: np.ndarray):
+        """With ``overlap_camera``: the frame's meter and the bound's image derivatives around the
+        targets' true places (:func:`svgs_sim.sim.crlb.prefetch_gradients`) started in a background
+        thread (a future; None otherwise). Both only read the optical image and the points."""
+        if not self.overlap_camera:
+            return None
+        if self._camera_pool is None:
+            self._camera_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="svgs-camera")
+
+        def work():
+            exposer.meter  # noqa: B018 - the property builds and keeps the meter
+            if self.crlb:
+                prefetch_gradients(frame, exposer, uv_true)
+
+        return self._camera_pool.submit(work)
+
     def _expose_and_solve(self, frame: Frame, exposer, settings, noise_seed: int, timings: dict):
         """The exposure, the detection and the SVGS solution (:func:`svgs_sim.sim.closed_loop.solve_exposure`
         against the actual pose): ``(exposure, blobs, row)``; ``timings`` gets ``expose`` and
@@ -474,8 +502,11 @@ class ApproachSensor:
         )
 
     def close(self) -> None:
-        """Stop the background render thread (a later frame starts it again)."""
+        """Stop the background threads (a later frame starts them again)."""
         self.renders.close()
+        if self._camera_pool is not None:
+            self._camera_pool.shutdown(wait=True)
+            self._camera_pool = None
 
     def _out_of_view(self, k: int, t_s: float, R, t) -> Measurement:
         """A dropout: the target is behind the camera or outside its field of view (not rendered;
