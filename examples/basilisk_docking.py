@@ -413,13 +413,19 @@ def _true_pose(tg, ch, camera=CAMERA, pattern=PATTERN):
                          camera, pattern)
 
 
-def _sensor(phone: str | None, *, preview: bool, seed: int, rate_hz: float, orbit: bool = False):
+def _sensor(phone: str | None, *, preview: bool, seed: int, rate_hz: float, orbit: bool = False,
+            sensor_model: str | None = None):
     """The SVGS sensor of a phone (None: the ideal sensor); ``orbit``: black space around the target
-    (the sun and the Earth set per frame by the module)."""
+    (the sun and the Earth set per frame by the module); ``sensor_model``: the statistical sensor drawn
+    from that table (``svgs sensor-model build``) instead of rendered frames."""
     from svgs_sim.sim.basilisk_svgs import IdealSensor
 
     if phone is None:
         return IdealSensor()
+    if sensor_model is not None:
+        from svgs_sim.sim.statistical_sensor import StatisticalSensor
+
+        return StatisticalSensor(sensor_model, seed=seed, frame_rate_hz=rate_hz)
     from svgs_sim.sim.approach import ApproachSensor
 
     cam = phone
@@ -527,13 +533,15 @@ def _orbit_light(sim, target, sun_N):
 def run(phone: str | None, *, start_state=START_STATE, sensor_rate_hz=PHONE_FRAME_RATE_HZ, preview=False, seed=0,
         max_time_s=1200.0, latency_s=None, case: str = "vbar", environment: str = "lab",
         eclipse_in_s: float = ECLIPSE_IN_S, raan_deg: float = RAAN_DEG, transition: str = "entry",
-        thrust: ThrustErrors | None = None, prior_scale: float = 1.0) -> dict:
+        thrust: ThrustErrors | None = None, prior_scale: float = 1.0, sensor_model: str | None = None) -> dict:
     """One closed-loop approach. ``phone`` None: the ideal sensor (no latency). ``case``: the
     corridor (:data:`CASES`); ``environment="orbit"``: the sun from the orbit (astropy, at
     :data:`svgs_sim.sim.orbit_light.SUN_EPOCH_UTC`), the Earth, Basilisk's eclipse module, the
     approach starting ``eclipse_in_s`` before the eclipse's entry (``transition="exit"``: its exit).
     ``thrust``: the thrusters' errors (:class:`ThrustErrors`; default ideal); ``prior_scale``: the
-    hand-over's 1-sigma as a multiple of :data:`PRIOR_SIGMA_M` and :data:`PRIOR_SIGMA_M_S`.
+    hand-over's 1-sigma as a multiple of :data:`PRIOR_SIGMA_M` and :data:`PRIOR_SIGMA_M_S`;
+    ``sensor_model``: the phone's statistical sensor from this table (``sensor_model.json`` or its
+    folder; :class:`svgs_sim.sim.statistical_sensor.StatisticalSensor`) instead of rendered frames.
     Returns the logs and the summary numbers."""
     from Basilisk.simulation import extForceTorque, spacecraft
     from Basilisk.utilities import SimulationBaseClass, macros, simIncludeGravBody
@@ -574,7 +582,7 @@ def run(phone: str | None, *, start_state=START_STATE, sensor_rate_hz=PHONE_FRAM
         sim.AddModelToTask("dyn", sc, 10)
     sim.AddModelToTask("dyn", thr, 9)
     # the sensor
-    sensor = _sensor(phone, preview=preview, seed=seed, rate_hz=sensor_rate_hz, orbit=orbit)
+    sensor = _sensor(phone, preview=preview, seed=seed, rate_hz=sensor_rate_hz, orbit=orbit, sensor_model=sensor_model)
     svgs_mod = SVGSModule(sensor, camera_mount, pattern_mount, frame_rate_hz=sensor_rate_hz, latency_s=lat)
     svgs_mod.ModelTag = "svgs"
     svgs_mod.chaserStateInMsg.subscribeTo(ch.scStateOutMsg)
@@ -698,6 +706,8 @@ MC_START_ATTITUDE_SIGMA_DEG = 1.0
 MC_THRUST_SCALE_SIGMA = 0.03
 MC_THRUST_ANGLE_SIGMA_DEG = 1.0
 MC_MIN_IMPULSE_N_S = 5e-4
+#: Runs of each sensor whose dispersions and true path ``montecarlo.json`` keeps (all of the ideal sensor's).
+MC_PLOTTED_RUNS = 20
 #: The quantities ``montecarlo.json`` gives percentiles of.
 MC_KEYS = ("arrival_error_m", "arrival_time_s", "delta_v_m_s", "dropouts", "wrong_locks")
 
@@ -750,18 +760,23 @@ def mc_dispersions(seed: int, start_state) -> tuple[list[dict], dict]:
 
 def mc_run(task: dict) -> dict:
     """One Monte Carlo run (a task of the executor): :func:`run` with the run's dispersions; its
-    outcome as ``montecarlo.json`` records it and a thinned trajectory for the figure."""
+    outcome as ``montecarlo.json`` records it, with the dispersions and a thinned trajectory where
+    the task asks for them (``keep_detail``)."""
     records, kw = mc_dispersions(task["seed"], task["start_state"])
     r = run(task["phone"], seed=task["seed"], sensor_rate_hz=task["rate"], preview=task["preview"],
-            max_time_s=task["max_time_s"], case=task["case"], environment=task["environment"], **kw)
+            max_time_s=task["max_time_s"], case=task["case"], environment=task["environment"],
+            sensor_model=task.get("sensor_model"), **kw)
     s = r["summary"]
     dropouts = sum(s["dropouts_by_reason"].values())
-    traj = r["log"]["cam_true"][:: max(1, len(r["log"]["cam_true"]) // 200)]
-    return {"phone": task["phone"] or "ideal", "seed": task["seed"],
-            "arrival_error_m": s["final_position_error_norm_m"] if s["arrived"] else None,
-            "arrival_time_s": s["time_s"], "delta_v_m_s": s["delta_v_m_s"], "dropouts": dropouts,
-            "dropouts_by_reason": s["dropouts_by_reason"], "wrong_locks": s["wrong_locks"], "frames": s["frames"],
-            "dispersions": records, "trajectory_cam_m": np.asarray(traj).tolist(), "wall_s": s["wall_s"]}
+    out = {"phone": task.get("label") or task["phone"] or "ideal", "seed": task["seed"],
+           "arrival_error_m": s["final_position_error_norm_m"] if s["arrived"] else None,
+           "arrival_time_s": s["time_s"], "delta_v_m_s": s["delta_v_m_s"], "dropouts": dropouts,
+           "dropouts_by_reason": s["dropouts_by_reason"], "wrong_locks": s["wrong_locks"], "frames": s["frames"],
+           "wall_s": s["wall_s"]}
+    if task.get("keep_detail", True):
+        traj = r["log"]["cam_true"][:: max(1, len(r["log"]["cam_true"]) // 100)]
+        out.update({"dispersions": records, "trajectory_cam_m": np.round(np.asarray(traj), 4).tolist()})
+    return out
 
 
 def order_statistic_interval(values, q: float, level: float = 0.90):
@@ -807,12 +822,53 @@ def mc_percentiles(runs: list[dict]) -> dict:
     return out
 
 
+def _mc_tasks(phones, n: int, statistical_runs: int, sensor_models: dict, common: dict, seeds: list) -> list[dict]:
+    """The runs of a Monte Carlo: the ideal sensor on every seed, each phone rendered on the first
+    ``n`` seeds and drawn from its sensor model on the first ``statistical_runs`` (the same seeds)."""
+    tasks = [{"phone": None, "label": "ideal", "seed": sd, **common} for sd in seeds]
+    for ph in phones:
+        tasks += [{"phone": ph, "label": ph, "seed": sd, **common} for sd in seeds[:n]]
+        tasks += [{"phone": ph, "label": f"{ph} (statistical)", "seed": sd, "sensor_model": sensor_models[ph],
+                   **common} for sd in seeds[:statistical_runs]]
+    for t in tasks:  # dispersions and paths kept for the ideal runs (every seed) and the first runs of each sensor
+        t["keep_detail"] = t["label"] == "ideal" or seeds.index(t["seed"]) < MC_PLOTTED_RUNS
+    return tasks
+
+
+def _mc_stored(out: Path, manifest: dict) -> dict:
+    """The runs a killed Monte Carlo in ``out`` finished (``montecarlo_runs.jsonl``, one line a run),
+    by ``(label, seed)``; a folder holding another Monte Carlo's runs is refused."""
+    mpath, rpath = out / "montecarlo_manifest.json", out / "montecarlo_runs.jsonl"
+    if mpath.exists():
+        if json.loads(mpath.read_text(encoding="utf-8")) != manifest:
+            raise InputError(f"--out: {str(out)!r} holds a Monte Carlo with other parameters; rerun with its "
+                             "arguments to continue it, or choose another --out")
+    elif rpath.exists():
+        raise InputError(f"--out: {str(out)!r} holds montecarlo_runs.jsonl but no montecarlo_manifest.json; "
+                         "choose another --out")
+    out.mkdir(parents=True, exist_ok=True)
+    mpath.write_text(json.dumps(manifest, indent=1) + "\n", encoding="utf-8")
+    done = {}
+    if rpath.exists():
+        for line in rpath.read_text(encoding="utf-8").splitlines():
+            try:
+                r = json.loads(line)
+            except json.JSONDecodeError:  # a line cut by the kill: that run is run again
+                continue
+            done[(r["phone"], r["seed"])] = r
+    return done
+
+
 def monte_carlo(phones, n: int, *, base_seed: int, start_state, rate: float, preview: bool, max_time_s: float,
-                case: str, environment: str, spec, out: Path) -> dict:
+                case: str, environment: str, spec, out: Path, statistical_runs: int = 0,
+                sensor_models: dict | None = None) -> dict:
     """``--monte-carlo N``: per phone N runs with dispersed true initial states, hand-over errors,
     sensor seeds and thruster errors (:func:`mc_dispersions`), the ideal sensor on the same seeds and
-    dispersions; the runs on the project's executors (:func:`svgs_sim.studies.execution.open_executor`:
-    a process pool or Dask; each run is one task, so a cluster takes them unchanged). Writes
+    dispersions, and with ``statistical_runs`` M the phone's statistical sensor (``sensor_models``: its
+    table) on the first M seeds (the rendered runs' N among them); the runs on the project's executors
+    (:func:`svgs_sim.studies.execution.open_executor`: a process pool or Dask; each run is one task, so a
+    cluster takes them unchanged). Each finished run is kept in ``out/montecarlo_runs.jsonl``: a killed
+    Monte Carlo continues where it stopped when rerun with the same arguments. Writes
     ``out/montecarlo.json`` and ``out/montecarlo.png``."""
     from concurrent.futures import as_completed
 
@@ -826,36 +882,59 @@ def monte_carlo(phones, n: int, *, base_seed: int, start_state, rate: float, pre
     if here not in sys.path:
         sys.path.insert(0, here)
     task_fn = importlib.import_module("basilisk_docking").mc_run
-    seeds = mc_seeds(base_seed, n)
-    tasks = [{"phone": ph, "seed": sd, "start_state": tuple(start_state), "rate": rate, "preview": preview,
-              "max_time_s": max_time_s, "case": case, "environment": environment}
-             for ph in [None, *phones] for sd in seeds]
-    results = []
-    with open_executor(spec) as ex:
-        futs = [ex.submit(task_fn, t) for t in tasks]
-        for k, f in enumerate(as_completed(futs), 1):
-            r = f.result()
-            results.append(r)
-            print(f"monte carlo: {k}/{len(tasks)} runs ({r['phone']}, seed {r['seed']}: "
-                  f"delta-v {r['delta_v_m_s'] * 100:.2f} cm/s)", file=sys.stderr, flush=True)
-    order = {sd: i for i, sd in enumerate(seeds)}
-    by = {ph: sorted([r for r in results if r["phone"] == ph], key=lambda r: order[r["seed"]])
-          for ph in ["ideal", *phones]}
-    obj = {"sensor_rate_hz": rate, "runs_per_sensor": n, "base_seed": base_seed, "case": case,
-           "environment": environment, "preview": preview, "start_state": list(start_state),
+    seeds = mc_seeds(base_seed, max(n, statistical_runs))
+    common = {"start_state": tuple(start_state), "rate": rate, "preview": preview, "max_time_s": max_time_s,
+              "case": case, "environment": environment}
+    tasks = _mc_tasks(phones, n, statistical_runs, sensor_models or {}, common, seeds)
+    manifest = {"phones": list(phones), "runs_per_sensor": n, "statistical_runs": statistical_runs,
+                "base_seed": base_seed, **{k: (list(v) if isinstance(v, tuple) else v) for k, v in common.items()},
+                "sensor_models": {k: str(v) for k, v in (sensor_models or {}).items()}}
+    done = _mc_stored(out, manifest)
+    todo = [t for t in tasks if (t["label"], t["seed"]) not in done]
+    if done:
+        print(f"monte carlo: {len(tasks) - len(todo)} of {len(tasks)} runs already in {out}/montecarlo_runs.jsonl",
+              file=sys.stderr, flush=True)
+    if todo:
+        with open_executor(spec) as ex, open(out / "montecarlo_runs.jsonl", "a", encoding="utf-8") as log:
+            futs = [ex.submit(task_fn, t) for t in todo]
+            for k, f in enumerate(as_completed(futs), 1):
+                r = f.result()
+                log.write(json.dumps(r) + "\n")
+                log.flush()
+                done[(r["phone"], r["seed"])] = r
+                print(f"monte carlo: {k}/{len(todo)} runs ({r['phone']}, seed {r['seed']}: "
+                      f"delta-v {r['delta_v_m_s'] * 100:.2f} cm/s)", file=sys.stderr, flush=True)
+    obj = _mc_result(phones, n, statistical_runs, seeds, done, manifest)
+    (out / "montecarlo.json").write_text(json.dumps(obj, indent=1) + "\n", encoding="utf-8")
+    plot_monte_carlo({k: v["runs"] for k, v in obj["sensors"].items()} | {"ideal": obj["ideal_runs"]},
+                     out / "montecarlo.png", f"Monte Carlo, {rate:g} frames/s, {start_state[2]:g} m -> {GOAL_Z_M:g} m: "
+                     f"{n} rendered and {statistical_runs} statistical runs a phone")
+    return obj
+
+
+def _mc_result(phones, n: int, statistical_runs: int, seeds: list, done: dict, manifest: dict) -> dict:
+    """``montecarlo.json``: the parameters, each sensor's runs and percentiles, the ideal runs, and for
+    each phone with both sensors the statistical sensor on the rendered runs' seeds beside the rendered."""
+    def runs_of(label, k):
+        return [done[(label, sd)] for sd in seeds[:k]]
+
+    obj = {"sensor_rate_hz": manifest["rate"], **{k: v for k, v in manifest.items() if k != "rate"},
            "dispersion_sigmas": {"start_position_m_at_30m": list(MC_START_SIGMA_M),
                                  "start_attitude_deg": MC_START_ATTITUDE_SIGMA_DEG,
                                  "thrust_scale": MC_THRUST_SCALE_SIGMA, "thrust_misalignment_deg": MC_THRUST_ANGLE_SIGMA_DEG,
                                  "min_impulse_n_s": MC_MIN_IMPULSE_N_S,
                                  "handover_position_m": PRIOR_SIGMA_M, "handover_velocity_m_s": PRIOR_SIGMA_M_S},
-           "sensors": {ph: {"runs": by[ph], "percentiles": mc_percentiles(by[ph])} for ph in phones},
-           "ideal_runs": by["ideal"], "ideal_percentiles": mc_percentiles(by["ideal"])}
-    if len(phones) == 1:  # the issue's layout for one phone: its runs and percentiles at the top
-        obj["runs"], obj["percentiles"] = by[phones[0]], obj["sensors"][phones[0]]["percentiles"]
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "montecarlo.json").write_text(json.dumps(obj, indent=1) + "\n", encoding="utf-8")
-    plot_monte_carlo(by, out / "montecarlo.png", f"Monte Carlo, {n} runs per sensor, {rate:g} frames/s, "
-                                                 f"{start_state[2]:g} m -> {GOAL_Z_M:g} m")
+           "sensors": {}, "ideal_runs": runs_of("ideal", len(seeds))}
+    obj["ideal_percentiles"] = mc_percentiles(obj["ideal_runs"])
+    for ph in phones:
+        for label, k in ((ph, n), (f"{ph} (statistical)", statistical_runs)):
+            if k:
+                obj["sensors"][label] = {"runs": runs_of(label, k), "percentiles": mc_percentiles(runs_of(label, k))}
+        if n and statistical_runs:
+            obj["sensors"][f"{ph} (statistical)"]["percentiles_on_rendered_seeds"] = mc_percentiles(
+                runs_of(f"{ph} (statistical)", min(n, statistical_runs)))
+    if len(phones) == 1 and n:  # the issue's layout for one phone: its runs and percentiles at the top
+        obj["runs"], obj["percentiles"] = obj["sensors"][phones[0]]["runs"], obj["sensors"][phones[0]]["percentiles"]
     return obj
 
 
@@ -868,16 +947,21 @@ def plot_monte_carlo(by: dict, path: Path, title: str) -> None:
     fig = Figure(figsize=(13, 4), constrained_layout=True)
     FigureCanvasAgg(fig)
     ax = fig.subplots(1, 3)
-    colors = dict(zip(by, ("k", "tab:blue", "tab:orange", "tab:green")))
+    phones = [p for p in by if p != "ideal" and not p.endswith("(statistical)")]
+    base = {"ideal": "k", **dict(zip(phones, ("tab:blue", "tab:orange", "tab:green", "tab:red")))}
     for ph, runs in by.items():
-        for i, r in enumerate(runs):
+        stat = ph.endswith(" (statistical)")
+        color, ls = base.get(ph.removesuffix(" (statistical)"), "tab:gray"), "--" if stat else "-"
+        drawn = [r for r in runs if r.get("trajectory_cam_m")][:MC_PLOTTED_RUNS]
+        for i, r in enumerate(drawn):
             tr = np.asarray(r["trajectory_cam_m"])
-            if tr.size:
-                ax[0].plot(tr[:, 2], np.hypot(tr[:, 0], tr[:, 1]) * 100, color=colors[ph], lw=0.7, alpha=0.6,
-                           label=ph if i == 0 else None)
+            ax[0].plot(tr[:, 2], np.hypot(tr[:, 0], tr[:, 1]) * 100, color=color, ls=ls, lw=0.7, alpha=0.6,
+                       label=f"{ph} ({len(drawn)} paths)" if i == 0 else None)
         arr = [r["arrival_error_m"] * 100 for r in runs if r["arrival_error_m"] is not None]
-        ax[1].hist(arr, bins=20, histtype="step", color=colors[ph], label=f"{ph} ({len(arr)} arrived)")
-        ax[2].hist([r["delta_v_m_s"] * 100 for r in runs], bins=20, histtype="step", color=colors[ph], label=ph)
+        kw = {"bins": 20, "histtype": "step", "color": color, "ls": ls, "density": True}
+        if arr:
+            ax[1].hist(arr, label=f"{ph} ({len(arr)} of {len(runs)} arrived)", **kw)
+        ax[2].hist([r["delta_v_m_s"] * 100 for r in runs], label=f"{ph} ({len(runs)} runs)", **kw)
     if not any(r["arrival_error_m"] is not None for runs in by.values() for r in runs):
         ax[1].text(0.5, 0.5, "no run arrived within the time limit", ha="center", va="center",
                    transform=ax[1].transAxes)
@@ -886,9 +970,11 @@ def plot_monte_carlo(by: dict, path: Path, title: str) -> None:
     ax[0].set_ylabel("lateral offset, cm")
     ax[0].set_title("true camera paths", fontsize=9)
     ax[1].set_xlabel("arrival error (final position against the goal), cm")
+    ax[1].set_ylabel("density (each sensor's runs)")
     ax[2].set_xlabel("delta-v, cm/s")
     for a in ax:
-        a.legend(fontsize=7)
+        if a.get_legend_handles_labels()[0]:
+            a.legend(fontsize=7)
     fig.suptitle(title, fontsize=10)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=80)
@@ -1011,6 +1097,12 @@ def main(argv=None) -> dict:
     ap.add_argument("--monte-carlo", type=int, default=None, metavar="N",
                     help="N runs per sensor with dispersed initial states, hand-over errors, sensor seeds and "
                          "thruster errors, and the ideal sensor on the same seeds: OUT/montecarlo.json and .png")
+    ap.add_argument("--statistical-runs", type=int, default=None, metavar="M",
+                    help="also M runs per phone with its statistical sensor (svgs sensor-model build) on the same "
+                         "seeds, the N rendered ones first: the two side by side in OUT/montecarlo.json")
+    ap.add_argument("--sensor-models", default="docs/reports/sensor-model-{phone}",
+                    help="where each phone's sensor model is ({phone}: its name; default "
+                         "docs/reports/sensor-model-{phone})")
     ap.add_argument("--processes", type=int, default=None, help="Monte Carlo: a local pool of N processes (0: here)")
     ap.add_argument("--workers", type=int, default=None, help="Monte Carlo: a Dask LocalCluster of N workers")
     ap.add_argument("--scheduler", default=None, help="Monte Carlo: a running Dask scheduler (tcp://HOST:PORT)")
@@ -1051,17 +1143,49 @@ def main(argv=None) -> dict:
     max_time = args.max_time_s or (40.0 if args.quick else 1200.0)
     preview = args.preview or args.quick
     out = Path(args.out)
-    if args.monte_carlo is not None:
-        from svgs_sim.studies.execution import executor_spec
-
-        if args.monte_carlo < 1:
-            raise InputError(f"--monte-carlo: expected a positive number of runs, got {args.monte_carlo}")
-        spec = executor_spec(args.processes, args.workers, args.scheduler)
-        mc = monte_carlo(phones, args.monte_carlo, base_seed=args.seed, start_state=start, rate=rate, preview=preview,
-                         max_time_s=max_time, case=args.case, environment=args.environment, spec=spec, out=out)
-        print(f"wrote {out}/montecarlo.json and montecarlo.png")
-        return mc
+    if args.monte_carlo is not None or args.statistical_runs is not None:
+        return monte_carlo_from_args(args, phones, start, rate, preview, max_time, out)
     return single_runs(args, phones, start, rate, preview, max_time, out)
+
+
+def check_sensor_models(args, phones, start, rate: float, preview: bool) -> dict:
+    """Each phone's sensor model for ``--statistical-runs`` (``--sensor-models``), checked before any
+    run: it loads, it is that phone's, at this frame rate, and the start lies inside its envelope."""
+    from svgs_sim.sim.statistical_sensor import SensorTable
+
+    if preview or args.environment != "lab":
+        raise InputError("--statistical-runs: the sensor models are the lab's at full resolution (svgs sensor-model "
+                         "build); they take neither --preview, --quick's preview nor --environment orbit")
+    models = {}
+    for ph in phones:
+        path = args.sensor_models.format(phone=ph)
+        t = SensorTable.load(path)
+        if Path(t.camera).stem != Path(ph).stem:
+            raise InputError(f"--sensor-models: {path!r} is the model of {t.camera}, not of {ph}")
+        if abs(t.frame_rate_hz - rate) > 1e-9 * rate:
+            raise InputError(f"--sensor-models: {path!r} was built at {t.frame_rate_hz:g} frames/s, the run takes "
+                             f"{rate:g} (--sensor-rate-hz)")
+        if not t.ranges_m[0] <= start[2] <= t.ranges_m[-1] or GOAL_Z_M < t.ranges_m[0]:
+            raise InputError(f"--sensor-models: {path!r} covers {t.ranges_m[0]:g}-{t.ranges_m[-1]:g} m; the run goes "
+                             f"from {start[2]:g} m to {GOAL_Z_M:g} m")
+        models[ph] = path
+    return models
+
+
+def monte_carlo_from_args(args, phones, start, rate: float, preview: bool, max_time: float, out: Path) -> dict:
+    """``--monte-carlo N`` and ``--statistical-runs M``: checked, then :func:`monte_carlo`."""
+    from svgs_sim.studies.execution import executor_spec
+
+    n, m = args.monte_carlo or 0, args.statistical_runs or 0
+    if n < 0 or m < 0 or n + m < 1:
+        raise InputError(f"--monte-carlo, --statistical-runs: expected runs (at least one in all), got {n} and {m}")
+    models = check_sensor_models(args, phones, start, rate, preview) if m else {}
+    spec = executor_spec(args.processes, args.workers, args.scheduler)
+    mc = monte_carlo(phones, n, base_seed=args.seed, start_state=start, rate=rate, preview=preview,
+                     max_time_s=max_time, case=args.case, environment=args.environment, spec=spec, out=out,
+                     statistical_runs=m, sensor_models=models)
+    print(f"wrote {out}/montecarlo.json and montecarlo.png")
+    return mc
 
 
 def single_runs(args, phones, start, rate: float, preview: bool, max_time: float, out: Path) -> dict:

@@ -144,3 +144,50 @@ def test_the_monte_carlo_writes_its_runs_and_percentiles(tmp_path):
                                                                         "dropouts", "dropouts_by_reason", "wrong_locks"}
     assert set(mc["percentiles"]) == {"arrival_error_m", "arrival_time_s", "delta_v_m_s", "dropouts", "wrong_locks"}
     assert set(mc["percentiles"]["delta_v_m_s"]) >= {"p50", "p90", "p99", "ci90"}
+
+
+def _write_table(path, camera="galaxy-nexus", rate=2.0):
+    """A hand-written sensor model over 0.8-8 m (errors of a few mm, 10 % dropouts)."""
+    from svgs_sim.sim.statistical_sensor import SensorTable
+
+    cov = np.diag([2e-3, 2e-3, 1e-3, 0.05, 0.05, 0.02]) ** 2
+    t = SensorTable(camera=camera, pattern="svgs-3u", ranges_m=np.array([0.8, 8.0]), off_axis_deg=np.array([0.0, 10.0]),
+                    attitude_max_deg=8.0, frame_rate_hz=rate, n=np.full((2, 2), 50), n_solved=np.full((2, 2), 45),
+                    n_gross=np.zeros((2, 2), int),
+                    n_wrong_lock=np.zeros((2, 2), int), dropouts={"too_few_blobs": np.full((2, 2), 5)},
+                    bias=np.zeros((2, 2, 6)), covariance=np.broadcast_to(cov, (2, 2, 6, 6)).copy(),
+                    crlb_std=np.full((2, 2, 6), 1e-4), wrong_lock_errors=[[[], []], [[], []]],
+                    gross_errors=[[[], []], [[], []]])
+    path.mkdir(parents=True, exist_ok=True)
+    t.save(path / "sensor_model.json")
+    return path
+
+
+@pytest.mark.slow
+def test_the_statistical_monte_carlo_runs_resumes_and_checks_its_tables(tmp_path, capsys):
+    """--statistical-runs without rendering: its runs on the rendered runs' seeds, a resumed rerun that
+    flies nothing again, and tables refused before any run (another phone's, another rate)."""
+    pytest.importorskip("Basilisk", reason="the basilisk extra is not installed (pip install -e \".[basilisk]\")")
+    from svgs_sim.base.errors import InputError
+
+    ex = _example()
+    models = str(tmp_path / "model-{phone}")
+    _write_table(tmp_path / "model-galaxy-nexus")
+    argv = ["--monte-carlo", "0", "--statistical-runs", "3", "--phones", "galaxy-nexus", "--start-z-m", "3",
+            "--max-time-s", "15", "--processes", "0", "--sensor-models", models, "--out", str(tmp_path / "mc")]
+    mc = ex.main(argv)
+    runs = mc["sensors"]["galaxy-nexus (statistical)"]["runs"]
+    assert [r["seed"] for r in runs] == ex.mc_seeds(0, 3) == [r["seed"] for r in mc["ideal_runs"]]
+    assert all(r["frames"] >= 25 for r in runs) and sum(r["dropouts"] for r in runs) > 0
+    assert mc["statistical_runs"] == 3 and mc["sensor_rate_hz"] == 2.0
+    capsys.readouterr()
+    again = ex.main(argv)
+    assert "6 of 6 runs already" in capsys.readouterr().err
+    assert json.loads(json.dumps(again)) == json.loads((tmp_path / "mc" / "montecarlo.json").read_text())
+    _write_table(tmp_path / "model-galaxy-nexus", camera="htc-amaze-4g")
+    with pytest.raises(InputError, match="not of galaxy-nexus"):
+        ex.main(argv[:-1] + [str(tmp_path / "other")])
+    _write_table(tmp_path / "model-galaxy-nexus", rate=1.0)
+    with pytest.raises(InputError, match="built at 1 frames/s"):
+        ex.main(argv[:-1] + [str(tmp_path / "other")])
+    assert not (tmp_path / "other" / "montecarlo_runs.jsonl").exists()

@@ -57,3 +57,11 @@ def test_a_negative_list_after_a_space_is_read_as_the_value_for_every_option_tha
             checked += 1
     assert checked > 100
     assert join_negative_values(PARSER, ["render", "--json", "-5"]) == ["render", "--json", "-5"]
+
+
+def test_every_command_group_names_its_dest_where_the_cli_looks_for_it():
+    """A new command group must join signals.GROUP_DESTS, or its commands' names and leaf parsers are lost."""
+    from svgs_sim.cli.main import GROUPS
+    from svgs_sim.cli.signals import GROUP_DESTS
+
+    assert sorted(g[2] for g in GROUPS.values()) == sorted(GROUP_DESTS)

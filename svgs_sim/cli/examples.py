@@ -82,6 +82,16 @@ EXAMPLES = {
         ("svgs sun-study --camera galaxy-nexus --ranges 5,10 --sun-azimuths-deg -90,0,90 --sun-elevations-deg 0,30 "
          "--trials 4 --body 3u --out sun", "lock, loss and wrong locks with the sun around the target"),
     ],
+    ("sensor-model", "build"): [
+        ("svgs sensor-model build --camera galaxy-nexus --out model-nexus",
+         "the table over 0.8-34 m and 0-5 deg off axis, 30 frames a node (about 8 min on two cores)"),
+        ("svgs sensor-model build --camera htc-amaze-4g --ranges 1,2,4,6.5 --frames-per-node 10 --out amaze --plan-only",
+         "what a small table would render and how long it would take, nothing run"),
+    ],
+    ("sensor-model", "validate"): [
+        ("svgs sensor-model validate --model model-nexus --frames 200 --out model-nexus/validation",
+         "200 held-out frames against the model: KS tests, scatter ratios, dropout counts"),
+    ],
     ("approach",): [
         ("svgs approach --camera galaxy-nexus --from 30 --to 1 --duration 60 --fps 1 --out approach",
          "a docking approach frame by frame, the error against the CRLB, a video"),

@@ -32,7 +32,7 @@ import sys
 
 from svgs_sim.cli.examples import add_examples
 from svgs_sim.cli.exit_codes import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_IO_ERROR, EXIT_NO_SOLUTION
-from svgs_sim.cli.signals import interruptible
+from svgs_sim.cli.signals import GROUP_DESTS, interruptible
 from svgs_sim.cli.stdout_guard import GuardedStdout
 from svgs_sim.base.errors import InputError, SimulationFailure
 
@@ -48,6 +48,12 @@ GROUPS = {
         "time-of-flight sensor (Zhu et al. 2022): pose from gray + depth frames",
         "Time-of-flight sensor commands (second seed, Zhu et al. 2022).",
         "tof_command", "TOF_COMMAND"),
+    "sensor-model": (
+        "the statistical sensor: its table from rendered frames, and its check against held-out frames",
+        "The statistical sensor for closed-loop Monte Carlo (svgs_sim.sim.statistical_sensor): 'build' renders "
+        "frames over range and off-axis angle and keeps each node's error bias, covariance and dropouts; 'validate' "
+        "compares it with rendered frames that were not used to build it.",
+        "sensor_model_command", "SENSOR_MODEL_COMMAND"),
 }
 
 #: Every command module, in help order: (group or None, module, the commands it adds).
@@ -63,6 +69,7 @@ COMMANDS = (
     ("tof", "svgs_sim.cli.tof_stability", ("stability", "study")),
     (None, "svgs_sim.cli.studies", ("campaign", "sensitivity", "merge-range", "sun-study")),
     (None, "svgs_sim.cli.approach", ("approach",)),
+    ("sensor-model", "svgs_sim.cli.sensor_model", ("build", "validate")),
 )
 
 
@@ -177,7 +184,7 @@ def join_negative_values(parser: argparse.ArgumentParser, argv: list) -> list:
 def leaf_parser(parser: argparse.ArgumentParser, args) -> argparse.ArgumentParser:
     """The (sub)parser of the command that ``args`` ran (``svgs calibrate focal``'s parser)."""
     p = parser
-    for key in ("command", "calibrate_command", "tof_command"):
+    for key in ("command", *GROUP_DESTS):
         name = getattr(args, key, None)
         if not name:
             continue

@@ -47,10 +47,13 @@ def _raise_terminated(signum, frame):
     raise Terminated()
 
 
+#: The argparse ``dest`` of each command group's second word (:data:`svgs_sim.cli.main.GROUPS`).
+GROUP_DESTS = ("calibrate_command", "tof_command", "sensor_model_command")
+
+
 def command_name(args) -> str:
     """The command as typed: ``campaign``, ``calibrate study``, ``tof solve``."""
-    words = [getattr(args, "command", None), getattr(args, "calibrate_command", None),
-             getattr(args, "tof_command", None)]
+    words = [getattr(args, "command", None), *(getattr(args, k, None) for k in GROUP_DESTS)]
     return " ".join(w for w in words if w) or "svgs"
 
 

@@ -33,6 +33,7 @@ from svgs_sim.base.errors import InputError, number_items
 from svgs_sim.svgs.envelope import MIN_SPAN_PX  # noqa: F401 - re-exported (the module notes name it)
 from svgs_sim.svgs.envelope import check_attitude_deg, check_range_m, range_envelope_m
 from svgs_sim.base.limits import INPUT_BOUNDS, INT_BOUNDS
+from svgs_sim.cli.signals import GROUP_DESTS
 
 #: Integer arguments that count something (>= 1).
 COUNTS = {"spp", "roi_spp", "rim_spp_factor", "spot_samples", "trials", "poses", "frames", "views", "subsets",
@@ -122,7 +123,7 @@ def _interval(dest: str, bounds) -> str:
 
 def _command(args) -> str:
     words = [args.command]
-    for k in ("calibrate_command", "tof_command"):
+    for k in GROUP_DESTS:
         if getattr(args, k, None):
             words.append(getattr(args, k))
     return " ".join(words)

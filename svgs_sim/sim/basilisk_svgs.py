@@ -203,12 +203,10 @@ def camera_position_covariance(state_vector, covariance) -> tuple[np.ndarray, np
     covariance_C : ndarray, shape (3, 3), m^2
     """
     s = np.asarray(state_vector, float)
-    J = np.empty((3, 6))
-    for j in range(6):
-        d = np.zeros(6)
-        d[j] = JACOBIAN_STEP
-        J[:, j] = -(state_to_pose(s + d)[1] - state_to_pose(s - d)[1]) / (2 * JACOBIAN_STEP)
-    return -state_to_pose(s)[1], J @ np.asarray(covariance, float) @ J.T
+    d = JACOBIAN_STEP * np.eye(6)
+    t = state_to_pose(np.concatenate([s[None], s + d, s - d]))[1]  # one batched call: (13, 3)
+    J = -(t[1:7] - t[7:13]).T / (2 * JACOBIAN_STEP)
+    return -t[0], J @ np.asarray(covariance, float) @ J.T
 
 
 class IdealSensor:

@@ -37,7 +37,7 @@ from .tof_study.design import PAPER_FIG14_Z_MM
 
 #: The pages that carry generated passages, relative to the repository root.
 PAGES = ("README.md", "docs/index.md", "docs/studies.md", "docs/tof.md", "docs/orbit.md", "docs/basilisk.md",
-         "docs/approach.md")
+         "docs/approach.md", "docs/sensor-model.md", "docs/reports/montecarlo-docking/README.md")
 #: The command that writes them (quoted in each passage's page).
 COMMAND = "python -m svgs_sim.studies.report_text"
 BLOCK_RE = re.compile(r"(<!-- generated: (?P<name>[\w.-]+) -->\n)(?P<body>.*?)(<!-- /generated: (?P=name) -->)", re.S)
@@ -359,6 +359,91 @@ def sun_3u_detail(root: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
+def sensor_model_validation(root: Path) -> str:
+    """The statistical sensors against their held-out rendered frames
+    (``docs/reports/sensor-model-<phone>/validation/validation.json``): per phone each outcome's count
+    against the model's 90 % interval, and per component the KS tests and the scatter ratio."""
+    out = []
+    for ph in PHONES:
+        path = root / "docs" / "reports" / f"sensor-model-{ph}" / "validation" / "validation.json"
+        if not path.is_file():
+            continue
+        v = _json(path)
+        env = v["envelope"]
+        out.append(f"**{PHONE_NAMES[ph]}**: {v['frames']} held-out frames (seed {v['seed']}) over "
+                   f"{env['range_m'][0]:g}-{env['range_m'][1]:g} m, 0-{env['off_axis_deg_max']:g} deg off axis, "
+                   f"attitude within +-{env['attitude_deg_max']:g} deg.\n")
+        out.append("| outcome | rendered | model: mean (90 % interval) | |\n|---|---|---|---|")
+        for k, o in v["outcomes"].items():
+            out.append(f"| `{k}` | {o['observed']} | {o['model_mean']:.1f} ({o['model_interval90'][0]}-"
+                       f"{o['model_interval90'][1]}) | {'within' if o['within'] else '**outside**'} |")
+        out.append("")
+        out.append("| component | solved frames | KS p, all ranges | KS p by third of the log-range (near, mid, far) | "
+                   "scatter / model's (90 %) |\n|---|---|---|---|---|")
+        for k, e in v["errors"].items():
+            if "ks_p" not in e:
+                out.append(f"| {k} | {e['n_rendered']} | too few | | |")
+                continue
+            bands = ", ".join(f"{b['ks_p']:.2g}" for b in e.get("bands", []))
+            lo, hi = e["scatter_ratio_interval90"]
+            out.append(f"| {k} | {e['n_rendered']} | {e['ks_p']:.2g} | {bands} | {e['scatter_ratio']:.2f} "
+                       f"({lo:.2f}-{hi:.2f}) |")
+        out.append("")
+    return "\n".join(out)
+
+
+#: The committed Monte Carlo (examples/basilisk_docking.py --monte-carlo ... --statistical-runs ...).
+MONTE_CARLO = Path("docs") / "reports" / "montecarlo-docking" / "montecarlo.json"
+
+
+def _mc_row(name: str, runs: list, p: dict) -> str:
+    def q(key, scale, fmt):
+        d = p[key]
+        return "/".join("-" if d[s] is None else format(scale * d[s], fmt) for s in ("p50", "p90"))
+
+    arrived = sum(r["arrival_error_m"] is not None for r in runs)
+    return (f"| {name} | {len(runs)} | {arrived} | {q('arrival_error_m', 100, '.2f')} | "
+            f"{q('arrival_time_s', 1, '.0f')} | {q('delta_v_m_s', 100, '.2f')} | {q('dropouts', 1, '.0f')} | "
+            f"{sum(r['wrong_locks'] for r in runs)} |")
+
+
+def monte_carlo(root: Path) -> str:
+    """The committed docking Monte Carlo: per phone the ideal sensor, the rendered sensor, the statistical
+    sensor on the rendered runs' seeds and on all its runs (p50/p90 of each quantity), and the KS test of
+    the rendered runs against the statistical ones."""
+    from scipy.stats import ks_2samp
+
+    d = _json(root / MONTE_CARLO)
+    n, m = d["runs_per_sensor"], d["statistical_runs"]
+    rows = [f"{n} rendered and {m} statistical runs per phone from {d['start_state'][2]:g} m at "
+            f"{d['sensor_rate_hz']:g} frames/s; the ideal sensor on all {len(d['ideal_runs'])} seeds. Each cell: "
+            "p50/p90.\n",
+            "| sensor | runs | arrived | arrival error, cm | arrival time, s | delta-v, cm/s | dropouts | wrong locks |",
+            "|---|---|---|---|---|---|---|---|",
+            _mc_row("ideal", d["ideal_runs"], d["ideal_percentiles"])]
+    notes = []
+    for ph in PHONES:
+        r, s = d["sensors"].get(ph), d["sensors"].get(f"{ph} (statistical)")
+        if not (r and s):
+            continue
+        rows.append(_mc_row(f"{PHONE_NAMES[ph]}, rendered", r["runs"], r["percentiles"]))
+        rows.append(_mc_row(f"{PHONE_NAMES[ph]}, statistical, the same {n} seeds", s["runs"][:n],
+                            s["percentiles_on_rendered_seeds"]))
+        rows.append(_mc_row(f"{PHONE_NAMES[ph]}, statistical", s["runs"], s["percentiles"]))
+        tests = []
+        for key, label in (("delta_v_m_s", "delta-v"), ("arrival_error_m", "arrival error"), ("dropouts", "dropouts")):
+            a = [x[key] for x in r["runs"] if x[key] is not None]
+            b = [x[key] for x in s["runs"] if x[key] is not None]
+            if len(a) >= 3 and len(b) >= 3 and len(set(a) | set(b)) > 1:
+                tests.append(f"{label} p = {ks_2samp(a, b).pvalue:.2g}")
+        dv = np.array([x["delta_v_m_s"] for x in r["runs"]]) - np.array([x["delta_v_m_s"] for x in s["runs"][:n]])
+        notes.append(f"- {PHONE_NAMES[ph]}: the {n} rendered runs against the {m} statistical runs, two-sample KS: "
+                     f"{', '.join(tests) or 'no test (too few values)'}; delta-v, rendered minus statistical on the "
+                     f"same seeds: {100 * dv.mean():+.3f} +- {100 * dv.std(ddof=1) / np.sqrt(dv.size):.3f} cm/s "
+                     "(mean +- its standard error).")
+    return "\n".join(rows) + "\n\n" + "\n".join(notes) + "\n"
+
+
 def _mechanisms(phone: str) -> Callable[[Path], str]:
     def block(root: Path) -> str:
         rows = cell_mechanisms(read_table(_campaign(root, phone) / "results.csv"), phone)
@@ -383,6 +468,8 @@ BLOCKS: dict[str, Callable[[Path], str]] = {
     "tof-mechanisms": tof_mechanisms,
     "sun-albedo": sun_albedo,
     "sun-3u-detail": sun_3u_detail,
+    "sensor-model-validation": sensor_model_validation,
+    "monte-carlo": monte_carlo,
     **{f"mechanisms-{ph}": _mechanisms(ph) for ph in PHONES},
 }
 
