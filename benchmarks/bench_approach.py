@@ -22,9 +22,12 @@ wall time (the render's is the wait for it).
 Goal (issue 23): 3 frames/s at full resolution, 10 at preview, on the 2-core machine (issue 15's
 were 2 and 8). Issue 40: 0.2 s a full-resolution frame; ``old camera path`` is the same sensor
 through the camera model as it was before (:func:`old_camera_path`, the same numbers), measured
-in the same run, alternating with ours.
+in the same run, alternating with ours; ``ours, fast dark pixels`` is ours with
+``ApproachSensor(dark_pixels="fast")`` (issue 40's numbers-changing option, off by default: the
+pixels that cannot reach the threshold draw their shot noise from a table sampler of the same
+Poisson law), alternating with the other two.
 
-Run: ``.venv/bin/python benchmarks/bench_approach.py [--frames N] [--camera NAME]``
+Run: ``.venv/bin/python benchmarks/bench_approach.py [--frames N] [--camera NAME] [--full-only]``
 """
 
 from __future__ import annotations
@@ -57,9 +60,12 @@ def old_camera_path():
         isp.ExposureSolver._build_f32, isp.JPEG_BAND_MIN_ROWS = saved
 
 
-def ours(camera, traj, times, motion=False, overlap=True, old=False):
+def ours(camera, traj, times, motion=False, overlap=True, old=False, dark_pixels="exact"):
     from svgs_sim.sim.approach import ApproachSensor
 
+    if dark_pixels != "exact":
+        return _ours(ApproachSensor(camera, seed=1, motion=motion, overlap_render=overlap, dark_pixels=dark_pixels),
+                     traj, times, overlap)
     if old:  # the same sensor through the camera model's path before issue 40
         with old_camera_path():
             sensor = ApproachSensor(camera, seed=1, motion=motion, overlap_render=overlap, overlap_camera=False)
@@ -82,6 +88,40 @@ def _ours(sensor, traj, times, overlap):
     sensor.close()
     n = len(times) - 1
     return wall / n, {k: v / n for k, v in stages.items()}, solved
+
+
+def exposure_stages(camera, reps=5):
+    """The exposure alone on one rendered frame (10 m), exact and fast dark pixels alternating,
+    ``reps`` times each, the best of each kept: the whole ``Exposer.expose`` and its charge stage
+    (the Poisson draws: ``electrons`` against ``electrons_dark``), s."""
+    from svgs_sim.camera.phone import DARK_TILE_PX
+    from svgs_sim.camera.phone.sensor import electrons, electrons_dark
+    from svgs_sim.sim.closed_loop import Scenario, render_scenario
+    from svgs_sim.svgs.pipeline import camera_threshold
+
+    fr = render_scenario(Scenario(camera=camera if isinstance(camera, str) else camera.name, range_m=10.0), seed=1)
+    ex = fr.exposer()
+    thr = float(camera_threshold(np.zeros(1, np.uint8), ex.phone.camera))
+    t, iso, _ = ex.settings()
+    sp = ex.phone.params.sensor
+    prnu, dsnu = ex.phone.fixed_patterns()
+    dark, why = ex.dark_tiles(t, iso, ex.stages, ex.phone.params.isp, ex.phone.params.cfa.demosaic, thr)
+    best = {}
+
+    def clock(key, f):
+        a = time.perf_counter()
+        f()
+        best[key] = min(best.get(key, np.inf), time.perf_counter() - a)
+
+    for k in range(reps + 1):  # the first round compiles and warms up
+        clock("expose exact", lambda: ex.expose(seed=k))
+        clock("expose fast", lambda: ex.expose(seed=k, dark_pixels="fast", threshold_u8=thr))
+        clock("charge exact", lambda: electrons(ex.flux_optics, sp, t, prnu, dsnu, k))
+        if dark is not None:
+            clock("charge fast", lambda: electrons_dark(ex.flux_optics, sp, t, prnu, dsnu, k, dark, DARK_TILE_PX))
+        if k == 0:
+            best.clear()
+    return best, why
 
 
 def peer(camera, traj, times):
@@ -125,6 +165,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--frames", type=int, default=6, help="timed frames per run (default 6, after one warm-up)")
     ap.add_argument("--camera", default="galaxy-nexus")
+    ap.add_argument("--full-only", action="store_true", help="full resolution only, without the overlapped, "
+                    "motion and peer runs (the camera paths' comparison alone)")
     args = ap.parse_args(argv)
     traj = Trajectory.straight(20.0, 5.0, 10.0)
     times = np.linspace(0.0, 10.0, args.frames + 1)
@@ -136,14 +178,14 @@ def main(argv=None):
     prev_path = str(prev.save(tmp / f"{prev.name}.toml"))
     print(f"svgs approach, {args.camera}, 20 -> 5 m, {args.frames} timed frames after one warm-up (2-core CPU, "
           "Mitsuba LLVM)")
-    for label, cam in (("full resolution", args.camera), ("preview 640x480", prev_path)):
-        # ours and the old path alternate, twice each, the better of each kept (the machine is shared)
-        runs = [ours(cam, traj, times, overlap=False, old=old) for old in (True, False, True, False)]
-        o_s, o_st, o_ok = min(runs[1::2], key=lambda r: r[0])
-        x_s, x_st, _ = min(runs[0::2], key=lambda r: r[0])
-        n_s, n_st, _ = ours(cam, traj, times, overlap=True)
-        m_s, _, _ = ours(cam, traj, times, motion=True)
-        p_s, p_st, p_ok = peer(cam, traj, times)
+    for label, cam in (("full resolution", args.camera), ("preview 640x480", prev_path))[:1 if args.full_only else 2]:
+        # the old path, ours and ours with fast dark pixels alternate, twice each, the better of each kept
+        # (the machine is shared)
+        runs = [ours(cam, traj, times, overlap=False, old=old, dark_pixels=dp)
+                for _ in range(2) for old, dp in ((True, "exact"), (False, "exact"), (False, "fast"))]
+        o_s, o_st, o_ok = min(runs[1::3], key=lambda r: r[0])
+        x_s, x_st, _ = min(runs[0::3], key=lambda r: r[0])
+        f_s, f_st, f_ok = min(runs[2::3], key=lambda r: r[0])
         print(f"\n{label}:")
         print("  ours (ApproachSensor):   " + ", ".join(f"{k} {v:.3f} s" for k, v in o_st.items())
               + f"  -> {o_s:.3f} s/frame = {1 / o_s:.2f} frames/s ({o_ok}/{args.frames} solved)")
@@ -151,6 +193,22 @@ def main(argv=None):
               + ", ".join(f"{k} {v:.3f} s" for k, v in x_st.items()) + f"  -> {x_s:.3f} s/frame = {1 / x_s:.2f} frames/s")
         print(f"  ratio ours / old camera path (time per frame): {o_s / x_s:.2f} (issue 40's goal 0.2 s a frame at full "
               f"resolution: {'met' if o_s <= 0.2 else 'NOT met'})")
+        print("  ours, fast dark pixels (dark_pixels='fast'; other noise draws, the same statistics): "
+              + ", ".join(f"{k} {v:.3f} s" for k, v in f_st.items())
+              + f"  -> {f_s:.3f} s/frame = {1 / f_s:.2f} frames/s ({f_ok}/{args.frames} solved)")
+        print(f"  ratio fast dark pixels / ours: {f_s / o_s:.2f}; / old camera path: {f_s / x_s:.2f} (issue 40's goal "
+              f"0.2 s a frame at full resolution: {'met' if f_s <= 0.2 else 'NOT met'})")
+        if label.startswith("full"):
+            st, why = exposure_stages(cam)
+            print(f"  the exposure alone (10 m frame, best of 5, alternating; dark pixels: {why}): "
+                  + ", ".join(f"{k} {v:.3f} s" for k, v in st.items())
+                  + f"; ratio fast / exact: expose {st['expose fast'] / st['expose exact']:.2f}"
+                  + (f", charge {st['charge fast'] / st['charge exact']:.2f}" if "charge fast" in st else ""))
+        if args.full_only:
+            continue
+        n_s, n_st, _ = ours(cam, traj, times, overlap=True)
+        m_s, _, _ = ours(cam, traj, times, motion=True)
+        p_s, p_st, p_ok = peer(cam, traj, times)
         print("  ours, render overlapped (overlap_render=True): " + ", ".join(f"{k} {v:.3f} s" for k, v in n_st.items())
               + f"  -> {n_s:.3f} s/frame = {1 / n_s:.2f} frames/s")
         print(f"  ours with motion blur and rolling shutter: {m_s:.3f} s/frame = {1 / m_s:.2f} frames/s")

@@ -67,6 +67,10 @@ def register(sub) -> None:
     p.add_argument("--overlap-render", action="store_true",
                    help="render the next frame in a background thread while the phone model works on this one "
                         "(same numbers; no gain on a 2-core machine, docs/approach.md#speed)")
+    p.add_argument("--fast-dark-pixels", action="store_true",
+                   help="draw the shot noise of the pixels that cannot reach the detection threshold (away from the "
+                        "spots) with a cheaper sampler of the same Poisson law: other noise draws than the default, "
+                        "the same statistics; the exact path for a frame mostly bright (docs/performance.md, Issue 40)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object on stdout")
     p.set_defaults(func=cmd_approach)
@@ -104,7 +108,7 @@ def config_from_args(args) -> dict:
 
     return make_config(args.camera, traj, args.fps, seed=args.seed, preview=args.preview, motion=not args.no_motion,
                        crlb=not args.no_crlb, pattern=args.pattern, threshold=args.threshold, scene=scene,
-                       body=body_options(args))
+                       body=body_options(args), dark_pixels="fast" if args.fast_dark_pixels else "exact")
 
 
 def print_summary(s: dict, file=None) -> None:
@@ -152,8 +156,8 @@ def command_line(args) -> str:
             parts.append(f"--attitude {quote(args.attitude)}")
     parts.append(f"--fps {_exact(args.fps)}")
     parts += [f"--seed {args.seed}"] if args.seed else []
-    parts += [f for f, on in (("--preview", args.preview), ("--no-motion", args.no_motion), ("--no-crlb", args.no_crlb))
-              if on]
+    parts += [f for f, on in (("--preview", args.preview), ("--no-motion", args.no_motion), ("--no-crlb", args.no_crlb),
+                              ("--fast-dark-pixels", getattr(args, "fast_dark_pixels", False))) if on]
     if args.threshold not in (None, "app"):
         parts.append(f"--threshold {quote(str(args.threshold))}")
     from svgs_sim.sim.scene import scene_option_words

@@ -53,11 +53,13 @@ TEXT_COLUMNS = ("reason",)
 
 def make_config(camera: str, trajectory: Trajectory, fps: float, *, seed: int = 0, preview: bool = False,
                 motion: bool = True, crlb: bool = True, pattern: str = "svgs-3u", threshold=None,
-                scene: Scene | None = None, body: dict | None = None) -> dict:
+                scene: Scene | None = None, body: dict | None = None, dark_pixels: str = "exact") -> dict:
     """The approach's parameters (the store's manifest): what decides the numbers. ``threshold``:
     the detector's (None or ``"app"``: the app's for the camera, :mod:`svgs_sim.svgs.app`; ``"auto"``,
     ``"otsu"`` or a level in 8-bit counts). ``scene``: around the target (default the paper's lab;
-    recorded as ``scene`` only when it is another, so a study folder made before the option resumes)."""
+    recorded as ``scene`` only when it is another, so a study folder made before the option resumes).
+    ``dark_pixels``: the camera model's sampler of the dark pixels (:class:`svgs_sim.sim.approach.ApproachSensor`;
+    recorded only when ``"fast"``, which changes the numbers)."""
     from svgs_sim.svgs.detect import parse_threshold
 
     t = parse_threshold(None if threshold is None else str(threshold))
@@ -66,6 +68,8 @@ def make_config(camera: str, trajectory: Trajectory, fps: float, *, seed: int = 
            "threshold": "app" if t is None else t if isinstance(t, str) else float(t)}
     if scene is not None and scene != Scene():
         cfg["scene"] = scene.to_json()
+    if dark_pixels != "exact":
+        cfg["dark_pixels"] = str(dark_pixels)
     if body and any(v not in (None, {}, ()) for v in body.values()):  # recorded only when given: older folders resume
         opts = RenderOptions(**body)  # checked before any work
         cfg["body"] = {"body": opts.body, "body_material": opts.body_material,
@@ -180,7 +184,7 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
             sensor = ApproachSensor(cam, cfg["pattern"], seed=cfg["seed"], motion=cfg["motion"], crlb=cfg["crlb"],
                                     keep_images=True, frame_rate_hz=cfg["fps"], threshold=_threshold(cfg),
                                     overlap_render=overlap_render, base=Scenario(scene=scene_of(cfg)),
-                                    body=cfg.get("body"))
+                                    body=cfg.get("body"), dark_pixels=cfg.get("dark_pixels", "exact"))
             if todo[0] > 0:
                 last = {r["trial_id"]: r for r in store.read_rows()}[todo[0] - 1]
                 sensor.restore(todo[0], last["next_exposure_s"], last["next_iso"])

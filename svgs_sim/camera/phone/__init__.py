@@ -65,11 +65,36 @@ from svgs_sim.camera.phone.params import (
     check_stages,
 )
 from svgs_sim.camera.phone.psf import PIXEL_KERNEL_RADIUS_PX, splat_patches, support_box
-from svgs_sim.camera.phone.sensor import bloom, electrons, fixed_patterns, readout
+from svgs_sim.camera.phone.sensor import (DARK_TABLE_MAX_E, bloom, dark_charge_limit, electrons, electrons_dark,
+                                         fixed_patterns, readout, tile_max)
 from svgs_sim.camera.rendered import PointFlux
 from svgs_sim.camera.tonemap import gamma_u8
 
-__all__ = ["PhoneCamera", "Exposer", "Exposure", "PhoneParams", "ALL_STAGES", "NOISE_STAGES", "OPTICS_STAGES"]
+__all__ = ["PhoneCamera", "Exposer", "Exposure", "PhoneParams", "ALL_STAGES", "NOISE_STAGES", "OPTICS_STAGES",
+           "DARK_PIXELS"]
+
+#: How an exposure draws the shot noise of its dark pixels (:meth:`Exposer.expose`): ``exact``
+#: (default), every pixel by the exact path's inversion; ``fast``, the pixels that cannot reach
+#: the detection threshold by a table sampler of the same Poisson law (other variates).
+DARK_PIXELS = ("exact", "fast")
+#: Side of the dark pixels' tiles, px (the 16-px JPEG MCU, a multiple of the 2-px mosaic).
+DARK_TILE_PX = 16
+#: The tiles within this distance of a point sample of the targets' spots are exact, px (and
+#: their neighbours, :data:`DARK_ISP_REACH_PX`).
+DARK_WINDOW_PX = 16
+#: How far the ISP carries a pixel's value, px of the delivered image: the demosaic's 1 px, a
+#: JPEG block's 15 px and the chroma upsampling's 2 px. The tiles this close to a tile that can
+#: reach the threshold are exact too (scaled by a downscale's factor).
+DARK_ISP_REACH_PX = 18
+#: The chance allowed to one dark pixel of reaching the detection threshold: 1e-13, i.e. below
+#: 1e-6 over a 5-Mpx frame.
+DARK_TAIL_P = 1e-13
+#: What the ISP after the pixels may add to a dark region's 8-bit level (the JPEG's quantisation
+#: error on a dark, smooth block), 8-bit counts: the dark pixels stay this far below the threshold.
+DARK_JPEG_MARGIN_U8 = 8.0
+#: Above this fraction of the frame's pixels in tiles that can reach the threshold (a sunlit body
+#: or the Earth behind the target) the exposure takes the exact path.
+DARK_FALLBACK_FRACTION = 0.25
 
 
 @dataclass
@@ -136,6 +161,7 @@ class PhoneCamera:
         except ValueError as exc:
             raise InputError(str(exc)) from None
         self._fpn = None
+        self._pattern_bounds = None
 
     @property
     def shape(self):
@@ -145,6 +171,14 @@ class PhoneCamera:
         if self._fpn is None:
             self._fpn = fixed_patterns(self.params.sensor, self.shape)
         return self._fpn
+
+    def pattern_bounds(self) -> tuple[float, float]:
+        """The fixed patterns' extremes (kept): the largest PRNU gain and the largest DSNU
+        magnitude (e-), for the dark pixels' bound (:meth:`Exposer.dark_tiles`)."""
+        if self._pattern_bounds is None:
+            prnu, dsnu = self.fixed_patterns()
+            self._pattern_bounds = (float(prnu.max()), float(np.abs(dsnu).max()))
+        return self._pattern_bounds
 
     def core_psf(self):
         """The lens' core PSF (:class:`svgs_sim.camera.phone.psf.CorePSF`): Airy (x) aberration."""
@@ -402,6 +436,10 @@ class Exposer:
         bg = phone.check_background(background)
         nat = phone.check_natural(natural)
         self.cfa = phone.uses_cfa(self.stages)
+        #: The point samples of the targets' spots (their tiles keep the exact path, :meth:`expose`).
+        self.points = pts
+        self._flux_tiles = None
+        self._windows = None
         if "glare" in self.stages:
             self.flux_optics = phone.optics(f, pts, seed=optics_seed, cfa=self.cfa, background=bg, natural=nat)
         else:  # a perfect lens: each point counts in its own pixel
@@ -460,7 +498,7 @@ class Exposer:
         return float(exposure_s), float(iso), info
 
     def expose(self, *, seed: int = 0, exposure_s=None, iso=None, keep_electrons=False, stages=None, isp=None,
-               demosaic=None) -> Exposure:
+               demosaic=None, dark_pixels: str = "exact", threshold_u8: float | None = None) -> Exposure:
         """One exposure with its own noise draw.
 
         Parameters
@@ -480,6 +518,12 @@ class Exposer:
         demosaic : str, optional
             The demosaic of this exposure (:data:`svgs_sim.camera.phone.params.DEMOSAIC_METHODS`) instead
             of the profile's ``[cfa] demosaic``.
+        dark_pixels : {"exact", "fast"}
+            ``fast``: the pixels that cannot reach ``threshold_u8`` draw their shot noise from a
+            cheaper sampler of the same law (:meth:`_electrons`); not the same bytes as ``exact``.
+        threshold_u8 : float, optional
+            The detector's threshold on the delivered 8-bit image (``fast`` only; without it,
+            the exact path).
 
         Returns
         -------
@@ -499,8 +543,7 @@ class Exposer:
             raise InputError(f"isp: expected a svgs_sim.camera.phone.params.IspParams, got {type(isp).__name__}")
         method = p.cfa.demosaic if demosaic is None else check_demosaic(demosaic)
         t, iso, info = self.settings(exposure_s, iso)
-        prnu, dsnu = self.phone.fixed_patterns()
-        e = electrons(self.flux_optics, sp, t, prnu, dsnu, seed, shot="shot" in st, dark="dark" in st, fpn="fpn" in st)
+        e = self._electrons(t, iso, seed, st, isp, method, dark_pixels, threshold_u8, info)
         if "bloom" in st:
             info["bloom"] = bloom(e, sp.full_well_e, sp.anti_blooming_drain, sp.bloom_direction)
         else:
@@ -537,6 +580,111 @@ class Exposer:
             img = luma(img)
         info.update({"seed": int(seed), "stages": list(st), "demosaic": method if self.cfa else None})
         return Exposure(raw, img, t, iso, sp.gain_dn_per_e(iso), info, e if keep_electrons else None)
+
+    def _electrons(self, exposure_s: float, iso: float, seed: int, st, isp, method: str, dark_pixels: str,
+                   threshold_u8, info: dict) -> np.ndarray:
+        """The charge image (e-, float32 (H, W)) before blooming: every pixel by
+        :func:`svgs_sim.camera.phone.sensor.electrons`, or with ``dark_pixels="fast"`` the dark
+        tiles' pixels (:meth:`dark_tiles`) by :func:`svgs_sim.camera.phone.sensor.electrons_dark`
+        (the same law; the other pixels to the bit as the exact path). ``info["dark_pixels"]``
+        says which path was taken and why."""
+        if dark_pixels not in DARK_PIXELS:
+            raise InputError(f"dark_pixels: expected one of {DARK_PIXELS}, got {dark_pixels!r}")
+        sp = self.phone.params.sensor
+        prnu, dsnu = self.phone.fixed_patterns()
+        if dark_pixels == "fast":
+            dark, why = self.dark_tiles(exposure_s, iso, st, isp, method, threshold_u8)
+            info["dark_pixels"] = why
+            if dark is not None:
+                return electrons_dark(self.flux_optics, sp, exposure_s, prnu, dsnu, seed, dark, DARK_TILE_PX,
+                                      fpn="fpn" in st)
+        return electrons(self.flux_optics, sp, exposure_s, prnu, dsnu, seed, shot="shot" in st, dark="dark" in st,
+                         fpn="fpn" in st)
+
+    def dark_reach_e(self, iso: float, st, isp, threshold_u8: float) -> float:
+        """The charge (e-) below which a pixel cannot bring the delivered image to
+        ``threshold_u8 - DARK_JPEG_MARGIN_U8``: raw DN ``black + K e`` (rounded), white-balanced
+        by the weakest channel response (the bilinear demosaic and the luminance are averages, so
+        no output exceeds the largest white-balanced input), then the tone curve.
+
+        Parameters
+        ----------
+        iso : float
+        st : tuple of str
+            The exposure's stages.
+        isp : IspParams
+        threshold_u8 : float
+            The detector's threshold, 8-bit counts.
+
+        Returns
+        -------
+        float
+            e- (0 when the margin leaves nothing).
+        """
+        p = self.phone.params
+        sp = p.sensor
+        x = (float(threshold_u8) - DARK_JPEG_MARGIN_U8) / 255.0
+        if x <= 0:
+            return 0.0
+        lin = x ** isp.gamma if ("tone" in st and isp.gamma > 0) else x
+        resp = min(p.cfa.response) if self.cfa else 1.0
+        dn_above = lin * (sp.white_dn - sp.black_level_dn) * resp
+        return max((dn_above - 0.5) / sp.gain_dn_per_e(iso), 0.0)
+
+    def dark_tiles(self, exposure_s: float, iso: float, st, isp, method: str, threshold_u8):
+        """The dark tiles of an exposure (``DARK_TILE_PX`` square): those whose pixels, and the
+        pixels of the tiles within :data:`DARK_ISP_REACH_PX` (times a downscale's factor), cannot reach the
+        threshold (expected charge below :func:`svgs_sim.camera.phone.sensor.dark_charge_limit` of
+        :meth:`dark_reach_e`, chance :data:`DARK_TAIL_P` a pixel) and lie away from the spots'
+        point samples (:data:`DARK_WINDOW_PX`).
+
+        Returns
+        -------
+        dark : ndarray, bool, shape (ceil(H / DARK_TILE_PX), ceil(W / DARK_TILE_PX)), or None
+            None: the exact path (no threshold, an ISP the bound does not hold for, or more
+            than :data:`DARK_FALLBACK_FRACTION` of the frame can reach the threshold).
+        why : dict
+            ``path`` ("fast" or "exact"), ``reason``, and when computed ``mu_dark_e`` (e-),
+            ``reach_fraction`` (of the tiles).
+        """
+        sp = self.phone.params.sensor
+        if threshold_u8 is None or isinstance(threshold_u8, str) or not np.isfinite(float(threshold_u8)):
+            return None, {"path": "exact", "reason": "no numeric threshold"}
+        if not ("shot" in st and "dark" in st) or ("nr" in st and isp.nr_sigma_px > 0) or (
+                "sharpen" in st and isp.sharpen_amount > 0) or (self.cfa and method != "bilinear"):
+            return None, {"path": "exact", "reason": "stages or ISP outside the bound"}
+        prnu_max, dsnu_max = self.phone.pattern_bounds() if "fpn" in st else (1.0, 0.0)
+        mu_dark = dark_charge_limit(self.dark_reach_e(iso, st, isp, float(threshold_u8)), sp, dsnu_max, DARK_TAIL_P)
+        if self._flux_tiles is None:
+            self._flux_tiles = tile_max(self.flux_optics, DARK_TILE_PX)
+        mu = sp.qe * exposure_s * self._flux_tiles * prnu_max + sp.dark_current_e_s * exposure_s
+        reach = (mu >= min(mu_dark, DARK_TABLE_MAX_E)) | self._window_tiles(mu.shape)
+        f = max(1.0, self.phone.shape[1] / isp.output_width) if ("downscale" in st and isp.output_width > 0) else 1.0
+        r = max(1, int(np.ceil((DARK_ISP_REACH_PX * f + 1) / DARK_TILE_PX)))
+        grown = np.pad(reach, r)
+        dil = np.zeros_like(reach)
+        for a in range(2 * r + 1):
+            for b in range(2 * r + 1):
+                dil |= grown[a:a + reach.shape[0], b:b + reach.shape[1]]
+        why = {"mu_dark_e": float(mu_dark), "reach_fraction": float(dil.mean())}
+        if dil.mean() > DARK_FALLBACK_FRACTION:
+            return None, {"path": "exact", "reason": "bright frame (fallback)", **why}
+        return ~dil, {"path": "fast", "reason": "", **why}
+
+    def _window_tiles(self, shape) -> np.ndarray:
+        """The tiles within :data:`DARK_WINDOW_PX` of a point sample of the spots (kept): bool,
+        ``shape`` (tiles)."""
+        if self._windows is None:
+            win = np.zeros(shape, bool)
+            if self.points is not None and len(self.points):
+                w = DARK_WINDOW_PX
+                for du in (-w, 0, w):
+                    for dv in (-w, 0, w):
+                        i = np.clip((self.points.v_px + dv) // DARK_TILE_PX, 0, shape[0] - 1).astype(int)
+                        j = np.clip((self.points.u_px + du) // DARK_TILE_PX, 0, shape[1] - 1).astype(int)
+                        win[i, j] = True
+            self._windows = win
+        return self._windows
 
     def _isp_image(self, raw, isp, method: str, gamma: float, *, nr: bool, sharpen: bool, colour: bool,
                    u8: bool) -> np.ndarray:

@@ -424,3 +424,208 @@ def readout(e, params: SensorParams, iso: float, seed: int, *, read=True, adc=Tr
                     float(params.black_level_dn), float(params.white_dn), _key(seed, 3),
                     bool(read), bool(adc), lut_arr, normal_levels(), out, out8)
     return out, (out8 if want8 else None)
+
+
+# ---------------------------------------------------------------------------------------------
+# Dark pixels (an option, off by default): a cheaper exact Poisson sampler for the pixels whose
+# expected charge keeps them far below the detection threshold.
+
+#: Step of the expected-charge levels of the dark pixels' Poisson tables, e-.
+DARK_TABLE_STEP_E = 1.0 / 16.0
+#: The highest expected charge a dark pixel may have, e- (below ``POISSON_GAUSS_LAMBDA`` = 25 e-,
+#: where the exact path's sampler is exact Poisson inversion too: both draw the same law).
+DARK_TABLE_MAX_E = 24.0
+#: Counts per level in the tables: ``P(Poisson(24) > 64) < 1e-11`` (below the draws' 2^-32), the mass beyond on the last.
+DARK_TABLE_KMAX = 64
+#: Guide bins per level (``u`` in bin ``b`` starts the search at the smallest count whose CDF passes ``b / bins``).
+_GUIDE_BITS = 6
+DARK_GUIDE_BINS = 1 << _GUIDE_BITS
+
+
+@functools.lru_cache(maxsize=1)
+def dark_poisson_tables() -> tuple[np.ndarray, np.ndarray]:
+    """The dark pixels' Poisson tables: the CDF of ``Poisson(q * DARK_TABLE_STEP_E)`` for each
+    level ``q`` (0 ... ``DARK_TABLE_MAX_E / DARK_TABLE_STEP_E`` + 1) in units of 2^-32, and its
+    guide table.
+
+    Returns
+    -------
+    cdf : ndarray, int64, shape (levels, DARK_TABLE_KMAX + 1)
+        ``round(2^32 P(N <= k))``; the last column 2^32 (the mass beyond ``DARK_TABLE_KMAX``,
+        below 1e-11, put there).
+    guide : ndarray, int32, shape (levels, DARK_GUIDE_BINS)
+        The smallest ``k`` with ``cdf[q, k] > b 2^32 / DARK_GUIDE_BINS``: the search's start
+        for a 32-bit draw in bin ``b``.
+    """
+    from scipy.stats import poisson
+
+    lam = np.arange(int(round(DARK_TABLE_MAX_E / DARK_TABLE_STEP_E)) + 2) * DARK_TABLE_STEP_E
+    k = np.arange(DARK_TABLE_KMAX + 1)
+    cdf = np.rint(poisson.cdf(k[None, :], lam[:, None]) * 2.0 ** 32).astype(np.int64)
+    cdf[:, -1] = 1 << 32
+    edges = np.arange(DARK_GUIDE_BINS, dtype=np.int64) << (32 - _GUIDE_BITS)
+    guide = np.stack([np.searchsorted(row, edges, side="right") for row in cdf]).astype(np.int32)
+    cdf.setflags(write=False)
+    guide.setflags(write=False)
+    return cdf, guide
+
+
+@njit(cache=True, inline="always")
+def _poisson_dark(lam, key, counter, cdf, guide):
+    """Poisson(lam) for ``0 <= lam < DARK_TABLE_MAX_E``, exact in law to 2^-32: the sum of
+    Poisson(``q * step``) by inversion of the integer CDF table (guide table, no exponential,
+    no float conversion) and Poisson of the remainder ``r < step`` by inversion (zero for
+    ``u2 <= 1 - r``, without an exponential). The two draws are the 32-bit halves of one
+    counter-based draw (``2 * counter``, the exact sampler's counter): outcomes rarer than
+    2^-32 (2.3e-10) a pixel are not resolved."""
+    if lam <= 0.0:
+        return 0.0
+    x = lam * (1.0 / DARK_TABLE_STEP_E)
+    q = int(x)
+    r = (x - q) * DARK_TABLE_STEP_E
+    z = _bits(key, np.uint64(2) * counter)
+    hi = np.int64(z >> np.uint64(32))
+    k = guide[q, hi >> (32 - _GUIDE_BITS)]
+    while hi >= cdf[q, k]:
+        k += 1
+    lo = np.int64(z & np.uint64(0xFFFFFFFF))
+    if lo >= (1.0 - r) * 4294967296.0:  # rare (probability r <= step): the remainder's inversion
+        u2 = (lo + 0.5) * (1.0 / 4294967296.0)
+        p = np.exp(-r)
+        F = p
+        j = 0
+        while u2 > F and j < 40:
+            j += 1
+            p *= r * _INV_K[j]
+            F += p
+        k += j
+    return float(k)
+
+
+@njit(parallel=True, cache=True)
+def _charge_kernel_dark(flux, scale, prnu, use_prnu, dark_e, dsnu, key_shot, dark_tile, tile, cdf, guide, out):
+    """:func:`_charge_kernel` with shot and dark noise on, the pixels of the dark tiles
+    (``dark_tile[r // tile, c // tile]``) drawn by :func:`_poisson_dark`; the others exactly as
+    :func:`_charge_kernel` draws them (the same counters: the same bits)."""
+    H, W = flux.shape
+    for r in prange(H):
+        tr = r // tile
+        for c in range(W):
+            idx = np.uint64(r * W + c)
+            m = scale * flux[r, c]
+            if use_prnu:
+                m *= prnu[r, c]
+            lam = m + dark_e
+            if dark_tile[tr, c // tile] and lam < DARK_TABLE_MAX_E:  # the guard: a table level always exists
+                e = _poisson_dark(lam, key_shot, idx, cdf, guide)
+            else:
+                e = _poisson(lam, key_shot, idx)
+            out[r, c] = e + dsnu[r, c]
+
+
+@njit(parallel=True, cache=True)
+def _tile_max_kernel(a, tile, out):
+    """Largest value of each ``tile x tile`` block of ``a`` (the last row and column of blocks partial)."""
+    H, W = a.shape
+    th, tw = out.shape
+    for i in prange(th):
+        for j in range(tw):
+            m = -np.inf
+            for r in range(i * tile, min(H, (i + 1) * tile)):
+                for c in range(j * tile, min(W, (j + 1) * tile)):
+                    if a[r, c] > m:
+                        m = a[r, c]
+            out[i, j] = m
+
+
+def tile_max(a: np.ndarray, tile: int) -> np.ndarray:
+    """The largest value of each ``tile x tile`` block of a float32 image.
+
+    Parameters
+    ----------
+    a : ndarray, float32, shape (H, W)
+    tile : int
+        Block side, px.
+
+    Returns
+    -------
+    ndarray, float64, shape (ceil(H / tile), ceil(W / tile))
+    """
+    H, W = a.shape
+    out = np.empty((-(-H // tile), -(-W // tile)))
+    _tile_max_kernel(np.ascontiguousarray(a, np.float32), int(tile), out)
+    return out
+
+
+def dark_charge_limit(e_reach: float, params: SensorParams, dsnu_max_e: float, tail_p: float) -> float:
+    """The largest expected charge (e-) of a pixel that reaches ``e_reach`` e- (signal, dark
+    current, DSNU and read noise together) with probability below ``tail_p`` at most, capped at
+    :data:`DARK_TABLE_MAX_E`.
+
+    The bound is hard in the fixed and read parts: DSNU at most ``dsnu_max_e`` (the frame's
+    largest), read noise at most its largest quantile (4.33 sigma, :func:`normal_levels`); the
+    Poisson count ``N`` must then reach ``n = ceil(e_reach - dsnu_max_e - 4.33 sigma_read)``, and
+    ``P(N >= n) < tail_p`` is solved for the mean by bisection (``P`` grows with the mean).
+
+    Parameters
+    ----------
+    e_reach : float
+        Charge, e-, at and above which a pixel could reach the detection threshold.
+    params : SensorParams
+    dsnu_max_e : float
+        Largest DSNU of the frame, e-.
+    tail_p : float
+        Per-pixel probability allowed.
+
+    Returns
+    -------
+    float
+        e- (0 when no expected charge is safe).
+    """
+    from scipy.stats import poisson
+
+    read_max = float(params.read_noise_e) * float(np.abs(normal_levels()).max())
+    n = int(np.ceil(e_reach - dsnu_max_e - read_max))
+    if n <= 0 or poisson.sf(n - 1, 1e-9) >= tail_p:
+        return 0.0
+    if poisson.sf(n - 1, DARK_TABLE_MAX_E) < tail_p:
+        return DARK_TABLE_MAX_E
+    lo, hi = 1e-9, DARK_TABLE_MAX_E
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if poisson.sf(n - 1, mid) < tail_p else (lo, mid)
+    return lo
+
+
+def electrons_dark(flux, params: SensorParams, exposure_s: float, prnu, dsnu, seed: int, dark_tile, tile: int, *,
+                   fpn=True):
+    """:func:`electrons` with shot and dark noise on, the pixels of the dark tiles drawn by the
+    tables' sampler (the same Poisson law; other variates), the others to the bit as
+    :func:`electrons` draws them.
+
+    Parameters
+    ----------
+    flux : ndarray, float32, shape (H, W)
+        Photons per second per pixel (after the optics).
+    exposure_s : float
+        s.
+    prnu, dsnu : ndarray, float32, shape (H, W)
+        Fixed patterns; ignored unless ``fpn``.
+    seed : int
+    dark_tile : ndarray, bool or uint8, shape (ceil(H / tile), ceil(W / tile))
+        The dark tiles (every pixel of them below :data:`DARK_TABLE_MAX_E` expected e-).
+    tile : int
+        Tile side, px.
+
+    Returns
+    -------
+    ndarray, float32, shape (H, W)
+        Electrons per pixel.
+    """
+    out = np.empty(flux.shape, np.float32)
+    dsnu_use = dsnu if fpn else np.zeros(flux.shape, np.float32)
+    cdf, guide = dark_poisson_tables()
+    _charge_kernel_dark(np.ascontiguousarray(flux, np.float32), float(params.qe * exposure_s), prnu, bool(fpn),
+                        float(params.dark_current_e_s * exposure_s), dsnu_use, _key(seed, 1),
+                        np.ascontiguousarray(dark_tile, np.uint8), int(tile), cdf, guide, out)
+    return out

@@ -190,6 +190,13 @@ class ApproachSensor:
         The target's body (:class:`svgs_sim.sim.closed_loop.RenderOptions`' ``body``,
         ``body_material``, ``body_materials``: ``"3u"``, a mesh file...); default the renderer's,
         the lab's breadboard.
+    dark_pixels : {"exact", "fast"}
+        How the camera model draws the shot noise of the pixels that cannot reach the detection
+        threshold (:meth:`svgs_sim.camera.phone.Exposer.expose`): ``exact`` (default), every
+        pixel by the exact sampler; ``fast``, those pixels (tiles away from the spots, their
+        expected charge far below the threshold) by a table sampler of the same Poisson law,
+        the exact path for a frame whose pixels can mostly reach the threshold. Other numbers
+        than ``exact`` (the same statistics: ``tests/test_phone_dark_pixels.py``).
 
     Examples
     --------
@@ -201,8 +208,13 @@ class ApproachSensor:
     def __init__(self, camera="galaxy-nexus", pattern="svgs-3u", *, seed: int = 0, motion: bool = True,
                  crlb: bool = True, keep_images: bool = False, threshold=None, base: Scenario | None = None,
                  frame_rate_hz: float | None = None, overlap_render: bool = False, body=None,
-                 overlap_camera: bool = True):
-        from svgs_sim.camera.phone import PhoneCamera, PhoneParams
+                 overlap_camera: bool = True, dark_pixels: str = "exact"):
+        from svgs_sim.camera.phone import DARK_PIXELS, PhoneCamera, PhoneParams
+
+        if dark_pixels not in DARK_PIXELS:
+            raise InputError(f"dark_pixels: expected one of {DARK_PIXELS}, got {dark_pixels!r}")
+        #: How the camera model draws the dark pixels' shot noise (``exact`` or ``fast``).
+        self.dark_pixels = dark_pixels
 
         self.camera = load_camera(camera)
         for t in ("optics", "flash"):
@@ -458,7 +470,12 @@ class ApproachSensor:
         from svgs_sim.svgs.detect import detect_blobs
 
         t0 = time.perf_counter()
-        ex = exposer.expose(seed=noise_seed, exposure_s=settings[0], iso=settings[1])
+        if self.dark_pixels == "exact":
+            ex = exposer.expose(seed=noise_seed, exposure_s=settings[0], iso=settings[1])
+        else:  # the threshold on the delivered 8-bit image (a string: "auto" or "otsu", then the exact path)
+            thr = camera_threshold(np.zeros(1, np.uint8), self.camera, self.threshold)
+            ex = exposer.expose(seed=noise_seed, exposure_s=settings[0], iso=settings[1], dark_pixels=self.dark_pixels,
+                                threshold_u8=None if isinstance(thr, str) else float(thr))
         timings["expose"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         blobs = detect_blobs(ex.image, threshold=camera_threshold(ex.image, self.camera, self.threshold))
