@@ -53,6 +53,7 @@ drawn; percentiles with order-statistic intervals) and ``OUT/montecarlo.png``::
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import sys
 import time
@@ -613,7 +614,14 @@ def run(phone: str | None, *, start_state=START_STATE, sensor_rate_hz=PHONE_FRAM
         while t_end < max_time_s and gnc.arrived_s is None:
             t_end = min(t_end + 10.0, max_time_s)
             sim.ConfigureStopTime(macros.sec2nano(t_end))
-            sim.ExecuteSimulation()
+            try:
+                sim.ExecuteSimulation()
+            except RuntimeError:  # Basilisk wraps what the sensor raised: a refusal is said as itself
+                if getattr(sensor, "refused", None):
+                    from svgs_sim.sim.statistical_sensor import OutsideEnvelope
+
+                    raise OutsideEnvelope(sensor.refused) from None
+                raise
     finally:
         if hasattr(sensor, "close"):
             sensor.close()
@@ -762,10 +770,17 @@ def mc_run(task: dict) -> dict:
     """One Monte Carlo run (a task of the executor): :func:`run` with the run's dispersions; its
     outcome as ``montecarlo.json`` records it, with the dispersions and a thinned trajectory where
     the task asks for them (``keep_detail``)."""
+    from svgs_sim.sim.statistical_sensor import OutsideEnvelope
+
     records, kw = mc_dispersions(task["seed"], task["start_state"])
-    r = run(task["phone"], seed=task["seed"], sensor_rate_hz=task["rate"], preview=task["preview"],
-            max_time_s=task["max_time_s"], case=task["case"], environment=task["environment"],
-            sensor_model=task.get("sensor_model"), **kw)
+    try:
+        r = run(task["phone"], seed=task["seed"], sensor_rate_hz=task["rate"], preview=task["preview"],
+                max_time_s=task["max_time_s"], case=task["case"], environment=task["environment"],
+                sensor_model=task.get("sensor_model"), **kw)
+    except OutsideEnvelope as exc:  # the statistical sensor refused a pose its table says nothing of: no result
+        return {"phone": task.get("label") or task["phone"], "seed": task["seed"], "refused": str(exc),
+                **{k: None for k in MC_KEYS}, "dropouts_by_reason": None, "frames": None, "wall_s": None,
+                "sensor_model_sha256": task.get("sensor_model_sha256")}
     s = r["summary"]
     dropouts = sum(s["dropouts_by_reason"].values())
     out = {"phone": task.get("label") or task["phone"] or "ideal", "seed": task["seed"],
@@ -773,6 +788,8 @@ def mc_run(task: dict) -> dict:
            "arrival_time_s": s["time_s"], "delta_v_m_s": s["delta_v_m_s"], "dropouts": dropouts,
            "dropouts_by_reason": s["dropouts_by_reason"], "wrong_locks": s["wrong_locks"], "frames": s["frames"],
            "wall_s": s["wall_s"]}
+    if task.get("sensor_model_sha256"):
+        out["sensor_model_sha256"] = task["sensor_model_sha256"]
     if task.get("keep_detail", True):
         traj = r["log"]["cam_true"][:: max(1, len(r["log"]["cam_true"]) // 100)]
         out.update({"dispersions": records, "trajectory_cam_m": np.round(np.asarray(traj), 4).tolist()})
@@ -826,50 +843,82 @@ def _mc_tasks(phones, n: int, statistical_runs: int, sensor_models: dict, common
     """The runs of a Monte Carlo: the ideal sensor on every seed, each phone rendered on the first
     ``n`` seeds and drawn from its sensor model on the first ``statistical_runs`` (the same seeds)."""
     tasks = [{"phone": None, "label": "ideal", "seed": sd, **common} for sd in seeds]
+    for ph in phones:  # the statistical runs first: seconds each, where a rendered run takes minutes
+        tasks += [{"phone": ph, "label": f"{ph} (statistical)", "seed": sd, "sensor_model": sensor_models[ph],
+                   "sensor_model_sha256": _sha256(sensor_models[ph]), **common} for sd in seeds[:statistical_runs]]
     for ph in phones:
         tasks += [{"phone": ph, "label": ph, "seed": sd, **common} for sd in seeds[:n]]
-        tasks += [{"phone": ph, "label": f"{ph} (statistical)", "seed": sd, "sensor_model": sensor_models[ph],
-                   **common} for sd in seeds[:statistical_runs]]
     for t in tasks:  # dispersions and paths kept for the ideal runs (every seed) and the first runs of each sensor
         t["keep_detail"] = t["label"] == "ideal" or seeds.index(t["seed"]) < MC_PLOTTED_RUNS
     return tasks
 
 
+def _sha256(model) -> str:
+    """The SHA-256 of a sensor model's ``sensor_model.json`` (a folder holding one, or the file)."""
+    p = Path(model)
+    return hashlib.sha256(((p / "sensor_model.json") if p.is_dir() else p).read_bytes()).hexdigest()
+
+
+#: What a stored run's numbers depend on besides its sensor and seed: a stored Monte Carlo with other
+#: values is refused; the phones and the run counts may change (the seeds are the same spawned prefix).
+MC_RUN_KEYS = ("base_seed", "start_state", "rate", "preview", "max_time_s", "case", "environment")
+
+
 def _mc_stored(out: Path, manifest: dict) -> dict:
-    """The runs a killed Monte Carlo in ``out`` finished (``montecarlo_runs.jsonl``, one line a run),
-    by ``(label, seed)``; a folder holding another Monte Carlo's runs is refused."""
+    """The runs a killed (or smaller) Monte Carlo in ``out`` finished (``montecarlo_runs.jsonl``, one line a
+    run), by ``(label, seed)``: a folder holding runs with other :data:`MC_RUN_KEYS` is refused; a
+    statistical run drawn from another table than today's (its ``sensor_model_sha256``) is set aside."""
     mpath, rpath = out / "montecarlo_manifest.json", out / "montecarlo_runs.jsonl"
     if mpath.exists():
-        if json.loads(mpath.read_text(encoding="utf-8")) != manifest:
-            raise InputError(f"--out: {str(out)!r} holds a Monte Carlo with other parameters; rerun with its "
+        stored = json.loads(mpath.read_text(encoding="utf-8"))
+        diff = [k for k in MC_RUN_KEYS if stored.get(k) != manifest.get(k)]
+        if diff:
+            raise InputError(f"--out: {str(out)!r} holds a Monte Carlo with other {', '.join(diff)}; rerun with its "
                              "arguments to continue it, or choose another --out")
     elif rpath.exists():
         raise InputError(f"--out: {str(out)!r} holds montecarlo_runs.jsonl but no montecarlo_manifest.json; "
                          "choose another --out")
     out.mkdir(parents=True, exist_ok=True)
     mpath.write_text(json.dumps(manifest, indent=1) + "\n", encoding="utf-8")
-    done = {}
+    done, stale = {}, 0
+    shas = manifest.get("sensor_model_sha256", {})
     if rpath.exists():
         for line in rpath.read_text(encoding="utf-8").splitlines():
             try:
                 r = json.loads(line)
             except json.JSONDecodeError:  # a line cut by the kill: that run is run again
                 continue
+            ph = r["phone"].removesuffix(" (statistical)")
+            if r["phone"] != ph and r.get("sensor_model_sha256") != shas.get(ph):
+                stale += 1  # drawn from another table
+                continue
             done[(r["phone"], r["seed"])] = r
+    report = out / "montecarlo.json"  # the committed form: its runs count as stored too (no runs file needed)
+    if report.exists():
+        d = json.loads(report.read_text(encoding="utf-8"))
+        for r in d.get("ideal_runs", []) + [r for v in d.get("sensors", {}).values() for r in v.get("runs", [])]:
+            ph = r["phone"].removesuffix(" (statistical)")
+            if r["phone"] != ph and r.get("sensor_model_sha256") != shas.get(ph):
+                continue
+            done.setdefault((r["phone"], r["seed"]), r)
+    if stale:
+        print(f"monte carlo: {stale} stored statistical runs were drawn from other sensor models: flown again",
+              file=sys.stderr, flush=True)
     return done
 
 
 def monte_carlo(phones, n: int, *, base_seed: int, start_state, rate: float, preview: bool, max_time_s: float,
                 case: str, environment: str, spec, out: Path, statistical_runs: int = 0,
-                sensor_models: dict | None = None) -> dict:
+                sensor_models: dict | None = None, report_only: bool = False) -> dict:
     """``--monte-carlo N``: per phone N runs with dispersed true initial states, hand-over errors,
     sensor seeds and thruster errors (:func:`mc_dispersions`), the ideal sensor on the same seeds and
     dispersions, and with ``statistical_runs`` M the phone's statistical sensor (``sensor_models``: its
     table) on the first M seeds (the rendered runs' N among them); the runs on the project's executors
     (:func:`svgs_sim.studies.execution.open_executor`: a process pool or Dask; each run is one task, so a
     cluster takes them unchanged). Each finished run is kept in ``out/montecarlo_runs.jsonl``: a killed
-    Monte Carlo continues where it stopped when rerun with the same arguments. Writes
-    ``out/montecarlo.json`` and ``out/montecarlo.png``."""
+    Monte Carlo continues where it stopped when rerun with the same arguments; ``report_only``: nothing
+    is flown, the report holds the runs stored so far (each sensor's ``runs_done`` of its
+    ``runs_requested``). Writes ``out/montecarlo.json`` and ``out/montecarlo.png``."""
     from concurrent.futures import as_completed
 
     from svgs_sim.studies.execution import open_executor
@@ -888,13 +937,17 @@ def monte_carlo(phones, n: int, *, base_seed: int, start_state, rate: float, pre
     tasks = _mc_tasks(phones, n, statistical_runs, sensor_models or {}, common, seeds)
     manifest = {"phones": list(phones), "runs_per_sensor": n, "statistical_runs": statistical_runs,
                 "base_seed": base_seed, **{k: (list(v) if isinstance(v, tuple) else v) for k, v in common.items()},
-                "sensor_models": {k: str(v) for k, v in (sensor_models or {}).items()}}
+                "sensor_models": {k: str(v) for k, v in (sensor_models or {}).items()},
+                "sensor_model_sha256": {k: _sha256(v) for k, v in (sensor_models or {}).items()}}
     done = _mc_stored(out, manifest)
     todo = [t for t in tasks if (t["label"], t["seed"]) not in done]
     if done:
         print(f"monte carlo: {len(tasks) - len(todo)} of {len(tasks)} runs already in {out}/montecarlo_runs.jsonl",
               file=sys.stderr, flush=True)
-    if todo:
+    if todo and report_only:
+        print(f"monte carlo: --report-only: {len(todo)} runs not flown yet; the report holds the "
+              f"{len(tasks) - len(todo)} stored", file=sys.stderr, flush=True)
+    elif todo:
         with open_executor(spec) as ex, open(out / "montecarlo_runs.jsonl", "a", encoding="utf-8") as log:
             futs = [ex.submit(task_fn, t) for t in todo]
             for k, f in enumerate(as_completed(futs), 1):
@@ -902,21 +955,27 @@ def monte_carlo(phones, n: int, *, base_seed: int, start_state, rate: float, pre
                 log.write(json.dumps(r) + "\n")
                 log.flush()
                 done[(r["phone"], r["seed"])] = r
-                print(f"monte carlo: {k}/{len(todo)} runs ({r['phone']}, seed {r['seed']}: "
-                      f"delta-v {r['delta_v_m_s'] * 100:.2f} cm/s)", file=sys.stderr, flush=True)
+                what = (f"delta-v {r['delta_v_m_s'] * 100:.2f} cm/s" if r.get("refused") is None
+                        else f"refused by the sensor model: {r['refused']}")
+                print(f"monte carlo: {k}/{len(todo)} runs ({r['phone']}, seed {r['seed']}: {what})",
+                      file=sys.stderr, flush=True)
     obj = _mc_result(phones, n, statistical_runs, seeds, done, manifest)
-    (out / "montecarlo.json").write_text(json.dumps(obj, indent=1) + "\n", encoding="utf-8")
+    (out / "montecarlo.json").write_text(json.dumps(obj) + "\n", encoding="utf-8")  # one line: ~1 MB for 1500 runs
+    counts = ", ".join(f"{k} {len(v['runs'])}" for k, v in obj["sensors"].items())
     plot_monte_carlo({k: v["runs"] for k, v in obj["sensors"].items()} | {"ideal": obj["ideal_runs"]},
-                     out / "montecarlo.png", f"Monte Carlo, {rate:g} frames/s, {start_state[2]:g} m -> {GOAL_Z_M:g} m: "
-                     f"{n} rendered and {statistical_runs} statistical runs a phone")
+                     out / "montecarlo.png", f"Monte Carlo, {rate:g} frames/s, {start_state[2]:g} m -> {GOAL_Z_M:g} m; "
+                     f"runs: {counts}")
     return obj
 
 
 def _mc_result(phones, n: int, statistical_runs: int, seeds: list, done: dict, manifest: dict) -> dict:
     """``montecarlo.json``: the parameters, each sensor's runs and percentiles, the ideal runs, and for
     each phone with both sensors the statistical sensor on the rendered runs' seeds beside the rendered."""
-    def runs_of(label, k):
-        return [done[(label, sd)] for sd in seeds[:k]]
+    def runs_of(label, k):  # the stored runs of the first k seeds (all of them but under --report-only)
+        out = [dict(done[(label, sd)]) for sd in seeds[:k] if (label, sd) in done]
+        for r in out[MC_PLOTTED_RUNS:]:  # the figure draws the first paths only
+            r.pop("trajectory_cam_m", None)
+        return out
 
     obj = {"sensor_rate_hz": manifest["rate"], **{k: v for k, v in manifest.items() if k != "rate"},
            "dispersion_sigmas": {"start_position_m_at_30m": list(MC_START_SIGMA_M),
@@ -929,10 +988,14 @@ def _mc_result(phones, n: int, statistical_runs: int, seeds: list, done: dict, m
     for ph in phones:
         for label, k in ((ph, n), (f"{ph} (statistical)", statistical_runs)):
             if k:
-                obj["sensors"][label] = {"runs": runs_of(label, k), "percentiles": mc_percentiles(runs_of(label, k))}
-        if n and statistical_runs:
+                obj["sensors"][label] = {"runs": runs_of(label, k), "percentiles": mc_percentiles(runs_of(label, k)),
+                                         "runs_requested": k, "runs_done": len(runs_of(label, k)),
+                                         "runs_refused": sum(1 for r in runs_of(label, k) if r.get("refused"))}
+        if n and statistical_runs:  # on the seeds of the rendered runs done
+            rendered = {r["seed"] for r in runs_of(ph, n)}
             obj["sensors"][f"{ph} (statistical)"]["percentiles_on_rendered_seeds"] = mc_percentiles(
-                runs_of(f"{ph} (statistical)", min(n, statistical_runs)))
+                [r for r in runs_of(f"{ph} (statistical)", statistical_runs) if r["seed"] in rendered])
+    obj["complete"] = all(v["runs_done"] == v["runs_requested"] for v in obj["sensors"].values())
     if len(phones) == 1 and n:  # the issue's layout for one phone: its runs and percentiles at the top
         obj["runs"], obj["percentiles"] = obj["sensors"][phones[0]]["runs"], obj["sensors"][phones[0]]["percentiles"]
     return obj
@@ -961,7 +1024,9 @@ def plot_monte_carlo(by: dict, path: Path, title: str) -> None:
         kw = {"bins": 20, "histtype": "step", "color": color, "ls": ls, "density": True}
         if arr:
             ax[1].hist(arr, label=f"{ph} ({len(arr)} of {len(runs)} arrived)", **kw)
-        ax[2].hist([r["delta_v_m_s"] * 100 for r in runs], label=f"{ph} ({len(runs)} runs)", **kw)
+        dv = [r["delta_v_m_s"] * 100 for r in runs if r["delta_v_m_s"] is not None]
+        if dv:
+            ax[2].hist(dv, label=f"{ph} ({len(runs)} runs)", **kw)
     if not any(r["arrival_error_m"] is not None for runs in by.values() for r in runs):
         ax[1].text(0.5, 0.5, "no run arrived within the time limit", ha="center", va="center",
                    transform=ax[1].transAxes)
@@ -1103,6 +1168,9 @@ def main(argv=None) -> dict:
     ap.add_argument("--sensor-models", default="docs/reports/sensor-model-{phone}",
                     help="where each phone's sensor model is ({phone}: its name; default "
                          "docs/reports/sensor-model-{phone})")
+    ap.add_argument("--report-only", action="store_true",
+                    help="Monte Carlo: fly nothing; write montecarlo.json and .png from the runs stored in --out so "
+                         "far (a Monte Carlo under way or stopped)")
     ap.add_argument("--processes", type=int, default=None, help="Monte Carlo: a local pool of N processes (0: here)")
     ap.add_argument("--workers", type=int, default=None, help="Monte Carlo: a Dask LocalCluster of N workers")
     ap.add_argument("--scheduler", default=None, help="Monte Carlo: a running Dask scheduler (tcp://HOST:PORT)")
@@ -1183,7 +1251,7 @@ def monte_carlo_from_args(args, phones, start, rate: float, preview: bool, max_t
     spec = executor_spec(args.processes, args.workers, args.scheduler)
     mc = monte_carlo(phones, n, base_seed=args.seed, start_state=start, rate=rate, preview=preview,
                      max_time_s=max_time, case=args.case, environment=args.environment, spec=spec, out=out,
-                     statistical_runs=m, sensor_models=models)
+                     statistical_runs=m, sensor_models=models, report_only=args.report_only)
     print(f"wrote {out}/montecarlo.json and montecarlo.png")
     return mc
 

@@ -166,7 +166,8 @@ def _write_table(path, camera="galaxy-nexus", rate=2.0):
 @pytest.mark.slow
 def test_the_statistical_monte_carlo_runs_resumes_and_checks_its_tables(tmp_path, capsys):
     """--statistical-runs without rendering: its runs on the rendered runs' seeds, a resumed rerun that
-    flies nothing again, and tables refused before any run (another phone's, another rate)."""
+    flies nothing again, another table's runs flown again, and tables refused before any run (another
+    phone's, another rate)."""
     pytest.importorskip("Basilisk", reason="the basilisk extra is not installed (pip install -e \".[basilisk]\")")
     from svgs_sim.base.errors import InputError
 
@@ -180,10 +181,27 @@ def test_the_statistical_monte_carlo_runs_resumes_and_checks_its_tables(tmp_path
     assert [r["seed"] for r in runs] == ex.mc_seeds(0, 3) == [r["seed"] for r in mc["ideal_runs"]]
     assert all(r["frames"] >= 25 for r in runs) and sum(r["dropouts"] for r in runs) > 0
     assert mc["statistical_runs"] == 3 and mc["sensor_rate_hz"] == 2.0
+    assert mc["complete"] and mc["sensors"]["galaxy-nexus (statistical)"]["runs_done"] == 3
+    # --report-only with more runs asked: nothing flown, the report of the 3 stored, said incomplete
+    more = list(argv)
+    more[argv.index("--statistical-runs") + 1] = "5"
+    part = ex.main(more + ["--report-only"])
+    assert not part["complete"] and part["sensors"]["galaxy-nexus (statistical)"]["runs_done"] == 3
+    assert part["sensors"]["galaxy-nexus (statistical)"]["runs_requested"] == 5 and len(part["ideal_runs"]) == 3
     capsys.readouterr()
     again = ex.main(argv)
     assert "6 of 6 runs already" in capsys.readouterr().err
     assert json.loads(json.dumps(again)) == json.loads((tmp_path / "mc" / "montecarlo.json").read_text())
+    (tmp_path / "mc" / "montecarlo_runs.jsonl").unlink()  # the committed form: montecarlo.json alone resumes
+    assert ex.main(argv) == again and "6 of 6 runs already" in capsys.readouterr().err
+    # another table in the same place: the stored statistical runs are flown again, the ideal ones kept
+    t = json.loads((tmp_path / "model-galaxy-nexus" / "sensor_model.json").read_text())
+    t["n_solved"], t["dropouts"]["too_few_blobs"] = [[50, 50], [50, 50]], [[0, 0], [0, 0]]
+    (tmp_path / "model-galaxy-nexus" / "sensor_model.json").write_text(json.dumps(t))
+    third = ex.main(argv)
+    assert "3 stored statistical runs were drawn from other sensor models" in capsys.readouterr().err
+    assert sum(r["dropouts"] for r in third["sensors"]["galaxy-nexus (statistical)"]["runs"]) == 0
+    assert third["ideal_runs"] == again["ideal_runs"]
     _write_table(tmp_path / "model-galaxy-nexus", camera="htc-amaze-4g")
     with pytest.raises(InputError, match="not of galaxy-nexus"):
         ex.main(argv[:-1] + [str(tmp_path / "other")])

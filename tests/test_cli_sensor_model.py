@@ -68,3 +68,24 @@ def test_a_tiny_build_and_validation_end_to_end_and_resumed(capsys, tmp_path):
     assert set(v["errors"]) == {"x_m", "y_m", "z_m", "roll_deg", "pitch_deg", "yaw_deg"}
     # two frames a node lend no statistics (fewer than MIN_SOLVED_FOR_STATISTICS): only the outcomes are tested
     assert v["errors"]["x_m"]["n_rendered"] == 0 and v["ks_min_p"] is None and v["outcomes"]["solved"]["observed"] >= 8
+
+
+def test_validate_plan_only_refuses_a_folder_holding_another_validation(capsys, tmp_path):
+    import numpy as np
+
+    from svgs_sim.sim.statistical_sensor import SensorTable
+
+    t = SensorTable(camera="galaxy-nexus", pattern="svgs-3u", ranges_m=np.array([2.0, 8.0]), off_axis_deg=np.array([0.0]),
+                    attitude_max_deg=5.0, frame_rate_hz=2.0, n=np.full((2, 1), 10), n_solved=np.full((2, 1), 10),
+                    n_gross=np.zeros((2, 1), int), n_wrong_lock=np.zeros((2, 1), int), dropouts={},
+                    bias=np.zeros((2, 1, 6)), covariance=np.broadcast_to(np.eye(6) * 1e-6, (2, 1, 6, 6)).copy(),
+                    crlb_std=np.full((2, 1, 6), 1e-4), wrong_lock_errors=[[[]], [[]]], gross_errors=[[[]], [[]]])
+    t.save(tmp_path / "sensor_model.json")
+    (tmp_path / "v").mkdir()
+    (tmp_path / "v" / "validation_manifest.json").write_text('{"kind": "sensor-model validate", "seed": 9}')
+    rc, _, err = _run(capsys, ["sensor-model", "validate", "--model", str(tmp_path), "--out", str(tmp_path / "v"),
+                               "--plan-only"])
+    assert rc == 2 and "other parameters" in err
+    rc, out, err = _run(capsys, ["sensor-model", "validate", "--model", str(tmp_path), "--out", str(tmp_path / "w"),
+                                 "--frames", "20", "--plan-only", "--json"])
+    assert rc == 0 and json.loads(out)["plan"]["frames"] == 20 and not (tmp_path / "w").exists()

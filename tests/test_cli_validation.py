@@ -44,7 +44,7 @@ def base_argv(cmd, parser, files, out_dir, *, skip=()):
               "range_m": "2" if tof else "5", "range": "5", "ranges": "5,10", "gray": [files["gray"]],
               "depth": [files["depth"]], "out": None if out_dir is None else str(out_dir / "out"), "board": "chessboard", "cols": "9",
               "rows": "6", "spacing_mm": "20", "views": "3", "fps": "1", "sun_azimuths_deg": "0,90",
-              "sun_elevations_deg": "-30,30", "trials": "1"}
+              "sun_elevations_deg": "-30,30", "trials": "1", "model": "sensor_model.json"}
     argv = list(cmd)
     for a in parser._actions:
         if isinstance(a, (argparse._HelpAction, argparse._SubParsersAction)) or a.dest in skip:

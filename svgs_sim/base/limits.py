@@ -53,7 +53,7 @@ INPUT_BOUNDS = {
     "true_pp_offset_px": (-1000.0, 1000.0, "px"), "ambient_lux": (0.0, 2e5, "lux"),
     "integration_time_s": (0.0, 1.0, "s"), "modulation_frequency_hz": (0.0, 1e9, "Hz"),
     "focal_error_frac": (-0.5, 0.5, ""), "k1_error": (-1.0, 1.0, ""), "merge_px": (0.0, 1000.0, "px"),
-    "duration_s": (0.0, 1e6, "s"), "fps": (0.0, 1000.0, "Hz"),
+    "duration_s": (0.0, 1e6, "s"), "fps": (0.0, 1000.0, "Hz"), "attitude_deg": (0.0, 45.0, "deg"),
 }
 
 #: Whole-number inputs with an upper bound (the CLI's argument names): name -> ``(low, high,

@@ -84,7 +84,7 @@ EXAMPLES = {
     ],
     ("sensor-model", "build"): [
         ("svgs sensor-model build --camera galaxy-nexus --out model-nexus",
-         "the table over 0.8-34 m and 0-5 deg off axis, 30 frames a node (about 8 min on two cores)"),
+         "the table over 0.8-34 m and 0-10 deg off axis, 30 frames a node (about 12 min on two cores)"),
         ("svgs sensor-model build --camera htc-amaze-4g --ranges 1,2,4,6.5 --frames-per-node 10 --out amaze --plan-only",
          "what a small table would render and how long it would take, nothing run"),
     ],

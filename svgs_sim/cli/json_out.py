@@ -172,6 +172,21 @@ SCHEMAS = {
             "rot_err_rms_deg": float, "integration_time_s": float}],
  "failure_modes": {"flying_pixels_1m", "multipath_1m", "ambient_1m", ...}, "wall_s": float,
  "outputs": {"report", "csv", "series", "mechanisms", "fig14", "failure_modes": path}}""",
+    "svgs sensor-model build": """\
+{"ok": true, "camera": str, "nodes": int, "frames": int,
+ "solved": int, "gross_errors": int, "wrong_locks": int,   # over every node's frames (solved: the core)
+ "dropouts": {reason: int},
+ "envelope": {"range_m": [lo, hi], "off_axis_deg_max": float, "attitude_deg_max": float},
+ "outputs": {"table", "frames", "figure": path}}""",
+    "svgs sensor-model validate": """\
+{"camera": str, "frames": int, "seed": int, "command": str,
+ "envelope": {"range_m": [lo, hi], "off_axis_deg_max": float, "attitude_deg_max": float},
+ "outcomes": {outcome: {"observed": int, "model_mean": float,      # solved, gross_error, wrong_lock, reasons
+                        "model_interval90": [lo, hi], "within": bool}},
+ "errors": {state key: {"n_rendered": int, "ks_p": float, "scatter_ratio": float,
+                        "scatter_ratio_interval90": [lo, hi],
+                        "bands": [{"range_m": [lo, hi], "n_rendered": int, "ks_p": float}]}},
+ "outcomes_within": bool, "ks_min_p": float | null}""",
     "svgs approach": f"""\
 {{"camera": str, "preview": bool, "fps": float, "seed": int, "trajectory": str,
  "frames": int, "solved": int, "solved_fraction": float,

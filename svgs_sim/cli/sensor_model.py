@@ -117,8 +117,8 @@ def cmd_build(args) -> int:
     with output_folder(args.out), text_to_stderr(args.json):
         s = build_sensor_model(cfg, args.out, spec, progress=not args.no_progress, command=shlex.join(argv))
         drops = ", ".join(f"{k} {v}" for k, v in sorted(s["dropouts"].items())) or "none"
-        print(f"{cfg.camera}: {s['frames']} frames at {s['nodes']} nodes: {s['solved']} solved, "
-              f"{s['wrong_locks']} wrong locks, dropouts: {drops}")
+        print(f"{cfg.camera}: {s['frames']} frames at {s['nodes']} nodes: {s['solved']} solved in the core, "
+              f"{s['gross_errors']} gross errors, {s['wrong_locks']} wrong locks, dropouts: {drops}")
         print(f"  table: {s['outputs']['table']}  frames: {s['outputs']['frames']}  figure: {s['outputs']['figure']}")
     emit(s, args.json)
     return EXIT_OK
@@ -129,12 +129,10 @@ def cmd_validate(args) -> int:
     from svgs_sim.cli.outdir import output_folder
     from svgs_sim.cli.studies import executor_from_args, executor_argv
     from svgs_sim.sim.statistical_sensor import SensorTable
-    from svgs_sim.studies.sensor_model import validate_sensor_model
+    from svgs_sim.studies.sensor_model import check_validation_folder, validate_sensor_model
 
     spec = executor_from_args(args)
-    SensorTable.load(args.model)  # a missing or malformed table fails here
-    if not 10 <= args.frames <= 100000:
-        raise InputError(f"--frames: expected 10-100000 held-out frames, got {args.frames}")
+    check_validation_folder(SensorTable.load(args.model), args.out, args.frames, args.seed)  # before any work
     if _plan(args, spec, args.frames, "sensor model validation"):
         return EXIT_OK
     argv = ["svgs", "sensor-model", "validate", "--model", args.model, "--frames", str(args.frames),

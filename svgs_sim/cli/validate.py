@@ -47,7 +47,7 @@ POSITIVE = {"centroid_sigma_px", "exposure_s", "iso", "focus_m", "integration_ti
             "modulation_frequency_hz", "spacing_mm", "marker_mm", "exposure_fill", "aspect_ratio",
             "range_m", "range", "from_m", "to_m", "duration_s", "fps"}
 #: Float arguments that must be >= 0.
-NON_NEGATIVE = {"sigma_px", "range_sigma_m", "merge_px", "jitter_deg", "jitter_m", "ambient", "ambient_lux", "backdrop_m"}
+NON_NEGATIVE = {"attitude_deg", "sigma_px", "range_sigma_m", "merge_px", "jitter_deg", "jitter_m", "ambient", "ambient_lux", "backdrop_m"}
 #: Physical bounds of every float argument (dest -> (low, high, unit)); inclusive, except a low of
 #: 0 for the :data:`POSITIVE` ones: :data:`svgs_sim.base.limits.INPUT_BOUNDS`, the one table the study
 #: parameters (:class:`svgs_sim.sim.trials.Parameter`) take their bounds from too. Far beyond any phone,

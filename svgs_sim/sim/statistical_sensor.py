@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from svgs_sim.base.errors import InputError
-from svgs_sim.base.profiles import Camera
+from svgs_sim.base.profiles import Camera, load_camera
 from svgs_sim.svgs.frames import STATE_KEYS, check_pose, pose_to_state, state_dict
 
 from .approach.sensor import Measurement
@@ -288,11 +288,13 @@ class StatisticalSensor:
         self.seed = int(seed)
         self.frame_rate_hz = float(frame_rate_hz) if frame_rate_hz is not None else self.table.frame_rate_hz
         self.frame_index = 0
+        #: Why the sensor refused a pose (:class:`OutsideEnvelope`'s message, with the time), or None.
+        self.refused = None
 
     @property
     def camera(self) -> Camera:
         """The table's camera profile (its focal length scales the docking filter's floors)."""
-        return Camera.load(self.table.camera)
+        return load_camera(self.table.camera)
 
     def _rng(self, k: int) -> np.random.Generator:
         return np.random.default_rng(np.random.SeedSequence([self.seed, int(k), 43]))
@@ -302,7 +304,11 @@ class StatisticalSensor:
         are static). Raises :class:`OutsideEnvelope` outside the table's envelope."""
         range_m, off, truth = pose_coordinates(R_cam_target, t_cam_target_m)
         att = [truth[k] for k in STATE_KEYS[3:]]
-        self.table.check_pose(range_m, off, att)
+        try:
+            self.table.check_pose(range_m, off, att)
+        except OutsideEnvelope as exc:  # kept: a caller that only sees its own wrapper (Basilisk's) can ask
+            self.refused = f"t = {float(t_s):g} s: {exc}"
+            raise
         k = self.frame_index
         self.frame_index += 1
         rng = self._rng(k)

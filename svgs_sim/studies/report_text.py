@@ -404,30 +404,39 @@ def _mc_row(name: str, runs: list, p: dict) -> str:
     arrived = sum(r["arrival_error_m"] is not None for r in runs)
     return (f"| {name} | {len(runs)} | {arrived} | {q('arrival_error_m', 100, '.2f')} | "
             f"{q('arrival_time_s', 1, '.0f')} | {q('delta_v_m_s', 100, '.2f')} | {q('dropouts', 1, '.0f')} | "
-            f"{sum(r['wrong_locks'] for r in runs)} |")
+            f"{sum(r['wrong_locks'] or 0 for r in runs)} |")
 
 
 def monte_carlo(root: Path) -> str:
     """The committed docking Monte Carlo: per phone the ideal sensor, the rendered sensor, the statistical
     sensor on the rendered runs' seeds and on all its runs (p50/p90 of each quantity), and the KS test of
-    the rendered runs against the statistical ones."""
+    the rendered runs against the statistical ones, with the runs done of those asked for."""
     from scipy.stats import ks_2samp
 
     d = _json(root / MONTE_CARLO)
-    n, m = d["runs_per_sensor"], d["statistical_runs"]
-    rows = [f"{n} rendered and {m} statistical runs per phone from {d['start_state'][2]:g} m at "
-            f"{d['sensor_rate_hz']:g} frames/s; the ideal sensor on all {len(d['ideal_runs'])} seeds. Each cell: "
-            "p50/p90.\n",
+    done = ", ".join(f"{k} {v['runs_done']} of {v['runs_requested']}"
+                     + (f" ({v['runs_refused']} refused by the sensor model: the pose left its table's envelope)"
+                        if v.get("runs_refused") else "") for k, v in d["sensors"].items())
+    rows = [f"From {d['start_state'][2]:g} m at {d['sensor_rate_hz']:g} frames/s; the ideal sensor on all "
+            f"{len(d['ideal_runs'])} seeds. Runs done: {done}"
+            f"{'' if d['complete'] else ' (the Monte Carlo is not complete: rerunning its command flies the rest)'}. "
+            "Each cell: p50/p90.\n",
             "| sensor | runs | arrived | arrival error, cm | arrival time, s | delta-v, cm/s | dropouts | wrong locks |",
             "|---|---|---|---|---|---|---|---|",
             _mc_row("ideal", d["ideal_runs"], d["ideal_percentiles"])]
     notes = []
     for ph in PHONES:
         r, s = d["sensors"].get(ph), d["sensors"].get(f"{ph} (statistical)")
+        if s and not (r and r["runs"]):  # no rendered run done yet: the statistical sensor alone
+            rows.append(_mc_row(f"{PHONE_NAMES[ph]}, statistical", s["runs"], s["percentiles"]))
+            notes.append(f"- {PHONE_NAMES[ph]}: no rendered run done yet, so no comparison.")
+            continue
         if not (r and s):
             continue
+        seeds = {x["seed"] for x in r["runs"]}
+        same = [x for x in s["runs"] if x["seed"] in seeds]
         rows.append(_mc_row(f"{PHONE_NAMES[ph]}, rendered", r["runs"], r["percentiles"]))
-        rows.append(_mc_row(f"{PHONE_NAMES[ph]}, statistical, the same {n} seeds", s["runs"][:n],
+        rows.append(_mc_row(f"{PHONE_NAMES[ph]}, statistical, the same {len(same)} seeds", same,
                             s["percentiles_on_rendered_seeds"]))
         rows.append(_mc_row(f"{PHONE_NAMES[ph]}, statistical", s["runs"], s["percentiles"]))
         tests = []
@@ -436,13 +445,15 @@ def monte_carlo(root: Path) -> str:
             b = [x[key] for x in s["runs"] if x[key] is not None]
             if len(a) >= 3 and len(b) >= 3 and len(set(a) | set(b)) > 1:
                 tests.append(f"{label} p = {ks_2samp(a, b).pvalue:.2g}")
-        dv = np.array([x["delta_v_m_s"] for x in r["runs"]]) - np.array([x["delta_v_m_s"] for x in s["runs"][:n]])
-        notes.append(f"- {PHONE_NAMES[ph]}: the {n} rendered runs against the {m} statistical runs, two-sample KS: "
-                     f"{', '.join(tests) or 'no test (too few values)'}; delta-v, rendered minus statistical on the "
-                     f"same seeds: {100 * dv.mean():+.3f} +- {100 * dv.std(ddof=1) / np.sqrt(dv.size):.3f} cm/s "
-                     "(mean +- its standard error).")
+        by_seed = {x["seed"]: x["delta_v_m_s"] for x in same if x["delta_v_m_s"] is not None}
+        dv = np.array([x["delta_v_m_s"] - by_seed[x["seed"]] for x in r["runs"]
+                       if x["seed"] in by_seed and x["delta_v_m_s"] is not None])
+        paired = (f"{100 * dv.mean():+.3f} +- {100 * dv.std(ddof=1) / np.sqrt(dv.size):.3f} cm/s (mean +- its standard "
+                  "error)" if dv.size >= 2 else "too few runs")
+        notes.append(f"- {PHONE_NAMES[ph]}: the {len(r['runs'])} rendered runs against the {len(s['runs'])} statistical "
+                     f"runs, two-sample KS: {', '.join(tests) or 'no test (too few values)'}; delta-v, rendered minus "
+                     f"statistical on the same seeds: {paired}.")
     return "\n".join(rows) + "\n\n" + "\n".join(notes) + "\n"
-
 
 def _mechanisms(phone: str) -> Callable[[Path], str]:
     def block(root: Path) -> str:

@@ -83,7 +83,7 @@ class SensorModelConfig:
     camera: str
     pattern: str = "svgs-3u"
     ranges_m: tuple = (0.8, 1.0, 1.3, 1.7, 2.2, 3.0, 4.0, 5.5, 7.5, 10.0, 13.0, 17.0, 22.0, 28.0, 34.0)
-    off_axis_deg: tuple = (0.0, 5.0)
+    off_axis_deg: tuple = (0.0, 5.0, 10.0)
     frames_per_node: int = 30
     attitude_deg: float = 8.0
     frame_rate_hz: float = 2.0
@@ -189,16 +189,28 @@ def check_build_folder(cfg: SensorModelConfig, out_dir) -> dict:
             stored = json.loads(mpath.read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise InputError(f"--out: {str(mpath)!r} cannot be read ({exc}); choose another --out") from None
-        if stored != manifest:
+        if stored != manifest and not _extends(stored, manifest):
             diff = sorted(k for k in set(stored) | set(manifest) if stored.get(k) != manifest.get(k))
             raise InputError(f"--out: {str(out)!r} holds a sensor-model build with other parameters ({', '.join(diff)}); "
-                             "rerun with its arguments to continue it, or choose another --out")
+                             "rerun with its arguments to continue it (or with ranges or off-axis angles appended to "
+                             "its own, to extend it), or choose another --out")
     elif out.is_dir():
         theirs = sorted(p.name for p in out.iterdir() if p.name in ("sensor_model.json", "frames.csv", "nodes"))
         if theirs:
             raise InputError(f"--out: {str(out)!r} holds {', '.join(theirs)} but no {MANIFEST_NAME}: files no build "
                              "made, which a build would overwrite; choose another --out")
     return manifest
+
+
+def _extends(stored: dict, manifest: dict) -> bool:
+    """``manifest`` appends ranges (its off-axis angles the same) or off-axis angles (its ranges the
+    same) to the stored build's grid, all else equal: every stored node keeps its index, so its frames
+    (drawn from the node's indices) are those a build of the whole grid makes."""
+    rest = ("ranges_m", "off_axis_deg")
+    if {k: v for k, v in stored.items() if k not in rest} != {k: v for k, v in manifest.items() if k not in rest}:
+        return False
+    (r0, a0), (r1, a1) = (stored.get(k, []) for k in rest), (manifest[k] for k in rest)
+    return (a0 == a1 and r1[:len(r0)] == r0) or (r0 == r1 and a1[:len(a0)] == a0)
 
 
 def _run_tasks(tasks: list[dict], spec, done, description: str, progress: bool, n_frames: int) -> None:
@@ -238,7 +250,8 @@ def build_sensor_model(cfg: SensorModelConfig, out_dir, spec, *, progress: bool 
     write_frames_csv(out / "frames.csv", rows)
     plot_sensor_model(table, out / "sensor_model.png")
     return {"ok": True, "camera": cfg.camera, "nodes": len(tasks), "frames": len(rows),
-            "solved": int(table.n_solved.sum()), "wrong_locks": int(table.n_wrong_lock.sum()),
+            "solved": int(table.n_solved.sum()), "gross_errors": int(table.n_gross.sum()),
+            "wrong_locks": int(table.n_wrong_lock.sum()),
             "dropouts": {k: int(v.sum()) for k, v in table.dropouts.items()},
             "envelope": {"range_m": [cfg.ranges_m[0], cfg.ranges_m[-1]], "off_axis_deg_max": cfg.off_axis_deg[-1],
                          "attitude_deg_max": cfg.attitude_deg},
@@ -317,6 +330,7 @@ def plot_sensor_model(table: SensorTable, path) -> None:
             ax.set_xlabel("range, m")
         axes[3].plot(table.ranges_m, table.n_solved[:, j] / table.n[:, j], "o-", color=c, label=f"{off:g} deg")
     axes[0].legend(fontsize=7)
+    axes[7].axis("off")
     axes[3].set_xscale("log")
     axes[3].set_ylim(-0.05, 1.05)
     axes[3].set_title("fraction solved")
@@ -480,12 +494,9 @@ def error_check(table: SensorTable, rows: list[dict], outcomes: list[str], bias:
     return out
 
 
-def validate_sensor_model(table_path, out_dir, *, frames: int = 200, seed: int = 1, spec=None,
-                          progress: bool = True, command: str = "") -> dict:
-    """Render ``frames`` held-out frames inside the table's envelope and compare them with the
-    statistical sensor (:func:`dropout_check`, :func:`error_check`). Writes ``validation.json``,
-    ``validation.csv`` and ``validation.png`` in ``out_dir``; returns the validation."""
-    table = SensorTable.load(table_path)
+def check_validation_folder(table: SensorTable, out_dir, frames: int, seed: int) -> dict:
+    """The validation's manifest; refuses bad counts and a folder holding a validation with other
+    parameters or of another table - before any work."""
     check_seed(seed)
     if not 10 <= int(frames) <= 100000:
         raise InputError(f"--frames: expected 10-100000 held-out frames, got {frames!r}")
@@ -493,11 +504,26 @@ def validate_sensor_model(table_path, out_dir, *, frames: int = 200, seed: int =
     mpath = out / "validation_manifest.json"
     manifest = {"kind": "sensor-model validate", "table": table.to_json()["provenance"], "camera": table.camera,
                 "frames": int(frames), "seed": int(seed)}
-    if mpath.exists() and json.loads(mpath.read_text(encoding="utf-8")) != manifest:
+    try:
+        stored = json.loads(mpath.read_text(encoding="utf-8")) if mpath.exists() else manifest
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"--out: {str(mpath)!r} cannot be read ({exc}); choose another --out") from None
+    if stored != manifest:
         raise InputError(f"--out: {str(out)!r} holds a validation with other parameters or of another table; "
                          "rerun with its arguments, or choose another --out")
+    return manifest
+
+
+def validate_sensor_model(table_path, out_dir, *, frames: int = 200, seed: int = 1, spec=None,
+                          progress: bool = True, command: str = "") -> dict:
+    """Render ``frames`` held-out frames inside the table's envelope and compare them with the
+    statistical sensor (:func:`dropout_check`, :func:`error_check`). Writes ``validation.json``,
+    ``validation.csv`` and ``validation.png`` in ``out_dir``; returns the validation."""
+    table = SensorTable.load(table_path)
+    out = Path(out_dir)
+    manifest = check_validation_folder(table, out, frames, seed)
     out.mkdir(parents=True, exist_ok=True)
-    _write_atomic(mpath, json.dumps(manifest, indent=1) + "\n")
+    _write_atomic(out / "validation_manifest.json", json.dumps(manifest, indent=1) + "\n")
     rows = render_validation_frames(table, frames, seed, spec, out / "validation_frames", progress=progress)
     bias, std = _model_at(table, rows)
     kinds = [outcome_of(r, b, sd) for r, b, sd in zip(rows, bias, std)]
