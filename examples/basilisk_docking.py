@@ -609,22 +609,7 @@ def run(phone: str | None, *, start_state=START_STATE, sensor_rate_hz=PHONE_FRAM
     sim.AddModelToTask("gnc", gnc)
     sim.InitializeSimulation()
     wall0 = time.perf_counter()
-    t_end = 0.0
-    try:
-        while t_end < max_time_s and gnc.arrived_s is None:
-            t_end = min(t_end + 10.0, max_time_s)
-            sim.ConfigureStopTime(macros.sec2nano(t_end))
-            try:
-                sim.ExecuteSimulation()
-            except RuntimeError:  # Basilisk wraps what the sensor raised: a refusal is said as itself
-                if getattr(sensor, "refused", None):
-                    from svgs_sim.sim.statistical_sensor import OutsideEnvelope
-
-                    raise OutsideEnvelope(sensor.refused) from None
-                raise
-    finally:
-        if hasattr(sensor, "close"):
-            sensor.close()
+    _fly(sim, gnc, sensor, max_time_s)
     wall = time.perf_counter() - wall0
     out = _run_summary(gnc, phone, preview, sensor_rate_hz, lat, wall)
     out["summary"]["case"] = case
@@ -635,6 +620,29 @@ def run(phone: str | None, *, start_state=START_STATE, sensor_rate_hz=PHONE_FRAM
         out["light"] = svgs_mod.light_log
     del light
     return out
+
+
+def _fly(sim, gnc, sensor, max_time_s: float) -> None:
+    """Run the simulation 10 s at a time until arrival or ``max_time_s``; a pose the statistical sensor
+    refused (Basilisk wraps the sensor's exception in its own) is raised as the refusal itself."""
+    from Basilisk.utilities import macros
+
+    t_end = 0.0
+    try:
+        while t_end < max_time_s and gnc.arrived_s is None:
+            t_end = min(t_end + 10.0, max_time_s)
+            sim.ConfigureStopTime(macros.sec2nano(t_end))
+            try:
+                sim.ExecuteSimulation()
+            except RuntimeError:
+                if getattr(sensor, "refused", None):
+                    from svgs_sim.sim.statistical_sensor import OutsideEnvelope
+
+                    raise OutsideEnvelope(sensor.refused) from None
+                raise
+    finally:
+        if hasattr(sensor, "close"):
+            sensor.close()
 
 
 def _orbit_summary(light_log, meas, n_rad_s, u0_deg, beta_deg, raan_deg) -> dict:
@@ -880,27 +888,26 @@ def _mc_stored(out: Path, manifest: dict) -> dict:
                          "choose another --out")
     out.mkdir(parents=True, exist_ok=True)
     mpath.write_text(json.dumps(manifest, indent=1) + "\n", encoding="utf-8")
-    done, stale = {}, 0
-    shas = manifest.get("sensor_model_sha256", {})
+    records = {}
     if rpath.exists():
         for line in rpath.read_text(encoding="utf-8").splitlines():
             try:
                 r = json.loads(line)
             except json.JSONDecodeError:  # a line cut by the kill: that run is run again
                 continue
-            ph = r["phone"].removesuffix(" (statistical)")
-            if r["phone"] != ph and r.get("sensor_model_sha256") != shas.get(ph):
-                stale += 1  # drawn from another table
-                continue
-            done[(r["phone"], r["seed"])] = r
+            records[(r["phone"], r["seed"])] = r
     report = out / "montecarlo.json"  # the committed form: its runs count as stored too (no runs file needed)
     if report.exists():
         d = json.loads(report.read_text(encoding="utf-8"))
         for r in d.get("ideal_runs", []) + [r for v in d.get("sensors", {}).values() for r in v.get("runs", [])]:
-            ph = r["phone"].removesuffix(" (statistical)")
-            if r["phone"] != ph and r.get("sensor_model_sha256") != shas.get(ph):
-                continue
-            done.setdefault((r["phone"], r["seed"]), r)
+            records.setdefault((r["phone"], r["seed"]), r)
+    done, stale, shas = {}, 0, manifest.get("sensor_model_sha256", {})
+    for key, r in records.items():
+        ph = r["phone"].removesuffix(" (statistical)")
+        if r["phone"] != ph and r.get("sensor_model_sha256") != shas.get(ph):
+            stale += 1  # drawn from another table
+            continue
+        done[key] = r
     if stale:
         print(f"monte carlo: {stale} stored statistical runs were drawn from other sensor models: flown again",
               file=sys.stderr, flush=True)

@@ -18,7 +18,7 @@ def _run(capsys, argv):
 
 def test_plan_only_prints_the_frames_and_writes_nothing(capsys, tmp_path):
     rc, out, err = _run(capsys, ["sensor-model", "build", "--camera", "galaxy-nexus", "--ranges", "2,5",
-                                 "--frames-per-node", "4", "--out", str(tmp_path / "m"), "--plan-only", "--json"])
+                                 "--off-axis-deg", "0,5", "--frames-per-node", "4", "--out", str(tmp_path / "m"), "--plan-only", "--json"])
     assert rc == 0 and json.loads(out)["plan"]["frames"] == 2 * 2 * 4 and not (tmp_path / "m").exists()
     assert "16 rendered frames" in err
 

@@ -33,6 +33,8 @@ def test_every_page_passage_has_a_writer_and_every_writer_is_used():
 
 def _copy_root(tmp_path: Path) -> Path:
     for p in PAGES:
+        if p.startswith("docs/reports/"):  # read through the link below
+            continue
         (tmp_path / p).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(ROOT / p, tmp_path / p)
     for data in ("reports", "figures"):  # read only: the test never writes the figure (--check, fill)
