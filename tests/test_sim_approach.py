@@ -10,6 +10,7 @@ time, never a change of numbers. Rendered tests use the Galaxy Nexus scaled to 6
 
 import csv
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -275,7 +276,7 @@ def test_overlapped_render_changes_no_number(small_camera):
     frame rendered in sequence; a pose that differs from the one prefetched is rendered anew."""
     traj = Trajectory.straight(6.0, 4.0, 2.0, attitude_deg=(0.0, 3.0, -5.0))
     times = [0.0, 0.5, 1.0]
-    seq = ApproachSensor(small_camera, seed=5, motion=True, crlb=False, keep_images=True)
+    seq = ApproachSensor(small_camera, seed=5, motion=True, crlb=False, keep_images=True, overlap_render=False)
     ov = ApproachSensor(small_camera, seed=5, motion=True, crlb=False, keep_images=True, overlap_render=True)
     a = [seq.measure_on(traj, t) for t in times]
     b = list(ov.along(traj, times))
@@ -329,13 +330,18 @@ def test_approach_command_writes_its_outputs_and_resumes(small_camera, small_aut
     assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 3
     cap.release()
 
-    # a run killed after frame 1: the rerun makes frame 2 only, with the same numbers
+    # a run killed after frame 1: the rerun makes frame 2 only, with the same numbers (here with
+    # --no-video: no picture of it, no video, and the same numbers)
     res = out / "results.csv"
     lines = res.read_text().splitlines(keepends=True)
     res.write_text("".join(lines[:-1]))
-    assert main(argv) == 0
+    (out / "frames" / "00002.jpg").unlink()
+    assert main(argv + ["--no-video"]) == 0
     s2 = json.loads(capsys.readouterr().out)
     assert s2["run"] == {**s2["run"], "frames_run": 1, "frames_reused": 2}
+    assert not (out / "frames" / "00002.jpg").exists() and s2["outputs"]["video"] is None
+    assert not Path(s["outputs"]["video"]).exists()  # the first run's video, of other frames, is gone
+    assert "1 of 3 frames run without pictures" in s2["outputs"]["video_codec"]
     rows2 = _rows(out / "measurements.csv")
     timing = {c for c in rows[0] if c.endswith("_s") and c != "t_s" and c not in ("exposure_s", "next_exposure_s")}
     assert [{k: v for k, v in r.items() if k not in timing} for r in rows2] == \

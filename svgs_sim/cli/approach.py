@@ -12,6 +12,7 @@ count, the output folder, a stored run with other parameters).
 
 from __future__ import annotations
 
+import argparse
 import sys
 
 from svgs_sim.cli.exit_codes import EXIT_NO_SOLUTION, EXIT_OK
@@ -64,9 +65,13 @@ def register(sub) -> None:
     add_scene_options(p)
     body_args(p)
     p.add_argument("--out", required=True, help="output folder (a rerun with the same arguments resumes it)")
-    p.add_argument("--overlap-render", action="store_true",
+    p.add_argument("--overlap-render", action=argparse.BooleanOptionalAction, default=True,
                    help="render the next frame in a background thread while the phone model works on this one "
-                        "(same numbers; no gain on a 2-core machine, docs/approach.md#speed)")
+                        "(default on; the same numbers; docs/approach.md#speed)")
+    p.add_argument("--no-video", action="store_true",
+                   help="write no frame pictures and no video: the delivered full image is then never made (the "
+                        "detector reads only the tiles that can reach its threshold), the fastest run; the same "
+                        "numbers (docs/approach.md#speed)")
     p.add_argument("--fast-dark-pixels", action="store_true",
                    help="draw the shot noise of the pixels that cannot reach the detection threshold (away from the "
                         "spots) with a cheaper sampler of the same Poisson law: other noise draws than the default, "
@@ -108,7 +113,7 @@ def config_from_args(args) -> dict:
 
     return make_config(args.camera, traj, args.fps, seed=args.seed, preview=args.preview, motion=not args.no_motion,
                        crlb=not args.no_crlb, pattern=args.pattern, threshold=args.threshold, scene=scene,
-                       body=body_options(args), dark_pixels="fast" if args.fast_dark_pixels else "exact")
+                       body=body_options(args), dark_pixels="fast" if args.fast_dark_pixels else "deferred")
 
 
 def print_summary(s: dict, file=None) -> None:
@@ -157,7 +162,8 @@ def command_line(args) -> str:
     parts.append(f"--fps {_exact(args.fps)}")
     parts += [f"--seed {args.seed}"] if args.seed else []
     parts += [f for f, on in (("--preview", args.preview), ("--no-motion", args.no_motion), ("--no-crlb", args.no_crlb),
-                              ("--fast-dark-pixels", getattr(args, "fast_dark_pixels", False))) if on]
+                              ("--fast-dark-pixels", getattr(args, "fast_dark_pixels", False)),
+                              ("--no-video", getattr(args, "no_video", False))) if on]
     if args.threshold not in (None, "app"):
         parts.append(f"--threshold {quote(str(args.threshold))}")
     from svgs_sim.sim.scene import scene_option_words
@@ -180,7 +186,7 @@ def cmd_approach(args) -> int:
     cfg = config_from_args(args)
     with output_folder(args.out), text_to_stderr(args.json):  # --out made and probed before any work
         s = run_approach(cfg, args.out, progress=not args.no_progress, command=command_line(args),
-                         overlap_render=args.overlap_render)
+                         overlap_render=args.overlap_render, video=not args.no_video)
         print_summary(s)
     emit(s, args.json)
     return EXIT_OK if s["solved"] > 0 else EXIT_NO_SOLUTION

@@ -634,8 +634,9 @@ def solve_exposure(frame: Frame, ex, *, threshold=None, solver_camera_profile: C
 
     _truth_flags(truth)
     t1 = time.perf_counter()
-    cam = solver_camera(solver_camera_profile or frame.camera, ex.image.shape)
-    sol = solve_image(ex.image, cam, frame.scenario.pattern, threshold=threshold, blobs=blobs)
+    img = ex.detect_image
+    cam = solver_camera(solver_camera_profile or frame.camera, img.shape)
+    sol = solve_image(img, cam, frame.scenario.pattern, threshold=threshold, blobs=blobs)
     t2 = time.perf_counter()
     R, t = frame.scenario.truth_pose(*_truth_flags(truth))
     truth_state = pose_to_state(R, t)

@@ -53,13 +53,13 @@ TEXT_COLUMNS = ("reason",)
 
 def make_config(camera: str, trajectory: Trajectory, fps: float, *, seed: int = 0, preview: bool = False,
                 motion: bool = True, crlb: bool = True, pattern: str = "svgs-3u", threshold=None,
-                scene: Scene | None = None, body: dict | None = None, dark_pixels: str = "exact") -> dict:
+                scene: Scene | None = None, body: dict | None = None, dark_pixels: str = "deferred") -> dict:
     """The approach's parameters (the store's manifest): what decides the numbers. ``threshold``:
     the detector's (None or ``"app"``: the app's for the camera, :mod:`svgs_sim.svgs.app`; ``"auto"``,
     ``"otsu"`` or a level in 8-bit counts). ``scene``: around the target (default the paper's lab;
     recorded as ``scene`` only when it is another, so a study folder made before the option resumes).
-    ``dark_pixels``: the camera model's sampler of the dark pixels (:class:`svgs_sim.sim.approach.ApproachSensor`;
-    recorded only when ``"fast"``, which changes the numbers)."""
+    ``dark_pixels``: how the camera model makes the dark pixels (:class:`svgs_sim.sim.approach.ApproachSensor`;
+    recorded only when ``"fast"``, which changes the numbers: ``deferred`` and ``exact`` give the same)."""
     from svgs_sim.svgs.detect import parse_threshold
 
     t = parse_threshold(None if threshold is None else str(threshold))
@@ -68,7 +68,7 @@ def make_config(camera: str, trajectory: Trajectory, fps: float, *, seed: int = 
            "threshold": "app" if t is None else t if isinstance(t, str) else float(t)}
     if scene is not None and scene != Scene():
         cfg["scene"] = scene.to_json()
-    if dark_pixels != "exact":
+    if dark_pixels == "fast":
         cfg["dark_pixels"] = str(dark_pixels)
     if body and any(v not in (None, {}, ()) for v in body.values()):  # recorded only when given: older folders resume
         opts = RenderOptions(**body)  # checked before any work
@@ -141,8 +141,14 @@ def _overlay(m, cam, pattern, title: str) -> np.ndarray:
     return canvas
 
 
+def _title(m) -> str:
+    """A video frame's title line."""
+    return (f"t = {m.t_s:7.2f} s  range {m.range_m:6.2f} m  " + ("SOLVED" if m.ok else f"NO SOLUTION ({m.reason})")
+            + f"  exposure {m.exposure_s * 1e3:.2f} ms ISO {m.iso:.0f}")
+
+
 def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, command: str | None = None,
-                 overlap_render: bool = False) -> dict:
+                 overlap_render: bool = True, video: bool = True) -> dict:
     """Run (or continue) an approach into ``out_dir`` and write its outputs.
 
     Parameters
@@ -156,6 +162,12 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
         Called with each new :class:`svgs_sim.sim.approach.Measurement` (tests).
     command : str, optional
         The command line that made the run, for ``report.md``.
+    overlap_render : bool
+        Render the next frame in a background thread (:class:`svgs_sim.sim.approach.ApproachSensor`).
+    video : bool
+        Write each frame's overlay picture and the video. Off: the delivered full image is never
+        made (the detector reads only the tiles that can reach its threshold; the same numbers),
+        and the video is left out.
 
     Returns
     -------
@@ -182,9 +194,9 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
         frames_dir.mkdir(exist_ok=True)
         if todo:
             sensor = ApproachSensor(cam, cfg["pattern"], seed=cfg["seed"], motion=cfg["motion"], crlb=cfg["crlb"],
-                                    keep_images=True, frame_rate_hz=cfg["fps"], threshold=_threshold(cfg),
+                                    keep_images=video, frame_rate_hz=cfg["fps"], threshold=_threshold(cfg),
                                     overlap_render=overlap_render, base=Scenario(scene=scene_of(cfg)),
-                                    body=cfg.get("body"), dark_pixels=cfg.get("dark_pixels", "exact"))
+                                    body=cfg.get("body"), dark_pixels=cfg.get("dark_pixels", "deferred"))
             if todo[0] > 0:
                 last = {r["trial_id"]: r for r in store.read_rows()}[todo[0] - 1]
                 sensor.restore(todo[0], last["next_exposure_s"], last["next_iso"])
@@ -198,12 +210,10 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
                     # the next frame renders while this one is exposed, solved and written
                     m = sensor.measure_on(traj, float(times[k]),
                                           next_t_s=float(times[k + 1]) if k + 1 < len(times) else None)
-                    title = (f"t = {m.t_s:7.2f} s  range {m.range_m:6.2f} m  "
-                             + ("SOLVED" if m.ok else f"NO SOLUTION ({m.reason})")
-                             + f"  exposure {m.exposure_s * 1e3:.2f} ms ISO {m.iso:.0f}")
-                    picture = _overlay(m, cam, pattern, title)
+                    picture = _overlay(m, cam, pattern, _title(m)) if video else None
                     with hard_stop.protected():  # Ctrl-C inside a render stops the process, never mid-write
-                        write_image(frames_dir / f"{k:05d}.jpg", picture, [cv2.IMWRITE_JPEG_QUALITY, 90])
+                        if picture is not None:
+                            write_image(frames_dir / f"{k:05d}.jpg", picture, [cv2.IMWRITE_JPEG_QUALITY, 90])
                         store.append([{"trial_id": k, **m.row()}])
                     n_new += 1
                     if on_frame is not None:
@@ -364,6 +374,12 @@ def write_video(out: Path, fps: float, n: int) -> dict:
 
     frames = [out / FRAMES_DIR / f"{k:05d}.jpg" for k in range(n)]
     rate = max(float(fps), MIN_VIDEO_FPS)
+    missing = sum(not f.is_file() for f in frames)
+    if missing:  # run (or partly run) with --no-video: an earlier video would show other frames
+        for name in ("approach.mp4", "approach.avi"):
+            (out / name).unlink(missing_ok=True)
+        return {"video": None, "video_codec": f"none: {missing} of {n} frames run without pictures (--no-video)",
+                "video_fps": rate}
     for name, fourcc, codec in (("approach.mp4", "mp4v", "mp4v (MPEG-4 Part 2)"),
                                 ("approach.avi", "MJPG", "MJPG (Motion-JPEG)")):
         path = out / name

@@ -70,13 +70,21 @@ from svgs_sim.camera.phone.sensor import (DARK_TABLE_MAX_E, bloom, dark_charge_l
 from svgs_sim.camera.rendered import PointFlux
 from svgs_sim.camera.tonemap import gamma_u8
 
-__all__ = ["PhoneCamera", "Exposer", "Exposure", "PhoneParams", "ALL_STAGES", "NOISE_STAGES", "OPTICS_STAGES",
+__all__ = ["PhoneCamera", "Exposer", "Exposure", "DeferredExposure", "PhoneParams", "ALL_STAGES", "NOISE_STAGES", "OPTICS_STAGES",
            "DARK_PIXELS"]
 
-#: How an exposure draws the shot noise of its dark pixels (:meth:`Exposer.expose`): ``exact``
-#: (default), every pixel by the exact path's inversion; ``fast``, the pixels that cannot reach
-#: the detection threshold by a table sampler of the same Poisson law (other variates).
-DARK_PIXELS = ("exact", "fast")
+#: How an exposure makes its dark pixels (:meth:`Exposer.expose`): ``exact`` (default), every
+#: pixel by the exact path's inversion; ``fast``, the pixels that cannot reach the detection
+#: threshold by a table sampler of the same Poisson law (other variates); ``deferred``, only the
+#: tiles that can reach it (and the ISP's reach around them) are exposed now, to the exact path's
+#: bytes, and the full frame, the exact path's, when the image is read (:class:`DeferredExposure`).
+DARK_PIXELS = ("exact", "fast", "deferred")
+#: The JPEG's minimum coded unit, px (16 x 16 at 4:2:0; the block grid's period for a crop).
+JPEG_MCU_PX = 16
+#: A deferred exposure's crops reach this far beyond the tiles they deliver, px: the ISP's
+#: reach (:data:`DARK_ISP_REACH_PX`: the demosaic, the JPEG's block and chroma upsampling) rounded
+#: up to whole tiles, so the delivered pixels do not see the crop's edge.
+DEFERRED_MARGIN_TILES = 2
 #: Side of the dark pixels' tiles, px (the 16-px JPEG MCU, a multiple of the 2-px mosaic).
 DARK_TILE_PX = 16
 #: The tiles within this distance of a point sample of the targets' spots are exact, px (and
@@ -123,6 +131,63 @@ class Exposure:
     gain_dn_per_e: float
     info: dict = field(default_factory=dict)
     electrons: np.ndarray | None = None
+
+    @property
+    def detect_image(self) -> np.ndarray:
+        """The image a detector with a numeric threshold reads: :attr:`image`."""
+        return self.image
+
+
+class DeferredExposure(Exposure):
+    """An exposure whose dark pixels are made only when asked for (``dark_pixels="deferred"``,
+    :meth:`Exposer.expose`).
+
+    :attr:`detect_image` holds, now, the exact path's delivered bytes over the tiles that can
+    reach the detection threshold (and the ISP's reach around them), and 0 elsewhere: the same
+    blobs as the full image unless a dark pixel reaches the threshold (a chance below
+    :data:`DARK_TAIL_P` a pixel). :attr:`image`, :attr:`raw_dn` and :attr:`electrons` are the
+    exact path's exposure with the same seed, made on first read (bit for bit).
+
+    Attributes
+    ----------
+    detect_image : ndarray, uint8, shape (h, w)
+    exposure_s, iso, gain_dn_per_e, info
+        As :class:`Exposure`; ``info["dark_pixels"]`` says what was deferred.
+    """
+
+    def __init__(self, full, detect_image: np.ndarray, exposure_s: float, iso: float, gain_dn_per_e: float,
+                 info: dict, keep_electrons: bool):
+        self._full_fn = full
+        self._full = None
+        self._detect = detect_image
+        self._keep_electrons = bool(keep_electrons)
+        self.exposure_s = exposure_s
+        self.iso = iso
+        self.gain_dn_per_e = gain_dn_per_e
+        self.info = info
+
+    def full(self) -> Exposure:
+        """The exact path's exposure (made on the first call, then kept)."""
+        if self._full is None:
+            self._full = self._full_fn()
+            self._full_fn = None
+        return self._full
+
+    @property
+    def detect_image(self) -> np.ndarray:
+        return self._detect
+
+    @property
+    def image(self) -> np.ndarray:
+        return self.full().image
+
+    @property
+    def raw_dn(self) -> np.ndarray:
+        return self.full().raw_dn
+
+    @property
+    def electrons(self) -> np.ndarray | None:
+        return self.full().electrons if self._keep_electrons else None
 
 
 #: Optical images of backgrounds that stay from frame to frame (:meth:`PhoneCamera.optics`),
@@ -407,6 +472,39 @@ def _natural_excess(natural):
     return np.ascontiguousarray(flux, np.float32), excess
 
 
+def lit_crops(lit: np.ndarray, margin_tiles: int) -> list:
+    """The crops of a deferred exposure, in tiles: the lit tiles grouped so that crops reaching
+    ``margin_tiles`` beyond them do not overlap.
+
+    Parameters
+    ----------
+    lit : ndarray, bool, shape (th, tw)
+        The tiles to deliver.
+    margin_tiles : int
+
+    Returns
+    -------
+    list of ((r0, r1, c0, c1), (i0, i1, j0, j1))
+        Per crop, its tile box (half-open, clipped to the grid) and the box of its lit tiles.
+    """
+    from scipy import ndimage
+
+    if not lit.any():
+        return []
+    k = 2 * int(margin_tiles) + 1
+    grown = ndimage.binary_dilation(lit, np.ones((k, k), bool))
+    labels, _ = ndimage.label(grown, np.ones((3, 3), bool))
+    out = []
+    for lab, sl in enumerate(ndimage.find_objects(labels), start=1):
+        rows, cols = np.nonzero(lit[sl] & (labels[sl] == lab))
+        if rows.size == 0:
+            continue
+        inner = (sl[0].start + rows.min(), sl[0].start + rows.max() + 1, sl[1].start + cols.min(),
+                 sl[1].start + cols.max() + 1)
+        out.append(((sl[0].start, sl[0].stop, sl[1].start, sl[1].stop), inner))
+    return out
+
+
 class Exposer:
     """Render once, expose many: optics and metering done once for a flux image.
 
@@ -518,9 +616,12 @@ class Exposer:
         demosaic : str, optional
             The demosaic of this exposure (:data:`svgs_sim.camera.phone.params.DEMOSAIC_METHODS`) instead
             of the profile's ``[cfa] demosaic``.
-        dark_pixels : {"exact", "fast"}
+        dark_pixels : {"exact", "fast", "deferred"}
             ``fast``: the pixels that cannot reach ``threshold_u8`` draw their shot noise from a
             cheaper sampler of the same law (:meth:`_electrons`); not the same bytes as ``exact``.
+            ``deferred``: only the tiles that can reach it are exposed now (a
+            :class:`DeferredExposure`: the exact path's bytes there, the full frame on reading
+            its image; :meth:`_deferred`).
         threshold_u8 : float, optional
             The detector's threshold on the delivered 8-bit image (``fast`` only; without it,
             the exact path).
@@ -543,7 +644,22 @@ class Exposer:
             raise InputError(f"isp: expected a svgs_sim.camera.phone.params.IspParams, got {type(isp).__name__}")
         method = p.cfa.demosaic if demosaic is None else check_demosaic(demosaic)
         t, iso, info = self.settings(exposure_s, iso)
+        if dark_pixels == "deferred":
+            ex = self._deferred(seed, t, iso, st, isp, method, threshold_u8, info, keep_electrons)
+            if ex is not None:
+                return ex
         e = self._electrons(t, iso, seed, st, isp, method, dark_pixels, threshold_u8, info)
+        raw, img = self._develop(e, seed, iso, st, isp, method, info)
+        info.update({"seed": int(seed), "stages": list(st), "demosaic": method if self.cfa else None})
+        return Exposure(raw, img, t, iso, sp.gain_dn_per_e(iso), info, e if keep_electrons else None)
+
+    def _develop(self, e, seed: int, iso: float, st, isp, method: str, info: dict, origin=(0, 0),
+                 full_width: int | None = None):
+        """The charge ``e`` (e-, float32 (H, W), modified in place) through blooming, the readout
+        and the ISP: ``(raw_dn, image)``. ``origin`` and ``full_width`` place a crop in the frame
+        (:func:`svgs_sim.camera.phone.sensor.readout`); ``info["bloom"]`` gets the blooming's statistics."""
+        p = self.phone.params
+        sp = p.sensor
         if "bloom" in st:
             info["bloom"] = bloom(e, sp.full_well_e, sp.anti_blooming_drain, sp.bloom_direction)
         else:
@@ -556,7 +672,7 @@ class Exposer:
         colour = self.cfa and isp.jpeg_subsampling != "gray"
         legacy = not (nr or sharpen or colour)  # the luminance image through the one-pass paths
         raw, img = readout(e, sp, iso, seed, read="read" in st, adc="adc" in st,
-                           lut=None if (self.cfa or not legacy) else lut)
+                           lut=None if (self.cfa or not legacy) else lut, origin=origin, full_width=full_width)
         if legacy:
             if self.cfa:  # white balance, demosaic, luminance; then the tone curve
                 if "adc" in st:
@@ -575,11 +691,63 @@ class Exposer:
             img = downscale(img, isp.output_width, isp.output_height)
         if "jpeg" in st and "u8" in st and isp.jpeg_quality > 0:
             sub = (isp.jpeg_subsampling if "chroma" in st else "4:4:4") if colour else "gray"
-            img = jpeg_roundtrip(img, isp.jpeg_quality, sub, isp.jpeg_grid_offset_px)
+            ox, oy = isp.jpeg_grid_offset_px  # a crop's pixels on the frame's block grid
+            grid = ((int(ox) + int(origin[1])) % JPEG_MCU_PX, (int(oy) + int(origin[0])) % JPEG_MCU_PX)
+            img = jpeg_roundtrip(img, isp.jpeg_quality, sub, grid)
         if img.ndim == 3:  # the app reads the colour picture's luma
             img = luma(img)
+        return raw, img
+
+    def _deferred(self, seed: int, exposure_s: float, iso: float, st, isp, method: str, threshold_u8, info: dict,
+                  keep_electrons: bool):
+        """The :class:`DeferredExposure` of :meth:`expose`, or None for the exact path (``info["dark_pixels"]``
+        says why): no numeric threshold, a bright frame or an ISP outside the dark tiles' bound
+        (:meth:`dark_tiles`), a downscale, or blooming that spills to a crop's edge.
+
+        The lit tiles (not dark) are grouped into crops, each reaching
+        :data:`DEFERRED_MARGIN_TILES` tiles beyond them; each crop goes through the exact path's
+        charge, blooming, readout, ISP and JPEG with the frame's counters and block grid, and its
+        lit tiles are copied into the detection image."""
+        dark, why = self.dark_tiles(exposure_s, iso, st, isp, method, threshold_u8)
+        if dark is not None and "downscale" in st and isp.output_width > 0:
+            dark, why = None, {"path": "exact", "reason": "downscaled image"}
+        if dark is None:
+            info["dark_pixels"] = why
+            return None
+        sp = self.phone.params.sensor
+        H, W = self.flux_optics.shape
+        prnu, dsnu = self.phone.fixed_patterns()
+        detect = np.zeros((H, W), np.uint8)
+        crops = lit_crops(~dark, DEFERRED_MARGIN_TILES)
+        blooms = []
+        for crop, inner in crops:
+            crop_info = {}
+            (r0, r1, c0, c1), (i0, i1, j0, j1) = (tuple(DARK_TILE_PX * np.asarray(b)) for b in (crop, inner))
+            r1, c1, i1, j1 = min(r1, H), min(c1, W), min(i1, H), min(j1, W)
+            e = electrons(self.flux_optics[r0:r1, c0:c1], sp, exposure_s, prnu[r0:r1, c0:c1], dsnu[r0:r1, c0:c1], seed,
+                          shot="shot" in st, dark="dark" in st, fpn="fpn" in st, origin=(r0, c0), full_width=W)
+            before = e.copy() if "bloom" in st else None
+            _, img = self._develop(e, seed, iso, st, isp, method, crop_info, origin=(r0, c0), full_width=W)
+            if before is not None and crop_info["bloom"]["regions"]:
+                moved = e != np.minimum(before, sp.full_well_e)  # the pixels blooming filled
+                moved[i0 - r0:i1 - r0, j0 - c0:j1 - c0] = False
+                if moved.any() or crop_info["bloom"]["lost_e"] > 0:  # beyond the delivered tiles (or off the crop)
+                    info["dark_pixels"] = {**why, "path": "exact", "reason": "blooming beyond the lit tiles"}
+                    return None
+            detect[i0:i1, j0:j1] = img[i0 - r0:i1 - r0, j0 - c0:j1 - c0]
+            blooms.append(crop_info.get("bloom"))
+        if "bloom" in st:  # the crops' blooming (regions that spill into no other crop: the frame's)
+            info["bloom"] = {k: sum(b[k] for b in blooms) for k in ("drained_e", "lost_e", "regions", "bloomed_px")}
+        lit_px = sum((min(c[1] * DARK_TILE_PX, H) - c[0] * DARK_TILE_PX) * (min(c[3] * DARK_TILE_PX, W) - c[2] * DARK_TILE_PX)
+                     for c, _ in crops)
+        info["dark_pixels"] = {**why, "path": "deferred", "crops": len(crops), "exposed_fraction": lit_px / (H * W)}
         info.update({"seed": int(seed), "stages": list(st), "demosaic": method if self.cfa else None})
-        return Exposure(raw, img, t, iso, sp.gain_dn_per_e(iso), info, e if keep_electrons else None)
+
+        def full():
+            return self.expose(seed=seed, exposure_s=exposure_s, iso=iso, keep_electrons=keep_electrons, stages=st,
+                               isp=isp, demosaic=method)
+
+        return DeferredExposure(full, detect, exposure_s, iso, sp.gain_dn_per_e(iso), info, keep_electrons)
 
     def _electrons(self, exposure_s: float, iso: float, seed: int, st, isp, method: str, dark_pixels: str,
                    threshold_u8, info: dict) -> np.ndarray:
@@ -677,12 +845,21 @@ class Exposer:
         if self._windows is None:
             win = np.zeros(shape, bool)
             if self.points is not None and len(self.points):
-                w = DARK_WINDOW_PX
-                for du in (-w, 0, w):
-                    for dv in (-w, 0, w):
-                        i = np.clip((self.points.v_px + dv) // DARK_TILE_PX, 0, shape[0] - 1).astype(int)
-                        j = np.clip((self.points.u_px + du) // DARK_TILE_PX, 0, shape[1] - 1).astype(int)
-                        win[i, j] = True
+                # each point's tile, and the tiles k = DARK_WINDOW_PX / DARK_TILE_PX away (clipped to the
+                # frame): the points' tiles (one far beyond the frame as the k-th outside it)
+                # marked on a grid padded by k, dilated by k, cut back
+                k = -(-DARK_WINDOW_PX // DARK_TILE_PX)
+                i = np.clip(np.floor(self.points.v_px / DARK_TILE_PX), -k, shape[0] - 1 + k).astype(np.intp) + k
+                j = np.clip(np.floor(self.points.u_px / DARK_TILE_PX), -k, shape[1] - 1 + k).astype(np.intp) + k
+                base = np.zeros((shape[0] + 2 * k, shape[1] + 2 * k), bool)
+                base[i, j] = True
+                grown = np.zeros_like(base)
+                n0, n1 = base.shape
+                for a in range(-k, k + 1):
+                    for b in range(-k, k + 1):
+                        grown[max(a, 0):n0 + min(a, 0), max(b, 0):n1 + min(b, 0)] |= \
+                            base[max(-a, 0):n0 + min(-a, 0), max(-b, 0):n1 + min(-b, 0)]
+                win = grown[k:k + shape[0], k:k + shape[1]]
             self._windows = win
         return self._windows
 

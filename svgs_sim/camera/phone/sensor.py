@@ -105,13 +105,14 @@ def _key(seed: int, stream: int) -> np.uint64:
 
 
 @njit(parallel=True, cache=True)
-def _charge_kernel(flux, scale, prnu, use_prnu, dark_e, dsnu, key_shot, key_dark, shot, dark, out):
+def _charge_kernel(flux, scale, prnu, use_prnu, dark_e, dsnu, key_shot, key_dark, shot, dark, r0, c0, width, out):
     """Expected photo-electrons ``scale * flux * prnu`` (scale = QE x exposure time), Poisson
-    shot + dark noise and DSNU; every pixel draws from its own counter."""
+    shot + dark noise and DSNU; every pixel draws from its own counter: its index in the full
+    frame (``width`` px wide) whose rows ``r0 ..`` and columns ``c0 ..`` these arrays hold."""
     H, W = flux.shape
     for r in prange(H):
         for c in range(W):
-            idx = np.uint64(r * W + c)
+            idx = np.uint64((r + r0) * width + c + c0)
             m = scale * flux[r, c]
             if use_prnu:
                 m *= prnu[r, c]
@@ -151,12 +152,14 @@ def _bits(key, counter):
 
 
 @njit(parallel=True, cache=True)
-def _readout_kernel(e, read_sigma, gain, black, white, key, read, quantise, lut, levels, out, out8):
+def _readout_kernel(e, read_sigma, gain, black, white, key, read, quantise, lut, levels, r0, c0, width, out, out8):
     """Read noise, gain, black level, ADC clip and rounding (DN, float32), and the 8-bit
-    image through the tone LUT when quantising (one pass)."""
+    image through the tone LUT when quantising (one pass). The draws are counted in the full
+    frame (``width`` px wide; these arrays hold its rows ``r0 ..`` and columns ``c0 ..``, ``c0`` a
+    multiple of 4)."""
     H, W = e.shape
     nl = lut.shape[0]
-    blocks = (W + 3) // 4
+    blocks = (width + 3) // 4
     for r in prange(H):
         z = np.uint64(0)
         for c in range(W):
@@ -164,7 +167,7 @@ def _readout_kernel(e, read_sigma, gain, black, white, key, read, quantise, lut,
             if read:
                 j = c & 3
                 if j == 0:
-                    z = _bits(key, np.uint64(r * blocks + (c >> 2)))
+                    z = _bits(key, np.uint64((r + r0) * blocks + ((c + c0) >> 2)))
                 x += read_sigma * levels[(z >> np.uint64(16 * j)) & np.uint64(0xFFFF)]
             y = gain * x + black
             if quantise:
@@ -380,7 +383,8 @@ def _fill_rings_by_dilation(sub, region, q, fw, kernel):
     return max(q, 0.0), filled, edge
 
 
-def electrons(flux, params: SensorParams, exposure_s: float, prnu, dsnu, seed: int, *, shot=True, dark=True, fpn=True):
+def electrons(flux, params: SensorParams, exposure_s: float, prnu, dsnu, seed: int, *, shot=True, dark=True, fpn=True,
+              origin=(0, 0), full_width: int | None = None):
     """Stages 1-2: expected photo-electrons ``QE * flux * t * PRNU``, shot and dark noise, DSNU.
 
     Parameters
@@ -390,6 +394,11 @@ def electrons(flux, params: SensorParams, exposure_s: float, prnu, dsnu, seed: i
     exposure_s : float
     prnu, dsnu : ndarray, float32, shape (H, W)
         Fixed patterns (:func:`fixed_patterns`); ignored unless ``fpn``.
+    origin : (int, int)
+        ``(row, column)`` of ``flux[0, 0]`` in the full frame: a crop draws the same numbers as
+        the same pixels of the full frame.
+    full_width : int, optional
+        The full frame's width, px (default ``W``: the arrays are the frame).
 
     Returns
     -------
@@ -400,12 +409,17 @@ def electrons(flux, params: SensorParams, exposure_s: float, prnu, dsnu, seed: i
     dsnu_use = dsnu if fpn else np.zeros(flux.shape, np.float32)
     _charge_kernel(np.ascontiguousarray(flux, np.float32), float(params.qe * exposure_s), prnu, bool(fpn),
                    float(params.dark_current_e_s * exposure_s), dsnu_use, _key(seed, 1), _key(seed, 2),
-                   bool(shot), bool(dark), out)
+                   bool(shot), bool(dark), int(origin[0]), int(origin[1]),
+                   int(flux.shape[1] if full_width is None else full_width), out)
     return out
 
 
-def readout(e, params: SensorParams, iso: float, seed: int, *, read=True, adc=True, lut=None):
+def readout(e, params: SensorParams, iso: float, seed: int, *, read=True, adc=True, lut=None, origin=(0, 0),
+            full_width: int | None = None):
     """Stage 4: read noise, gain, black level and ADC.
+
+    ``origin`` (row, column; the column a multiple of 4) and ``full_width`` place a crop ``e``
+    in the full frame: it draws the read noise of those pixels of the frame.
 
     Returns
     -------
@@ -414,6 +428,8 @@ def readout(e, params: SensorParams, iso: float, seed: int, *, read=True, adc=Tr
     image : ndarray, uint8, shape (H, W) or None
         ``lut[raw_dn]`` when ``adc`` and a tone LUT is given (one pass over the frame).
     """
+    if int(origin[1]) % 4:
+        raise ValueError(f"origin: a crop's first column must be a multiple of 4 (the read noise's draws), got {origin}")
     out = np.empty(e.shape, np.float32)
     want8 = bool(adc) and lut is not None
     # the kernel writes the 8-bit image whenever it quantises (no bounds checks in numba):
@@ -422,7 +438,8 @@ def readout(e, params: SensorParams, iso: float, seed: int, *, read=True, adc=Tr
     lut_arr = np.ascontiguousarray(lut if lut is not None else np.zeros(1, np.uint8), np.uint8)
     _readout_kernel(np.ascontiguousarray(e, np.float32), float(params.read_noise_e), float(params.gain_dn_per_e(iso)),
                     float(params.black_level_dn), float(params.white_dn), _key(seed, 3),
-                    bool(read), bool(adc), lut_arr, normal_levels(), out, out8)
+                    bool(read), bool(adc), lut_arr, normal_levels(), int(origin[0]), int(origin[1]),
+                    int(e.shape[1] if full_width is None else full_width), out, out8)
     return out, (out8 if want8 else None)
 
 

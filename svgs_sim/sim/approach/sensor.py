@@ -172,9 +172,12 @@ class ApproachSensor:
         Keep the delivered image, the blobs and the solution in each :class:`Measurement`.
     overlap_render : bool
         Render the next frame of a trajectory (``next_pose``, :meth:`along`) in a background
-        thread while the phone model works on this one. Off by default: on the two-core machine
-        it bought nothing (Mitsuba's threads and the camera model's then share the two cores;
-        ``benchmarks/bench_approach.py``); with more cores it may. The numbers do not change.
+        thread while the phone model works on this one. On by default since the deferred dark
+        pixels (issue 40): on the two-core machine it takes a full-resolution frame from about
+        0.24 to 0.2 s (``benchmarks/bench_approach.py``); before them it bought little, the
+        camera model's full-frame passes then filling both cores. Only a trajectory's frames
+        know their next pose (``measure_on(..., next_t_s=)``, :meth:`along`); :meth:`measure`
+        renders in place. The numbers do not change.
     overlap_camera : bool
         Meter the frame and compute the bound's image derivatives around the spots' expected
         places in a background thread while the exposure is made, detected and solved (the
@@ -190,13 +193,17 @@ class ApproachSensor:
         The target's body (:class:`svgs_sim.sim.closed_loop.RenderOptions`' ``body``,
         ``body_material``, ``body_materials``: ``"3u"``, a mesh file...); default the renderer's,
         the lab's breadboard.
-    dark_pixels : {"exact", "fast"}
-        How the camera model draws the shot noise of the pixels that cannot reach the detection
-        threshold (:meth:`svgs_sim.camera.phone.Exposer.expose`): ``exact`` (default), every
-        pixel by the exact sampler; ``fast``, those pixels (tiles away from the spots, their
-        expected charge far below the threshold) by a table sampler of the same Poisson law,
-        the exact path for a frame whose pixels can mostly reach the threshold. Other numbers
-        than ``exact`` (the same statistics: ``tests/test_phone_dark_pixels.py``).
+    dark_pixels : {"deferred", "exact", "fast"}
+        How the camera model makes the pixels that cannot reach the detection threshold
+        (:meth:`svgs_sim.camera.phone.Exposer.expose`; tiles away from the spots whose expected
+        charge keeps them below it but with a chance under 1e-13 a pixel). ``deferred``
+        (default): only the other tiles are exposed for the detector, to the exact path's bytes;
+        the full image, the exact path's, is made when it is read (``keep_images``): the same
+        measurements as ``exact`` unless a dark pixel would have reached the threshold
+        (``tests/test_phone_deferred.py``). ``exact``: every pixel now. ``fast``: those pixels by a
+        table sampler of the same Poisson law (other numbers, the same statistics:
+        ``tests/test_phone_dark_pixels.py``). A frame whose pixels can mostly reach the
+        threshold takes the exact path.
 
     Examples
     --------
@@ -207,13 +214,13 @@ class ApproachSensor:
 
     def __init__(self, camera="galaxy-nexus", pattern="svgs-3u", *, seed: int = 0, motion: bool = True,
                  crlb: bool = True, keep_images: bool = False, threshold=None, base: Scenario | None = None,
-                 frame_rate_hz: float | None = None, overlap_render: bool = False, body=None,
-                 overlap_camera: bool = True, dark_pixels: str = "exact"):
+                 frame_rate_hz: float | None = None, overlap_render: bool = True, body=None,
+                 overlap_camera: bool = True, dark_pixels: str = "deferred"):
         from svgs_sim.camera.phone import DARK_PIXELS, PhoneCamera, PhoneParams
 
         if dark_pixels not in DARK_PIXELS:
             raise InputError(f"dark_pixels: expected one of {DARK_PIXELS}, got {dark_pixels!r}")
-        #: How the camera model draws the dark pixels' shot noise (``exact`` or ``fast``).
+        #: How the camera model makes the dark pixels (``deferred``, ``exact`` or ``fast``).
         self.dark_pixels = dark_pixels
 
         self.camera = load_camera(camera)
@@ -384,8 +391,8 @@ class ApproachSensor:
         crlb = self._crlb(frame, exposer, row, timings)
         m = self._measurement(k, t_s, R, t, row, crlb, settings, level, timings, ex, blobs)
         m.match_err_max_px = match_err_max_px(row, row["_solution"], spot_positions_px(
-            solver_camera(self.camera, ex.image.shape), self.pattern, R, t, frame.truth.get("spots_px_predicted"),
-            ex.image.shape[1] / self.camera.width), self.pattern.ids)
+            solver_camera(self.camera, ex.detect_image.shape), self.pattern, R, t, frame.truth.get("spots_px_predicted"),
+            ex.detect_image.shape[1] / self.camera.width), self.pattern.ids)
         m.wrong_lock = bool(m.match_err_max_px is not None
                             and m.match_err_max_px > wrong_lock_px(self.camera, self.pattern, float(t[2])))
         self.frame_index = k + 1
@@ -478,7 +485,8 @@ class ApproachSensor:
                                 threshold_u8=None if isinstance(thr, str) else float(thr))
         timings["expose"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        blobs = detect_blobs(ex.image, threshold=camera_threshold(ex.image, self.camera, self.threshold))
+        img = ex.detect_image  # deferred: the lit tiles' bytes (the full image is made only when it is read)
+        blobs = detect_blobs(img, threshold=camera_threshold(img, self.camera, self.threshold))
         t_detect = time.perf_counter() - t0
         row = solve_exposure(frame, ex, threshold=self.threshold, solver_camera_profile=self.camera, truth="actual",
                              blobs=blobs)
