@@ -141,7 +141,7 @@ def test_scheduler_window_keeps_every_worker_busy(tmp_path):
     trials = [Trial(i, {"range_m": float(i)}, 0) for i in range(32)]
     _ACTIVE.update(now=0, most=0)
     with LocalCluster(n_workers=1, threads_per_worker=8, processes=False, protocol="tcp", host="127.0.0.1",
-                      dashboard_address=None, silence_logs=logging.ERROR) as cluster:
+                      dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR) as cluster:
         spec = ExecutorSpec("dask-scheduler", 0, cluster.scheduler_address)
         store, stats = run_stored_study(kind, trials, tmp_path / "study", {"study": "sleep"}, spec, chunk_size=1,
                                         progress=False)

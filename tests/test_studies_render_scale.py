@@ -147,7 +147,7 @@ def resume_spec():
 
     from distributed import LocalCluster
 
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address="127.0.0.1:0",
                       silence_logs=logging.ERROR) as cluster:
         yield ExecutorSpec("dask-scheduler", 0, cluster.scheduler_address)
 
