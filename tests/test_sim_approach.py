@@ -314,6 +314,7 @@ def test_approach_command_writes_its_outputs_and_resumes(small_camera, small_aut
     assert main(argv) == 0
     s = json.loads(capsys.readouterr().out)
     assert s["frames"] == 3 and s["solved"] >= (2 if exposure == "manual" else 1) and s["run"]["frames_run"] == 3
+    assert 0 < s["run"]["wall_per_frame_s"] < s["run"]["wall_s"]  # the frames after the first, by the clock
     rows = _rows(out / "measurements.csv")
     assert [float(r["t_s"]) for r in rows] == [0.0, 1.0, 2.0]
     assert {"true_z_m", "est_z_m", "err_yaw_deg", "crlb_yaw_deg", "ok", "reason", "solve_s"} <= set(rows[0])

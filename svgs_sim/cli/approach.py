@@ -135,6 +135,10 @@ def print_summary(s: dict, file=None) -> None:
     t = s["timing"]
     parts = ", ".join(f"{k[5:-2]} {t[k]:.2f} s" for k in t if k.startswith("mean_") and k != "mean_frame_s" and t[k] is not None)
     print(f"  per frame: {parts}; {t['mean_frame_s']:.2f} s = {t['frames_per_s']:.2f} frames/s on this machine", file=file)
+    wpf = s.get("run", {}).get("wall_per_frame_s")
+    if wpf:  # what the stages leave out: the background threads' waits, the pictures, the store
+        print(f"  wall clock: {wpf:.2f} s a frame after the first ({1 / wpf:.2f} frames/s), "
+              f"{s['run']['wall_s']:.1f} s in all", file=file)
     o = s["outputs"]
     print(f"  wrote {o['measurements']}, {o['plot']}, {o['video']} ({o['video_codec']})", file=file)
 

@@ -198,7 +198,8 @@ SCHEMAS = {
  "timing": {{"mean_render_s", "mean_optics_s", "mean_expose_s", "mean_solve_s",   # frames after the first
             "mean_crlb_s",                                  # over the solved frames
             "mean_frame_s", "frames_per_s": float | null}},
- "run": {{"frames_run": int, "frames_reused": int, "wall_s": float}},
+ "run": {{"frames_run": int, "frames_reused": int, "wall_s": float,
+         "wall_per_frame_s": float | null}},   # wall time a frame after the first, pictures included
  "outputs": {{"measurements", "plot", "report", "video": path | null, "video_codec": str, "video_fps": float}}}}""",
     "svgs range-sweep": f"""\
 {{"camera": str, "pattern": str, "trials_per_pose": int, "poses": int,
