@@ -92,8 +92,9 @@ def test_blobs_and_solution_inputs_are_the_exact_paths(small_camera):
 
 
 def test_falls_back_to_the_exact_exposure(small_camera):
-    """A half-bright frame, no numeric threshold, a downscaled image, blooming that spills
-    beyond the delivered tiles: a plain exposure, the exact path's bytes, and the reason."""
+    """A half-bright frame, no numeric threshold, a downscaled image, a float image (no ``u8``),
+    blooming that spills beyond the delivered tiles: a plain exposure, the exact path's bytes,
+    and the reason."""
     from dataclasses import replace
 
     phone, ex = _frame(small_camera, [(100, 120, 20, 4000.0)])
@@ -108,8 +109,10 @@ def test_falls_back_to_the_exact_exposure(small_camera):
         (ex, {"threshold_u8": None}, "no numeric threshold"),
         (ex, {"threshold_u8": THRESHOLD, "isp": replace(phone.params.isp, output_width=W // 2, output_height=H // 2)},
          "downscaled image"),
+        (ex, {"threshold_u8": THRESHOLD, "stages": tuple(s for s in NO_GLARE if s not in ("u8", "jpeg"))},
+         "no 8-bit image"),
     ):
-        a = e.expose(seed=2, **{k: v for k, v in kw.items() if k == "isp"})
+        a = e.expose(seed=2, **{k: v for k, v in kw.items() if k in ("isp", "stages")})
         b = e.expose(seed=2, dark_pixels="deferred", **kw)
         assert not isinstance(b, DeferredExposure)
         assert b.info["dark_pixels"]["path"] == "exact" and b.info["dark_pixels"]["reason"] == reason

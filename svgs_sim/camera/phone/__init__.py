@@ -702,7 +702,8 @@ class Exposer:
                   keep_electrons: bool):
         """The :class:`DeferredExposure` of :meth:`expose`, or None for the exact path (``info["dark_pixels"]``
         says why): no numeric threshold, a bright frame or an ISP outside the dark tiles' bound
-        (:meth:`dark_tiles`), a downscale, or blooming that spills to a crop's edge.
+        (:meth:`dark_tiles`), a downscale, a float image (no ``u8`` stage), or blooming that fills a
+        pixel beyond the delivered tiles.
 
         The lit tiles (not dark) are grouped into crops, each reaching
         :data:`DEFERRED_MARGIN_TILES` tiles beyond them; each crop goes through the exact path's
@@ -711,6 +712,8 @@ class Exposer:
         dark, why = self.dark_tiles(exposure_s, iso, st, isp, method, threshold_u8)
         if dark is not None and "downscale" in st and isp.output_width > 0:
             dark, why = None, {"path": "exact", "reason": "downscaled image"}
+        elif dark is not None and "u8" not in st:  # the threshold is on the delivered 8-bit image
+            dark, why = None, {"path": "exact", "reason": "no 8-bit image"}
         if dark is None:
             info["dark_pixels"] = why
             return None
