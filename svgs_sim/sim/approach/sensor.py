@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import dataclasses
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -242,6 +243,7 @@ class ApproachSensor:
         self.overlap_render = bool(overlap_render)
         self.overlap_camera = bool(overlap_camera)
         self._camera_pool = None
+        self._meter_lock = threading.Lock()
         self.threshold = threshold
         self.phone = PhoneCamera(self.camera, params=params)
         self.exposure = ExposureStream(self.phone, self.frame_rate_hz)
@@ -384,8 +386,7 @@ class ApproachSensor:
         timings["optics"] = time.perf_counter() - t0
         ahead = self._ahead(frame, exposer, uv_true)
         ex, blobs, row = self._expose_and_solve(frame, exposer, settings, noise_seed, timings)
-        if ahead is not None:
-            ahead.result()
+        self._meter_built(exposer, ahead)
         level = exposer.metered_level(*settings)
         self.exposure.after_frame(t_s, settings, exposer.meter)
         crlb = self._crlb(frame, exposer, row, timings)
@@ -455,20 +456,31 @@ class ApproachSensor:
         return exposer, settings
 
     def _ahead(self, frame: Frame, exposer, uv_true: np.ndarray):
-        """With ``overlap_camera``: the frame's meter and the bound's image derivatives around the
-        targets' true places (:func:`svgs_sim.sim.crlb.prefetch_gradients`) started in a background
-        thread (a future; None otherwise). Both only read the optical image and the points."""
+        """With ``overlap_camera``: the bound's image derivatives around the targets' true places
+        (:func:`svgs_sim.sim.crlb.prefetch_gradients`), then the frame's meter, started in a
+        background thread (a future; None otherwise). Both only read the optical image and the
+        points. The meter is built under the exposer's lock: the main thread, done with the
+        exposure, builds it itself when the thread has not yet begun it (:meth:`_meter_built`)."""
         if not self.overlap_camera:
             return None
         if self._camera_pool is None:
             self._camera_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="svgs-camera")
+        lock = self._meter_lock
 
         def work():
-            exposer.meter  # noqa: B018 - the property builds and keeps the meter
             if self.crlb:
                 prefetch_gradients(frame, exposer, uv_true)
+            with lock:
+                exposer.meter  # noqa: B018 - the property builds and keeps the meter
 
         return self._camera_pool.submit(work)
+
+    def _meter_built(self, exposer, ahead) -> None:
+        """The frame's meter built (by whichever thread gets to it first) and the background work done."""
+        if ahead is not None:
+            with self._meter_lock:
+                exposer.meter  # noqa: B018
+            ahead.result()
 
     def _expose_and_solve(self, frame: Frame, exposer, settings, noise_seed: int, timings: dict):
         """The exposure, the detection and the SVGS solution (:func:`svgs_sim.sim.closed_loop.solve_exposure`
