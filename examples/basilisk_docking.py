@@ -995,13 +995,13 @@ def _mc_result(phones, n: int, statistical_runs: int, seeds: list, done: dict, m
     for ph in phones:
         for label, k in ((ph, n), (f"{ph} (statistical)", statistical_runs)):
             if k:
-                obj["sensors"][label] = {"runs": runs_of(label, k), "percentiles": mc_percentiles(runs_of(label, k)),
-                                         "runs_requested": k, "runs_done": len(runs_of(label, k)),
-                                         "runs_refused": sum(1 for r in runs_of(label, k) if r.get("refused"))}
+                runs = runs_of(label, k)
+                obj["sensors"][label] = {"runs": runs, "percentiles": mc_percentiles(runs), "runs_requested": k,
+                                         "runs_done": len(runs), "runs_refused": sum(1 for r in runs if r.get("refused"))}
         if n and statistical_runs:  # on the seeds of the rendered runs done
-            rendered = {r["seed"] for r in runs_of(ph, n)}
+            rendered = {r["seed"] for r in obj["sensors"][ph]["runs"]}
             obj["sensors"][f"{ph} (statistical)"]["percentiles_on_rendered_seeds"] = mc_percentiles(
-                [r for r in runs_of(f"{ph} (statistical)", statistical_runs) if r["seed"] in rendered])
+                [r for r in obj["sensors"][f"{ph} (statistical)"]["runs"] if r["seed"] in rendered])
     obj["complete"] = all(v["runs_done"] == v["runs_requested"] for v in obj["sensors"].values())
     if len(phones) == 1 and n:  # the layout for one phone: its runs and percentiles at the top
         obj["runs"], obj["percentiles"] = obj["sensors"][phones[0]]["runs"], obj["sensors"][phones[0]]["percentiles"]

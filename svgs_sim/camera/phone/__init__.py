@@ -722,11 +722,12 @@ class Exposer:
         prnu, dsnu = self.phone.fixed_patterns()
         detect = np.zeros((H, W), np.uint8)
         crops = lit_crops(~dark, DEFERRED_MARGIN_TILES)
-        blooms = []
+        blooms, lit_px = [], 0
         for crop, inner in crops:
             crop_info = {}
             (r0, r1, c0, c1), (i0, i1, j0, j1) = (tuple(DARK_TILE_PX * np.asarray(b)) for b in (crop, inner))
             r1, c1, i1, j1 = min(r1, H), min(c1, W), min(i1, H), min(j1, W)
+            lit_px += (r1 - r0) * (c1 - c0)
             e = electrons(self.flux_optics[r0:r1, c0:c1], sp, exposure_s, prnu[r0:r1, c0:c1], dsnu[r0:r1, c0:c1], seed,
                           shot="shot" in st, dark="dark" in st, fpn="fpn" in st, origin=(r0, c0), full_width=W)
             before = e.copy() if "bloom" in st else None
@@ -741,8 +742,6 @@ class Exposer:
             blooms.append(crop_info.get("bloom"))
         if "bloom" in st:  # the crops' blooming (regions that spill into no other crop: the frame's)
             info["bloom"] = {k: sum(b[k] for b in blooms) for k in ("drained_e", "lost_e", "regions", "bloomed_px")}
-        lit_px = sum((min(c[1] * DARK_TILE_PX, H) - c[0] * DARK_TILE_PX) * (min(c[3] * DARK_TILE_PX, W) - c[2] * DARK_TILE_PX)
-                     for c, _ in crops)
         info["dark_pixels"] = {**why, "path": "deferred", "crops": len(crops), "exposed_fraction": lit_px / (H * W)}
         info.update({"seed": int(seed), "stages": list(st), "demosaic": method if self.cfa else None})
 
