@@ -98,6 +98,17 @@ sys.exit(main(sys.argv[1:]))
 """
 
 
+def _cmdline(proc) -> str:
+    """A process's command line, or "" once it has ended: short-lived helpers (a zombie not yet
+    reaped, a process gone between listing and reading) come and go while the campaign starts."""
+    import psutil
+
+    try:
+        return " ".join(proc.cmdline())
+    except psutil.Error:
+        return ""
+
+
 def _alive(procs):
     import psutil
 
@@ -131,20 +142,20 @@ def test_workers_die_with_a_sigkilled_parent(tmp_path, executor):
         deadline = time.monotonic() + 120  # start-up on a loaded machine; not a speed test
         while time.monotonic() < deadline and proc.poll() is None:
             children = parent.children(recursive=True)
-            workers = [c for c in children if "spawn_main" in " ".join(c.cmdline())]
+            workers = [c for c in children if "spawn_main" in _cmdline(c)]
             if marker.exists() and len(workers) >= 2:
                 break
             time.sleep(0.1)
         assert proc.poll() is None and marker.exists(), "the campaign ended before its workers were seen"
         children = parent.children(recursive=True)
-        assert len(workers) >= 2, [c.cmdline() for c in children]
+        assert len(workers) >= 2, [_cmdline(c) for c in children]
         os.kill(proc.pid, signal.SIGKILL)
         assert proc.wait(timeout=10) == -signal.SIGKILL
         deadline = time.monotonic() + 15
         while _alive(children) and time.monotonic() < deadline:
             time.sleep(0.2)
         left = _alive(children)
-        assert not left, [(p.pid, p.cmdline()) for p in left]
+        assert not left, [(p.pid, _cmdline(p)) for p in left]
     finally:
         for p in [parent, *children]:  # nothing of this test outlives it, pass or fail
             try:
