@@ -63,7 +63,7 @@ def test_the_orbit_form_crosses_the_eclipse_entry_where_basilisk_puts_it(tmp_pat
     Earth's horizon dip at the shadow's edge, asin(R / (R + h)) - 90 = -19.8 deg from 407 km."""
     pytest.importorskip("Basilisk", reason="the basilisk extra is not installed (pip install -e \".[basilisk]\")")
     ex = _example()
-    summary = ex.main(["--quick", "--phones", "galaxy-nexus", "--max-time-s", "16", "--sensor-rate-hz", "0.5",
+    summary = ex.main(["--quick", "--phones", "galaxy-nexus", "--max-time-s", "10", "--sensor-rate-hz", "0.5",
                        "--environment", "orbit",
                        "--case", "rbar-above", "--eclipse-in-s", "7", "--out", str(tmp_path)])
     assert (tmp_path / "basilisk_docking_orbit_rbar_above_quick_phase_galaxy-nexus.png").is_file()

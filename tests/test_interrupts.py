@@ -30,10 +30,10 @@ REPO = Path(__file__).resolve().parents[1]
 EXIT_WITHIN_S = 1.0
 #: Rows the store holds before the signal is sent.
 ROWS_BEFORE_SIGNAL = 100
-#: The same campaign for every run below: 2 x 1500 geometric trials (several seconds of work).
+#: The same campaign for every run below: 2 x 600 geometric trials (a few seconds of work).
 CAMPAIGN = ["campaign", "--camera", "galaxy-nexus", "--trial-kind", "geometric", "--calibration", "exact",
-            "--trials", "1500", "--ranges", "5,15", "--seed", "7", "--no-progress"]
-N_TRIALS = 3000
+            "--trials", "600", "--ranges", "5,15", "--seed", "7", "--no-progress"]
+N_TRIALS = 1200
 #: The CLI in a child whose SIGINT raises KeyboardInterrupt even when the test runner was
 #: started with SIGINT ignored (a background job): the child of ``python -m svgs_sim.cli.main``.
 _CLI_CHILD = ("import signal, sys\nsignal.signal(signal.SIGINT, signal.default_int_handler)\n"

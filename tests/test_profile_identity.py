@@ -1,10 +1,11 @@
-"""A profile is read once and known by its key: along one ``svgs render-and-solve`` and one short
-``svgs approach`` each TOML file is opened at most once (an audit hook on ``open`` in a process
-that runs the console script's entry point), and a copy of a profile under another display name
+"""A profile is read once and known by its key: along one ``svgs render-and-solve``, one short
+``svgs approach`` and one ``svgs render``, run one after another in a process through the console
+script's entry point, each TOML file is opened at most once (an audit hook on ``open``), and a copy of a profile under another display name
 is the same camera (the same threshold, overlay and solution)."""
 
 from __future__ import annotations
 
+import collections
 import json
 import subprocess
 import sys
@@ -15,8 +16,9 @@ import pytest
 from svgs_sim.base.profiles import Camera
 from svgs_sim.cli.main import main
 
-#: Runs the ``svgs`` console script's entry point (found with importlib.metadata) with an audit
-#: hook that counts every open of a ``.toml`` file; prints the counts as JSON on stderr's last line.
+#: Runs the ``svgs`` console script's entry point (found with importlib.metadata) once for each
+#: command line given as JSON in argv[1], in one process, with an audit hook that counts every open
+#: of a ``.toml`` file; prints each command's exit code and counts as JSON on stderr's last line.
 AUDITED = """\
 import collections, json, sys
 from importlib.metadata import entry_points
@@ -26,35 +28,46 @@ def hook(event, args):
         opens[str(args[0])] += 1
 sys.addaudithook(hook)
 (ep,) = [e for e in entry_points(group="console_scripts") if e.name == "svgs"]
-sys.argv = ["svgs", *sys.argv[1:]]
-try:
-    rc = ep.load()()
-except SystemExit as exc:
-    rc = exc.code
-print(json.dumps({"rc": rc, "opens": opens}), file=sys.stderr)
+runs = []
+for args in json.loads(sys.argv[1]):
+    opens.clear()
+    sys.argv = ["svgs", *args]
+    try:
+        rc = ep.load()()
+    except SystemExit as exc:
+        rc = exc.code
+    runs.append({"rc": rc, "opens": dict(opens)})
+print(json.dumps(runs), file=sys.stderr)
 """
 
 
-def _audited(args, cwd) -> dict:
-    p = subprocess.run([sys.executable, "-c", AUDITED, *args], cwd=cwd, capture_output=True, text=True, timeout=600)
+def _audited(commands, cwd) -> list[dict]:
+    p = subprocess.run([sys.executable, "-c", AUDITED, json.dumps(commands)], cwd=cwd, capture_output=True,
+                       text=True, timeout=600)
     return json.loads(p.stderr.strip().splitlines()[-1])
 
 
 @pytest.mark.slow
 @pytest.mark.render
 def test_each_toml_file_is_opened_at_most_once(tmp_path):
-    ras = _audited(["render-and-solve", "--camera", "galaxy-nexus", "--range", "10", "--seed", "1"], tmp_path)
-    appr = _audited(["approach", "--camera", "galaxy-nexus", "--from", "10", "--to", "8", "--duration", "2",
-                     "--fps", "1", "--out", str(tmp_path / "approach"), "--no-progress"], tmp_path)
-    render = _audited(["render", "--camera", "galaxy-nexus", "--range", "10", "--seed", "1",
-                       "--out", str(tmp_path / "render")], tmp_path)  # the same route as render-and-solve
-    for run in (ras, appr, render):
+    """The three commands run one after another in one process (one start-up of the renderer):
+    the first reads each profile once, the later ones find it loaded. Each command's files are
+    opened at most once, and over the three together too."""
+    ras, appr, render = runs = _audited([
+        ["render-and-solve", "--camera", "galaxy-nexus", "--range", "10", "--seed", "1"],
+        ["approach", "--camera", "galaxy-nexus", "--from", "10", "--to", "8", "--duration", "2",
+         "--fps", "1", "--out", str(tmp_path / "approach"), "--no-progress"],
+        ["render", "--camera", "galaxy-nexus", "--range", "10", "--seed", "1",
+         "--out", str(tmp_path / "render")],  # the same route as render-and-solve
+    ], tmp_path)
+    total = collections.Counter()
+    for run in runs:
         assert run["rc"] == 0
-        names = {Path(p).name for p in run["opens"]}
-        assert {"galaxy-nexus.toml", "svgs-3u.toml"} <= names  # the hook sees the reads
-        if run is not render:
-            assert "svgs-app.toml" in names  # the detector's settings (svgs render detects nothing)
-        assert max(run["opens"].values()) == 1, run["opens"]
+        assert not run["opens"] or max(run["opens"].values()) == 1, run["opens"]
+        total.update(run["opens"])
+    names = {Path(p).name for p in ras["opens"]}
+    assert {"galaxy-nexus.toml", "svgs-3u.toml", "svgs-app.toml"} <= names  # the hook sees the reads
+    assert max(total.values()) == 1, total  # a profile read once is known by its key afterwards
 
 
 @pytest.mark.slow

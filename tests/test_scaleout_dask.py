@@ -12,7 +12,9 @@ spawned processes (``--processes 2``) and on a Dask LocalCluster of 2 single-thr
 processes (``--workers 2``); every row must agree, column by column, except the timings.
 
 About 50 s on this two-core machine (60 s with another process busy on it): two executors
-started and warmed up, the calibration's and the campaign's renders.
+started and warmed up, the calibration's and the campaign's renders; a long form
+(``SVGS_LONG_TESTS=1``), since the default run's ``tests/test_studies_render_scale.py`` checks the
+same executors on rendered trials.
 
 ``test_scheduler_window_keeps_every_worker_busy`` (sleeping trials, a few seconds): a study on
 an existing cluster (``--scheduler``) keeps every worker thread of the cluster busy (the window
@@ -21,6 +23,7 @@ of tasks in flight is sized from the cluster, not from the command line).
 
 import logging
 import math
+import os
 import threading
 import time
 
@@ -79,7 +82,13 @@ def differences(rows, ref_rows, timings) -> list:
 
 @pytest.mark.render
 @pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("SVGS_LONG_TESTS"), reason="long form (~50 s): the default run's "
+                    "tests/test_studies_render_scale.py checks rendered rows on a process pool and on Dask against "
+                    "the in-process run; set SVGS_LONG_TESTS=1")
 def test_rendered_campaign_same_rows_on_process_pool_and_dask(tmp_path):
+    """Long form (``SVGS_LONG_TESTS=1``): the default run's ``tests/test_studies_render_scale.py``
+    checks the same executors on rendered trials; this one adds the campaign's configuration with
+    its rendered calibration."""
     pytest.importorskip("distributed", reason="the 'dask' extra is not installed")
     from svgs_sim.sim.render_trial import RENDER_TIMING_OUTPUTS
     from svgs_sim.studies.execution import ExecutorSpec
