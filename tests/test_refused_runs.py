@@ -72,12 +72,15 @@ def test_a_calibration_study_refused_after_its_trials_started_leaves_nothing(tmp
     """Refused once the board set is drawn and detected (a fine 40 x 30 board is not found in every
     view): the trials folder this run made is removed with its stores and detection cache."""
     out = tmp_path / "study"
-    argv = [a for a in STUDY if a not in ("--pose-ranges", "2,5,10,20,30")] + ["--pose-ranges", "2,5"]
-    # refused after the board set was drawn and detected: a few seconds of work by design
+    argv = [a for a in STUDY if a not in ("--pose-ranges", "2,5,10,20,30", "--width", "640", "--height", "480")]
+    argv += ["--pose-ranges", "2,5", "--width", "320", "--height", "240"]
+    # refused after the board set was drawn and detected: a few seconds of work by design (at
+    # 320 x 240 px no view resolves the board; 640 x 480 finds it in 7 of 8 after 15 s of OpenCV)
     line = refused(argv + ["--board", "chessboard", "--cols", "40", "--rows", "30", "--spacing-mm", "5",
                            "--out", str(out)], capsys, watch=[tmp_path], within_s=60.0,
                    after_work=True)
-    assert "--views-list: 8 views asked but the board was found in only" in line
+    assert "--views-list: 8 views asked but the board was found in only 0" in line
+    assert "a calibration needs 3: a board with fewer, larger squares, or a larger image" in line
     assert not out.exists()
 
 

@@ -33,3 +33,13 @@ def test_views_list_messages_name_the_option(views, message):
 
 def test_a_views_list_the_detections_allow_passes():
     assert check_views_list(_detections(7), load_camera("galaxy-nexus"), [7, 3, 5, 5]) == [3, 5, 7]
+
+
+def test_a_board_found_in_too_few_views_says_what_to_change_in_one_short_line():
+    """Eight views skipped for one reason are named once, with their count; with fewer than 3
+    views found the message says what would find more (not "give numbers from 3 to 0")."""
+    with pytest.raises(InputError) as exc:
+        check_views_list(_detections(0, 8), load_camera("galaxy-nexus"), [4, 8])
+    assert str(exc.value) == ("--views-list: 8 views asked but the board was found in only 0 (skipped: 8 views, "
+                              "view_000 to view_007 (board not found)); a calibration needs 3: a board with fewer, "
+                              "larger squares, or a larger image")

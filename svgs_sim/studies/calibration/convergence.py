@@ -217,10 +217,27 @@ def check_views_list(detections: Detections, camera_true: Camera, views_list) ->
     if vl[0] < 3:
         raise InputError(f"--views-list: a calibration needs at least 3 views, got {vl[0]}")
     if vl[-1] > n_have:
-        skipped = "; ".join(f"{n} ({f.message})" for n, f in detections.skipped[:8])
+        skipped = _skipped_text(detections.skipped)
         raise InputError(f"--views-list: {vl[-1]} views asked but the board was found in only {n_have}"
-                         + (f" (skipped: {skipped})" if skipped else "") + f"; give numbers from 3 to {n_have}")
+                         + (f" (skipped: {skipped})" if skipped else "")
+                         + (f"; give numbers from 3 to {n_have}" if n_have >= 3 else
+                            "; a calibration needs 3: a board with fewer, larger squares, or a larger image"))
     return vl
+
+
+def _skipped_text(skipped) -> str:
+    """The views the detection skipped, each with its reason; a reason shared by more than three
+    views once, with their count (the message stays one line a reader takes in)."""
+    by_reason: dict[str, list[str]] = {}
+    for name, failure in skipped:
+        by_reason.setdefault(failure.message, []).append(name)
+    parts = []
+    for reason, names in by_reason.items():
+        if len(names) > 3:
+            parts.append(f"{len(names)} views, {names[0]} to {names[-1]} ({reason})")
+        else:
+            parts.extend(f"{n} ({reason})" for n in names)
+    return "; ".join(parts[:8])
 
 
 def convergence_subsets(n_have: int, views_list, subsets: int = DEFAULT_SUBSETS, seed: int = 0) -> list[tuple]:
