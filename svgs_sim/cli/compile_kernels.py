@@ -1,7 +1,9 @@
 """Compile the numba kernels once, ahead of the first command (``make`` runs this after it installs).
 
 The collinearity solver (:mod:`svgs_sim.svgs._lm_kernel`, :mod:`svgs_sim.base.distortion`) and the
-phone sensor (:mod:`svgs_sim.camera.phone.sensor`) are numba kernels cached on disk (``cache=True``):
+phone sensor (:mod:`svgs_sim.camera.phone.sensor`, with the approach's meter, optical composition and
+deferred dark pixels in :mod:`svgs_sim.camera.phone.isp` and :mod:`svgs_sim.camera.phone.optics`) are
+numba kernels cached on disk (``cache=True``):
 the first process that calls them spends about 15-20 s compiling, every later one loads them in well under a second. Compiling here,
 with a status line, keeps that pause out of a fresh checkout's first ``make demo`` or solve.
 
@@ -88,12 +90,21 @@ def compile_kernels(out=None) -> dict:
     solver_s = time.perf_counter() - t0
     print(f"  solver: {solver_s:.1f} s", file=out, flush=True)
 
-    from svgs_sim.camera.phone import PhoneCamera
+    from svgs_sim.camera.phone import Exposer, PhoneCamera
+    from svgs_sim.camera.phone.isp import ExposureSolver
 
     t0 = time.perf_counter()
     flux = np.zeros((cam.height, cam.width), np.float32)
     flux[cam.height // 2, cam.width // 2] = 1e9  # one bright spot: blooming and clipping paths too
     PhoneCamera(cam).expose(flux, seed=0)
+    # the approach's path: the auto-exposure's meter, the optics' one-pass composition and the
+    # deferred dark pixels (their tile bound)
+    flux[:] = 1.0
+    flux[cam.height // 2, cam.width // 2] = 1e9
+    ex = Exposer(PhoneCamera(cam), flux, background=(1.0, np.ones_like(flux)))
+    ex.expose(seed=0, dark_pixels="deferred", threshold_u8=64.0).detect_image
+    for metering in ("mean", "center_weighted"):  # the meter of a float32 flux (both weightings)
+        ExposureSolver.from_flux(ex.flux_optics.astype(np.float32), ex.phone.params.sensor, metering)
     sensor_s = time.perf_counter() - t0
     print(f"  camera sensor: {sensor_s:.1f} s", file=out, flush=True)
     return {"solver_s": solver_s, "sensor_s": sensor_s}
