@@ -212,26 +212,12 @@ def _windows(spots_px, window_half_px: int, shape) -> list:
 
 def _cached_gradient(exposer, pts, box) -> tuple[np.ndarray, np.ndarray]:
     """:func:`_window_core_gradient` of a window, kept on the exposer: the derivatives depend on
-    the render and the window only (a campaign's several exposures per stand setting, and
-    :func:`prefetch_gradients`)."""
+    the render and the window only (a campaign's several exposures per stand setting)."""
     cache = exposer.__dict__.setdefault("_crlb_gradients", {})
     key = (id(pts),) + tuple(int(b) for b in box)
     if key not in cache:
         cache[key] = (pts, _window_core_gradient(exposer.phone, exposer.cfa, pts, box))
     return cache[key][1]
-
-
-def prefetch_gradients(frame, exposer, spots_px, *, window_half_px: int = WINDOW_HALF_PX) -> None:
-    """Compute the bound's image derivatives (:func:`centroid_crlb_px`, ``method="analytic"``)
-    for windows around where the spots are expected (e.g. their true places), ahead of the
-    solution: the bound later takes them from the exposer's cache where its windows (around the
-    solved spots) are the same, and computes the others. The numbers do not change."""
-    pts = frame.points
-    if pts is None or len(pts) == 0:
-        return
-    for box in _windows(spots_px, window_half_px, exposer.phone.shape):
-        if box is not None:
-            _cached_gradient(exposer, pts, box)
 
 
 def pose_crlb(solution, centroid_sigma_px: float) -> dict:

@@ -16,7 +16,7 @@ from svgs_sim.base.profiles import load_camera, load_pattern
 from svgs_sim.sim.closed_loop import (
     Frame, RenderOptions, Scenario, lab_flux, lab_photon_factor, natural_part, solve_exposure, solver_camera,
 )
-from svgs_sim.sim.crlb import frame_crlb, prefetch_gradients
+from svgs_sim.sim.crlb import frame_crlb
 from svgs_sim.sim.metrics import match_err_max_px, spot_positions_px, state_error, wrong_lock_px
 from svgs_sim.svgs.frames import D_CAM_PHOTO, STATE_KEYS, angles_from_rotation, check_pose, pose_to_state, state_dict
 from svgs_sim.svgs.pipeline import camera_threshold
@@ -180,10 +180,9 @@ class ApproachSensor:
         know their next pose (``measure_on(..., next_t_s=)``, :meth:`along`); :meth:`measure`
         renders in place. The numbers do not change.
     overlap_camera : bool
-        Meter the frame and compute the bound's image derivatives around the spots' expected
-        places in a background thread while the exposure is made, detected and solved (the
-        single-threaded JPEG and solution leave a core free). On by default; the numbers do not
-        change (``tests/test_sim_approach.py``).
+        Meter the frame in a background thread while the exposure is made, detected and solved
+        and the bound computed (the single-threaded JPEG, solution and bound leave a core free).
+        On by default; the numbers do not change (``tests/test_sim_approach.py``).
     threshold : None, float or str
         The detector's threshold (None: the app's for the camera, :func:`svgs_sim.svgs.pipeline.camera_threshold`).
     base : Scenario, optional
@@ -384,12 +383,12 @@ class ApproachSensor:
             vel = self._velocity_since_last(t_s, R, t)
         exposer, settings = self._optics(frame, uv_true, vel, motion_seed)
         timings["optics"] = time.perf_counter() - t0
-        ahead = self._ahead(frame, exposer, uv_true)
+        ahead = self._ahead(exposer)
         ex, blobs, row = self._expose_and_solve(frame, exposer, settings, noise_seed, timings)
+        crlb = self._crlb(frame, exposer, row, timings)  # while the camera thread meters
         self._meter_built(exposer, ahead)
         level = exposer.metered_level(*settings)
         self.exposure.after_frame(t_s, settings, exposer.meter)
-        crlb = self._crlb(frame, exposer, row, timings)
         m = self._measurement(k, t_s, R, t, row, crlb, settings, level, timings, ex, blobs)
         m.match_err_max_px = match_err_max_px(row, row["_solution"], spot_positions_px(
             solver_camera(self.camera, ex.detect_image.shape), self.pattern, R, t, frame.truth.get("spots_px_predicted"),
@@ -455,12 +454,15 @@ class ApproachSensor:
             exposer = frame.exposer()
         return exposer, settings
 
-    def _ahead(self, frame: Frame, exposer, uv_true: np.ndarray):
-        """With ``overlap_camera``: the bound's image derivatives around the targets' true places
-        (:func:`svgs_sim.sim.crlb.prefetch_gradients`), then the frame's meter, started in a
-        background thread (a future; None otherwise). Both only read the optical image and the
-        points. The meter is built under the exposer's lock: the main thread, done with the
-        exposure, builds it itself when the thread has not yet begun it (:meth:`_meter_built`)."""
+    def _ahead(self, exposer):
+        """With ``overlap_camera``: the frame's meter (it only reads the optical image), started
+        in a background thread while this one exposes, detects, solves and computes the bound (a
+        future; None otherwise). The meter is built under the exposer's lock: the main thread
+        builds it itself when the thread has not yet begun it (:meth:`_meter_built`).
+
+        (Until the third round of issue 40 the thread first computed the bound's image derivatives
+        around the targets' true places; the bound's windows lie around the solved spots, which
+        round to other pixels, so 34 of 36 were computed again here: wasted work on a shared core.)"""
         if not self.overlap_camera:
             return None
         if self._camera_pool is None:
@@ -468,8 +470,6 @@ class ApproachSensor:
         lock = self._meter_lock
 
         def work():
-            if self.crlb:
-                prefetch_gradients(frame, exposer, uv_true)
             with lock:
                 exposer.meter  # noqa: B018 - the property builds and keeps the meter
 
