@@ -400,7 +400,7 @@ def test_a_pattern_file_is_solved_with_its_own_geometry(small_camera, tmp_path):
 @pytest.mark.parametrize("cam", ["small_camera", "small_auto_camera"])
 def test_issue40_camera_path_changes_no_number(cam, request, monkeypatch):
     """Issue 40's camera path (the meter without per-pixel logarithms, the JPEG in bands on two
-    threads, the meter and the bound's derivatives in a background thread) gives every number
+    threads, the meter and half the bound's derivatives in a background thread) gives every number
     and image of the path before it (the reference, run with those switched off)."""
     from svgs_sim.camera.phone import isp
 

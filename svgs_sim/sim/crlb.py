@@ -220,6 +220,27 @@ def _cached_gradient(exposer, pts, box) -> tuple[np.ndarray, np.ndarray]:
     return cache[key][1]
 
 
+def frame_windows(exposer, row, *, window_half_px: int = WINDOW_HALF_PX) -> list:
+    """The windows ``(y0, y1, x0, x1)`` whose image derivatives :func:`frame_crlb` uses for a
+    solved frame (around its solved spots; none outside the frame), in its order; [] when the
+    frame is unsolved."""
+    sol = row.get("_solution")
+    if not row.get("ok") or sol is None:
+        return []
+    spots = np.array([sol.targets_px[i] for i in sol.targets_px], float)
+    return [b for b in _windows(spots, window_half_px, exposer.phone.shape) if b is not None]
+
+
+def window_gradients(frame, exposer, boxes) -> None:
+    """The bound's image derivatives of ``boxes`` (:func:`frame_windows`) computed and kept on the
+    exposer, where :func:`frame_crlb` finds them (another thread may compute some while this one
+    computes the others). The numbers do not change."""
+    if frame.points is None or len(frame.points) == 0:
+        return
+    for box in boxes:
+        _cached_gradient(exposer, frame.points, tuple(int(b) for b in box))
+
+
 def pose_crlb(solution, centroid_sigma_px: float) -> dict:
     """1-sigma Cramer-Rao bound of each state component (m, deg) for a centroid noise.
 

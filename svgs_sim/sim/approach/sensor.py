@@ -16,7 +16,7 @@ from svgs_sim.base.profiles import load_camera, load_pattern
 from svgs_sim.sim.closed_loop import (
     Frame, RenderOptions, Scenario, lab_flux, lab_photon_factor, natural_part, solve_exposure, solver_camera,
 )
-from svgs_sim.sim.crlb import frame_crlb
+from svgs_sim.sim.crlb import frame_crlb, frame_windows, window_gradients
 from svgs_sim.sim.metrics import match_err_max_px, spot_positions_px, state_error, wrong_lock_px
 from svgs_sim.svgs.frames import D_CAM_PHOTO, STATE_KEYS, angles_from_rotation, check_pose, pose_to_state, state_dict
 from svgs_sim.svgs.pipeline import camera_threshold
@@ -511,7 +511,11 @@ class ApproachSensor:
         crlb = None
         t0 = time.perf_counter()
         if self.crlb and row["ok"]:
-
+            if self.overlap_camera:  # half the windows' derivatives on the camera thread (after its meter)
+                boxes = frame_windows(exposer, row)
+                theirs = self._camera_pool.submit(window_gradients, frame, exposer, boxes[1::2])
+                window_gradients(frame, exposer, boxes[0::2])
+                theirs.result()
             c = frame_crlb(frame, exposer, row, draws=CRLB_DRAWS)
             crlb = None if c is None else c.get("crlb_std")
         timings["crlb"] = time.perf_counter() - t0 if self.crlb else None
