@@ -29,7 +29,8 @@ demo: $(STAMP)
 # The full run on TEST_WORKERS pytest-xdist processes, each test file on one of them (its module
 # fixtures made once). Three on two cores: many tests wait on subprocesses, process pools and
 # start-up, so a third worker fills the gaps (docs/performance.md, issue 40: 807 s serial, 581 s
-# on two workers, 502 s on three). TEST_WORKERS=0 runs them in this process, one after another.
+# on two workers, 502 s on three; 433 s on four after the third round, against 398-409 s on three).
+# TEST_WORKERS=0 runs them in this process, one after another.
 TEST_WORKERS ?= 3
 
 test: $(STAMP)
