@@ -325,8 +325,8 @@ def test_function_level_imports_are_for_heavy_libraries_the_cli_or_a_cycle():
     """An import inside a function outside the CLI must load a heavy library the module does not
     load itself (measured: each module's lazy imports in a fresh process, one after another; one that
     seems to load nothing heavy there - an earlier one may have loaded its library - again alone in a
-    fresh process, unless the same import of that module loaded one in its run), or break a listed cycle; anything else belongs at module level. The CLI imports in
-    its handlers (cold start)."""
+    fresh process, unless the same import of that module loaded one in its run), or break a listed
+    cycle; anything else belongs at module level. The CLI imports in its handlers (cold start)."""
     from concurrent.futures import ThreadPoolExecutor
 
     root = Path(__file__).resolve().parents[1]

@@ -1,7 +1,8 @@
 """A profile is read once and known by its key: along one ``svgs render-and-solve``, one short
 ``svgs approach`` and one ``svgs render``, run one after another in a process through the console
-script's entry point, each TOML file is opened at most once (an audit hook on ``open``), and a copy of a profile under another display name
-is the same camera (the same threshold, overlay and solution)."""
+script's entry point, each TOML file is opened at most once (an audit hook on ``open``), and a
+copy of a profile under another display name is the same camera (the same threshold, overlay and
+solution)."""
 
 from __future__ import annotations
 

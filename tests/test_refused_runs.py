@@ -30,15 +30,18 @@ def _no_compile_notice(monkeypatch):
 
 
 @pytest.mark.slow  # a few seconds each (make test runs it; make test-fast does not)
-@pytest.mark.parametrize("bad", [["--ranges", "5,5"], ["--ranges", "1e9"], ["--misalignment-deg", "0,0,11"],
-                                 ["--misalignment-deg", "1,2"], ["--sigma-px", "-1"]])
-def test_a_refused_campaign_leaves_nothing_and_the_corrected_rerun_runs(bad, tmp_path, capsys):
+@pytest.mark.parametrize("bad, rerun", [(["--ranges", "5,5"], True), (["--ranges", "1e9"], False),
+                                        (["--misalignment-deg", "0,0,11"], False),
+                                        (["--misalignment-deg", "1,2"], False), (["--sigma-px", "-1"], False)])
+def test_a_refused_campaign_leaves_nothing_and_the_corrected_rerun_runs(bad, rerun, tmp_path, capsys):
+    """Each refusal leaves no folder; the corrected rerun into it runs (shown once: with no folder
+    left, the rerun after any refusal is a fresh run)."""
     out = tmp_path / "campaign"
     argv = CAMPAIGN + ["--out", str(out)]
     refused(argv + bad, capsys, watch=[tmp_path])  # exit 2, one line, within a second, nothing written
     assert not out.exists()
-    if bad != ["--ranges", "5,5"]:
-        return  # no folder left: the corrected rerun is a fresh run, as the first case shows once
+    if not rerun:
+        return
     assert main(argv) == 0, capsys.readouterr().err  # the same folder: not refused for other parameters
     capsys.readouterr()
     assert json.loads((out / "manifest.json").read_text())["parameters"]["ranges_m"] == [5.0, 10.0]

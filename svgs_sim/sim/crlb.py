@@ -227,8 +227,13 @@ def frame_windows(exposer, row, *, window_half_px: int = WINDOW_HALF_PX) -> list
     sol = row.get("_solution")
     if not row.get("ok") or sol is None:
         return []
-    spots = np.array([sol.targets_px[i] for i in sol.targets_px], float)
-    return [b for b in _windows(spots, window_half_px, exposer.phone.shape) if b is not None]
+    return [b for b in _windows(_solved_spots(sol)[1], window_half_px, exposer.phone.shape) if b is not None]
+
+
+def _solved_spots(solution) -> tuple[list, np.ndarray]:
+    """The solved targets' ids and image places ``(N, 2)`` px, in the solution's order."""
+    ids = list(solution.targets_px)
+    return ids, np.array([solution.targets_px[i] for i in ids], float)
 
 
 def window_gradients(frame, exposer, boxes) -> None:
@@ -238,7 +243,7 @@ def window_gradients(frame, exposer, boxes) -> None:
     if frame.points is None or len(frame.points) == 0:
         return
     for box in boxes:
-        _cached_gradient(exposer, frame.points, tuple(int(b) for b in box))
+        _cached_gradient(exposer, frame.points, box)
 
 
 def pose_crlb(solution, centroid_sigma_px: float) -> dict:
@@ -268,8 +273,7 @@ def frame_crlb(frame, exposer, row, *, draws: int = CRLB_DRAWS) -> dict | None:
     sol = row.get("_solution")
     if not row.get("ok") or sol is None or frame.points is None:
         return None
-    ids = list(sol.targets_px)
-    spots = np.array([sol.targets_px[i] for i in ids], float)
+    ids, spots = _solved_spots(sol)
     sig = centroid_crlb_px(frame, exposer, row["_exposure"], spots, draws=draws)
     finite = np.isfinite(sig)
     if not np.all(finite):
