@@ -42,3 +42,25 @@ def test_the_stability_run_shows_a_progress_bar_and_a_status_line(capsys):
     err = capsys.readouterr().err
     assert err.splitlines()[0].startswith("rendering tof-epc660")
     assert "frames:" in err and "30/30" in err
+
+
+def test_every_extra_signature_names_a_cached_kernel_and_its_arity():
+    """``make``'s compile step (issue 40): each listed signature is a cached numba kernel of the
+    project with as many arguments as the kernel's Python function takes, so a renamed kernel or a
+    changed argument list fails here, not as a compile in the middle of a user's first run."""
+    import importlib
+    import inspect
+
+    from svgs_sim.cli.compile_kernels import EXTRA_SIGNATURES, parse_signature
+
+    assert len(EXTRA_SIGNATURES) >= 10
+    for path, sigs in EXTRA_SIGNATURES.items():
+        mod, name = path.rsplit(".", 1)
+        kernel = getattr(importlib.import_module(mod), name)
+        assert type(kernel._cache).__name__ != "NullCache", path  # @njit(cache=True): kept on disk
+        n_args = len(inspect.signature(kernel.py_func).parameters)
+        assert sigs and len(set(sigs)) == len(sigs), path
+        for text in sigs:
+            assert len(parse_signature(text)) == n_args, (path, text)
+    with pytest.raises(ValueError, match="not a kernel signature word"):
+        parse_signature("f8[2], x9")

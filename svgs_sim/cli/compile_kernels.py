@@ -3,9 +3,10 @@
 The collinearity solver (:mod:`svgs_sim.svgs._lm_kernel`, :mod:`svgs_sim.base.distortion`) and the
 phone sensor (:mod:`svgs_sim.camera.phone.sensor`, with the approach's meter, optical composition and
 deferred dark pixels in :mod:`svgs_sim.camera.phone.isp` and :mod:`svgs_sim.camera.phone.optics`) are
-numba kernels cached on disk (``cache=True``):
-the first process that calls them spends about 15-20 s compiling, every later one loads them in well under a second. Compiling here,
-with a status line, keeps that pause out of a fresh checkout's first ``make demo`` or solve.
+numba kernels cached on disk (``cache=True``): the first process that calls them spends about
+15-20 s compiling the common signatures (about a minute with every signature of
+:data:`EXTRA_SIGNATURES`), every later one loads them in well under a second. Compiling here, with
+a status line, keeps that pause out of a fresh checkout's first ``make demo`` or solve.
 
 Run: ``python -m svgs_sim.cli.compile_kernels``. Prints one line per kernel family on stderr.
 """
@@ -58,6 +59,79 @@ def kernels_cached() -> bool:
     return True
 
 
+#: The signatures the project's callers give each kernel, beyond those the calls of
+#: :func:`compile_kernels` make: numba builds machine code per signature, and a read-only array
+#: (a cached map, a view of a frozen profile table) or a strided crop is a signature of its own.
+#: Compiled here, a fresh install compiles none of them in the middle of a run (issue 40: 17 of
+#: them were compiled during the first test run of a fresh clone). Notation: ``f4[2]`` is a
+#: C-contiguous float32 array of 2 dimensions; ``ro`` read-only; ``A`` any layout.
+EXTRA_SIGNATURES = {
+    "svgs_sim.camera.phone.sensor._charge_kernel": [
+        "f4[2], f8, f4[2]ro, b1, f8, f4[2]ro, u8, u8, b1, b1, i8, i8, i8, f4[2]",
+        "f4[2], f8, f4[2]Aro, b1, f8, f4[2]Aro, u8, u8, b1, b1, i8, i8, i8, f4[2]",
+        "f4[2], f8, f4[2]ro, b1, f8, f4[2], u8, u8, b1, b1, i8, i8, i8, f4[2]",
+        "f4[2], f8, f4[2], b1, f8, f4[2], u8, u8, b1, b1, i8, i8, i8, f4[2]",
+        "f4[2], f8, f4[2]A, b1, f8, f4[2]A, u8, u8, b1, b1, i8, i8, i8, f4[2]"],
+    "svgs_sim.camera.phone.sensor._charge_kernel_dark": [
+        "f4[2], f8, f4[2]ro, b1, f8, f4[2], u8, u1[2], i8, i8[2]ro, i4[2]ro, f4[2]",
+        "f4[2], f8, f4[2]ro, b1, f8, f4[2]ro, u8, u1[2], i8, i8[2]ro, i4[2]ro, f4[2]"],
+    "svgs_sim.camera.phone.sensor._tile_max_kernel": ["f4[2], i8, f8[2]"],
+    "svgs_sim.camera.phone.isp._meter_range": ["f8[1], f8, f8, f8, i8", "f4[1], f8, f8, f8, i8"],
+    "svgs_sim.camera.phone.isp._meter_bins": [
+        f"{x}[1], f8, f8, f8, f8[1]{ro}, f8, f8, f8, i8, i8, f8[2], f8[2], f8[1]"
+        for x in ("f8", "f4") for ro in ("", "ro")],
+    "svgs_sim.camera.phone.isp._meter_bins_f32": [
+        f"f4[1], i4[1], f8, f8, f8, f8[1]{ro}, f8, i8, i8, i4[1], i8[1], i8, i8, f8[2], f8[2]" for ro in ("", "ro")],
+    "svgs_sim.camera.phone.optics._compose_kernel": [
+        f"f8[2], f8, f8[2], i8, f8, f8[2]{a}, f8, b1, f4[2]{b}, f8[2], f4[2]{c}, b1, f4[2]"
+        for a, b, c in (("", "ro", ""), ("ro", "ro", ""), ("", "ro", "ro"), ("", "", ""))],
+    "svgs_sim.camera.phone.cfa._plane_lut_kernel": ["u2[3], u1[2], u1[3]", "u2[3], f4[2], f4[3]"],
+    "svgs_sim.camera.phone.cfa._luma_tone_kernel": ["u2[3], f8[2], u1[1], u1[2]"],
+    "svgs_sim.svgs._lm_kernel.lm_batch": ["f8[3], f8[2], f8[2], f8[3], f8[4], i8, f8, b1[1]"],
+    "svgs_sim.svgs._lm_kernel._solve_frame": [
+        f"{k}, f8[3], f8[2], f8[2], f8[3], f8[4], i8, f8, b1[1], b1[1], i8[1], f8[2], f8[3], f8[1]" for k in ("i8", "u8")],
+}
+
+
+def parse_signature(text: str) -> tuple:
+    """The numba argument types of one :data:`EXTRA_SIGNATURES` line (a tuple of numba types)."""
+    import re
+
+    from numba import types
+
+    scalars = {"f8": types.float64, "f4": types.float32, "i8": types.int64, "i4": types.int32, "u8": types.uint64,
+               "u2": types.uint16, "u1": types.uint8, "b1": types.boolean}
+    out = []
+    for word in (w.strip() for w in text.split(",")):
+        m = re.fullmatch(r"(\w\d)(?:\[(\d)\](A?)(ro)?)?", word)
+        if not m or m.group(1) not in scalars:
+            raise ValueError(f"not a kernel signature word: {word!r} in {text!r}")
+        dt, nd, any_layout, ro = m.groups()
+        out.append(scalars[dt] if nd is None else
+                   types.Array(scalars[dt], int(nd), "A" if any_layout else "C", readonly=bool(ro)))
+    return tuple(out)
+
+
+def compile_signatures(table=None) -> int:
+    """Compile (or load from numba's cache) every signature of :data:`EXTRA_SIGNATURES`.
+
+    Returns
+    -------
+    int
+        Signatures compiled or loaded.
+    """
+    import importlib
+
+    n = 0
+    for path, sigs in (EXTRA_SIGNATURES if table is None else table).items():
+        mod, name = path.rsplit(".", 1)
+        kernel = getattr(importlib.import_module(mod), name)
+        for text in sigs:
+            kernel.compile(parse_signature(text))
+            n += 1
+    return n
+
+
 def compile_kernels(out=None) -> dict:
     """Call each kernel family once on a small input, so numba compiles and caches it.
 
@@ -69,7 +143,7 @@ def compile_kernels(out=None) -> dict:
     Returns
     -------
     dict
-        Seconds per family: ``{"solver_s": float, "sensor_s": float}``.
+        Seconds per family: ``{"solver_s": float, "sensor_s": float, "signatures_s": float}``.
     """
     import numpy as np
 
@@ -107,7 +181,12 @@ def compile_kernels(out=None) -> dict:
         ExposureSolver.from_flux(ex.flux_optics.astype(np.float32), ex.phone.params.sensor, metering)
     sensor_s = time.perf_counter() - t0
     print(f"  camera sensor: {sensor_s:.1f} s", file=out, flush=True)
-    return {"solver_s": solver_s, "sensor_s": sensor_s}
+    t0 = time.perf_counter()
+    n = compile_signatures()
+    other_s = time.perf_counter() - t0
+    print(f"  {n} more signatures (read-only and strided arrays, the meter's and the solver's): {other_s:.1f} s",
+          file=out, flush=True)
+    return {"solver_s": solver_s, "sensor_s": sensor_s, "signatures_s": other_s}
 
 
 def main() -> int:
