@@ -27,14 +27,16 @@ demo: $(STAMP)
 	$(PY) -m svgs_sim.cli.demo
 
 # The full run on TEST_WORKERS pytest-xdist processes, each test file on one of them (its module
-# fixtures made once). Three on two cores: many tests wait on subprocesses, process pools and
-# start-up, so a third worker fills the gaps (docs/performance.md, issue 40: 807 s serial, 581 s
-# on two workers, 502 s on three; 433 s on four after the third round, against 398-409 s on three).
-# TEST_WORKERS=0 runs them in this process, one after another.
+# fixtures made once), the heaviest files handed out first (tests/durations.json, in the order
+# tests/conftest.py puts them; tools/test_durations.py writes it), each worker's numba threads
+# its share of the cores (tests/conftest.py). Three on two cores: many tests wait on
+# subprocesses, process pools and start-up, so a third worker fills the gaps (docs/performance.md,
+# issue 40: 807 s serial, 581 s on two workers, 502 s on three; 433 s on four after the third
+# round, against 398-409 s on three). TEST_WORKERS=0 runs them in this process, one after another.
 TEST_WORKERS ?= 3
 
 test: $(STAMP)
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
 
 test-fast: $(STAMP)
 	$(PY) -m pytest -q -m "not slow and not render"

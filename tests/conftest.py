@@ -40,6 +40,26 @@ SHARED = REPO.parent / "shared"
 RENDERER_MODULES = ("mitsuba", "drjit")
 
 
+def pytest_collection_modifyitems(config, items):
+    """Under pytest-xdist, the test files in order of their duration in ``tests/durations.json``,
+    heaviest first (a file not in it: the median), each file's tests in their own order. ``make
+    test`` hands the files out in this order (``--dist loadfile --no-loadscope-reorder``), so the
+    long files start early and the short ones fill the end (tools/test_durations.py writes it)."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+    import json
+
+    path = Path(__file__).with_name("durations.json")
+    seconds = json.loads(path.read_text())["files"] if path.is_file() else {}
+    if not seconds:
+        return
+    default = float(np.median(list(seconds.values())))
+    first = {}
+    for i, item in enumerate(items):
+        first.setdefault(item.nodeid.split("::")[0], i)
+    items.sort(key=lambda it: (-seconds.get(it.nodeid.split("::")[0], default), first[it.nodeid.split("::")[0]]))
+
+
 @pytest.fixture(autouse=True)
 def _mitsuba_needs_the_render_marker(request):
     """Fail a test without the ``render`` marker that imports Mitsuba or Dr.Jit in this process.
