@@ -168,19 +168,24 @@ def test_the_renderers_acceptance_against_the_return_footprint():
 @pytest.mark.render
 def test_the_patterns_acceptance_is_where_the_renderer_returns_no_light():
     """``[reflector] acceptance_deg``: a degree beyond it no tilt direction or clocking returns light
-    to either shipped phone; a degree inside it, one does."""
-    from svgs_sim.render.acceptance import return_flux
+    to either shipped phone; a degree inside it, one does. The cubes' return alone (the spot
+    estimator's light, ``spots_only``: the frame's flux less its windows' diffuse light, 4e-7 of
+    the head-on return with no body), over the tool's grid of directions and clockings."""
+    from svgs_sim.render.acceptance import pose, return_flux
     from svgs_sim.render.api import Renderer
 
     acc = load_pattern("svgs-3u").reflector.acceptance_deg
     lit = 0.0
     for cam in ("galaxy-nexus", "htc-amaze-4g"):
         r = Renderer(cam, "svgs-3u", scene_options={"body": "none"}, spp=0)
-        f0 = return_flux(r, 0.0, 0.0, 0.0)
+        f0 = return_flux(r, 0.0, 0.0, 0.0, spots_only=True)
+        frame = r.render(*pose(0.0, 0.0, 0.0, 5.0), seed=1, spp=0, check_fov=False)
+        assert f0 == pytest.approx(float(frame.points.rate_ph_s.sum()), rel=1e-12)  # the frame's samples
+        assert f0 == pytest.approx(float(frame.flux.sum()), rel=1e-5)  # and nearly all its light
         for psi in range(0, 120, 20):
             for phi in range(0, 360, 15):
-                assert return_flux(r, acc + 1.0, phi, psi) < 1e-3 * f0, (cam, phi, psi)
-        lit = max(lit, return_flux(r, acc - 1.0, 0.0, 20.0) / f0)
+                assert return_flux(r, acc + 1.0, phi, psi, spots_only=True) < 1e-3 * f0, (cam, phi, psi)
+        lit = max(lit, return_flux(r, acc - 1.0, 0.0, 20.0, spots_only=True) / f0)
     assert lit >= 1e-3
 
 
