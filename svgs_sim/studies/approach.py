@@ -33,7 +33,8 @@ from svgs_sim.sim import hard_stop
 from svgs_sim.sim.approach import MEASUREMENT_COLUMNS, TIMING_KEYS, ApproachSensor, Trajectory, check_visible
 from svgs_sim.sim.closed_loop import RenderOptions, Scenario
 from svgs_sim.sim.scene import Scene
-from svgs_sim.studies.diagnosis import FAR_ABOVE_BOUND, bound_ratios, cause_text, far_above, glint_targets_of_state
+from svgs_sim.studies.diagnosis import (FAR_ABOVE_BOUND, bound_ratios, cause_text, far_above, glint_geometry,
+                                        glint_targets_of_state)
 from svgs_sim.studies.execution import StoredProgress
 from svgs_sim.studies.progress import progress_bar
 from svgs_sim.studies.store import ResultStore
@@ -314,7 +315,7 @@ def far_above_bound(rows: list[dict], cfg: dict, factor: float | None = None) ->
 
     factor = FAR_ABOVE_BOUND if factor is None else float(factor)
     frames, glint, worst = [], [], None
-    cam = None
+    cam = geometry = None
     for r in sorted(rows, key=lambda r: int(r["frame"])):
         if int(r["ok"]) != 1:
             continue
@@ -327,8 +328,11 @@ def far_above_bound(rows: list[dict], cfg: dict, factor: float | None = None) ->
         k, ratio = next(iter(big.items()))
         if worst is None or ratio > worst["ratio"]:
             worst = {"frame": f, "range_m": float(r["range_m"]), "component": k, "ratio": float(ratio)}
-        cam = sensor_camera(cfg) if cam is None else cam
-        if glint_targets_of_state(cam, cfg["pattern"], {k: float(r[f"true_{k}"]) for k in STATE_KEYS}):
+        if cam is None:  # the glint's geometry once for every frame (the target's meshes: 0.37 s)
+            cam = sensor_camera(cfg)
+            geometry = glint_geometry(cam, cfg["pattern"])
+        if glint_targets_of_state(cam, cfg["pattern"], {k: float(r[f"true_{k}"]) for k in STATE_KEYS},
+                                  geometry=geometry):
             glint.append(f)
     return {"factor": factor, "frames": frames, "glint_frames": glint, "worst": worst}
 
