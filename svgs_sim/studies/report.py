@@ -105,13 +105,16 @@ class Report:
         self._parts.append("".join(out))
         self.n_tables += 1
 
-    def figure(self, fig, caption: str = "", dpi: int = 110) -> None:
-        """Embed a matplotlib :class:`~matplotlib.figure.Figure` as a base64 PNG."""
+    def figure(self, fig, caption: str = "", dpi: int = 110, tight: bool = True) -> None:
+        """Embed a matplotlib :class:`~matplotlib.figure.Figure` as a base64 PNG.
+
+        ``tight``: crop the PNG to what the figure draws (``bbox_inches="tight"``, which draws the
+        figure twice); False for a figure that sets its own margins (``subplots_adjust``)."""
         from matplotlib.backends.backend_agg import FigureCanvasAgg
 
         FigureCanvasAgg(fig)
         buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+        fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight" if tight else None)
         data = base64.b64encode(buf.getvalue()).decode("ascii")
         alt = html.escape(caption or f"figure {self.n_figures + 1}")
         self._parts.append(f'<figure><img alt="{alt}" src="data:image/png;base64,{data}">'

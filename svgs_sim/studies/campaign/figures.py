@@ -18,6 +18,14 @@ from ..error_budget import reported_mask
 from .design import COMPONENT_LABELS, SHORT, CampaignConfig
 
 
+#: Fixed margins (``Figure.subplots_adjust``) of the report's histogram, bound and weak-mode
+#: figures, which the report embeds uncropped (``Report.figure(tight=False)``): matplotlib's
+#: tight layout and tight crop took about half of a 3-trial campaign's report (issue 40).
+HISTOGRAM_MARGINS = {"left": 0.06, "right": 0.99, "bottom": 0.16, "top": 0.86, "wspace": 0.25}
+CRLB_MARGINS = {"left": 0.06, "right": 0.99, "bottom": 0.08, "top": 0.91, "wspace": 0.3, "hspace": 0.3}
+WEAK_MODE_MARGINS = {"left": 0.07, "right": 0.99, "bottom": 0.13, "top": 0.86, "wspace": 0.22}
+
+
 def _range_groups(ranges):
     """Split ranges as the paper's figures did (Amaze 1-3 / 4-8 m, Nexus 5-15 / 20-30 m)."""
     rs = list(ranges)
@@ -53,6 +61,7 @@ def histogram_figures(table: dict, config: CampaignConfig):
                 ax.grid(alpha=0.3)
             axes[0].legend(fontsize=8)
             fig.suptitle(f"{config.camera}: {title.lower()} ({label})")
+            fig.subplots_adjust(**HISTOGRAM_MARGINS)
             yield fig, f"{title} histograms, {label} (like the paper's Figures 6-13)."
 
 
@@ -77,7 +86,7 @@ def crlb_figure(summary: list[dict], config: CampaignConfig):
         ax.grid(alpha=0.3, which="both")
     axes[0].legend(fontsize=7)
     fig.suptitle(f"{config.camera}: errors versus range, beside the Cramer-Rao bound and the paper")
-    fig.tight_layout()
+    fig.subplots_adjust(**CRLB_MARGINS)
     return fig
 
 
@@ -218,5 +227,5 @@ def weak_mode_figure(table: dict, config: CampaignConfig, camera_key: str, paper
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=7)
     fig.suptitle(f"{config.camera}: the weak mode of the four-point solve (slide by d, turn by d/R)")
-    fig.tight_layout()
+    fig.subplots_adjust(**WEAK_MODE_MARGINS)
     return fig, st

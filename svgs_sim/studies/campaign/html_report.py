@@ -132,7 +132,7 @@ def _mean_error_section(rep, summary, crlb_note: str, table: dict, config: Campa
                     + "; ".join(f"{SHORT[p]}: correlation {v['corr']:+.2f}, slope {v['slope']:+.2f} over {v['n']} "
                                 f"trials; the paper's {SHORT[p]} / (R tan {SHORT[v['angle']]}) "
                                 + ", ".join(f"{r:g} m {x:.2f}" for r, x in v["paper_ratio"])
-                                for p, v in st.items()) + ".")
+                                for p, v in st.items()) + ".", tight=False)
 
 
 def _consistency_section(rep, summary) -> None:
@@ -292,7 +292,7 @@ def _figure_sections(rep, config: CampaignConfig, table: dict, summary: list[dic
         keep = np.array([str(v) == "baseline" for v in table["variant"]])
         base_table = {k: np.asarray(v)[keep] for k, v in table.items()}
     for fig, cap in histogram_figures(base_table, config):
-        rep.figure(fig, cap)
+        rep.figure(fig, cap, tight=False)
 
 
 def _explain_section(rep, config: CampaignConfig, summary: list[dict]) -> None:
@@ -334,7 +334,7 @@ def write_campaign_report(out_dir, config: CampaignConfig, table: dict, summary:
                  "svgs_sim.sim.crlb), median over the solved trials" if rendered else
                  f"the solver's Cramer-Rao bound for {config.sigma_px:g} px centroid noise, median over the solved trials")
     rep.figure(crlb_figure(summary, config), "Simulated standard deviation and mean |error| (blue), the paper's "
-               "(red) and the Cramer-Rao bound (black), per component, versus range.")
+               "(red) and the Cramer-Rao bound (black), per component, versus range.", tight=False)
     _std_bias_sections(rep, summary, crlb_note)
     _consistency_section(rep, summary)
     _mean_error_section(rep, summary, crlb_note, table, config)
