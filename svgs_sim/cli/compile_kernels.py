@@ -94,7 +94,25 @@ EXTRA_SIGNATURES = {
 
 
 def parse_signature(text: str) -> tuple:
-    """The numba argument types of one :data:`EXTRA_SIGNATURES` line (a tuple of numba types)."""
+    """The numba argument types of one :data:`EXTRA_SIGNATURES` line.
+
+    Parameters
+    ----------
+    text : str
+        Comma-separated words: ``f8``, ``f4``, ``i8``, ``i4``, ``u8``, ``u2``, ``u1``, ``b1`` for a
+        scalar; ``f4[2]`` a C-contiguous array of 2 dimensions, ``f4[2]A`` of any layout, a
+        trailing ``ro`` read-only.
+
+    Returns
+    -------
+    tuple
+        numba types, one per argument.
+
+    Raises
+    ------
+    ValueError
+        A word that is none of these.
+    """
     import re
 
     from numba import types
@@ -114,6 +132,11 @@ def parse_signature(text: str) -> tuple:
 
 def compile_signatures(table=None) -> int:
     """Compile (or load from numba's cache) every signature of :data:`EXTRA_SIGNATURES`.
+
+    Parameters
+    ----------
+    table : dict, optional
+        ``{"module.kernel": [signature, ...]}`` (default :data:`EXTRA_SIGNATURES`).
 
     Returns
     -------

@@ -399,10 +399,24 @@ class Renderer:
         return acc / n_pass
 
     def spot_flux(self, R_cam_target, t_cam_target_m, *, seed: int = 0) -> float:
-        """Total flux (photons/s) of the guided spot estimator's samples at a pose: the cubes'
-        return as :meth:`render` adds it to a frame of the same ``seed`` (the same samples, the same
-        sum as its ``points``), without the diffuse background, the spots' windows or the truth
-        record, in about half a frame's time. No field-of-view check; 0 without a spot estimator."""
+        """Total flux of the guided spot estimator's samples at a pose: the cubes' return as
+        :meth:`render` adds it to a frame of the same ``seed`` (the same samples, the same sum as its
+        ``points``), without the diffuse background, the spots' windows or the truth record, in
+        about half a frame's time. No field-of-view check.
+
+        Parameters
+        ----------
+        R_cam_target : array_like, shape (3, 3)
+        t_cam_target_m : array_like, shape (3,)
+            ``p_cam = R_cam_target @ p_target + t_cam_target_m`` (OpenCV camera frame).
+        seed : int
+            The frame's seed (as :meth:`render`'s).
+
+        Returns
+        -------
+        float
+            Photons/s reaching the sensor through the cubes; 0 without a spot estimator.
+        """
         R, t = check_pose(R_cam_target, t_cam_target_m)
         seed = int(check_finite(seed, "seed"))
         if self.spots is None:
