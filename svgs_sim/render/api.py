@@ -406,9 +406,8 @@ class Renderer:
 
         Parameters
         ----------
-        R_cam_target : array_like, shape (3, 3)
-        t_cam_target_m : array_like, shape (3,)
-            ``p_cam = R_cam_target @ p_target + t_cam_target_m`` (OpenCV camera frame).
+        R_cam_target, t_cam_target_m : array_like, shapes (3, 3) and (3,)
+            The pose, as :meth:`render` takes it.
         seed : int
             The frame's seed (as :meth:`render`'s).
 
