@@ -421,11 +421,10 @@ class Renderer:
         if self.spots is None:
             return 0.0
         self._set_pose(R, t)
-        _, _, (su, sv, sval) = self._spot_image(R, t, seed + 0x5BD1E995)
+        _, _, (su, sv, sval) = self._spot_image(R, t, seed + _SPOT_SEED_OFFSET)
         if not len(su):
             return 0.0
-        ui = np.floor(su + 0.5).astype(np.int64)
-        vi = np.floor(sv + 0.5).astype(np.int64)
+        ui, vi = _sample_pixels(su, sv)
         return float(np.sum(sval * self.flux_factor()[vi, ui]))
 
     def flux_factor(self, u0=0, v0=0, width=None, height=None) -> np.ndarray:
@@ -695,12 +694,11 @@ class Renderer:
         """
         H, W = self.camera.height, self.camera.width
         t0 = time.perf_counter()
-        spot_img, strategies, (su, sv, sval) = self._spot_image(R, t, seed + 0x5BD1E995)
+        spot_img, strategies, (su, sv, sval) = self._spot_image(R, t, seed + _SPOT_SEED_OFFSET)
         sl = _box_slices(_union_box(lit)) if lit else None
         flux_diffuse = _times_factor(rad, factor, sl)
         if len(su):
-            ui = np.floor(su + 0.5).astype(np.int64)
-            vi = np.floor(sv + 0.5).astype(np.int64)
+            ui, vi = _sample_pixels(su, sv)
             # one pixel more each side: the estimator bins in float32 (a sample at a pixel
             # border may land one pixel over from this float64 rounding)
             sbox = (max(0, int(vi.min()) - 1), min(H, int(vi.max()) + 2), max(0, int(ui.min()) - 1),
@@ -719,6 +717,15 @@ class Renderer:
         """The ground-truth record of a frame (JSON-serialisable; :func:`svgs_sim.render.truth.svgs_frame_truth`)."""
 
         return svgs_frame_truth(self, R, t, targets_px, visible, spots, **render_info)
+
+
+#: Added to a frame's seed for its spot estimator's samples (:meth:`Renderer.render`, :meth:`Renderer.spot_flux`).
+_SPOT_SEED_OFFSET = 0x5BD1E995
+
+
+def _sample_pixels(su, sv):
+    """The pixel (column ``ui``, row ``vi``; int64 arrays) each spot sample falls in, rounded in float64."""
+    return np.floor(su + 0.5).astype(np.int64), np.floor(sv + 0.5).astype(np.int64)
 
 
 def _full_frame_factor(camera, optics, mean_photon_energy_j: float) -> np.ndarray:

@@ -328,7 +328,7 @@ def far_above_bound(rows: list[dict], cfg: dict, factor: float | None = None) ->
         k, ratio = next(iter(big.items()))
         if worst is None or ratio > worst["ratio"]:
             worst = {"frame": f, "range_m": float(r["range_m"]), "component": k, "ratio": float(ratio)}
-        if cam is None:  # the glint's geometry once for every frame (the target's meshes: 0.37 s)
+        if cam is None:  # the glint's geometry (the target's meshes) once for every frame
             cam = sensor_camera(cfg)
             geometry = glint_geometry(cam, cfg["pattern"])
         if glint_targets_of_state(cam, cfg["pattern"], {k: float(r[f"true_{k}"]) for k in STATE_KEYS},
