@@ -20,7 +20,7 @@ from .design import COMPONENT_LABELS, SHORT, CampaignConfig
 
 #: Fixed margins (``Figure.subplots_adjust``) of the report's histogram, bound and weak-mode
 #: figures, which the report embeds uncropped (``Report.figure(tight=False)``): matplotlib's
-#: tight layout and tight crop took about half of a 3-trial campaign's report (issue 40).
+#: tight layout and tight crop took about a third of a 3-trial campaign's report (issue 40).
 HISTOGRAM_MARGINS = {"left": 0.06, "right": 0.99, "bottom": 0.16, "top": 0.86, "wspace": 0.25}
 CRLB_MARGINS = {"left": 0.06, "right": 0.99, "bottom": 0.08, "top": 0.91, "wspace": 0.3, "hspace": 0.3}
 WEAK_MODE_MARGINS = {"left": 0.07, "right": 0.99, "bottom": 0.13, "top": 0.86, "wspace": 0.22}
