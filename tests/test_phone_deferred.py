@@ -163,9 +163,14 @@ def test_approach_sensor_default_is_the_exact_paths_measurement():
     """``ApproachSensor``'s default (``deferred``) against ``dark_pixels="exact"``, the Galaxy
     Nexus at full resolution, three frames of a stream from 12 to 5 m: the same blobs, estimate,
     bound and exposure settings; the deferred frames expose a few per cent of the frame, and the
-    kept image is the exact one."""
+    kept image is the exact one. The video's picture of the pixels the detector keeps, made from
+    the deferred frame's detector image (its dark tiles 0), is the picture of the exact frame's
+    full image with the same black level."""
+    import math
+
     from svgs_sim.sim.approach import ApproachSensor
     from svgs_sim.svgs.frames import pose_from_scenario
+    from svgs_sim.svgs.overlay import render_overlay
 
     poses = [(0.5 * k, *pose_from_scenario(r, pitch_deg=2.0, yaw_deg=-3.0)) for k, r in enumerate((12.0, 8.0, 5.0))]
     a = ApproachSensor("galaxy-nexus", seed=3, dark_pixels="exact", keep_images=True)
@@ -176,6 +181,11 @@ def test_approach_sensor_default_is_the_exact_paths_measurement():
         np.testing.assert_array_equal(ma.blobs_px, mb.blobs_px)
         assert ma.estimate == mb.estimate and ma.crlb_std == mb.crlb_std
         assert (ma.exposure_s, ma.iso, ma.next_exposure_s) == (mb.exposure_s, mb.iso, mb.next_exposure_s)
+        assert mb.threshold_u8 == ma.threshold_u8
+        black = float(math.floor(mb.threshold_u8))
+        assert (mb.detect_image != ma.image).mean() > 0.01  # the dark tiles' pixels are not in it
+        kw = dict(blobs_px=mb.blobs_px, title="t", size_px=680, black_level=black)
+        np.testing.assert_array_equal(render_overlay(mb.detect_image, **kw), render_overlay(ma.image, **kw))
         np.testing.assert_array_equal(ma.image, mb.image)
     a.close()
     b.close()

@@ -330,6 +330,7 @@ def test_approach_command_writes_its_outputs_and_resumes(small_camera, small_aut
     cap = cv2.VideoCapture(s["outputs"]["video"])
     assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 3
     cap.release()
+    assert (out / "frames" / "video_image.txt").read_text().strip() == "detector"
 
     # a run killed after frame 1: the rerun makes frame 2 only, with the same numbers (here with
     # --no-video: no picture of it, no video, and the same numbers)
@@ -337,6 +338,12 @@ def test_approach_command_writes_its_outputs_and_resumes(small_camera, small_aut
     lines = res.read_text().splitlines(keepends=True)
     res.write_text("".join(lines[:-1]))
     (out / "frames" / "00002.jpg").unlink()
+    # pictures of the other image, or pictures asked for without a video: refused before any work
+    for extra, message in ((["--video-image", "delivered"], "show the detector image"),
+                           (["--no-video", "--video-image", "delivered"], "no pictures with --no-video")):
+        assert main(argv + extra) == 2
+        assert message in capsys.readouterr().err
+        assert not (out / "frames" / "00002.jpg").exists() and len(_rows(res)) == 2
     assert main(argv + ["--no-video"]) == 0
     s2 = json.loads(capsys.readouterr().out)
     assert s2["run"] == {**s2["run"], "frames_run": 1, "frames_reused": 2}

@@ -50,3 +50,50 @@ def test_an_unsolved_frame_still_gets_a_picture():
     assert out.shape[0] > 58
     with pytest.raises(Exception):
         render_overlay(np.zeros((0, 0)))
+
+
+def _stretch_per_pixel(gray, box, lo):
+    """The display's square-root stretch written out on every pixel in float64 (the formula the
+    table of an integer image must reproduce)."""
+    x0, y0, x1, y1 = box
+    g = np.asarray(gray, np.float64)
+    hi = max(float(g[y0:y1, x0:x1].max()), lo + 1e-9)
+    return (255.0 * np.sqrt(np.clip((g - lo) / (hi - lo), 0.0, 1.0)) + 0.5).astype(np.uint8)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_the_display_table_of_an_integer_image_is_the_per_pixel_stretch(dtype):
+    """An 8- or 16-bit image goes through a table of its levels: the same bytes as the formula on
+    every pixel, from the frame's median and from a given black level (pixels at or below it
+    black)."""
+    from svgs_sim.svgs.overlay import _display_u8
+
+    rng = np.random.default_rng(4)
+    top = np.iinfo(dtype).max
+    img = rng.integers(0, top // 3, (90, 130)).astype(dtype)
+    img[40:50, 60:70] = rng.integers(top // 2, top, (10, 10))
+    box = (55, 35, 80, 60)
+    sub = np.asarray(img[:: max(1, 90 // 200), :: max(1, 130 // 200)], np.float64)
+    np.testing.assert_array_equal(_display_u8(img, box), _stretch_per_pixel(img, box, float(np.median(sub))))
+    lo = float(top // 4)
+    got = _display_u8(img, box, lo)
+    np.testing.assert_array_equal(got, _stretch_per_pixel(img, box, lo))
+    assert not got[img <= lo].any() and got[img > lo].all()
+
+
+def test_the_thumbnail_reduction_covers_the_whole_frame():
+    """The two-step area reduction of the inset thumbnail against OpenCV's one-step ``INTER_AREA``
+    on a smooth frame (within a count), and a lone pixel in the last row and column lands in the
+    thumbnail's last pixel (the whole frame is covered)."""
+    import cv2
+
+    from svgs_sim.svgs.overlay import _area_reduce
+
+    yy, xx = np.mgrid[0:1944, 0:2592]
+    ramp = (40 + 150 * (xx / 2592.0) * (0.5 + yy / 3888.0)).astype(np.uint8)
+    ref = cv2.resize(ramp, (170, 128), interpolation=cv2.INTER_AREA).astype(int)
+    assert np.abs(_area_reduce(ramp, 170, 128).astype(int) - ref).max() <= 1
+    dot = np.zeros((1944, 2592), np.uint8)
+    dot[-1, -1] = 255
+    t = _area_reduce(dot, 170, 128)
+    assert t.shape == (128, 170) and t[-1, -1] > 0 and t.sum() == t[-1, -1]

@@ -72,6 +72,10 @@ def register(sub) -> None:
                    help="write no frame pictures and no video: the delivered full image is then never made (the "
                         "detector reads only the tiles that can reach its threshold), the fastest run; the same "
                         "numbers (docs/approach.md#speed)")
+    p.add_argument("--video-image", choices=("detector", "delivered"), default=None,
+                   help="what the video's pictures show: 'detector' (the default): the pixels above the detection "
+                        "threshold, the rest black, made without the full image; 'delivered': the whole delivered "
+                        "image, which costs the full image every frame (about twice the time; docs/approach.md#speed)")
     p.add_argument("--fast-dark-pixels", action="store_true",
                    help="draw the shot noise of the pixels that cannot reach the detection threshold (away from the "
                         "spots) with a cheaper sampler of the same Poisson law: other noise draws than the default, "
@@ -168,6 +172,8 @@ def command_line(args) -> str:
     parts += [f for f, on in (("--preview", args.preview), ("--no-motion", args.no_motion), ("--no-crlb", args.no_crlb),
                               ("--fast-dark-pixels", getattr(args, "fast_dark_pixels", False)),
                               ("--no-video", getattr(args, "no_video", False))) if on]
+    if getattr(args, "video_image", None) == "delivered":
+        parts.append("--video-image delivered")
     if args.threshold not in (None, "app"):
         parts.append(f"--threshold {quote(str(args.threshold))}")
     from svgs_sim.sim.scene import scene_option_words
@@ -188,9 +194,12 @@ def cmd_approach(args) -> int:
     from svgs_sim.cli.outdir import output_folder
 
     cfg = config_from_args(args)
+    if args.no_video and args.video_image is not None:
+        raise InputError(f"--video-image {args.video_image}: there are no pictures with --no-video; give one or the other")
     with output_folder(args.out), text_to_stderr(args.json):  # --out made and probed before any work
         s = run_approach(cfg, args.out, progress=not args.no_progress, command=command_line(args),
-                         overlap_render=args.overlap_render, video=not args.no_video)
+                         overlap_render=args.overlap_render, video=not args.no_video,
+                         video_image=args.video_image or "detector")
         print_summary(s)
     emit(s, args.json)
     return EXIT_OK if s["solved"] > 0 else EXIT_NO_SOLUTION

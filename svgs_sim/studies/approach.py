@@ -6,7 +6,8 @@ Writes into ``out``:
   finished frame, appended and fsynced as it finishes; a rerun with the same parameters continues
   where a killed run stopped (the auto-exposure state is read back from the last stored frame),
   and a rerun with other parameters is refused before any work;
-- ``frames/NNNNN.jpg``: each frame's overlay (what the video is made of);
+- ``frames/NNNNN.jpg``: each frame's overlay (what the video is made of; by default the pixels the
+  detector keeps, :data:`VIDEO_IMAGES`) and ``frames/video_image.txt`` (which image they show);
 - ``measurements.csv``: one row per frame, in time order (:data:`svgs_sim.sim.approach.MEASUREMENT_COLUMNS`);
 - ``approach.mp4`` (OpenCV ``VideoWriter``, codec ``mp4v``, MPEG-4 Part 2; where the OpenCV build
   cannot write it, ``approach.avi`` with Motion-JPEG, and the summary says which);
@@ -49,6 +50,13 @@ VIDEO_SIZE_PX = (960, 720)
 #: Slowest playback of the video, frames/s (slower approaches play faster than real time).
 MIN_VIDEO_FPS = 2.0
 FRAMES_DIR = "frames"
+#: What a video frame shows. ``detector``: the pixels the detector keeps (above its threshold,
+#: stretched from it; the rest black), which the deferred camera path has without making the full
+#: image. ``delivered``: the whole delivered image, stretched from the frame's median (the full
+#: image made for every frame: about twice the frame's time at full resolution).
+VIDEO_IMAGES = ("detector", "delivered")
+#: The file in ``frames/`` that records which of :data:`VIDEO_IMAGES` its pictures show.
+VIDEO_IMAGE_FILE = "video_image.txt"
 TEXT_COLUMNS = ("reason",)
 
 
@@ -125,14 +133,19 @@ def check_config(cfg: dict):
     return cam, traj, times
 
 
-def _overlay(m, cam, pattern, title: str) -> np.ndarray:
-    """A video frame: the delivered image's overlay, letterboxed to :data:`VIDEO_SIZE_PX`."""
+def _overlay(m, cam, pattern, title: str, view: str = "detector") -> np.ndarray:
+    """A video frame: the frame's overlay (:data:`VIDEO_IMAGES`), letterboxed to :data:`VIDEO_SIZE_PX`."""
     import cv2
 
-
     targets, reproj = solution_marks(m.solution, cam, pattern)
-    pic = render_overlay(m.image, blobs_px=m.blobs_px if m.blobs_px is not None else (), targets_px=targets,
-                         reprojected_px=reproj, title=title, size_px=min(VIDEO_SIZE_PX) - 40)
+    if view == "detector" and m.threshold_u8 is not None and math.isfinite(m.threshold_u8):
+        # the pixels above the threshold are the same in the detector's image and the delivered one
+        img, black, label = m.detect_image, float(math.floor(m.threshold_u8)), "the threshold"
+    else:  # the full image (made now with the deferred camera path)
+        img, black, label = m.image, None, None
+    pic = render_overlay(img, blobs_px=m.blobs_px if m.blobs_px is not None else (), targets_px=targets,
+                         reprojected_px=reproj, title=title, size_px=min(VIDEO_SIZE_PX) - 40, black_level=black,
+                         black_label=label)
     W, H = VIDEO_SIZE_PX
     s = min(W / pic.shape[1], H / pic.shape[0])
     pic = cv2.resize(pic, (max(1, int(pic.shape[1] * s)), max(1, int(pic.shape[0] * s))), interpolation=cv2.INTER_AREA)
@@ -142,6 +155,22 @@ def _overlay(m, cam, pattern, title: str) -> np.ndarray:
     return canvas
 
 
+def _check_video_image(frames_dir: Path, video_image: str) -> None:
+    """Refuse a ``video_image`` not in :data:`VIDEO_IMAGES`, or other than the one of the pictures
+    already in ``frames_dir``; record it there."""
+    if video_image not in VIDEO_IMAGES:
+        raise InputError(f"video_image: expected one of {', '.join(VIDEO_IMAGES)}, got {video_image!r}")
+    marker = frames_dir / VIDEO_IMAGE_FILE
+    had = marker.read_text(encoding="utf-8").strip() if marker.is_file() else None
+    if had is None and any(frames_dir.glob("*.jpg")):
+        had = "delivered"  # pictures from before the choice existed
+    if had is not None and had != video_image:
+        raise InputError(f"--video-image {video_image}: the stored frames' pictures in {str(frames_dir)!r} show the "
+                         f"{had} image; continue with --video-image {had} (or remove the folder to start again)")
+    if had is None:
+        marker.write_text(video_image + "\n", encoding="utf-8")
+
+
 def _title(m) -> str:
     """A video frame's title line."""
     return (f"t = {m.t_s:7.2f} s  range {m.range_m:6.2f} m  " + ("SOLVED" if m.ok else f"NO SOLUTION ({m.reason})")
@@ -149,7 +178,7 @@ def _title(m) -> str:
 
 
 def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, command: str | None = None,
-                 overlap_render: bool = True, video: bool = True) -> dict:
+                 overlap_render: bool = True, video: bool = True, video_image: str = "detector") -> dict:
     """Run (or continue) an approach into ``out_dir`` and write its outputs.
 
     Parameters
@@ -169,6 +198,9 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
         Write each frame's overlay picture and the video. Off: the delivered full image is never
         made (the detector reads only the tiles that can reach its threshold; the same numbers),
         and the video is left out.
+    video_image : {"detector", "delivered"}
+        What the pictures show (:data:`VIDEO_IMAGES`). A run continued with the other one is
+        refused before any work (its video would mix the two).
 
     Returns
     -------
@@ -193,6 +225,8 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
                              "only continue from its last frame (remove the folder to start again)")
         frames_dir = out / FRAMES_DIR
         frames_dir.mkdir(exist_ok=True)
+        if video and todo:
+            _check_video_image(frames_dir, video_image)
         if todo:
             sensor = ApproachSensor(cam, cfg["pattern"], seed=cfg["seed"], motion=cfg["motion"], crlb=cfg["crlb"],
                                     keep_images=video, frame_rate_hz=cfg["fps"], threshold=_threshold(cfg),
@@ -211,7 +245,7 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
                     # the next frame renders while this one is exposed, solved and written
                     m = sensor.measure_on(traj, float(times[k]),
                                           next_t_s=float(times[k + 1]) if k + 1 < len(times) else None)
-                    picture = _overlay(m, cam, pattern, _title(m)) if video else None
+                    picture = _overlay(m, cam, pattern, _title(m), video_image) if video else None
                     with hard_stop.protected():  # Ctrl-C inside a render stops the process, never mid-write
                         if picture is not None:
                             write_image(frames_dir / f"{k:05d}.jpg", picture, [cv2.IMWRITE_JPEG_QUALITY, 90])

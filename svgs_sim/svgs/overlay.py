@@ -23,15 +23,30 @@ BOX_BGR = (0, 200, 255)
 _SHIFT = 4
 
 
-def _display_u8(gray: np.ndarray, box) -> np.ndarray:
-    """A square-root stretch from the frame's median (black) to the crop's brightest pixel (white)."""
-    g = np.asarray(gray, np.float64)
+def _display_u8(gray: np.ndarray, box, black_level: float | None = None) -> np.ndarray:
+    """A square-root stretch from ``black_level`` (default the frame's median) to the crop's
+    brightest pixel (white); pixels at or below ``black_level`` are black.
+
+    An integer image goes through a table of its values (the same formula on each level: the
+    same bytes as the formula on every pixel, without a float copy of the frame)."""
     x0, y0, x1, y1 = box
-    lo = float(np.median(g[:: max(1, g.shape[0] // 200), :: max(1, g.shape[1] // 200)]))
-    hi = float(np.max(g[y0:y1, x0:x1])) if (x1 > x0 and y1 > y0) else float(g.max())
+    if black_level is None:
+        lo = float(np.median(np.asarray(gray[:: max(1, gray.shape[0] // 200), :: max(1, gray.shape[1] // 200)],
+                                        np.float64)))
+    else:
+        lo = float(black_level)
+    hi = float(np.max(gray[y0:y1, x0:x1])) if (x1 > x0 and y1 > y0) else float(np.max(gray))
     hi = max(hi, lo + 1e-9)
-    v = np.sqrt(np.clip((g - lo) / (hi - lo), 0.0, 1.0))
-    return (255.0 * v + 0.5).astype(np.uint8)
+
+    def stretch(g):
+        return (255.0 * np.sqrt(np.clip((g - lo) / (hi - lo), 0.0, 1.0)) + 0.5).astype(np.uint8)
+
+    if gray.dtype in (np.uint8, np.uint16):
+        import cv2
+
+        table = stretch(np.arange(np.iinfo(gray.dtype).max + 1, dtype=np.float64))
+        return cv2.LUT(gray, table) if gray.dtype == np.uint8 else table[gray]
+    return stretch(np.asarray(gray, np.float64))
 
 
 def _pt(u, v, x0, y0, s):
@@ -56,7 +71,8 @@ def crop_box(points_px, shape, margin_px: float = 40.0) -> tuple[int, int, int, 
 
 
 def render_overlay(image, *, blobs_px=(), targets_px=None, reprojected_px=None, sigma_px=None,
-                   sigma_label: str = "1-sigma", title: str = "", size_px: int = 900, notes=()) -> np.ndarray:
+                   sigma_label: str = "1-sigma", title: str = "", size_px: int = 900, notes=(),
+                   black_level: float | None = None, black_label: str | None = None) -> np.ndarray:
     """The overlay picture.
 
     Parameters
@@ -80,6 +96,12 @@ def render_overlay(image, *, blobs_px=(), targets_px=None, reprojected_px=None, 
     notes : sequence of str
         Lines of a text panel below the picture (e.g. the error against the truth and
         error/CRLB per component); none: no panel.
+    black_level : float, optional
+        The level shown black: pixels at or below it are black, the brighter ones stretched up
+        to the crop's brightest (default the frame's median). ``svgs approach`` gives the
+        detector's threshold, so the picture shows exactly the pixels the detector keeps.
+    black_label : str, optional
+        What ``black_level`` is, for the caption (e.g. "the threshold").
 
     Returns
     -------
@@ -97,7 +119,7 @@ def render_overlay(image, *, blobs_px=(), targets_px=None, reprojected_px=None, 
     anchor = np.array(list(targets_px.values()) or list(reprojected_px.values()) or blobs[:8].tolist() or [[W / 2, H / 2]],
                       float)
     x0, y0, x1, y1 = crop_box(anchor, gray.shape)
-    disp = _display_u8(gray, (x0, y0, x1, y1))
+    disp = _display_u8(gray, (x0, y0, x1, y1), black_level)
     crop = disp[y0:y1, x0:x1]
     s = size_px / max(crop.shape)
     zoom = cv2.resize(crop, (max(1, int(round(crop.shape[1] * s))), max(1, int(round(crop.shape[0] * s)))),
@@ -119,6 +141,8 @@ def render_overlay(image, *, blobs_px=(), targets_px=None, reprojected_px=None, 
     _inset_thumbnail(out, disp, (x0, y0, x1, y1))
     bar = _legend_bar(out.shape[1], title, sigma_label if sigma_px else None, mag)
     crop_txt = f"crop x {x0}-{x1} y {y0}-{y1} of {W}x{H} px, zoom {s:.2g}x"
+    if black_level is not None:
+        crop_txt += f", black up to {black_level:g}" + (f" ({black_label})" if black_label else "")
     cv2.putText(out, crop_txt, (8, out.shape[0] - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (200, 200, 200), 1, cv2.LINE_AA)
     parts = [bar, out]
     if notes:
@@ -243,13 +267,28 @@ def _inset_thumbnail(out, disp, box) -> None:
     H, W = disp.shape
     tw = max(80, out.shape[1] // 4)
     th = max(1, int(round(H * tw / W)))
-    thumb = cv2.cvtColor(cv2.resize(disp, (tw, th), interpolation=cv2.INTER_AREA), cv2.COLOR_GRAY2BGR)
+    thumb = cv2.cvtColor(_area_reduce(disp, tw, th), cv2.COLOR_GRAY2BGR)
     f = tw / W
     cv2.rectangle(thumb, (int(x0 * f), int(y0 * f)), (max(int(x0 * f) + 2, int(x1 * f)), max(int(y0 * f) + 2, int(y1 * f))),
                   BOX_BGR, 1)
     cv2.rectangle(thumb, (0, 0), (tw - 1, th - 1), (200, 200, 200), 1)
     if th < out.shape[0] and tw < out.shape[1]:
         out[0:th, out.shape[1] - tw:] = thumb
+
+
+def _area_reduce(img: np.ndarray, width_px: int, height_px: int) -> np.ndarray:
+    """``img`` averaged down to ``(height_px, width_px)`` (OpenCV's ``INTER_AREA``), first by the
+    largest whole factor that divides both sides and stays within the reduction: OpenCV's
+    whole-factor path is several times faster on a full frame than its general one (1.5 against
+    11 ms for 2592 x 1944 -> 170 x 128); both steps cover the whole frame."""
+    import cv2
+
+    H, W = img.shape[:2]
+    f = max((k for k in range(2, max(2, min(W // width_px, H // height_px)) + 1) if W % k == 0 and H % k == 0),
+            default=1)
+    if f > 1:
+        img = cv2.resize(img, (W // f, H // f), interpolation=cv2.INTER_AREA)
+    return cv2.resize(img, (width_px, height_px), interpolation=cv2.INTER_AREA)
 
 
 def _legend_bar(width_px: int, title: str, sigma_label, mag: float) -> np.ndarray:
