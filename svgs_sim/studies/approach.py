@@ -140,7 +140,9 @@ def _overlay(m, cam, pattern, title: str, view: str = "detector") -> np.ndarray:
     targets, reproj = solution_marks(m.solution, cam, pattern)
     if view == "detector" and m.threshold_u8 is not None and math.isfinite(m.threshold_u8):
         # the pixels above the threshold are the same in the detector's image and the delivered one
-        img, black, label = m.detect_image, float(math.floor(m.threshold_u8)), "the threshold"
+        # (an integer image's pixel passes a level when it passes the level's floor, as in the detector)
+        img, label = m.detect_image, "the threshold"
+        black = float(math.floor(m.threshold_u8)) if np.issubdtype(img.dtype, np.integer) else float(m.threshold_u8)
     else:  # the full image (made now with the deferred camera path)
         img, black, label = m.image, None, None
     pic = render_overlay(img, blobs_px=m.blobs_px if m.blobs_px is not None else (), targets_px=targets,
