@@ -275,6 +275,8 @@ def test_approach_sensor_option(small_camera):
     np.testing.assert_array_equal(c.image, d.image)
     with pytest.raises(InputError):
         ApproachSensor(small_camera, dark_pixels="quick")
+    with pytest.raises(InputError, match="keep_images"):
+        ApproachSensor(small_camera, keep_images="all")
 
 
 def test_cli_flag_and_config():

@@ -163,7 +163,8 @@ def test_approach_sensor_default_is_the_exact_paths_measurement():
     """``ApproachSensor``'s default (``deferred``) against ``dark_pixels="exact"``, the Galaxy
     Nexus at full resolution, three frames of a stream from 12 to 5 m: the same blobs, estimate,
     bound and exposure settings; the deferred frames expose a few per cent of the frame, and the
-    kept image is the exact one. The video's picture of the pixels the detector keeps, made from
+    kept image is the exact one; ``keep_images="detector"`` keeps the same detector image and no
+    delivered image. The video's picture of the pixels the detector keeps, made from
     the deferred frame's detector image (its dark tiles 0), is the picture of the exact frame's
     full image with the same black level."""
     import math
@@ -175,8 +176,11 @@ def test_approach_sensor_default_is_the_exact_paths_measurement():
     poses = [(0.5 * k, *pose_from_scenario(r, pitch_deg=2.0, yaw_deg=-3.0)) for k, r in enumerate((12.0, 8.0, 5.0))]
     a = ApproachSensor("galaxy-nexus", seed=3, dark_pixels="exact", keep_images=True)
     b = ApproachSensor("galaxy-nexus", seed=3, keep_images=True)
+    c = ApproachSensor("galaxy-nexus", seed=3, keep_images="detector")  # the video's: no delivered image
     assert b.dark_pixels == "deferred"
-    for (ma, mb) in zip(a.stream(poses), b.stream(poses)):
+    for (ma, mb, mc) in zip(a.stream(poses), b.stream(poses), c.stream(poses)):
+        assert mc.image is None and mc.estimate == mb.estimate and mc.threshold_u8 == mb.threshold_u8
+        np.testing.assert_array_equal(mc.detect_image, mb.detect_image)
         assert ma.ok and mb.ok
         np.testing.assert_array_equal(ma.blobs_px, mb.blobs_px)
         assert ma.estimate == mb.estimate and ma.crlb_std == mb.crlb_std
@@ -189,6 +193,7 @@ def test_approach_sensor_default_is_the_exact_paths_measurement():
         np.testing.assert_array_equal(ma.image, mb.image)
     a.close()
     b.close()
+    c.close()
 
 
 def test_window_tiles_are_the_nine_offsets_definition():

@@ -331,6 +331,7 @@ def test_approach_command_writes_its_outputs_and_resumes(small_camera, small_aut
     assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 3
     cap.release()
     assert (out / "frames" / "video_image.txt").read_text().strip() == "detector"
+    assert "--video-image" not in s["outputs"]["report"] and "--video-image" not in (out / "report.md").read_text()
 
     # a run killed after frame 1: the rerun makes frame 2 only, with the same numbers (here with
     # --no-video: no picture of it, no video, and the same numbers)

@@ -377,7 +377,7 @@ class SVGSModule(sysModel.SysModel):
         else:
             m = self.sensor.measure(t_s, scenario=scenario_from_pose(R, tv, self.sensor.base.replace(scene=scene)),
                                     image_velocity_px_s=vel)
-        m.exposure = None  # a frame's exposure (its optical image) is too much to keep
+        m.image = m.detect_image = None  # a full frame a measurement is too much to keep
         sv = None
         if m.ok and m.estimate:
             sv = np.array([m.estimate[k] for k in STATE_KEYS], float)

@@ -143,7 +143,7 @@ def _overlay(m, cam, pattern, title: str, view: str = "detector") -> np.ndarray:
         # (an integer image's pixel passes a level when it passes the level's floor, as in the detector)
         img, label = m.detect_image, "the threshold"
         black = float(math.floor(m.threshold_u8)) if np.issubdtype(img.dtype, np.integer) else float(m.threshold_u8)
-    else:  # the full image (made now with the deferred camera path)
+    else:  # the delivered image
         img, black, label = m.image, None, None
     pic = render_overlay(img, blobs_px=m.blobs_px if m.blobs_px is not None else (), targets_px=targets,
                          reprojected_px=reproj, title=title, size_px=min(VIDEO_SIZE_PX) - 40, black_level=black,
@@ -231,7 +231,8 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
             _check_video_image(frames_dir, video_image)
         if todo:
             sensor = ApproachSensor(cam, cfg["pattern"], seed=cfg["seed"], motion=cfg["motion"], crlb=cfg["crlb"],
-                                    keep_images=video, frame_rate_hz=cfg["fps"], threshold=_threshold(cfg),
+                                    keep_images=(True if video_image == "delivered" else "detector") if video else False,
+                                    frame_rate_hz=cfg["fps"], threshold=_threshold(cfg),
                                     overlap_render=overlap_render, base=Scenario(scene=scene_of(cfg)),
                                     body=cfg.get("body"), dark_pixels=cfg.get("dark_pixels", "deferred"))
             if todo[0] > 0:

@@ -65,9 +65,13 @@ class Measurement:
     p_value : float or None
         The solution's consistency (:func:`svgs_sim.svgs.app.consistency`; also for an ``inconsistent``
         frame, whose ``reason`` says so).
-    exposure : svgs_sim.camera.phone.Exposure or None
-        The frame's exposure (when the sensor keeps images): :attr:`image` and
-        :attr:`detect_image` read it. It holds the frame's optical image until dropped.
+    image : ndarray, uint8 (H, W), or None
+        The delivered image (``keep_images=True``).
+    detect_image : ndarray, uint8 (H, W), or None
+        The image the detector read (``keep_images`` True or ``"detector"``): with
+        ``dark_pixels="deferred"`` the delivered bytes over the tiles that can reach the
+        threshold and 0 elsewhere (every pixel above :attr:`threshold_u8` as in :attr:`image`),
+        otherwise the delivered image itself.
     threshold_u8 : float or None
         The detector's threshold on this frame's 8-bit image (when the sensor keeps images).
     solution : object
@@ -101,27 +105,13 @@ class Measurement:
     n_blobs: int | None = None
     residual_rms_px: float | None = None
     p_value: float | None = None
-    exposure: object = field(default=None, repr=False)
+    image: np.ndarray | None = field(default=None, repr=False)
     solution: object = field(default=None, repr=False)
     blobs_px: np.ndarray | None = field(default=None, repr=False)
     match_err_max_px: float | None = None
     wrong_lock: bool = False
+    detect_image: np.ndarray | None = field(default=None, repr=False)
     threshold_u8: float | None = None
-
-    @property
-    def image(self) -> np.ndarray | None:
-        """The delivered image, uint8 (H, W) (when the sensor keeps images). With the default
-        ``dark_pixels="deferred"`` the first read makes the full frame (the exact path's bytes,
-        about as long again as the frame itself); :attr:`detect_image` does not."""
-        return None if self.exposure is None else self.exposure.image
-
-    @property
-    def detect_image(self) -> np.ndarray | None:
-        """The image the detector read, uint8 (H, W) (when the sensor keeps images): with
-        ``dark_pixels="deferred"`` the delivered bytes over the tiles that can reach the
-        threshold and 0 elsewhere (every pixel the detector keeps, above :attr:`threshold_u8`,
-        as in :attr:`image`), otherwise :attr:`image`."""
-        return None if self.exposure is None else self.exposure.detect_image
 
     def row(self) -> dict:
         """Flat columns (:data:`MEASUREMENT_COLUMNS`)."""
@@ -188,9 +178,12 @@ class ApproachSensor:
         rolling-shutter readout longer than the period is refused. The auto-exposure then steps
         ``period / max(1/STREAM_FPS, exposure)`` times between frames. None: free-running, the
         steps counted from the times of consecutive calls.
-    keep_images : bool
-        Keep the exposure (the delivered image, made when read, and the detector's image), the
-        threshold, the blobs and the solution in each :class:`Measurement`.
+    keep_images : bool or "detector"
+        Keep the images, the threshold, the blobs and the solution in each :class:`Measurement`.
+        True: the delivered image and the detector's image (with the default
+        ``dark_pixels="deferred"`` the delivered image is made for it: about as long again as
+        the frame at full resolution); ``"detector"``: the detector's image only (nothing more
+        to make).
     overlap_render : bool
         Render the next frame of a trajectory (``next_pose``, :meth:`along`) in a background
         thread while the phone model works on this one. On by default since the deferred dark
@@ -258,7 +251,10 @@ class ApproachSensor:
         self.seed = int(seed)
         self.motion = bool(motion)
         self.crlb = bool(crlb)
-        self.keep_images = bool(keep_images)
+        if keep_images not in (True, False, "detector"):
+            raise InputError(f"keep_images: expected True, False or 'detector', got {keep_images!r}")
+        #: What the measurements keep (True, ``"detector"`` or False).
+        self.keep_images = keep_images
         self.overlap_render = bool(overlap_render)
         self.overlap_camera = bool(overlap_camera)
         self._camera_pool = None
@@ -558,8 +554,9 @@ class ApproachSensor:
             exposure_s=float(settings[0]), iso=float(settings[1]), metered_level=float(level),
             next_exposure_s=float(nxt[0]), next_iso=float(nxt[1]), timings_s=timings, n_blobs=row["n_blobs"],
             residual_rms_px=row["residual_rms_px"], p_value=row.get("p_value"),
-            exposure=ex if self.keep_images else None, solution=sol if self.keep_images else None,
+            image=ex.image if self.keep_images is True else None, solution=sol if self.keep_images else None,
             blobs_px=blobs.centroid_px if self.keep_images else None,
+            detect_image=ex.detect_image if self.keep_images else None,
             threshold_u8=float(blobs.threshold_used) if self.keep_images else None,
         )
 
