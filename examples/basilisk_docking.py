@@ -441,7 +441,7 @@ def _sensor(phone: str | None, *, preview: bool, seed: int, rate_hz: float, orbi
         from svgs_sim.sim.scene import Scene
 
         base = Scenario(scene=Scene(environment="orbit"))
-    return ApproachSensor(cam, seed=seed, keep_images=True, frame_rate_hz=rate_hz, base=base)
+    return ApproachSensor(cam, seed=seed, keep_images="detector", frame_rate_hz=rate_hz, base=base)
 
 
 def eclipse_entry_phase_deg(sun_N, raan_deg: float, inclination_deg: float, radius_m: float,

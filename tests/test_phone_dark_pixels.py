@@ -277,6 +277,9 @@ def test_approach_sensor_option(small_camera):
         ApproachSensor(small_camera, dark_pixels="quick")
     with pytest.raises(InputError, match="keep_images"):
         ApproachSensor(small_camera, keep_images="all")
+    for truthy in (1, np.True_):  # what bool() takes for True keeps the delivered image, as before
+        assert ApproachSensor(small_camera, keep_images=truthy).keep_images is True
+    assert ApproachSensor(small_camera, keep_images=None).keep_images is False
 
 
 def test_cli_flag_and_config():

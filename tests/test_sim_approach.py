@@ -331,7 +331,7 @@ def test_approach_command_writes_its_outputs_and_resumes(small_camera, small_aut
     assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 3
     cap.release()
     assert (out / "frames" / "video_image.txt").read_text().strip() == "detector"
-    assert "--video-image" not in s["outputs"]["report"] and "--video-image" not in (out / "report.md").read_text()
+    assert "--video-image" not in (out / "report.md").read_text()  # the default is not written out
 
     # a run killed after frame 1: the rerun makes frame 2 only, with the same numbers (here with
     # --no-video: no picture of it, no video, and the same numbers)
@@ -429,3 +429,62 @@ def test_issue40_camera_path_changes_no_number(cam, request, monkeypatch):
         ra, rb = ma.row(), mb.row()
         assert {k: v for k, v in ra.items() if not k.endswith("_s") or k in ("t_s", "exposure_s", "next_exposure_s")} \
             == {k: v for k, v in rb.items() if not k.endswith("_s") or k in ("t_s", "exposure_s", "next_exposure_s")}
+
+
+def test_the_video_image_of_stored_pictures_binds_a_rerun(tmp_path):
+    """The pictures stored say which image a continued run must show: the record, or for pictures
+    from before the choice existed (no record) the delivered image; a record without pictures (a
+    run stopped before its first picture) binds nothing. A finished run is checked too (its
+    report's command must say what its pictures show), without writing a record."""
+    from svgs_sim.base.errors import InputError
+    from svgs_sim.studies.approach import VIDEO_IMAGE_FILE, _check_video_image
+
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    _check_video_image(frames, "detector", record=False)
+    assert not (frames / VIDEO_IMAGE_FILE).exists()
+    _check_video_image(frames, "detector")
+    _check_video_image(frames, "delivered")  # no picture yet: the record is replaced
+    assert (frames / VIDEO_IMAGE_FILE).read_text().strip() == "delivered"
+    (frames / "00000.jpg").write_bytes(b"x")
+    with pytest.raises(InputError, match="show the delivered image"):
+        _check_video_image(frames, "detector", record=False)
+    (frames / VIDEO_IMAGE_FILE).unlink()  # pictures of an older run: the delivered image
+    with pytest.raises(InputError, match="continue with --video-image delivered"):
+        _check_video_image(frames, "detector")
+    _check_video_image(frames, "delivered")
+
+
+@pytest.mark.parametrize("dtype,threshold,black", [(np.uint8, 64.5, 64.0), (np.uint8, 64.0, 64.0),
+                                                   (np.float32, 64.5, 64.5)])
+def test_the_detector_picture_shows_what_the_detector_keeps(dtype, threshold, black):
+    """A video frame of the detector's image: black up to the threshold (its floor for an integer
+    image, the level itself for a float one, as the detector compares), every pixel the detector
+    keeps (strictly above the level, :func:`svgs_sim.svgs.detect.detect_blobs`) shown."""
+    from types import SimpleNamespace
+
+    from svgs_sim.studies import approach
+    from svgs_sim.svgs.detect import detect_blobs
+
+    img = np.zeros((120, 160), dtype)
+    img[50:53, 70:73] = np.array([[60, 64, 65], [64.2, 64.8, 70], [200, 90, 63]], dtype)
+    m = SimpleNamespace(solution=None, image=None, detect_image=img, threshold_u8=threshold,
+                        blobs_px=np.array([[71.0, 51.0]]))
+    shown = []
+    real = approach.render_overlay
+
+    def spy(image, **kw):
+        shown.append(kw["black_level"])
+        return real(image, **kw)
+
+    approach.render_overlay, saved = spy, approach.render_overlay
+    try:
+        pic = approach._overlay(m, None, None, "t")
+    finally:
+        approach.render_overlay = saved
+    assert shown == [black] and pic.shape == approach.VIDEO_SIZE_PX[::-1] + (3,)
+    from svgs_sim.svgs.overlay import _display_u8
+
+    disp = _display_u8(img, (60, 40, 90, 65), black)
+    kept = detect_blobs(img, threshold=threshold, min_area_px=1, max_eccentricity=1.0, min_roundness=0.0).area_px
+    assert int((disp > 0).sum()) == int(np.sum(kept)) == int((img > threshold).sum())

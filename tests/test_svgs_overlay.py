@@ -97,3 +97,16 @@ def test_the_thumbnail_reduction_covers_the_whole_frame():
     dot[-1, -1] = 255
     t = _area_reduce(dot, 170, 128)
     assert t.shape == (128, 170) and t[-1, -1] > 0 and t.sum() == t[-1, -1]
+
+
+def test_a_frame_under_twice_the_thumbnail_takes_one_step():
+    """No whole-factor step when the frame is less than twice the thumbnail (or smaller, scaled
+    up): OpenCV's one-step ``INTER_AREA`` itself."""
+    import cv2
+
+    from svgs_sim.svgs.overlay import _area_reduce
+
+    rng = np.random.default_rng(2)
+    for shape, size in (((200, 300), (240, 160)), ((100, 120), (170, 142)), ((240, 320), (170, 128))):
+        img = rng.integers(0, 256, shape).astype(np.uint8)
+        np.testing.assert_array_equal(_area_reduce(img, *size), cv2.resize(img, size, interpolation=cv2.INTER_AREA))

@@ -69,9 +69,8 @@ def register(sub) -> None:
                    help="render the next frame in a background thread while the phone model works on this one "
                         "(default on; the same numbers; docs/approach.md#speed)")
     p.add_argument("--no-video", action="store_true",
-                   help="write no frame pictures and no video: the delivered full image is then never made (the "
-                        "detector reads only the tiles that can reach its threshold), the fastest run; the same "
-                        "numbers (docs/approach.md#speed)")
+                   help="write no frame pictures and no video: the fastest run (a little faster than the default "
+                        "video); the same numbers (docs/approach.md#speed)")
     p.add_argument("--video-image", choices=("detector", "delivered"), default=None,
                    help="what the video's pictures show: 'detector' (the default): the pixels above the detection "
                         "threshold, the rest black, made without the full image; 'delivered': the whole delivered "

@@ -168,7 +168,7 @@ class MeasurementOutput:
 def crlb_covariance(m: Measurement) -> np.ndarray | None:
     """The 6 x 6 CRLB covariance (m, rad) of a sensor measurement.
 
-    With the frame's solution (a sensor made with ``keep_images=True``): the solver's covariance
+    With the frame's solution (a sensor made with ``keep_images="detector"`` or True): the solver's covariance
     for unit centroid noise, scaled by the frame's centroid bound, which is recovered from
     ``crlb_std`` (``std_x = sqrt(unit_xx) * sigma_centroid``, :func:`svgs_sim.sim.crlb.pose_crlb`). Without
     it: ``diag(crlb_std^2)`` (angles in rad). None when there is no bound.
@@ -251,9 +251,9 @@ class SVGSModule(sysModel.SysModel):
     Parameters
     ----------
     sensor : svgs_sim.sim.approach.ApproachSensor or IdealSensor
-        The simulated sensor. Make an ApproachSensor with ``keep_images=True`` for the full 6 x 6
-        covariance (the module drops each delivered image), and with the same ``frame_rate_hz``
-        or none.
+        The simulated sensor. Make an ApproachSensor with ``keep_images="detector"`` (or True)
+        for the full 6 x 6 covariance (the module drops each frame's images), and with the same
+        ``frame_rate_hz`` or none.
     camera_mount : svgs_sim.sim.basilisk_frames.Mount
         The camera frame on the chaser.
     pattern_mount : svgs_sim.sim.basilisk_frames.Mount

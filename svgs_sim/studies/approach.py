@@ -138,9 +138,10 @@ def _overlay(m, cam, pattern, title: str, view: str = "detector") -> np.ndarray:
     import cv2
 
     targets, reproj = solution_marks(m.solution, cam, pattern)
-    if view == "detector" and m.threshold_u8 is not None and math.isfinite(m.threshold_u8):
+    if view == "detector" or m.image is None:
         # the pixels above the threshold are the same in the detector's image and the delivered one
-        # (an integer image's pixel passes a level when it passes the level's floor, as in the detector)
+        # (an integer image's pixel passes a level when it passes the level's floor, as in the detector;
+        # the detector's level is always finite)
         img, label = m.detect_image, "the threshold"
         black = float(math.floor(m.threshold_u8)) if np.issubdtype(img.dtype, np.integer) else float(m.threshold_u8)
     else:  # the delivered image
@@ -157,19 +158,19 @@ def _overlay(m, cam, pattern, title: str, view: str = "detector") -> np.ndarray:
     return canvas
 
 
-def _check_video_image(frames_dir: Path, video_image: str) -> None:
-    """Refuse a ``video_image`` not in :data:`VIDEO_IMAGES`, or other than the one of the pictures
-    already in ``frames_dir``; record it there."""
-    if video_image not in VIDEO_IMAGES:
-        raise InputError(f"video_image: expected one of {', '.join(VIDEO_IMAGES)}, got {video_image!r}")
+def _check_video_image(frames_dir: Path, video_image: str, *, record: bool = True) -> None:
+    """Refuse a ``video_image`` other than the one of the pictures already in ``frames_dir``
+    (pictures without a record are from before the choice: ``delivered``; a record without
+    pictures, of a run stopped before its first picture, is not binding); with ``record``,
+    record it there."""
     marker = frames_dir / VIDEO_IMAGE_FILE
-    had = marker.read_text(encoding="utf-8").strip() if marker.is_file() else None
-    if had is None and any(frames_dir.glob("*.jpg")):
-        had = "delivered"  # pictures from before the choice existed
+    had = None
+    if any(frames_dir.glob("*.jpg")):
+        had = marker.read_text(encoding="utf-8").strip() if marker.is_file() else "delivered"
     if had is not None and had != video_image:
         raise InputError(f"--video-image {video_image}: the stored frames' pictures in {str(frames_dir)!r} show the "
                          f"{had} image; continue with --video-image {had} (or remove the folder to start again)")
-    if had is None:
+    if record and had is None:
         marker.write_text(video_image + "\n", encoding="utf-8")
 
 
@@ -197,9 +198,8 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
     overlap_render : bool
         Render the next frame in a background thread (:class:`svgs_sim.sim.approach.ApproachSensor`).
     video : bool
-        Write each frame's overlay picture and the video. Off: the delivered full image is never
-        made (the detector reads only the tiles that can reach its threshold; the same numbers),
-        and the video is left out.
+        Write each frame's overlay picture and the video. Off: no pictures and no video (the same
+        numbers).
     video_image : {"detector", "delivered"}
         What the pictures show (:data:`VIDEO_IMAGES`). A run continued with the other one is
         refused before any work (its video would mix the two).
@@ -212,6 +212,8 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
     import cv2
 
 
+    if video_image not in VIDEO_IMAGES:
+        raise InputError(f"video_image: expected one of {', '.join(VIDEO_IMAGES)}, got {video_image!r}")
     cam, traj, times = check_config(cfg)
     out = Path(out_dir)
     ids = range(len(times))
@@ -227,8 +229,8 @@ def run_approach(cfg: dict, out_dir, *, progress: bool = True, on_frame=None, co
                              "only continue from its last frame (remove the folder to start again)")
         frames_dir = out / FRAMES_DIR
         frames_dir.mkdir(exist_ok=True)
-        if video and todo:
-            _check_video_image(frames_dir, video_image)
+        if video:  # the pictures stored must show the same image (and the command in report.md say so)
+            _check_video_image(frames_dir, video_image, record=bool(todo))
         if todo:
             sensor = ApproachSensor(cam, cfg["pattern"], seed=cfg["seed"], motion=cfg["motion"], crlb=cfg["crlb"],
                                     keep_images=(True if video_image == "delivered" else "detector") if video else False,

@@ -280,12 +280,12 @@ def _area_reduce(img: np.ndarray, width_px: int, height_px: int) -> np.ndarray:
     """``img`` averaged down to ``(height_px, width_px)`` (OpenCV's ``INTER_AREA``), first by the
     largest whole factor that divides both sides and stays within the reduction: OpenCV's
     whole-factor path is several times faster on a full frame than its general one (1.5 against
-    11 ms for 2592 x 1944 -> 170 x 128); both steps cover the whole frame."""
+    11 ms for 2592 x 1944 -> 170 x 128); both steps cover the whole frame. A frame less than
+    twice the size asked for (or smaller) takes the one step."""
     import cv2
 
     H, W = img.shape[:2]
-    f = max((k for k in range(2, max(2, min(W // width_px, H // height_px)) + 1) if W % k == 0 and H % k == 0),
-            default=1)
+    f = max((k for k in range(2, min(W // width_px, H // height_px) + 1) if W % k == 0 and H % k == 0), default=1)
     if f > 1:
         img = cv2.resize(img, (W // f, H // f), interpolation=cv2.INTER_AREA)
     return cv2.resize(img, (width_px, height_px), interpolation=cv2.INTER_AREA)

@@ -226,7 +226,7 @@ class ApproachSensor:
     """
 
     def __init__(self, camera="galaxy-nexus", pattern="svgs-3u", *, seed: int = 0, motion: bool = True,
-                 crlb: bool = True, keep_images: bool = False, threshold=None, base: Scenario | None = None,
+                 crlb: bool = True, keep_images: bool | str = False, threshold=None, base: Scenario | None = None,
                  frame_rate_hz: float | None = None, overlap_render: bool = True, body=None,
                  overlap_camera: bool = True, dark_pixels: str = "deferred"):
         from svgs_sim.camera.phone import DARK_PIXELS, PhoneCamera, PhoneParams
@@ -251,10 +251,10 @@ class ApproachSensor:
         self.seed = int(seed)
         self.motion = bool(motion)
         self.crlb = bool(crlb)
-        if keep_images not in (True, False, "detector"):
+        if isinstance(keep_images, str) and keep_images != "detector":
             raise InputError(f"keep_images: expected True, False or 'detector', got {keep_images!r}")
         #: What the measurements keep (True, ``"detector"`` or False).
-        self.keep_images = keep_images
+        self.keep_images = keep_images if isinstance(keep_images, str) else bool(keep_images)
         self.overlap_render = bool(overlap_render)
         self.overlap_camera = bool(overlap_camera)
         self._camera_pool = None
