@@ -457,7 +457,7 @@ def test_the_video_image_of_stored_pictures_binds_a_rerun(tmp_path):
 
 @pytest.mark.parametrize("dtype,threshold,black", [(np.uint8, 64.5, 64.0), (np.uint8, 64.0, 64.0),
                                                    (np.float32, 64.5, 64.5)])
-def test_the_detector_picture_shows_what_the_detector_keeps(dtype, threshold, black):
+def test_the_detector_picture_shows_what_the_detector_keeps(dtype, threshold, black, monkeypatch):
     """A video frame of the detector's image: black up to the threshold (its floor for an integer
     image, the level itself for a float one, as the detector compares), every pixel the detector
     keeps (strictly above the level, :func:`svgs_sim.svgs.detect.detect_blobs`) shown."""
@@ -477,11 +477,8 @@ def test_the_detector_picture_shows_what_the_detector_keeps(dtype, threshold, bl
         shown.append(kw["black_level"])
         return real(image, **kw)
 
-    approach.render_overlay, saved = spy, approach.render_overlay
-    try:
-        pic = approach._overlay(m, None, None, "t")
-    finally:
-        approach.render_overlay = saved
+    monkeypatch.setattr(approach, "render_overlay", spy)
+    pic = approach._overlay(m, None, None, "t")
     assert shown == [black] and pic.shape == approach.VIDEO_SIZE_PX[::-1] + (3,)
     from svgs_sim.svgs.overlay import _display_u8
 

@@ -138,7 +138,7 @@ def _overlay(m, cam, pattern, title: str, view: str = "detector") -> np.ndarray:
     import cv2
 
     targets, reproj = solution_marks(m.solution, cam, pattern)
-    if view == "detector" or m.image is None:
+    if view == "detector":
         # the pixels above the threshold are the same in the detector's image and the delivered one
         # (an integer image's pixel passes a level when it passes the level's floor, as in the detector;
         # the detector's level is always finite)
